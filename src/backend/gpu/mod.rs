@@ -1,0 +1,871 @@
+//! The wgpu backend: occluder extended Projections rasterised on the GPU, with exactly the
+//! contract of [`crate::backend`] and at least the conservativeness of the CPU reference
+//! ([`cpu`](crate::backend::cpu)).
+//!
+//! # Design: one instanced draw per plane, the 8 views tested per pixel in the fragment shader
+//!
+//! Appendix A of Durand et al. 2000 counts the views in the stencil buffer: per occluder, draw
+//! its 8 views incrementing the stencil, then draw where the stencil equals 8 writing depth and
+//! resetting it. The stencil must be reset between occluders (views of different occluders must
+//! never add up), so that needs at least two draws and two pipeline switches *per occluder*
+//! — 20,000 draws for a 10,000-triangle plane, bound by the CPU's draw submission rather than
+//! the GPU — plus conservatively shrunk view polygons whose vertices the rasteriser snaps to its
+//! sub-pixel grid (1/256 px on most hardware), an error far larger than ours.
+//!
+//! Instead each occluder is one *instance* of one draw per plane: a quad over the pixels that
+//! can be covered (the intersection of the 8 views' bounding boxes, shrunk by half a pixel,
+//! clipped to the plane), whose fragment shader evaluates the occluder's view edges at the
+//! pixel centre and discards unless all pass. Each edge was shrunk on the CPU by the pixel's
+//! half-extent along its normal (`½(|nₓ|+|n_y|)`), so "the centre passes every shrunk edge of
+//! the 8 views" is exactly "the closed pixel square lies inside all 8 views" — per occluder, so
+//! views of different occluders never add up. The CPU adds the CPU backend's margin plus a
+//! proven bound on the shader's `f32` error and rounds the offsets up, so a rounding can only
+//! uncover a pixel, never cover one (see [`setup`] for the bound). Per-pixel cost is one
+//! multiply-add and compare per edge, against storage data shared by the whole instance.
+//!
+//! The CPU's per-occluder setup (project the points from the 8 corners, 8 small hulls, one
+//! `f32` half-plane per hull edge, edges that every pixel centre of the quad passes dropped) is
+//! done in f64 with rayon, in parallel across planes and across occluders, before the GPU
+//! section; the GPU does all the per-pixel work.
+//!
+//! The Depth Map is an `R32Float` colour target cleared to `+inf` with blend operation `Min`
+//! (feature [`wgpu::Features::FLOAT32_BLENDABLE`]): every float Depth, negative or huge, is kept
+//! exactly, the minimum over occluders, and `+inf` stays where nothing covers.
+//!
+//! Slices are filled on the CPU with [`cpu::fill_slices`](crate::backend::cpu::fill_slices) as a
+//! mask *while the GPU renders* and merged on read-back (a per-row crossing scan: tens of µs per
+//! plane at 256², cheaper than uploading the segments and running a stencil fill and an erosion
+//! pass, and bit-identical to the CPU reference).
+//!
+//! # Per `render` call
+//!
+//! All jobs (a cell's 6–30 planes) are prepared in parallel, uploaded into shared, grown-only
+//! instance/edge/uniform buffers, encoded in one command buffer — per plane one render pass, one
+//! draw per chunk of the edge buffer (one chunk unless the plane's edges exceed the device's
+//! storage binding size), one texture-to-buffer copy — and submitted once; all staging buffers
+//! are mapped at once, the slice masks are computed, and the device is polled with a timeout.
+//! Render targets and staging buffers are pooled per resolution. Planes that no occluder can
+//! cover skip the GPU. Jobs are split into several submissions only to bound memory.
+//!
+//! Per plane: 1 render pass, 1 draw (instanced, 4 vertices per occluder), `res² × 4` bytes read
+//! back (rows padded to 256 bytes below 64², i.e. `256 × res` bytes then).
+//!
+//! Device loss, out-of-memory and validation errors become [`BackendError::Device`]: errors are
+//! caught by error scopes and by an uncaptured-error handler, loss by the device-lost callback,
+//! and waits poll with a timeout, so a failing device never hangs a bake.
+
+pub mod setup;
+
+use super::{BackendError, DepthMap, PlaneJob, RasterBackend, cpu};
+use rayon::prelude::*;
+use setup::{Edge, Instance, PlaneSetup, Scratch};
+use std::collections::HashMap;
+use std::num::NonZeroU64;
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// The WGSL source of every pass, `(file name, source)`, for validation in tests.
+pub const SHADERS: &[(&str, &str)] = &[(
+    "shaders/projection.wgsl",
+    include_str!("../../../shaders/projection.wgsl"),
+)];
+
+const PROJECTION_WGSL: &str = SHADERS[0].1;
+
+/// Occluders per rayon task of the setup.
+const SETUP_TASK: usize = 1024;
+/// Bytes of render targets + staging buffers one submission may use.
+const TARGET_BUDGET: u64 = 256 << 20;
+/// Bytes of instance + edge data one submission may use (also capped by the device).
+const DATA_BUDGET: u64 = 512 << 20;
+/// Stride of per-plane uniforms (WebGPU's maximum `min_uniform_buffer_offset_alignment`).
+const UNIFORM_STRIDE: u64 = 256;
+/// How long one poll blocks before the device-lost flag and the deadline are checked again.
+const POLL_SLICE: Duration = Duration::from_millis(250);
+/// A submission not finished after this long is reported as a device failure.
+const DEADLINE: Duration = Duration::from_secs(600);
+
+/// The wgpu backend. Instance, adapter, device, pipeline and pools are created once, in
+/// [`GpuBackend::new`]; every [`render`](RasterBackend::render) call reuses them.
+pub struct GpuBackend {
+    adapter_name: String,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    /// First device-lost or uncaptured error message; once set, every call fails.
+    failure: Arc<Mutex<Option<String>>>,
+    /// Largest storage binding, in edges (a multiple of the offset alignment).
+    max_chunk_edges: usize,
+    storage_align: u64,
+    max_buffer: u64,
+    max_texture: u32,
+    pool: Mutex<Pool>,
+}
+
+impl std::fmt::Debug for GpuBackend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuBackend")
+            .field("adapter", &self.adapter_name)
+            .finish_non_exhaustive()
+    }
+}
+
+/// GPU resources reused across calls.
+#[derive(Default)]
+struct Pool {
+    instances: Option<wgpu::Buffer>,
+    edges: Option<wgpu::Buffer>,
+    uniforms: Option<wgpu::Buffer>,
+    targets: HashMap<u32, Vec<Target>>,
+}
+
+/// One plane's render target and its read-back buffer.
+struct Target {
+    view: wgpu::TextureView,
+    texture: wgpu::Texture,
+    staging: wgpu::Buffer,
+    padded_row: u32,
+}
+
+/// A job's CPU-side preparation.
+struct Prepared {
+    instances: Vec<Instance>,
+    edges: Vec<Edge>,
+    /// Draw chunks: instance range and edge range (edge indices of the chunk's instances are
+    /// relative to the edge range's start).
+    chunks: Vec<Chunk>,
+}
+
+#[derive(Clone, Debug)]
+struct Chunk {
+    instances: std::ops::Range<u32>,
+    edges: std::ops::Range<usize>,
+}
+
+/// Adapter ranking: hardware first, software rasterisers last.
+fn rank(t: wgpu::DeviceType) -> u32 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+fn new_instance() -> wgpu::Instance {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    if desc.backends.is_empty() {
+        desc.backends = wgpu::Backends::PRIMARY;
+    }
+    wgpu::Instance::new(desc)
+}
+
+/// Features the backend needs from an adapter.
+const REQUIRED_FEATURES: wgpu::Features = wgpu::Features::FLOAT32_BLENDABLE;
+
+/// The adapters this backend can use, best first, with the reasons the others were rejected.
+fn usable_adapters(instance: &wgpu::Instance) -> (Vec<wgpu::Adapter>, Vec<String>) {
+    let all = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let mut rejected = Vec::new();
+    let mut ok: Vec<wgpu::Adapter> = all
+        .into_iter()
+        .filter(|a| {
+            let info = a.get_info();
+            if !a.features().contains(REQUIRED_FEATURES) {
+                rejected.push(format!(
+                    "{} ({:?}): no float32-blendable support",
+                    info.name, info.backend
+                ));
+                return false;
+            }
+            true
+        })
+        .collect();
+    ok.sort_by_key(|a| rank(a.get_info().device_type));
+    (ok, rejected)
+}
+
+/// True when a real (non-CPU) GPU adapter that this backend can use exists: the CLI's
+/// `--backend auto` picks the GPU backend only then (software rasterisers such as llvmpipe are
+/// slower than the CPU backend).
+pub fn hardware_adapter_available() -> bool {
+    let instance = new_instance();
+    let (adapters, _) = usable_adapters(&instance);
+    adapters
+        .iter()
+        .any(|a| a.get_info().device_type != wgpu::DeviceType::Cpu)
+}
+
+impl GpuBackend {
+    /// Creates the instance, picks the best adapter (hardware before software), and creates
+    /// the device, the pipeline and empty resource pools.
+    ///
+    /// `WGPU_BACKEND` (e.g. `vulkan`) restricts the backends searched.
+    ///
+    /// # Errors
+    /// [`BackendError::NoAdapter`] when no adapter exists or none supports `float32-blendable`
+    /// render targets; [`BackendError::Device`] when the device or pipeline cannot be created.
+    pub fn new() -> Result<Self, BackendError> {
+        let instance = new_instance();
+        let (adapters, rejected) = usable_adapters(&instance);
+        let Some(adapter) = adapters.into_iter().next() else {
+            let why = if rejected.is_empty() {
+                "no Vulkan, Metal or DX12 adapter is present (on Linux without a GPU, install \
+                 Mesa's software Vulkan driver: `apt-get install mesa-vulkan-drivers`)"
+                    .to_string()
+            } else {
+                format!("no adapter is usable: {}", rejected.join("; "))
+            };
+            return Err(BackendError::NoAdapter(why));
+        };
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("umbrasweep device"),
+            required_features: REQUIRED_FEATURES,
+            required_limits: limits.clone(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| BackendError::Device(format!("cannot create a device on {}: {e}", info.name)))?;
+
+        let failure: Arc<Mutex<Option<String>>> = Arc::default();
+        {
+            let failure = failure.clone();
+            device.set_device_lost_callback(move |reason, message| {
+                let mut f = failure.lock().unwrap_or_else(|e| e.into_inner());
+                f.get_or_insert(format!("device lost ({reason:?}): {message}"));
+            });
+        }
+        {
+            let failure = failure.clone();
+            device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+                let mut f = failure.lock().unwrap_or_else(|e| e.into_inner());
+                f.get_or_insert(format!("uncaptured GPU error: {e}"));
+            }));
+        }
+
+        let scope = ErrorScopes::push(&device);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shaders/projection.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(PROJECTION_WGSL.into()),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("projection bind group layout"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: NonZeroU64::new(16),
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: NonZeroU64::new(16),
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("projection pipeline layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let attributes = wgpu::vertex_attr_array![
+            0 => Uint32x4,
+            1 => Float32,
+            2 => Uint32x2,
+        ];
+        let blend = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::One,
+            operation: wgpu::BlendOperation::Min,
+        };
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("projection pipeline"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<Instance>() as u64,
+                    step_mode: wgpu::VertexStepMode::Instance,
+                    attributes: &attributes,
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: wgpu::TextureFormat::R32Float,
+                    blend: Some(wgpu::BlendState {
+                        color: blend,
+                        alpha: blend,
+                    }),
+                    write_mask: wgpu::ColorWrites::RED,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        scope.check()?;
+
+        let storage_align = limits.min_storage_buffer_offset_alignment.max(16) as u64;
+        let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let max_chunk_edges = ((max_binding / storage_align * storage_align) / 16) as usize;
+        Ok(GpuBackend {
+            adapter_name: info.name.clone(),
+            device,
+            queue,
+            pipeline,
+            layout,
+            failure,
+            max_chunk_edges,
+            storage_align,
+            max_buffer: limits.max_buffer_size,
+            max_texture: limits.max_texture_dimension_2d,
+            pool: Mutex::default(),
+        })
+    }
+
+    /// The adapter's information (name, backend, device type, driver).
+    pub fn adapter_info(&self) -> wgpu::AdapterInfo {
+        self.device.adapter_info()
+    }
+
+    fn check_failure(&self) -> Result<(), BackendError> {
+        let f = self.failure.lock().unwrap_or_else(|e| e.into_inner());
+        match &*f {
+            Some(msg) => Err(BackendError::Device(msg.clone())),
+            None => Ok(()),
+        }
+    }
+
+    /// CPU setup of one job: instances and edges of every occluder, split into draw chunks.
+    fn prepare(&self, job: &PlaneJob) -> Result<Prepared, BackendError> {
+        let frame = &job.frame;
+        let ps = PlaneSetup::new(frame);
+        let n = job.occluders.len();
+        let parts: Vec<(Vec<Instance>, Vec<Edge>)> = (0..n.div_ceil(SETUP_TASK))
+            .into_par_iter()
+            .map(|t| {
+                let mut scratch = Scratch::default();
+                let (mut inst, mut edges) = (Vec::new(), Vec::new());
+                for k in t * SETUP_TASK..((t + 1) * SETUP_TASK).min(n) {
+                    let pts = job.occluders.get(k);
+                    let depth = pts
+                        .iter()
+                        .map(|&p| frame.depth(p))
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    if let Some(i) = setup::occluder(&ps, pts, depth, &mut scratch, &mut edges, 0)
+                    {
+                        inst.push(i);
+                    }
+                }
+                (inst, edges)
+            })
+            .collect();
+        let mut instances = Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum());
+        let mut edges = Vec::with_capacity(parts.iter().map(|p| p.1.len()).sum());
+        for (inst, e) in parts {
+            let base = edges.len() as u32;
+            instances.extend(inst.into_iter().map(|mut i| {
+                i.edge_range[0] += base;
+                i
+            }));
+            edges.extend_from_slice(&e);
+        }
+        // Split into chunks whose edges fit one storage binding; rebase edge indices.
+        let mut chunks = Vec::new();
+        let (mut first, mut base) = (0usize, 0usize);
+        for k in 0..instances.len() {
+            let [start, count] = instances[k].edge_range;
+            let end = (start + count) as usize;
+            if count as usize > self.max_chunk_edges {
+                return Err(BackendError::Device(format!(
+                    "an occluder has {count} edges, more than one storage binding holds"
+                )));
+            }
+            if end - base > self.max_chunk_edges {
+                chunks.push(Chunk {
+                    instances: first as u32..k as u32,
+                    edges: base..start as usize,
+                });
+                first = k;
+                base = start as usize;
+            }
+            instances[k].edge_range[0] -= base as u32;
+        }
+        if first < instances.len() {
+            chunks.push(Chunk {
+                instances: first as u32..instances.len() as u32,
+                edges: base..edges.len(),
+            });
+        }
+        Ok(Prepared {
+            instances,
+            edges,
+            chunks,
+        })
+    }
+
+    /// Makes `slot` a buffer of at least `size` bytes (grown to a power of two, never shrunk).
+    fn ensure_buffer(
+        &self,
+        slot: &mut Option<wgpu::Buffer>,
+        size: u64,
+        usage: wgpu::BufferUsages,
+        label: &str,
+    ) -> Result<(), BackendError> {
+        if slot.as_ref().is_some_and(|b| b.size() >= size) {
+            return Ok(());
+        }
+        if size > self.max_buffer {
+            return Err(BackendError::Device(format!(
+                "{label}: {size} bytes exceed the device's maximum buffer size {}",
+                self.max_buffer
+            )));
+        }
+        let cap = size.next_power_of_two().clamp(1 << 16, self.max_buffer.max(size));
+        if let Some(old) = slot.take() {
+            old.destroy();
+        }
+        *slot = Some(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: cap,
+            usage,
+            mapped_at_creation: false,
+        }));
+        Ok(())
+    }
+
+    fn new_target(&self, res: u32) -> Target {
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(&format!("depth map {res}²")),
+            size: wgpu::Extent3d {
+                width: res,
+                height: res,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::R32Float,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some(&format!("depth map {res}² view")),
+            ..Default::default()
+        });
+        let padded_row = (res * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(&format!("depth map {res}² read-back")),
+            size: padded_row as u64 * res as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Target {
+            view,
+            texture,
+            staging,
+            padded_row,
+        }
+    }
+
+    /// Renders one submission's worth of jobs (`todo` indexes `jobs` and `prepared`).
+    fn render_wave(
+        &self,
+        pool: &mut Pool,
+        jobs: &[PlaneJob],
+        prepared: &[Prepared],
+        todo: &[usize],
+        out: &mut [Option<DepthMap>],
+    ) -> Result<(), BackendError> {
+        let scope = ErrorScopes::push(&self.device);
+        // Layout of the shared buffers.
+        let inst_size = std::mem::size_of::<Instance>() as u64;
+        let mut inst_total = 0u64;
+        let mut edge_total = 0u64;
+        let mut first_instance = Vec::with_capacity(todo.len());
+        let mut chunk_offsets: Vec<Vec<u64>> = Vec::with_capacity(todo.len());
+        for &j in todo {
+            let p = &prepared[j];
+            first_instance.push((inst_total / inst_size) as u32);
+            inst_total += p.instances.len() as u64 * inst_size;
+            let mut offs = Vec::with_capacity(p.chunks.len());
+            for c in &p.chunks {
+                offs.push(edge_total);
+                edge_total += ((c.edges.len() as u64) * 16).next_multiple_of(self.storage_align);
+            }
+            chunk_offsets.push(offs);
+        }
+        self.ensure_buffer(
+            &mut pool.instances,
+            inst_total.max(inst_size),
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+            "occluder instances",
+        )?;
+        self.ensure_buffer(
+            &mut pool.edges,
+            edge_total.max(16),
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            "occluder view edges",
+        )?;
+        self.ensure_buffer(
+            &mut pool.uniforms,
+            todo.len() as u64 * UNIFORM_STRIDE,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            "plane uniforms",
+        )?;
+        let (Some(inst_buf), Some(edge_buf), Some(uni_buf)) =
+            (&pool.instances, &pool.edges, &pool.uniforms)
+        else {
+            unreachable!("buffers were just ensured");
+        };
+        // Upload.
+        let mut uniforms = vec![0u8; todo.len() * UNIFORM_STRIDE as usize];
+        for (w, &j) in todo.iter().enumerate() {
+            let p = &prepared[j];
+            if !p.instances.is_empty() {
+                self.queue.write_buffer(
+                    inst_buf,
+                    first_instance[w] as u64 * inst_size,
+                    bytemuck::cast_slice(&p.instances),
+                );
+            }
+            for (c, &off) in p.chunks.iter().zip(&chunk_offsets[w]) {
+                if !c.edges.is_empty() {
+                    self.queue
+                        .write_buffer(edge_buf, off, bytemuck::cast_slice(&p.edges[c.edges.clone()]));
+                }
+            }
+            let scale = 2.0f32 / jobs[j].frame.resolution as f32;
+            let o = w * UNIFORM_STRIDE as usize;
+            uniforms[o..o + 4].copy_from_slice(&scale.to_le_bytes());
+        }
+        self.queue.write_buffer(uni_buf, 0, &uniforms);
+
+        // Targets from the pool, per resolution.
+        let mut taken: HashMap<u32, usize> = HashMap::new();
+        let mut slots = Vec::with_capacity(todo.len());
+        for &j in todo {
+            let res = jobs[j].frame.resolution;
+            let k = taken.entry(res).or_default();
+            let list = pool.targets.entry(res).or_default();
+            if list.len() <= *k {
+                list.push(self.new_target(res));
+            }
+            slots.push((res, *k));
+            *k += 1;
+        }
+
+        // Encode every plane: one pass, one draw per chunk, one copy.
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("umbrasweep planes"),
+            });
+        for (w, &j) in todo.iter().enumerate() {
+            let p = &prepared[j];
+            let (res, k) = slots[w];
+            let target = &pool.targets[&res][k];
+            let bind_groups: Vec<wgpu::BindGroup> = p
+                .chunks
+                .iter()
+                .zip(&chunk_offsets[w])
+                .map(|(c, &off)| {
+                    let size = ((c.edges.len() as u64) * 16).max(16);
+                    self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("projection chunk bind group"),
+                        layout: &self.layout,
+                        entries: &[
+                            wgpu::BindGroupEntry {
+                                binding: 0,
+                                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                    buffer: uni_buf,
+                                    offset: w as u64 * UNIFORM_STRIDE,
+                                    size: NonZeroU64::new(16),
+                                }),
+                            },
+                            wgpu::BindGroupEntry {
+                                binding: 1,
+                                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                    buffer: edge_buf,
+                                    offset: off,
+                                    size: NonZeroU64::new(size),
+                                }),
+                            },
+                        ],
+                    })
+                })
+                .collect();
+            {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("occluder projections"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &target.view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color {
+                                r: f64::INFINITY,
+                                g: 0.0,
+                                b: 0.0,
+                                a: 0.0,
+                            }),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_vertex_buffer(0, inst_buf.slice(..));
+                let base = first_instance[w];
+                for (c, bg) in p.chunks.iter().zip(&bind_groups) {
+                    pass.set_bind_group(0, bg, &[]);
+                    pass.draw(0..4, base + c.instances.start..base + c.instances.end);
+                }
+            }
+            encoder.copy_texture_to_buffer(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &target.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &target.staging,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(target.padded_row),
+                        rows_per_image: Some(res),
+                    },
+                },
+                wgpu::Extent3d {
+                    width: res,
+                    height: res,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        let submission = self.queue.submit([encoder.finish()]);
+        let (tx, rx) = mpsc::channel::<(usize, Result<(), wgpu::BufferAsyncError>)>();
+        for (w, &(res, k)) in slots.iter().enumerate() {
+            let tx = tx.clone();
+            pool.targets[&res][k]
+                .staging
+                .map_async(wgpu::MapMode::Read, .., move |r| {
+                    let _ = tx.send((w, r));
+                });
+        }
+        drop(tx);
+        scope.check()?;
+
+        // While the GPU works: slice masks on the CPU.
+        let masks: Vec<Option<DepthMap>> = todo
+            .par_iter()
+            .map(|&j| slice_mask(&jobs[j]))
+            .collect();
+
+        // Wait, polling with a timeout so a lost device cannot hang us.
+        let start = Instant::now();
+        let mut mapped = vec![false; todo.len()];
+        let mut remaining = todo.len();
+        while remaining > 0 {
+            self.check_failure()?;
+            match self.device.poll(wgpu::PollType::Wait {
+                submission_index: Some(submission.clone()),
+                timeout: Some(POLL_SLICE),
+            }) {
+                Ok(_) | Err(wgpu::PollError::Timeout) => {}
+                Err(e) => return Err(BackendError::Device(format!("poll failed: {e}"))),
+            }
+            while let Ok((w, r)) = rx.try_recv() {
+                r.map_err(|e| BackendError::Device(format!("read-back failed: {e}")))?;
+                if !mapped[w] {
+                    mapped[w] = true;
+                    remaining -= 1;
+                }
+            }
+            if remaining > 0 && start.elapsed() > DEADLINE {
+                return Err(BackendError::Device(format!(
+                    "the GPU did not finish {} planes within {DEADLINE:?}",
+                    todo.len()
+                )));
+            }
+        }
+        self.check_failure()?;
+
+        // Read back, merge the slice masks.
+        for (w, &j) in todo.iter().enumerate() {
+            let (res, k) = slots[w];
+            let target = &pool.targets[&res][k];
+            let mut map = DepthMap {
+                resolution: res,
+                depth: Vec::with_capacity((res * res) as usize),
+            };
+            {
+                let view = target
+                    .staging
+                    .get_mapped_range(..)
+                    .map_err(|e| BackendError::Device(format!("read-back mapping: {e}")))?;
+                let row_bytes = res as usize * 4;
+                for row in view.chunks(target.padded_row as usize) {
+                    map.depth
+                        .extend_from_slice(bytemuck::cast_slice::<u8, f32>(&row[..row_bytes]));
+                }
+            }
+            target.staging.unmap();
+            if let Some(mask) = &masks[w] {
+                merge_mask(&mut map, mask);
+            }
+            out[j] = Some(map);
+        }
+        Ok(())
+    }
+}
+
+/// The job's slices as a map: `0` inside, `+inf` elsewhere (`None` without slices).
+fn slice_mask(job: &PlaneJob) -> Option<DepthMap> {
+    if job.slices.is_empty() {
+        return None;
+    }
+    let mut mask = DepthMap::new(job.frame.resolution);
+    cpu::fill_slices(&mut mask, &job.frame, &job.slices);
+    Some(mask)
+}
+
+/// Per pixel minimum: what [`cpu::fill_slices`] does to a map (`0` where inside and `d > 0`).
+fn merge_mask(map: &mut DepthMap, mask: &DepthMap) {
+    for (d, m) in map.depth.iter_mut().zip(&mask.depth) {
+        if *m < *d {
+            *d = *m;
+        }
+    }
+}
+
+/// A Validation and an OutOfMemory error scope, popped together.
+struct ErrorScopes {
+    oom: wgpu::ErrorScopeGuard,
+    validation: wgpu::ErrorScopeGuard,
+}
+
+impl ErrorScopes {
+    fn push(device: &wgpu::Device) -> Self {
+        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        ErrorScopes { oom, validation }
+    }
+
+    fn check(self) -> Result<(), BackendError> {
+        let validation = pollster::block_on(self.validation.pop());
+        let oom = pollster::block_on(self.oom.pop());
+        match (oom, validation) {
+            (Some(e), _) => Err(BackendError::Device(format!("out of GPU memory: {e}"))),
+            (None, Some(e)) => Err(BackendError::Device(format!("GPU validation error: {e}"))),
+            (None, None) => Ok(()),
+        }
+    }
+}
+
+impl RasterBackend for GpuBackend {
+    fn name(&self) -> &'static str {
+        "gpu"
+    }
+
+    fn adapter(&self) -> Option<String> {
+        Some(self.adapter_name.clone())
+    }
+
+    fn render(&self, jobs: &[PlaneJob]) -> Result<Vec<DepthMap>, BackendError> {
+        self.check_failure()?;
+        for job in jobs {
+            let r = job.frame.resolution;
+            if r == 0 || r > self.max_texture {
+                return Err(BackendError::Device(format!(
+                    "plane resolution {r} is outside 1..={} supported by {}",
+                    self.max_texture, self.adapter_name
+                )));
+            }
+        }
+        // CPU setup outside the lock: other threads may render concurrently.
+        let prepared: Vec<Prepared> = jobs
+            .par_iter()
+            .map(|j| self.prepare(j))
+            .collect::<Result<_, _>>()?;
+        let mut out: Vec<Option<DepthMap>> = vec![None; jobs.len()];
+        // Planes nothing covers skip the GPU.
+        let mut gpu_jobs = Vec::new();
+        for (j, p) in prepared.iter().enumerate() {
+            if p.instances.is_empty() {
+                let mut map = DepthMap::new(jobs[j].frame.resolution);
+                if let Some(mask) = slice_mask(&jobs[j]) {
+                    merge_mask(&mut map, &mask);
+                }
+                out[j] = Some(map);
+            } else {
+                gpu_jobs.push(j);
+            }
+        }
+        // Submissions bounded in memory.
+        let data_budget = DATA_BUDGET.min(self.max_buffer);
+        let mut waves: Vec<Vec<usize>> = Vec::new();
+        let (mut tgt, mut data) = (0u64, 0u64);
+        for &j in &gpu_jobs {
+            let r = jobs[j].frame.resolution as u64;
+            let t = r * r * 4 + (r * 4).next_multiple_of(256) * r;
+            let p = &prepared[j];
+            let d = p.instances.len() as u64 * std::mem::size_of::<Instance>() as u64
+                + p.edges.len() as u64 * 16
+                + p.chunks.len() as u64 * self.storage_align;
+            match waves.last_mut() {
+                Some(w) if tgt + t <= TARGET_BUDGET && data + d <= data_budget => {
+                    w.push(j);
+                    tgt += t;
+                    data += d;
+                }
+                _ => {
+                    waves.push(vec![j]);
+                    tgt = t;
+                    data = d;
+                }
+            }
+        }
+        if !waves.is_empty() {
+            let mut pool = self.pool.lock().unwrap_or_else(|e| e.into_inner());
+            for wave in &waves {
+                self.render_wave(&mut pool, jobs, &prepared, wave, &mut out)?;
+            }
+        }
+        Ok(out
+            .into_iter()
+            .map(|m| m.expect("every job rendered"))
+            .collect())
+    }
+}

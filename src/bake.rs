@@ -1,0 +1,424 @@
+//! Bake orchestration: prepares a scene once (occluder parts, sliceable objects, a BVH over
+//! object bounds), then for every cell builds its projection planes, has the backend rasterise
+//! them, builds each plane's Hierarchical Depth Map and tests the occludees, walking the object
+//! BVH and stopping at hidden and at fully visible nodes. Cells run in parallel (rayon).
+
+use crate::backend::{BackendError, PlaneJob, RasterBackend, depth_down};
+use crate::geom::{Aabb, DAabb};
+use crate::hdm::{Coverage, Hdm};
+use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
+use crate::project::occluders::{self, Occluders};
+use crate::project::planes::{PlaneSettings, Sliceable, cell_jobs};
+use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
+use crate::scene::Scene;
+use obvhs::bvh2::Bvh2;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Everything that shapes a bake.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeSettings {
+    /// Depth Map resolution per side (a power of two). Default 256.
+    pub resolution: u32,
+    /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
+    /// Default 1.5 (the paper's).
+    pub extend: f64,
+    /// Projection planes per direction just behind occluders (all used). Default 4.
+    pub planes: u32,
+    /// Further planes per direction through the middle of the heaviest closed occluders,
+    /// receiving their slices. Default 1.
+    pub slice_planes: u32,
+    /// Treat non-opaque (alpha-tested, blended) triangles as occluders. May cull visible
+    /// objects. Default false.
+    pub alpha_occluders: bool,
+    /// Only objects whose name matches this glob are occluders (all stay occludees).
+    pub occluders: Option<String>,
+    /// Use the improved occludee Projection of §4 for boxes in front of a plane. Default true.
+    pub improved_projection: bool,
+}
+
+impl BakeSettings {
+    /// The defaults, as a `const fn` for presets.
+    pub const fn default_settings() -> Self {
+        BakeSettings {
+            resolution: 256,
+            extend: 1.5,
+            planes: 4,
+            slice_planes: 1,
+            alpha_occluders: false,
+            occluders: None,
+            improved_projection: true,
+        }
+    }
+
+    /// Checks the values.
+    ///
+    /// # Errors
+    /// A message naming the option at fault.
+    pub fn check(&self) -> Result<(), String> {
+        if !self.resolution.is_power_of_two() || !(4..=8192).contains(&self.resolution) {
+            return Err(format!(
+                "--resolution {}: must be a power of two between 4 and 8192 (e.g. 256)",
+                self.resolution
+            ));
+        }
+        if !(self.extend.is_finite() && self.extend >= 1.0) {
+            return Err(format!("--extend {}: must be a number ≥ 1 (e.g. 1.5)", self.extend));
+        }
+        if self.planes == 0 || self.planes > 64 {
+            return Err(format!("--planes {}: must be between 1 and 64", self.planes));
+        }
+        if self.slice_planes > 16 {
+            return Err(format!("--slice-planes {}: must be between 0 and 16", self.slice_planes));
+        }
+        Ok(())
+    }
+
+    fn plane_settings(&self) -> PlaneSettings {
+        PlaneSettings {
+            resolution: self.resolution,
+            extend: self.extend,
+            planes: self.planes,
+            slice_planes: self.slice_planes,
+        }
+    }
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        Self::default_settings()
+    }
+}
+
+/// Bake failures.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error("{0}")]
+    Settings(String),
+    #[error(transparent)]
+    Backend(#[from] BackendError),
+}
+
+/// One cell's outcome.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellResult {
+    /// Potentially visible object ids, ascending.
+    pub visible: Vec<u32>,
+    pub ms: f64,
+    /// Planes rasterised and occluder Projections sent to the backend.
+    pub planes: usize,
+    pub occluders_projected: usize,
+}
+
+/// A whole bake's outcome.
+#[derive(Clone, Debug)]
+pub struct BakeResult {
+    pub cells: Vec<CellResult>,
+    pub backend: String,
+    pub adapter: Option<String>,
+    pub occluder_triangles: usize,
+    pub degenerate_triangles: usize,
+    pub seconds: f64,
+}
+
+/// The per-scene preparation shared by all cells.
+pub struct Prepared<'a> {
+    pub scene: &'a Scene,
+    pub occluders: Occluders,
+    pub sliceable: Sliceable,
+    bvh: Option<Bvh2>,
+    settings: BakeSettings,
+}
+
+struct ObjBox(obvhs::aabb::Aabb);
+impl obvhs::Boundable for ObjBox {
+    fn aabb(&self) -> obvhs::aabb::Aabb {
+        self.0
+    }
+}
+
+impl<'a> Prepared<'a> {
+    /// Prepares a scene for baking with `settings`.
+    ///
+    /// # Errors
+    /// Invalid settings or an occluder pattern that is not a valid glob.
+    pub fn new(scene: &'a Scene, settings: &BakeSettings) -> Result<Self, BakeError> {
+        settings.check().map_err(BakeError::Settings)?;
+        let is_occluder: Vec<bool> = match &settings.occluders {
+            None => vec![true; scene.objects.len()],
+            Some(pat) => {
+                let glob = globset::Glob::new(pat)
+                    .map_err(|e| {
+                        BakeError::Settings(format!("--occluders {pat:?}: not a valid pattern: {e}"))
+                    })?
+                    .compile_matcher();
+                scene.objects.iter().map(|o| glob.is_match(&o.name)).collect()
+            }
+        };
+        let occluders = occluders::prepare(scene, &is_occluder, settings.alpha_occluders);
+        let sliceable = Sliceable::new(scene, &is_occluder, settings.alpha_occluders);
+        let boxes: Vec<ObjBox> = scene
+            .objects
+            .iter()
+            .map(|o| {
+                let b = if o.bounds.is_empty() {
+                    Aabb::new(glam::Vec3::ZERO, glam::Vec3::ZERO)
+                } else {
+                    o.bounds
+                };
+                ObjBox(obvhs::aabb::Aabb::new(b.min.into(), b.max.into()))
+            })
+            .collect();
+        let bvh = if boxes.is_empty() {
+            None
+        } else {
+            let mut t = std::time::Duration::ZERO;
+            Some(obvhs::bvh2::builder::build_bvh2(
+                &boxes,
+                obvhs::BvhBuildParams::fastest_build(),
+                &mut t,
+            ))
+        };
+        Ok(Prepared {
+            scene,
+            occluders,
+            sliceable,
+            bvh,
+            settings: settings.clone(),
+        })
+    }
+
+    /// The plane jobs of one cell (exposed for inspection and tests).
+    pub fn jobs(&self, cell: &Aabb) -> Vec<PlaneJob> {
+        cell_jobs(
+            &cell.to_f64(),
+            self.scene,
+            &self.occluders,
+            &self.sliceable,
+            &self.settings.plane_settings(),
+        )
+    }
+
+    /// Bakes one cell.
+    ///
+    /// # Errors
+    /// The backend's failure.
+    pub fn cell(&self, cell: &Aabb, backend: &dyn RasterBackend) -> Result<CellResult, BakeError> {
+        let start = Instant::now();
+        let jobs = self.jobs(cell);
+        let maps = backend.render(&jobs)?;
+        let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
+        let n = self.scene.objects.len();
+        let mut hidden = vec![false; n];
+        let cell64 = cell.to_f64();
+        for (job, hdm) in jobs.iter().zip(&hdms) {
+            self.traverse(job, hdm, &cell64, &mut hidden);
+        }
+        let visible = (0..n as u32)
+            .filter(|&o| !hidden[o as usize] && !self.scene.objects[o as usize].bounds.is_empty())
+            .collect();
+        Ok(CellResult {
+            visible,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+            planes: jobs.len(),
+            occluders_projected: jobs.iter().map(|j| j.occluders.len()).sum(),
+        })
+    }
+
+    /// Tests the object BVH against one plane, marking hidden objects.
+    fn traverse(&self, job: &PlaneJob, hdm: &Hdm, cell: &DAabb, hidden: &mut [bool]) {
+        let Some(bvh) = &self.bvh else { return };
+        let mut stack = vec![0u32];
+        while let Some(ni) = stack.pop() {
+            let node = &bvh.nodes[ni as usize];
+            let b = DAabb {
+                min: glam::Vec3::from(node.aabb.min).as_dvec3(),
+                max: glam::Vec3::from(node.aabb.max).as_dvec3(),
+            };
+            match self.test_box(job, hdm, &b, cell) {
+                Coverage::Hidden => {
+                    mark_hidden(bvh, ni, hidden);
+                    continue;
+                }
+                Coverage::Empty => continue,
+                Coverage::Partial => {}
+            }
+            if node.is_leaf() {
+                for k in 0..node.prim_count {
+                    let o = bvh.primitive_indices[(node.first_index + k) as usize] as usize;
+                    if hidden[o] {
+                        continue;
+                    }
+                    let ob = self.scene.objects[o].bounds.to_f64();
+                    if self.test_box(job, hdm, &ob, cell) == Coverage::Hidden {
+                        hidden[o] = true;
+                    }
+                }
+            } else {
+                stack.push(node.first_index);
+                stack.push(node.first_index + 1);
+            }
+        }
+    }
+
+    /// The occlusion test of one box on one plane. `Partial` when undecided (including boxes
+    /// the plane cannot judge: touching the cell, not beyond the face, or projecting outside
+    /// the plane's rectangle).
+    fn test_box(&self, job: &PlaneJob, hdm: &Hdm, b: &DAabb, cell: &DAabb) -> Coverage {
+        if b.is_empty() || b.overlaps(cell) {
+            return Coverage::Partial;
+        }
+        let frame = &job.frame;
+        let Some(sp) = span(frame, b) else {
+            return Coverage::Partial;
+        };
+        let depth = depth_down(sp.depth);
+        let (lo, hi) = standard_rect(frame, b);
+        let standard = match pixel_rect(frame, lo, hi) {
+            Some([i0, j0, i1, j1]) => hdm.test(i0, j0, i1, j1, depth),
+            None => Coverage::Partial,
+        };
+        if standard != Coverage::Partial || !(sp.in_front && self.settings.improved_projection) {
+            return standard;
+        }
+        let (lo, hi) = improved_rect(frame, b);
+        match pixel_rect(frame, lo, hi) {
+            Some([i0, j0, i1, j1]) if hdm.test(i0, j0, i1, j1, depth) == Coverage::Hidden => {
+                Coverage::Hidden
+            }
+            _ => Coverage::Partial,
+        }
+    }
+}
+
+fn mark_hidden(bvh: &Bvh2, node: u32, hidden: &mut [bool]) {
+    let mut stack = vec![node];
+    while let Some(ni) = stack.pop() {
+        let n = &bvh.nodes[ni as usize];
+        if n.is_leaf() {
+            for k in 0..n.prim_count {
+                hidden[bvh.primitive_indices[(n.first_index + k) as usize] as usize] = true;
+            }
+        } else {
+            stack.push(n.first_index);
+            stack.push(n.first_index + 1);
+        }
+    }
+}
+
+/// Bakes every cell. `progress` is called after each cell with the number done.
+///
+/// # Errors
+/// Invalid settings, or the backend's failure (no partial result).
+pub fn bake(
+    scene: &Scene,
+    cells: &[Aabb],
+    settings: &BakeSettings,
+    backend: &dyn RasterBackend,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+) -> Result<BakeResult, BakeError> {
+    let start = Instant::now();
+    let prepared = Prepared::new(scene, settings)?;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let cells_out: Result<Vec<CellResult>, BakeError> = cells
+        .par_iter()
+        .map(|c| {
+            let r = prepared.cell(c, backend);
+            let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if let Some(p) = progress {
+                p(k);
+            }
+            r
+        })
+        .collect();
+    Ok(BakeResult {
+        cells: cells_out?,
+        backend: backend.name().to_string(),
+        adapter: backend.adapter(),
+        occluder_triangles: prepared.occluders.stats.triangles,
+        degenerate_triangles: scene.degenerate_triangles(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Median of a list (0 for none).
+pub fn median(values: &[f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }
+}
+
+/// Builds the JSON PVS document of a bake, with its summary.
+pub fn to_document(
+    scene: &Scene,
+    cells: &[Aabb],
+    result: &BakeResult,
+    settings: &BakeSettings,
+) -> PvsDocument {
+    let tri_count = |o: u32| scene.objects[o as usize].triangles.len();
+    let total_tris = scene.triangles.len().max(1);
+    let n_obj = scene.objects.len().max(1);
+    let mut obj_pct = 0.0;
+    let mut tri_pct = 0.0;
+    for c in &result.cells {
+        obj_pct += 100.0 * (1.0 - c.visible.len() as f64 / n_obj as f64);
+        let vis_tris: usize = c.visible.iter().map(|&o| tri_count(o)).sum();
+        tri_pct += 100.0 * (1.0 - vis_tris as f64 / total_tris as f64);
+    }
+    let nc = result.cells.len().max(1) as f64;
+    let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
+    PvsDocument {
+        format: FORMAT.into(),
+        version: VERSION,
+        scene: scene.source.display().to_string(),
+        settings: PvsSettings {
+            backend: result.backend.clone(),
+            resolution: settings.resolution,
+            extend: settings.extend,
+            planes: settings.planes,
+            slice_planes: settings.slice_planes,
+            alpha_occluders: settings.alpha_occluders,
+            occluders: settings.occluders.clone(),
+            improved_projection: settings.improved_projection,
+        },
+        objects: scene
+            .objects
+            .iter()
+            .enumerate()
+            .map(|(i, o)| PvsObject {
+                id: i as u32,
+                name: o.name.clone(),
+                triangles: o.triangles.len() as u32,
+                min: o.bounds.min.to_array(),
+                max: o.bounds.max.to_array(),
+            })
+            .collect(),
+        cells: cells
+            .iter()
+            .zip(&result.cells)
+            .map(|(b, c)| PvsCell {
+                min: b.min.to_array(),
+                max: b.max.to_array(),
+                visible: c.visible.clone(),
+                ms: c.ms,
+            })
+            .collect(),
+        summary: Some(PvsSummary {
+            cells: cells.len(),
+            objects: scene.objects.len(),
+            triangles: scene.triangles.len(),
+            occluder_triangles: result.occluder_triangles,
+            degenerate_triangles: result.degenerate_triangles,
+            backend: result.backend.clone(),
+            adapter: result.adapter.clone(),
+            objects_culled_percent: obj_pct / nc,
+            triangles_culled_percent: tri_pct / nc,
+            median_ms_per_cell: median(&ms),
+            total_seconds: result.seconds,
+        }),
+    }
+}

@@ -1,0 +1,179 @@
+//! View cells: boxes the camera may be anywhere inside. Read from a JSON file
+//! (`{"cells": [{"min": [x,y,z], "max": [x,y,z]}, …]}`) or laid out as a regular grid.
+
+use crate::geom::Aabb;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Errors for cell input; each names the file or option at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum CellError {
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a cells file: {message} (expected {{\"cells\": [{{\"min\": [x,y,z], \"max\": [x,y,z]}}, …]}})")]
+    Parse { path: PathBuf, message: String },
+    #[error("{origin}: cell {index}: {message}")]
+    BadCell {
+        origin: String,
+        index: usize,
+        message: String,
+    },
+    #[error("{0}")]
+    BadGrid(String),
+}
+
+/// The cells file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CellsFile {
+    pub cells: Vec<CellBox>,
+}
+
+/// One cell as written in a cells file.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct CellBox {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+impl From<Aabb> for CellBox {
+    fn from(b: Aabb) -> Self {
+        CellBox {
+            min: b.min.to_array(),
+            max: b.max.to_array(),
+        }
+    }
+}
+
+/// Checks that every cell is finite with positive extent on each axis.
+///
+/// # Errors
+/// [`CellError::BadCell`] for the first inverted, flat or non-finite cell.
+pub fn check(cells: &[Aabb], origin: &str) -> Result<(), CellError> {
+    for (index, c) in cells.iter().enumerate() {
+        let bad = |message: String| CellError::BadCell {
+            origin: origin.to_string(),
+            index,
+            message,
+        };
+        if !c.min.is_finite() || !c.max.is_finite() {
+            return Err(bad("coordinates must be finite numbers".into()));
+        }
+        if c.min.cmpge(c.max).any() {
+            return Err(bad(format!(
+                "min {:?} must be below max {:?} on every axis (the cell is inverted or has zero volume)",
+                c.min.to_array(),
+                c.max.to_array()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Reads and checks a cells file.
+///
+/// # Errors
+/// Unreadable file, malformed JSON, no cells, or a bad cell; the message names the file.
+pub fn load_json(path: &Path) -> Result<Vec<Aabb>, CellError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CellError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let file: CellsFile = serde_json::from_str(&text).map_err(|e| CellError::Parse {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    if file.cells.is_empty() {
+        return Err(CellError::Parse {
+            path: path.to_path_buf(),
+            message: "the \"cells\" list is empty".into(),
+        });
+    }
+    let cells: Vec<Aabb> = file
+        .cells
+        .iter()
+        .map(|c| Aabb::new(Vec3::from(c.min), Vec3::from(c.max)))
+        .collect();
+    check(&cells, &path.display().to_string())?;
+    Ok(cells)
+}
+
+/// Writes a cells file atomically.
+///
+/// # Errors
+/// I/O errors, with the path.
+pub fn save_json(path: &Path, cells: &[Aabb]) -> Result<(), String> {
+    let file = CellsFile {
+        cells: cells.iter().map(|&c| c.into()).collect(),
+    };
+    let text = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?;
+    crate::util::write_atomic(path, text.as_bytes())
+}
+
+/// A regular grid of `n[0] × n[1] × n[2]` cells filling `bounds`, x fastest, then y, then z.
+///
+/// # Errors
+/// [`CellError::BadGrid`] when the box is inverted or flat, or a count is zero.
+pub fn grid(bounds: Aabb, n: [u32; 3]) -> Result<Vec<Aabb>, CellError> {
+    if n.contains(&0) {
+        return Err(CellError::BadGrid(format!(
+            "--grid-size {},{},{}: every count must be at least 1",
+            n[0], n[1], n[2]
+        )));
+    }
+    if !bounds.min.is_finite() || !bounds.max.is_finite() || bounds.min.cmpge(bounds.max).any() {
+        return Err(CellError::BadGrid(format!(
+            "--grid-box: min {:?} must be below max {:?} on every axis",
+            bounds.min.to_array(),
+            bounds.max.to_array()
+        )));
+    }
+    let size = bounds.size() / Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32);
+    let mut cells = Vec::with_capacity((n[0] * n[1] * n[2]) as usize);
+    for k in 0..n[2] {
+        for j in 0..n[1] {
+            for i in 0..n[0] {
+                let idx = Vec3::new(i as f32, j as f32, k as f32);
+                let min = bounds.min + size * idx;
+                // The last cell ends exactly on the box.
+                let max = Vec3::new(
+                    if i + 1 == n[0] { bounds.max.x } else { bounds.min.x + size.x * (i + 1) as f32 },
+                    if j + 1 == n[1] { bounds.max.y } else { bounds.min.y + size.y * (j + 1) as f32 },
+                    if k + 1 == n[2] { bounds.max.z } else { bounds.min.z + size.z * (k + 1) as f32 },
+                );
+                cells.push(Aabb::new(min, max));
+            }
+        }
+    }
+    check(&cells, "--grid-box")?;
+    Ok(cells)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_tiles_the_box_exactly() {
+        let b = Aabb::new(Vec3::ZERO, Vec3::new(3.0, 1.0, 2.0));
+        let cells = grid(b, [3, 1, 2]).unwrap();
+        assert_eq!(cells.len(), 6);
+        assert_eq!(cells[0].min, Vec3::ZERO);
+        assert_eq!(cells[5].max, b.max);
+        assert_eq!(cells[1].min.x, 1.0);
+        assert_eq!(cells[3].min.z, 1.0);
+    }
+
+    #[test]
+    fn inverted_and_flat_cells_are_refused() {
+        let flat = [Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0))];
+        assert!(check(&flat, "t").is_err());
+        let inv = [Aabb::new(Vec3::ONE, Vec3::ZERO)];
+        assert!(check(&inv, "t").is_err());
+        assert!(grid(Aabb::new(Vec3::ZERO, Vec3::ONE), [0, 1, 1]).is_err());
+    }
+}

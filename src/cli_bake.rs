@@ -1,0 +1,166 @@
+//! `umbrasweep bake`: argument parsing, backend choice, progress bar, summary and the atomic
+//! write of the PVS document.
+
+use anyhow::{Context, bail};
+use clap::ValueEnum;
+use glam::Vec3;
+use std::path::PathBuf;
+use umbrasweep::backend::RasterBackend;
+use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::bake::{self, BakeSettings};
+use umbrasweep::geom::Aabb;
+use umbrasweep::{cells, scene};
+
+/// Which raster backend runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendChoice {
+    /// The GPU when a hardware adapter exists, else the CPU.
+    Auto,
+    /// wgpu; fails (exit 2) when no adapter exists.
+    Gpu,
+    /// Pure Rust with rayon.
+    Cpu,
+}
+
+#[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Examples:\n  umbrasweep bake data/demo_city.obj --cells data/demo_city_cells.json -o demo.json\n  umbrasweep bake city.obj --grid-box 0,1,0,100,3,100 --grid-size 20,1,20 -o city.json --backend cpu"
+)]
+pub struct BakeArgs {
+    /// The scene: .obj, .gltf or .glb.
+    pub scene: PathBuf,
+    /// View cells: {"cells": [{"min": [x,y,z], "max": [x,y,z]}, …]} in scene units.
+    #[arg(long, conflicts_with_all = ["grid_box", "grid_size"], required_unless_present = "grid_box")]
+    pub cells: Option<PathBuf>,
+    /// A regular grid of cells filling this box: minx,miny,minz,maxx,maxy,maxz.
+    #[arg(long, value_delimiter = ',', num_args = 6, requires = "grid_size", allow_hyphen_values = true)]
+    pub grid_box: Option<Vec<f32>>,
+    /// Cells per axis of --grid-box: nx,ny,nz.
+    #[arg(long, value_delimiter = ',', num_args = 3, requires = "grid_box")]
+    pub grid_size: Option<Vec<u32>>,
+    /// Output PVS document (.json).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Raster backend.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    /// Depth Map resolution per side (a power of two).
+    #[arg(long, default_value_t = BakeSettings::default_settings().resolution)]
+    pub resolution: u32,
+    /// Extension factor of each plane's rectangle beyond the 90° frustum of the cell's face.
+    #[arg(long, default_value_t = BakeSettings::default_settings().extend)]
+    pub extend: f64,
+    /// Projection planes per direction (each occludee is tested on all of them).
+    #[arg(long, default_value_t = BakeSettings::default_settings().planes)]
+    pub planes: u32,
+    /// Further planes per direction through the middle of the nearest large closed
+    /// occluders, which receive their cross-sections (slices) at Depth 0.
+    #[arg(long, default_value_t = BakeSettings::default_settings().slice_planes)]
+    pub slice_planes: u32,
+    /// Only objects whose name matches this glob pattern are occluders (e.g. 'building*');
+    /// every object stays an occludee.
+    #[arg(long)]
+    pub occluders: Option<String>,
+    /// Treat alpha-tested and blended triangles (glTF MASK/BLEND, MTL d < 1 or map_d) as opaque
+    /// occluders. WARNING: this may cull visible objects, seen through transparent texels.
+    #[arg(long)]
+    pub alpha_occluders: bool,
+    /// Disable the improved occludee Projection (Durand §4).
+    #[arg(long)]
+    pub no_improved_projection: bool,
+    /// No progress bar or summary.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// Resolves the cells of the command line.
+fn read_cells(a: &BakeArgs) -> anyhow::Result<Vec<Aabb>> {
+    if let Some(path) = &a.cells {
+        return Ok(cells::load_json(path)?);
+    }
+    let (Some(b), Some(n)) = (&a.grid_box, &a.grid_size) else {
+        bail!("give --cells FILE or --grid-box with --grid-size");
+    };
+    let bounds = Aabb::new(Vec3::new(b[0], b[1], b[2]), Vec3::new(b[3], b[4], b[5]));
+    Ok(cells::grid(bounds, [n[0], n[1], n[2]])?)
+}
+
+/// Picks the backend.
+pub fn make_backend(choice: BackendChoice) -> anyhow::Result<Box<dyn RasterBackend>> {
+    match choice {
+        BackendChoice::Cpu | BackendChoice::Auto => Ok(Box::new(CpuBackend::new())),
+        BackendChoice::Gpu => bail!("the GPU backend is not built yet; use --backend cpu"),
+    }
+}
+
+pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
+    let settings = BakeSettings {
+        resolution: a.resolution,
+        extend: a.extend,
+        planes: a.planes,
+        slice_planes: a.slice_planes,
+        alpha_occluders: a.alpha_occluders,
+        occluders: a.occluders.clone(),
+        improved_projection: !a.no_improved_projection,
+    };
+    settings.check().map_err(anyhow::Error::msg)?;
+    if a.output.extension().and_then(|e| e.to_str()) != Some("json") {
+        bail!(
+            "{}: unsupported output format (use a .json file name)",
+            a.output.display()
+        );
+    }
+    let cells = read_cells(a)?;
+    let t = std::time::Instant::now();
+    let scene = scene::load(&a.scene)?;
+    let load_s = t.elapsed().as_secs_f64();
+    let backend = make_backend(a.backend)?;
+    let bar = if a.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let b = indicatif::ProgressBar::new(cells.len() as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} baking [{bar:40}] {pos}/{len} cells, {elapsed} elapsed, eta {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        b
+    };
+    let progress = |k: usize| bar.set_position(k as u64);
+    let result = bake::bake(&scene, &cells, &settings, backend.as_ref(), Some(&progress))?;
+    bar.finish_and_clear();
+    let doc = bake::to_document(&scene, &cells, &result, &settings);
+    umbrasweep::pvs::json::write(&a.output, &doc)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| "writing the PVS")?;
+    if !a.quiet {
+        let s = doc.summary.as_ref().expect("bake writes a summary");
+        eprintln!("scene       {} (loaded in {load_s:.2} s)", a.scene.display());
+        for w in &scene.warnings {
+            eprintln!("warning     {w}");
+        }
+        eprintln!(
+            "backend     {}{}",
+            s.backend,
+            s.adapter.as_ref().map(|x| format!(" ({x})")).unwrap_or_default()
+        );
+        eprintln!("cells       {}", s.cells);
+        eprintln!("objects     {}", s.objects);
+        eprintln!(
+            "triangles   {} ({} occluders, {} degenerate skipped)",
+            s.triangles, s.occluder_triangles, s.degenerate_triangles
+        );
+        eprintln!(
+            "culled      {:.1} % of objects, {:.1} % of triangles (mean over cells)",
+            s.objects_culled_percent, s.triangles_culled_percent
+        );
+        eprintln!(
+            "time        {:.1} ms per cell (median), {:.2} s in all",
+            s.median_ms_per_cell, s.total_seconds
+        );
+        eprintln!("wrote       {}", a.output.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,157 @@
+//! Small geometric types shared by every stage: axis-aligned boxes in single and double
+//! precision.
+
+use glam::{DVec3, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// An axis-aligned box in scene units (single precision, as stored in scenes and PVS files).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// The empty box: `min = +inf`, `max = -inf`; growing it by a point gives that point.
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::INFINITY,
+        max: Vec3::NEG_INFINITY,
+    };
+
+    pub const fn new(min: Vec3, max: Vec3) -> Self {
+        Aabb { min, max }
+    }
+
+    /// The smallest box holding all `points` ([`Aabb::EMPTY`] for none).
+    pub fn from_points<'a>(points: impl IntoIterator<Item = &'a Vec3>) -> Self {
+        let mut b = Aabb::EMPTY;
+        for p in points {
+            b.grow(*p);
+        }
+        b
+    }
+
+    pub fn grow(&mut self, p: Vec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb::new(self.min.min(o.min), self.max.max(o.max))
+    }
+
+    /// True when the box holds no point (`min > max` on some axis).
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    pub fn size(&self) -> Vec3 {
+        self.max - self.min
+    }
+
+    /// Closed-box overlap: boxes that only touch overlap.
+    pub fn overlaps(&self, o: &Aabb) -> bool {
+        !self.is_empty()
+            && !o.is_empty()
+            && self.min.cmple(o.max).all()
+            && o.min.cmple(self.max).all()
+    }
+
+    pub fn contains_point(&self, p: Vec3) -> bool {
+        self.min.cmple(p).all() && p.cmple(self.max).all()
+    }
+
+    pub fn to_f64(&self) -> DAabb {
+        DAabb {
+            min: self.min.as_dvec3(),
+            max: self.max.as_dvec3(),
+        }
+    }
+}
+
+/// An axis-aligned box in double precision, used by the culling geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DAabb {
+    pub min: DVec3,
+    pub max: DVec3,
+}
+
+impl DAabb {
+    pub const EMPTY: DAabb = DAabb {
+        min: DVec3::INFINITY,
+        max: DVec3::NEG_INFINITY,
+    };
+
+    pub fn grow(&mut self, p: DVec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    pub fn center(&self) -> DVec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    pub fn overlaps(&self, o: &DAabb) -> bool {
+        self.min.cmple(o.max).all() && o.min.cmple(self.max).all()
+    }
+
+    /// The 8 corners, corner `i` taking `max` on axis `k` when bit `k` of `i` is set.
+    pub fn corners(&self) -> [DVec3; 8] {
+        std::array::from_fn(|i| {
+            DVec3::new(
+                if i & 1 != 0 { self.max.x } else { self.min.x },
+                if i & 2 != 0 { self.max.y } else { self.min.y },
+                if i & 4 != 0 { self.max.z } else { self.min.z },
+            )
+        })
+    }
+}
+
+/// The 12 outward-facing (counter-clockwise seen from outside) triangles of a box.
+pub fn box_triangles(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
+    let c = |i: usize| {
+        Vec3::new(
+            if i & 1 != 0 { max.x } else { min.x },
+            if i & 2 != 0 { max.y } else { min.y },
+            if i & 4 != 0 { max.z } else { min.z },
+        )
+    };
+    const QUADS: [[usize; 4]; 6] = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    QUADS
+        .iter()
+        .flat_map(|q| [[c(q[0]), c(q[1]), c(q[2])], [c(q[0]), c(q[2]), c(q[3])]])
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_box_grows_to_point_and_overlap_is_closed() {
+        let mut b = Aabb::EMPTY;
+        assert!(b.is_empty());
+        b.grow(Vec3::ONE);
+        assert!(!b.is_empty());
+        assert_eq!(b.min, Vec3::ONE);
+        let touching = Aabb::new(Vec3::new(1.0, 0.0, 0.0), Vec3::new(2.0, 2.0, 2.0));
+        assert!(b.overlaps(&touching));
+        let apart = Aabb::new(Vec3::splat(1.5), Vec3::splat(2.0));
+        assert!(!b.overlaps(&apart));
+    }
+}

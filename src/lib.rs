@@ -1,0 +1,47 @@
+//! # umbrasweep
+//!
+//! Conservative from-region visibility: for each view cell (a box the camera may be anywhere
+//! inside) umbrasweep computes the potentially visible set (PVS) of scene objects, using the
+//! extended projections of Durand et al. (SIGGRAPH 2000).
+//!
+//! Data flows one way: [`scene`] → [`cells`] → per-cell culling ([`project`], [`hdm`], raster
+//! work in [`backend`]) → [`pvs`] → files. [`bake`] ties the stages together.
+//!
+//! The `runtime` feature alone (`--no-default-features --features runtime`) builds only
+//! [`geom`] and [`pvs`], the parts an engine needs at run time.
+//!
+//! ```no_run
+//! # #[cfg(feature = "bake")] {
+//! use umbrasweep::{bake, cells, scene};
+//! let scene = scene::load("data/demo_city.obj".as_ref()).unwrap();
+//! let cells = cells::load_json("data/demo_city_cells.json".as_ref()).unwrap();
+//! let settings = bake::BakeSettings::default();
+//! let backend = umbrasweep::backend::cpu::CpuBackend::new();
+//! let result = bake::bake(&scene, &cells, &settings, &backend, None).unwrap();
+//! println!("{} cells baked", result.cells.len());
+//! # }
+//! ```
+
+pub mod geom;
+pub mod pvs;
+
+#[cfg(feature = "bake")]
+pub mod backend;
+#[cfg(feature = "bake")]
+pub mod bake;
+#[cfg(feature = "bake")]
+pub mod cells;
+/// Scene generators (`umbrasweep gen`); files live in `src/gen/` (`gen` is reserved in Rust 2024).
+#[cfg(feature = "bake")]
+#[path = "gen/mod.rs"]
+pub mod generate;
+#[cfg(feature = "bake")]
+pub mod hdm;
+#[cfg(feature = "bake")]
+pub mod project;
+#[cfg(feature = "bake")]
+pub mod scene;
+#[cfg(feature = "bake")]
+pub mod util;
+#[cfg(feature = "bake")]
+pub mod validate;

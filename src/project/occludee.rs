@@ -1,0 +1,223 @@
+//! Occludee extended projections (Durand §3.1 and §4): bounding rectangles on a plane of the
+//! union of the views of a box from every point of the cell, and the improved Projection for
+//! boxes lying between the cell and the plane.
+
+use crate::backend::PlaneFrame;
+use crate::geom::DAabb;
+use glam::DVec2;
+
+/// Where an occludee box lies relative to a plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OccludeeSpan {
+    /// Depth of the box's nearest point (its minimum Depth, §2.3).
+    pub depth: f64,
+    /// True when the whole box lies between the cell's face and the plane.
+    pub in_front: bool,
+}
+
+/// The box's Depth span when it lies strictly beyond the cell's face, else `None` (some ray
+/// from the cell to it does not travel toward this plane).
+pub fn span(frame: &PlaneFrame, b: &DAabb) -> Option<OccludeeSpan> {
+    let a = frame.axis;
+    let s = frame.sign();
+    let (near, far) = if frame.positive {
+        (b.min[a], b.max[a])
+    } else {
+        (b.max[a], b.min[a])
+    };
+    if s * (near - frame.face()) <= 0.0 {
+        return None;
+    }
+    Some(OccludeeSpan {
+        depth: s * (near - frame.position),
+        in_front: s * (far - frame.position) <= 0.0,
+    })
+}
+
+/// The standard Projection's bounding rectangle (world `(u, v)`), exact for the union of views:
+/// each coordinate of a view point is monotone in every coordinate of the eye and of the box
+/// point separately, so its extremes over cell × box are reached at corners (the separating /
+/// supporting lines of §3.1). The box must lie strictly beyond the face ([`span`]).
+pub fn standard_rect(frame: &PlaneFrame, b: &DAabb) -> (DVec2, DVec2) {
+    let a = frame.axis;
+    let (u, v) = frame.uv_axes();
+    let c = &frame.cell;
+    let p = frame.position;
+    let mut lo = DVec2::INFINITY;
+    let mut hi = DVec2::NEG_INFINITY;
+    for va in [c.min[a], c.max[a]] {
+        for xa in [b.min[a], b.max[a]] {
+            let t = (p - va) / (xa - va);
+            for (k, ax) in [u, v].into_iter().enumerate() {
+                for vu in [c.min[ax], c.max[ax]] {
+                    for xu in [b.min[ax], b.max[ax]] {
+                        let q = vu + (xu - vu) * t;
+                        lo[k] = lo[k].min(q);
+                        hi[k] = hi[k].max(q);
+                    }
+                }
+            }
+        }
+    }
+    (lo, hi)
+}
+
+/// The improved Projection (§4) of a box lying between the cell's face and the plane: per
+/// in-plane axis, the segment between the two supporting lines of the cell and the box where
+/// they meet the plane, or its mid-point when they cross before the plane. Valid with convex or
+/// planar occluders (all of ours) and the usual Depth test.
+pub fn improved_rect(frame: &PlaneFrame, b: &DAabb) -> (DVec2, DVec2) {
+    let a = frame.axis;
+    let s = frame.sign();
+    let face = frame.face();
+    let c = &frame.cell;
+    let l = c.max[a] - c.min[a];
+    let (near, far) = if frame.positive {
+        (b.min[a], b.max[a])
+    } else {
+        (b.max[a], b.min[a])
+    };
+    let tb0 = s * (near - face);
+    let tb1 = s * (far - face);
+    let tp = s * (frame.position - face);
+    let (u, v) = frame.uv_axes();
+    let mut lo = DVec2::ZERO;
+    let mut hi = DVec2::ZERO;
+    for (k, ax) in [u, v].into_iter().enumerate() {
+        let (cu0, cu1, bu0, bu1) = (c.min[ax], c.max[ax], b.min[ax], b.max[ax]);
+        // Upper supporting line: through the cell's back top corner and the box's near top
+        // corner when the box is higher, else through the cell's front top corner and the box's
+        // far top corner.
+        let upper = if bu1 >= cu1 {
+            cu1 + (bu1 - cu1) * (tp + l) / (tb0 + l)
+        } else {
+            cu1 + (bu1 - cu1) * tp / tb1
+        };
+        let lower = if bu0 <= cu0 {
+            cu0 + (bu0 - cu0) * (tp + l) / (tb0 + l)
+        } else {
+            cu0 + (bu0 - cu0) * tp / tb1
+        };
+        if lower <= upper {
+            lo[k] = lower;
+            hi[k] = upper;
+        } else {
+            let m = 0.5 * (lower + upper);
+            lo[k] = m;
+            hi[k] = m;
+        }
+    }
+    (lo, hi)
+}
+
+/// The pixels `[i0, i1] × [j0, j1]` a world rectangle overlaps (rounded outward; a pixel that
+/// only touches it counts), or `None` when any part of it falls outside the plane's rectangle.
+pub fn pixel_rect(frame: &PlaneFrame, lo: DVec2, hi: DVec2) -> Option<[u32; 4]> {
+    let pl = frame.to_pixel(lo);
+    let ph = frame.to_pixel(hi);
+    let r = frame.resolution as f64;
+    if !(pl.x >= 0.0 && pl.y >= 0.0 && ph.x <= r && ph.y <= r) {
+        return None;
+    }
+    let i0 = pl.x.floor() as u32;
+    let j0 = pl.y.floor() as u32;
+    let i1 = (ph.x.floor() as u32).min(frame.resolution - 1);
+    let j1 = (ph.y.floor() as u32).min(frame.resolution - 1);
+    Some([i0, j0, i1.max(i0), j1.max(j0)])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    fn frame(position: f64) -> PlaneFrame {
+        PlaneFrame {
+            cell: DAabb {
+                min: DVec3::new(-1.0, -1.0, -1.0),
+                max: DVec3::new(1.0, 1.0, 1.0),
+            },
+            axis: 2,
+            positive: true,
+            position,
+            rect_min: DVec2::splat(-50.0),
+            rect_max: DVec2::splat(50.0),
+            resolution: 64,
+        }
+    }
+
+    /// Every ray from a sample of cell points to a sample of box points crosses the plane
+    /// inside the rectangle.
+    fn contains_all_views(f: &PlaneFrame, b: &DAabb, lo: DVec2, hi: DVec2) -> bool {
+        let steps = 6;
+        let lerp = |a: DVec3, b: DVec3, t: DVec3| a + (b - a) * t;
+        for i in 0..=steps * steps * steps {
+            let t = DVec3::new(
+                (i % (steps + 1)) as f64,
+                ((i / (steps + 1)) % (steps + 1)) as f64,
+                (i / ((steps + 1) * (steps + 1))) as f64,
+            ) / steps as f64;
+            let eye = lerp(f.cell.min, f.cell.max, t);
+            for j in 0..27 {
+                let s = DVec3::new((j % 3) as f64, ((j / 3) % 3) as f64, (j / 9) as f64) / 2.0;
+                let q = f.project(eye, lerp(b.min, b.max, s));
+                if q.x < lo.x - 1e-9 || q.y < lo.y - 1e-9 || q.x > hi.x + 1e-9 || q.y > hi.y + 1e-9 {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    #[test]
+    fn standard_rect_holds_every_view_in_front_of_and_behind_the_plane() {
+        let b = DAabb {
+            min: DVec3::new(2.0, -3.0, 4.0),
+            max: DVec3::new(5.0, 1.0, 6.0),
+        };
+        for pos in [5.0, 8.0, 20.0] {
+            let f = frame(pos);
+            let (lo, hi) = standard_rect(&f, &b);
+            assert!(contains_all_views(&f, &b, lo, hi), "plane at {pos}");
+        }
+    }
+
+    #[test]
+    fn improved_rect_is_inside_the_standard_one_and_collapses_for_small_boxes() {
+        let f = frame(30.0);
+        let small = DAabb {
+            min: DVec3::new(-0.2, -0.2, 4.0),
+            max: DVec3::new(0.2, 0.2, 4.5),
+        };
+        let (slo, shi) = standard_rect(&f, &small);
+        let (lo, hi) = improved_rect(&f, &small);
+        assert_eq!(lo, hi, "supporting lines cross before the plane: a point");
+        assert!(lo.x >= slo.x && hi.x <= shi.x);
+        let big = DAabb {
+            min: DVec3::new(-4.0, -3.0, 5.0),
+            max: DVec3::new(3.0, 2.0, 7.0),
+        };
+        let (slo, shi) = standard_rect(&f, &big);
+        let (lo, hi) = improved_rect(&f, &big);
+        assert!(lo.x < hi.x && lo.y < hi.y);
+        assert!(lo.x >= slo.x && lo.y >= slo.y && hi.x <= shi.x && hi.y <= shi.y);
+        assert!((hi - lo).x < (shi - slo).x, "strictly tighter");
+    }
+
+    #[test]
+    fn span_needs_the_box_beyond_the_face() {
+        let f = frame(10.0);
+        let straddling = DAabb {
+            min: DVec3::new(0.0, 0.0, 0.5),
+            max: DVec3::new(1.0, 1.0, 3.0),
+        };
+        assert!(span(&f, &straddling).is_none());
+        let beyond = DAabb {
+            min: DVec3::new(0.0, 0.0, 2.0),
+            max: DVec3::new(1.0, 1.0, 3.0),
+        };
+        let s = span(&f, &beyond).unwrap();
+        assert_eq!(s.depth, -8.0);
+        assert!(s.in_front);
+    }
+}

@@ -1,0 +1,525 @@
+//! Occluder preparation, once per scene: each occluder object is cut into convex parts whose
+//! views can be projected whole (the lessons' "per-triangle Projections leave cracks"):
+//!
+//! - a connected component that is a closed, convex solid (a box) becomes one [`PartKind::Solid`]
+//!   point set;
+//! - every other triangle joins adjacent coplanar triangles into convex polygons
+//!   ([`PartKind::Polygon`]; a lone triangle is a polygon of 3 points).
+//!
+//! Every part is a convex point set whose convex hull lies inside the opaque surface or solid
+//! (up to a measured deviation that is removed by shrinking, see [`OccluderPart::deviation`]),
+//! so the views of its points are views of real occluding geometry.
+
+use crate::geom::DAabb;
+use crate::scene::{Scene, is_degenerate};
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// The shape of one convex part.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PartKind {
+    /// A closed convex solid; the points are its (already shrunk) vertices.
+    Solid,
+    /// A planar convex polygon, points in order.
+    Polygon {
+        /// Unit normal of the fitted plane.
+        normal: DVec3,
+    },
+}
+
+/// One convex part of an occluder object.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OccluderPart {
+    pub start: u32,
+    pub end: u32,
+    pub bounds: DAabb,
+    pub object: u32,
+    pub kind: PartKind,
+    /// For polygons: the largest distance of a vertex from the fitted plane (0 for exact
+    /// planes and all triangles). A ray crossing a slightly bent polygon at a grazing angle θ
+    /// may pass up to `2·deviation / sin θ` beside it, so per cell such polygons are shrunk in
+    /// their plane by that amount (see `project::planes`).
+    pub deviation: f64,
+    /// For polygons: the distance from the vertex centroid to the nearest edge (in-plane
+    /// inradius about the centroid), used to shrink it.
+    pub inradius: f64,
+}
+
+/// All occluder parts of a scene.
+#[derive(Clone, Debug, Default)]
+pub struct Occluders {
+    pub points: Vec<DVec3>,
+    pub parts: Vec<OccluderPart>,
+    pub stats: OccluderStats,
+}
+
+/// Counts for the summary.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct OccluderStats {
+    /// Triangles used as occluders (opaque, selected, not degenerate).
+    pub triangles: usize,
+    /// Zero-area triangles skipped.
+    pub degenerate: usize,
+    pub solids: usize,
+    pub polygons: usize,
+}
+
+impl Occluders {
+    pub fn part_points(&self, k: usize) -> &[DVec3] {
+        let p = &self.parts[k];
+        &self.points[p.start as usize..p.end as usize]
+    }
+}
+
+/// Largest component (in triangles) tested for being a convex solid.
+const MAX_SOLID_TRIANGLES: usize = 256;
+
+/// Prepares the occluder parts of the selected objects.
+///
+/// `is_occluder[o]` selects objects; triangles of non-opaque materials are used only when
+/// `alpha_occluders` is set. Closed convex components become solids per object; all other
+/// triangles are welded across objects (bit-identical positions) and merged into convex
+/// coplanar polygons per connected component, so two walls of different objects that share an
+/// edge project as one polygon, with no crack at their seam.
+pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Occluders {
+    // 1. Per object: solids, and the triangles left over.
+    let per_object: Vec<(Vec<DVec3>, Vec<OccluderPart>, OccluderStats, Vec<[Vec3; 3]>)> =
+        (0..scene.objects.len())
+            .into_par_iter()
+            .map(|o| {
+                if !is_occluder[o] {
+                    return Default::default();
+                }
+                prepare_object(scene, o as u32, alpha_occluders)
+            })
+            .collect();
+    let mut out = Occluders::default();
+    // 2. Weld the leftover triangles of all objects together.
+    let mut index: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut verts: Vec<DVec3> = Vec::new();
+    let mut tris: Vec<[u32; 3]> = Vec::new();
+    let mut tri_object: Vec<u32> = Vec::new();
+    for (o, (pts, parts, st, rest)) in per_object.into_iter().enumerate() {
+        let base = out.points.len() as u32;
+        out.points.extend(pts);
+        out.parts.extend(parts.into_iter().map(|mut p| {
+            p.start += base;
+            p.end += base;
+            p
+        }));
+        out.stats.triangles += st.triangles;
+        out.stats.degenerate += st.degenerate;
+        out.stats.solids += st.solids;
+        for t in rest {
+            let ids = t.map(|p| {
+                let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+                *index.entry(key).or_insert_with(|| {
+                    verts.push(p.as_dvec3());
+                    (verts.len() - 1) as u32
+                })
+            });
+            tris.push(ids);
+            tri_object.push(o as u32);
+        }
+    }
+    drop(index);
+    // 3. Merge coplanar neighbours per connected component, in parallel.
+    let comps = components(&verts, &tris);
+    let merged: Vec<Vec<(u32, MergedPolygon)>> = comps
+        .par_iter()
+        .map(|comp| {
+            let comp_tris: Vec<[u32; 3]> = comp.iter().map(|&t| tris[t]).collect();
+            let object = tri_object[comp[0]];
+            if comp_tris.len() == 1 {
+                let n = (verts[comp_tris[0][1] as usize] - verts[comp_tris[0][0] as usize])
+                    .cross(verts[comp_tris[0][2] as usize] - verts[comp_tris[0][0] as usize])
+                    .normalize();
+                return vec![(
+                    object,
+                    MergedPolygon {
+                        verts: comp_tris[0].to_vec(),
+                        normal: n,
+                        deviation: 0.0,
+                        inradius: 0.0,
+                    },
+                )];
+            }
+            merge_coplanar(&verts, &comp_tris)
+                .into_iter()
+                .map(|p| (object, p))
+                .collect()
+        })
+        .collect();
+    for (object, poly) in merged.into_iter().flatten() {
+        out.stats.polygons += 1;
+        let pts: Vec<DVec3> = poly.verts.iter().map(|&i| verts[i as usize]).collect();
+        push_part(
+            &mut out.points,
+            &mut out.parts,
+            object,
+            pts,
+            PartKind::Polygon {
+                normal: poly.normal,
+            },
+            poly.deviation,
+            poly.inradius,
+        );
+    }
+    out
+}
+
+/// One object's convex solids, and its other usable triangles.
+fn prepare_object(
+    scene: &Scene,
+    object: u32,
+    alpha_occluders: bool,
+) -> (Vec<DVec3>, Vec<OccluderPart>, OccluderStats, Vec<[Vec3; 3]>) {
+    let mut stats = OccluderStats::default();
+    let range = scene.objects[object as usize].triangles.clone();
+    // Weld bit-identical positions.
+    let mut index: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut verts: Vec<DVec3> = Vec::new();
+    let mut raw: Vec<[Vec3; 3]> = Vec::new();
+    let mut tris: Vec<[u32; 3]> = Vec::new();
+    for t in range {
+        if !(scene.opaque[t as usize] || alpha_occluders) {
+            continue;
+        }
+        let corners = scene.triangle(t as usize);
+        if is_degenerate(corners) {
+            stats.degenerate += 1;
+            continue;
+        }
+        let ids = corners.map(|p| {
+            let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+            *index.entry(key).or_insert_with(|| {
+                verts.push(p.as_dvec3());
+                (verts.len() - 1) as u32
+            })
+        });
+        tris.push(ids);
+        raw.push(corners);
+    }
+    stats.triangles = tris.len();
+    let mut points = Vec::new();
+    let mut parts = Vec::new();
+    let mut rest = Vec::new();
+    for comp in components(&verts, &tris) {
+        let comp_tris: Vec<[u32; 3]> = comp.iter().map(|&t| tris[t]).collect();
+        if comp_tris.len() <= MAX_SOLID_TRIANGLES
+            && let Some(solid) = convex_solid(&verts, &comp_tris)
+        {
+            push_part(&mut points, &mut parts, object, solid, PartKind::Solid, 0.0, 0.0);
+            stats.solids += 1;
+            continue;
+        }
+        rest.extend(comp.iter().map(|&t| raw[t]));
+    }
+    (points, parts, stats, rest)
+}
+
+fn push_part(
+    points: &mut Vec<DVec3>,
+    parts: &mut Vec<OccluderPart>,
+    object: u32,
+    pts: Vec<DVec3>,
+    kind: PartKind,
+    deviation: f64,
+    inradius: f64,
+) {
+    let start = points.len() as u32;
+    let mut bounds = DAabb::EMPTY;
+    for &p in &pts {
+        bounds.grow(p);
+    }
+    points.extend(pts);
+    parts.push(OccluderPart {
+        start,
+        end: points.len() as u32,
+        bounds,
+        object,
+        kind,
+        deviation,
+        inradius,
+    });
+}
+
+/// Connected components of triangles sharing a vertex; lists of triangle indices.
+fn components(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<Vec<usize>> {
+    let mut parent: Vec<u32> = (0..verts.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for t in tris {
+        let a = find(&mut parent, t[0]);
+        for &v in &t[1..] {
+            let b = find(&mut parent, v);
+            if a != b {
+                parent[b as usize] = a;
+            }
+        }
+    }
+    let mut groups: HashMap<u32, Vec<usize>> = HashMap::new();
+    let mut order = Vec::new();
+    for (i, t) in tris.iter().enumerate() {
+        let r = find(&mut parent, t[0]);
+        groups
+            .entry(r)
+            .or_insert_with(|| {
+                order.push(r);
+                Vec::new()
+            })
+            .push(i);
+    }
+    order.into_iter().map(|r| groups.remove(&r).unwrap()).collect()
+}
+
+/// When the triangles form a closed, outward-oriented convex solid, its vertices shrunk toward
+/// their centroid just enough that their convex hull lies inside the solid.
+fn convex_solid(verts: &[DVec3], tris: &[[u32; 3]]) -> Option<Vec<DVec3>> {
+    if tris.len() < 4 {
+        return None;
+    }
+    // Closed 2-manifold: every directed edge once, its reverse once.
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(tris.len() * 3);
+    for t in tris {
+        for k in 0..3 {
+            let e = (t[k], t[(k + 1) % 3]);
+            *edges.entry(e).or_insert(0) += 1;
+        }
+    }
+    for (&(a, b), &n) in &edges {
+        if n != 1 || edges.get(&(b, a)) != Some(&1) {
+            return None;
+        }
+    }
+    let mut ids: Vec<u32> = tris.iter().flatten().copied().collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let pts: Vec<DVec3> = ids.iter().map(|&i| verts[i as usize]).collect();
+    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    let size = pts
+        .iter()
+        .fold(DAabb::EMPTY, |mut b, &p| {
+            b.grow(p);
+            b
+        });
+    let extent = (size.max - size.min).max_element();
+    let scale = extent.max(size.max.abs().max(size.min.abs()).max_element());
+    let tol = 1e-5 * extent + 4.0 * f32::EPSILON as f64 * scale;
+    let mut dev: f64 = 0.0;
+    let mut rho = f64::INFINITY;
+    let mut signed_volume = 0.0;
+    for t in tris {
+        let (a, b, cc) = (verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]);
+        signed_volume += a.dot(b.cross(cc));
+        let n = (b - a).cross(cc - a);
+        let len = n.length();
+        if len == 0.0 {
+            return None;
+        }
+        let n = n / len;
+        let d = n.dot(a);
+        for &p in &pts {
+            dev = dev.max(n.dot(p) - d);
+        }
+        rho = rho.min(d - n.dot(c));
+    }
+    // Outward orientation (positive volume), convex within tolerance, a real interior.
+    if signed_volume <= 0.0 || dev > tol || rho <= 8.0 * dev.max(0.0) || rho <= 0.0 {
+        return None;
+    }
+    // Hull ⊂ solid ⊕ B(k·dev); scaling about c by (1 − k·dev/ρ) brings it inside (B(c, ρ) lies
+    // in the solid). k = 3 covers the corner amplification of boxes and most polytopes.
+    let shrink = if dev > 0.0 { 3.0 * dev / rho } else { 0.0 };
+    Some(pts.iter().map(|&p| c + (p - c) * (1.0 - shrink)).collect())
+}
+
+/// A merged convex polygon.
+#[derive(Clone, Debug)]
+pub struct MergedPolygon {
+    pub verts: Vec<u32>,
+    pub normal: DVec3,
+    pub deviation: f64,
+    pub inradius: f64,
+}
+
+/// Greedy merge of edge-adjacent coplanar triangles into convex polygons.
+pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> {
+    let mut by_edge: HashMap<(u32, u32), usize> = HashMap::with_capacity(tris.len() * 3);
+    for (i, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            by_edge.insert((t[k], t[(k + 1) % 3]), i);
+        }
+    }
+    let normal = |t: &[u32; 3]| {
+        let (a, b, c) = (verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]);
+        (b - a).cross(c - a)
+    };
+    let mut order: Vec<usize> = (0..tris.len()).collect();
+    let areas: Vec<f64> = tris.iter().map(|t| normal(t).length()).collect();
+    order.sort_by(|&a, &b| areas[b].total_cmp(&areas[a]));
+    let mut used = vec![false; tris.len()];
+    let mut out = Vec::new();
+    for &seed in &order {
+        if used[seed] {
+            continue;
+        }
+        used[seed] = true;
+        let n = normal(&tris[seed]).normalize();
+        let p0 = verts[tris[seed][0] as usize];
+        let d = n.dot(p0);
+        let scale = p0.abs().max_element().max(areas[seed].sqrt());
+        let plane_tol = 4.0 * f32::EPSILON as f64 * scale;
+        let mut poly: Vec<u32> = tris[seed].to_vec();
+        let turn = |a: u32, b: u32, c: u32| {
+            let (a, b, c) = (verts[a as usize], verts[b as usize], verts[c as usize]);
+            let t = (b - a).cross(c - b).dot(n);
+            let m = (b - a).length() * (c - b).length();
+            t >= -1e-9 * m
+        };
+        let mut changed = true;
+        while changed {
+            changed = false;
+            let mut e = 0;
+            while e < poly.len() {
+                let len = poly.len();
+                let (p, q) = (poly[e], poly[(e + 1) % len]);
+                if let Some(&t2) = by_edge.get(&(q, p))
+                    && !used[t2]
+                {
+                    let tri = tris[t2];
+                    let r = tri
+                        .iter()
+                        .copied()
+                        .find(|&v| v != p && v != q)
+                        .unwrap_or(tri[0]);
+                    let n2 = normal(&tri).normalize();
+                    let coplanar = n2.dot(n) >= 1.0 - 1e-9
+                        && (n.dot(verts[r as usize]) - d).abs() <= plane_tol;
+                    let prev = poly[(e + len - 1) % len];
+                    let next = poly[(e + 2) % len];
+                    if coplanar && turn(prev, p, r) && turn(p, r, q) && turn(r, q, next) {
+                        poly.insert(e + 1, r);
+                        used[t2] = true;
+                        changed = true;
+                        continue;
+                    }
+                }
+                e += 1;
+            }
+        }
+        let pts: Vec<DVec3> = poly.iter().map(|&i| verts[i as usize]).collect();
+        let deviation = if poly.len() == 3 {
+            0.0
+        } else {
+            pts.iter()
+                .map(|&p| (n.dot(p) - d).abs())
+                .fold(0.0, f64::max)
+        };
+        let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+        let inradius = (0..pts.len())
+            .map(|k| {
+                let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
+                let e = b - a;
+                (c - a).cross(e).length() / e.length()
+            })
+            .fold(f64::INFINITY, f64::min);
+        out.push(MergedPolygon {
+            verts: poly,
+            normal: n,
+            deviation,
+            inradius,
+        });
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use std::path::Path;
+
+    fn quad_grid(n: usize) -> Vec<[Vec3; 3]> {
+        // An n×n grid of quads on z = 5, each split into two triangles.
+        let mut tris = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                let p = |a: usize, b: usize| Vec3::new(a as f32, b as f32, 5.0);
+                tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
+                tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
+            }
+        }
+        tris
+    }
+
+    #[test]
+    fn a_flat_grid_merges_into_one_convex_polygon() {
+        let scene = Scene::from_objects(
+            Path::new("t"),
+            vec![("wall".into(), quad_grid(4), true)],
+        );
+        let occ = prepare(&scene, &[true], false);
+        assert_eq!(occ.parts.len(), 1, "{:?}", occ.parts.len());
+        let b = occ.parts[0].bounds;
+        assert_eq!((b.min.x, b.max.x, b.min.y, b.max.y), (0.0, 4.0, 0.0, 4.0));
+        assert_eq!(occ.parts[0].deviation, 0.0);
+    }
+
+    #[test]
+    fn an_l_shape_is_split_into_convex_pieces() {
+        let mut tris = quad_grid(2);
+        tris.remove(7);
+        tris.remove(6); // drop quad (1,1): an L of three quads
+        let scene = Scene::from_objects(Path::new("t"), vec![("l".into(), tris, true)]);
+        let occ = prepare(&scene, &[true], false);
+        assert!(occ.parts.len() >= 2);
+        // Every polygon is convex: all turns left.
+        for k in 0..occ.parts.len() {
+            let p = occ.part_points(k);
+            for i in 0..p.len() {
+                let (a, b, c) = (p[i], p[(i + 1) % p.len()], p[(i + 2) % p.len()]);
+                assert!((b - a).cross(c - b).z >= -1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_box_becomes_one_solid_and_an_open_box_does_not() {
+        let b = crate::geom::box_triangles(Vec3::ZERO, Vec3::new(2.0, 3.0, 4.0));
+        let mut open = b.clone();
+        open.truncate(10);
+        let scene = Scene::from_objects(
+            Path::new("t"),
+            vec![("box".into(), b, true), ("open".into(), open, true)],
+        );
+        let occ = prepare(&scene, &[true, true], false);
+        let solids: Vec<_> = occ
+            .parts
+            .iter()
+            .filter(|p| p.kind == PartKind::Solid)
+            .collect();
+        assert_eq!(solids.len(), 1);
+        assert_eq!(solids[0].object, 0);
+        assert_eq!(solids[0].end - solids[0].start, 8);
+        assert_eq!(occ.stats.solids, 1);
+        assert!(occ.parts.iter().filter(|p| p.object == 1).count() >= 4);
+    }
+
+    #[test]
+    fn non_opaque_triangles_are_not_occluders_unless_asked() {
+        let scene = Scene::from_objects(
+            Path::new("t"),
+            vec![("leaf".into(), quad_grid(1), false)],
+        );
+        assert!(prepare(&scene, &[true], false).parts.is_empty());
+        assert_eq!(prepare(&scene, &[true], true).parts.len(), 1);
+        assert!(prepare(&scene, &[false], true).parts.is_empty());
+    }
+}

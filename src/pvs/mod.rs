@@ -1,0 +1,88 @@
+//! The PVS as data: the JSON document `bake -o OUT.json` writes (`format: "umbrasweep-pvs"`,
+//! version 1). Builds without the baking dependencies.
+//!
+//! Schema (documented in the README):
+//! `{"format": "umbrasweep-pvs", "version": 1, "scene": PATH, "settings": {…},
+//!   "objects": [{"id", "name", "triangles", "min", "max"}, …],
+//!   "cells": [{"min", "max", "visible": [sorted object ids], "ms"}, …], "summary": {…}}`
+
+use serde::{Deserialize, Serialize};
+
+/// The format tag of the JSON document.
+pub const FORMAT: &str = "umbrasweep-pvs";
+/// The JSON schema version this crate writes and reads.
+pub const VERSION: u32 = 1;
+
+/// A whole PVS document.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PvsDocument {
+    pub format: String,
+    pub version: u32,
+    /// The scene file the PVS was baked from.
+    pub scene: String,
+    /// The settings used, for reproducing the bake.
+    #[serde(default)]
+    pub settings: PvsSettings,
+    pub objects: Vec<PvsObject>,
+    pub cells: Vec<PvsCell>,
+    /// Totals of the bake; absent in documents made by other tools.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub summary: Option<PvsSummary>,
+}
+
+/// One scene object, as the PVS numbers it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PvsObject {
+    pub id: u32,
+    pub name: String,
+    pub triangles: u32,
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+/// One cell and its potentially visible set.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PvsCell {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+    /// Ids of the potentially visible objects, sorted ascending.
+    pub visible: Vec<u32>,
+    /// Milliseconds spent baking this cell.
+    #[serde(default)]
+    pub ms: f64,
+}
+
+/// Totals over all cells.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct PvsSummary {
+    pub cells: usize,
+    pub objects: usize,
+    pub triangles: usize,
+    pub occluder_triangles: usize,
+    pub degenerate_triangles: usize,
+    pub backend: String,
+    pub adapter: Option<String>,
+    /// Mean over cells of the percentage of objects culled.
+    pub objects_culled_percent: f64,
+    /// Mean over cells of the percentage of triangles culled.
+    pub triangles_culled_percent: f64,
+    pub median_ms_per_cell: f64,
+    pub total_seconds: f64,
+}
+
+/// The bake settings recorded in a PVS document.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PvsSettings {
+    pub backend: String,
+    pub resolution: u32,
+    pub extend: f64,
+    pub planes: u32,
+    pub slice_planes: u32,
+    pub alpha_occluders: bool,
+    pub occluders: Option<String>,
+    pub improved_projection: bool,
+}
+
+#[cfg(feature = "bake")]
+pub mod json;

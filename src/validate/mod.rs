@@ -1,0 +1,96 @@
+//! `umbrasweep validate`: checks a PVS against ray-sampled ground truth. Owns the command
+//! ([`ValidateArgs`], [`run`]) and re-exports the library API the tests and benchmarks use.
+//!
+//! For every cell, [`sample_cell`] casts rays from points strictly inside the cell through a
+//! BVH of the whole scene ([`SceneRays`]); the first triangle a ray hits names a visible object
+//! (see-through triangles name theirs and let the ray go on, unless the PVS was baked with
+//! `alpha_occluders`). The sampled visible set (VS) can only under-estimate the exact one, so
+//! an object in the VS but not in the PVS is a proven false cull, reported with the ray that
+//! proves it. [`check`] does this for a whole [`PvsDocument`](crate::pvs::PvsDocument) and
+//! returns a [`Report`].
+//!
+//! * `trace` — the BVH, the watertight ray/triangle test, point sampling on objects;
+//! * `sample` — ray budget, phases, random streams, deterministic merge;
+//! * `check` — input checks, the report and its table.
+//!
+//! ```no_run
+//! use umbrasweep::validate::{CheckOptions, SceneRays, check_with, sample_cell};
+//! # fn f(scene: &umbrasweep::scene::Scene, doc: &umbrasweep::pvs::PvsDocument) {
+//! let rays = SceneRays::new(scene);
+//! let cell = umbrasweep::geom::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE);
+//! let vs = sample_cell(&rays, scene, cell, 100_000, 1, 0, false);
+//! println!("{} objects seen", vs.visible.len());
+//! let report = check_with(&rays, scene, doc, &CheckOptions::default()).unwrap();
+//! assert_eq!(report.false_culls, 0);
+//! # }
+//! ```
+
+mod check;
+mod sample;
+mod trace;
+
+pub use check::{
+    CellReport, CheckOptions, FalseCull, Report, ValidateError, cell_report, check, check_input,
+    check_with,
+};
+pub use sample::{CHUNK, CellSample, Witness, sample_cell};
+pub use trace::{SceneRays, TraceHit};
+
+use anyhow::Context as _;
+use std::io::IsTerminal as _;
+use std::path::PathBuf;
+
+/// Options of `umbrasweep validate`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ValidateArgs {
+    /// The scene the PVS was baked from (.obj, .gltf, .glb).
+    pub scene: PathBuf,
+    /// The PVS document written by `umbrasweep bake -o`.
+    pub pvs: PathBuf,
+    /// Rays cast per cell.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub rays: u64,
+    /// Seed of the random rays (the same seed gives the same result on any thread count).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Also write the report as JSON to this file.
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+}
+
+/// Runs `umbrasweep validate`: prints the table on stdout, writes `--json` if asked, and
+/// returns the exit code: 0 when no false cull was found, 1 otherwise.
+///
+/// # Errors
+/// Bad input (exit code 2 in `main`): `--rays 0`, an unreadable or malformed scene or PVS, a
+/// PVS baked from another scene, an invalid cell; or a `--json` file that cannot be written.
+pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
+    if args.rays == 0 {
+        anyhow::bail!(ValidateError::NoRays);
+    }
+    // The PVS first: reading it is cheap, loading a big scene is not.
+    let doc = crate::pvs::json::read(&args.pvs).map_err(anyhow::Error::msg)?;
+    let scene = crate::scene::load(&args.scene)?;
+    check_input(&scene, &doc, args.rays)
+        .with_context(|| format!("{} does not fit {}", args.pvs.display(), args.scene.display()))?;
+    let opts = CheckOptions {
+        rays: args.rays,
+        seed: args.seed,
+        progress: std::io::stderr().is_terminal(),
+    };
+    let index = SceneRays::new(&scene);
+    let report = check_with(&index, &scene, &doc, &opts)?;
+    print!("{}", report.table());
+    println!(
+        "{} rays in {:.2} s ({:.2} M rays/s, {} threads)",
+        report.rays_cast,
+        report.seconds,
+        report.rays_per_second() / 1e6,
+        rayon::current_num_threads()
+    );
+    if let Some(path) = &args.json {
+        let bytes = serde_json::to_vec_pretty(&report)?;
+        crate::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
+    }
+    Ok(if report.false_culls > 0 { 1 } else { 0 })
+}

@@ -1,0 +1,483 @@
+//! Ray casting for the validator: [`SceneRays`], a compressed wide BVH (`obvhs` CWBVH) over
+//! the scene's non-degenerate triangles, a watertight ray/triangle test, first-hit tracing with
+//! see-through (alpha-tested) triangles, and area-weighted point sampling on objects.
+//!
+//! Robustness matters more than usual here: a ray that leaks through the shared edge of two
+//! wall triangles would "see" an object that is really hidden and report a false cull that is
+//! not there. Hence:
+//! * the triangle test is the watertight one of Woop, Benthin and Wald (JCGT 2013): a shared
+//!   edge gives exactly opposite edge functions in both triangles, and exact zeros are
+//!   re-evaluated in double precision, so a ray through a closed mesh always hits it;
+//! * the boxes the BVH is built from are padded a little, so the single-precision slab tests
+//!   of the traversal never reject a box whose triangle the ray hits;
+//! * zero-area triangles are left out: they never block and never name an object.
+
+use crate::geom::Aabb;
+use crate::scene::{self, Scene};
+use glam::{DVec3, UVec2, Vec3, Vec3A};
+use obvhs::BvhBuildParams;
+use obvhs::aabb::Aabb as BvhAabb;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::Ray;
+
+/// One triangle a ray reaches before (or at) its first blocking hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TraceHit {
+    /// The object owning the triangle.
+    pub object: u32,
+    /// The triangle's index in [`Scene::triangles`].
+    pub triangle: u32,
+    /// Distance along the ray, in units of the direction's length.
+    pub t: f32,
+}
+
+/// A hit as the traversal records it: BVH slot and distance.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RawHit {
+    pub slot: u32,
+    pub t: f32,
+}
+
+/// Per-triangle data in BVH order.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TriMeta {
+    pub object: u32,
+    pub triangle: u32,
+    pub opaque: bool,
+}
+
+/// Area-weighted sampling data of one object.
+#[derive(Clone, Debug)]
+struct ObjectArea {
+    /// Range into `SceneRays::area_cdf` / `area_tri`.
+    start: u32,
+    end: u32,
+}
+
+/// The ray-casting structure of one scene: built once, shared by all cells and threads.
+pub struct SceneRays {
+    bvh: CwBvh,
+    /// Triangle corners in BVH order (slot `i` is `bvh.primitive_indices[i]`).
+    tris: Vec<[Vec3A; 3]>,
+    /// Per slot: owner object, scene triangle index, opacity.
+    meta: Vec<TriMeta>,
+    /// Per object: its run of the cumulative-area table.
+    areas: Vec<ObjectArea>,
+    /// Cumulative triangle areas, per object run (inclusive prefix sums, from 0 per object).
+    area_cdf: Vec<f64>,
+    /// Scene triangle index of each entry of `area_cdf`.
+    area_tri: Vec<u32>,
+    /// Objects with at least one non-degenerate triangle, ascending.
+    targetable: Vec<u32>,
+    /// Object bounds, as in the scene.
+    bounds: Vec<Aabb>,
+}
+
+impl std::fmt::Debug for SceneRays {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SceneRays")
+            .field("triangles", &self.tris.len())
+            .field("bvh_nodes", &self.bvh.nodes.len())
+            .field("targetable_objects", &self.targetable.len())
+            .finish()
+    }
+}
+
+impl SceneRays {
+    /// Builds the BVH over all non-degenerate triangles of `scene` (single-threaded PLOC
+    /// build, then CWBVH conversion) and the per-object area tables.
+    ///
+    /// The scene should satisfy [`Scene::validate`] (indices in range, objects covering the
+    /// triangles in order); [`crate::validate::check`] checks that before calling this.
+    pub fn new(scene: &Scene) -> SceneRays {
+        let nt = scene.triangles.len();
+        let mut kept: Vec<u32> = Vec::with_capacity(nt);
+        let mut boxes: Vec<BvhAabb> = Vec::with_capacity(nt);
+        // Padding of the BVH input boxes: far above the rounding error of the slab tests
+        // (a few ulps of the coordinates), far below any feature size that matters.
+        let scale = scene_scale(scene);
+        let pad = Vec3A::splat(scale * 1e-5);
+        for t in 0..nt {
+            let tri = scene.triangle(t);
+            if scene::is_degenerate(tri) {
+                continue;
+            }
+            let mut b = BvhAabb::from_points(&tri.map(Vec3A::from));
+            b.min -= pad;
+            b.max += pad;
+            kept.push(t as u32);
+            boxes.push(b);
+        }
+
+        let bvh = if boxes.is_empty() {
+            CwBvh::default()
+        } else {
+            obvhs::cwbvh::builder::build_cwbvh(
+                &boxes,
+                BvhBuildParams::medium_build(),
+                &mut std::time::Duration::default(),
+            )
+        };
+        let mut tris = Vec::with_capacity(bvh.primitive_indices.len());
+        let mut meta = Vec::with_capacity(bvh.primitive_indices.len());
+        for &p in &bvh.primitive_indices {
+            let t = kept[p as usize];
+            tris.push(scene.triangle(t as usize).map(Vec3A::from));
+            meta.push(TriMeta {
+                object: scene.triangle_object(t),
+                triangle: t,
+                opaque: scene.opaque[t as usize],
+            });
+        }
+
+        let mut areas = Vec::with_capacity(scene.objects.len());
+        let mut area_cdf = Vec::new();
+        let mut area_tri = Vec::new();
+        let mut targetable = Vec::new();
+        for (id, o) in scene.objects.iter().enumerate() {
+            let start = area_cdf.len() as u32;
+            let mut sum = 0.0f64;
+            for t in o.triangles.clone() {
+                let tri = scene.triangle(t as usize);
+                let [a, b, c] = tri.map(|p| p.as_dvec3());
+                let area = 0.5 * (b - a).cross(c - a).length();
+                if area > 0.0 && area.is_finite() && !scene::is_degenerate(tri) {
+                    sum += area;
+                    area_cdf.push(sum);
+                    area_tri.push(t);
+                }
+            }
+            let end = area_cdf.len() as u32;
+            if end > start {
+                targetable.push(id as u32);
+            }
+            areas.push(ObjectArea { start, end });
+        }
+
+        SceneRays {
+            bvh,
+            tris,
+            meta,
+            areas,
+            area_cdf,
+            area_tri,
+            targetable,
+            bounds: scene.objects.iter().map(|o| o.bounds).collect(),
+        }
+    }
+
+    /// Number of triangles in the BVH (the scene's non-degenerate triangles).
+    pub fn triangles(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// Objects that have at least one non-degenerate triangle (the only ones a ray can
+    /// find), ascending.
+    pub fn targetable_objects(&self) -> &[u32] {
+        &self.targetable
+    }
+
+    /// Traces one ray and returns what it sees, nearest first: every see-through triangle in
+    /// front of the first blocking triangle, then the blocking triangle(s) (several only when
+    /// they are hit at exactly the same distance). A triangle blocks when it is opaque, or
+    /// always when `alpha_blocks` is true.
+    ///
+    /// `direction` need not be normalised but must be finite and non-zero.
+    pub fn trace(&self, origin: Vec3, direction: Vec3, alpha_blocks: bool) -> Vec<TraceHit> {
+        let mut raw = Vec::new();
+        self.trace_raw(origin, direction, alpha_blocks, &mut raw);
+        let mut out: Vec<TraceHit> = raw
+            .iter()
+            .map(|h| {
+                let m = self.meta[h.slot as usize];
+                TraceHit {
+                    object: m.object,
+                    triangle: m.triangle,
+                    t: h.t,
+                }
+            })
+            .collect();
+        out.sort_by(|a, b| a.t.total_cmp(&b.t).then(a.triangle.cmp(&b.triangle)));
+        out
+    }
+
+    /// The hits of one ray into `hits` (cleared first), in traversal order.
+    #[inline]
+    pub(crate) fn trace_raw(
+        &self,
+        origin: Vec3,
+        direction: Vec3,
+        alpha_blocks: bool,
+        hits: &mut Vec<RawHit>,
+    ) {
+        hits.clear();
+        if self.tris.is_empty() {
+            return;
+        }
+        let o = Vec3A::from(origin);
+        let d = Vec3A::from(direction);
+        let shear = Shear::new(o, d);
+        let mut ray = Ray::new_inf(o, d);
+        let mut state = self.bvh.new_traversal(d);
+        let mut node;
+        obvhs::traverse!(
+            self.bvh,
+            node,
+            state,
+            node.intersect_ray(&ray, state.oct_inv4),
+            {
+                let slot = state.primitive_id;
+                if let Some(t) = shear.intersect(&self.tris[slot as usize], ray.tmax) {
+                    hits.push(RawHit { slot, t });
+                    if t < ray.tmax && (alpha_blocks || self.meta[slot as usize].opaque) {
+                        ray.tmax = t;
+                    }
+                }
+            }
+        );
+        let tmax = ray.tmax;
+        hits.retain(|h| h.t <= tmax);
+    }
+
+    #[inline]
+    pub(crate) fn meta(&self, slot: u32) -> TriMeta {
+        self.meta[slot as usize]
+    }
+
+    /// The bounds of object `o`.
+    #[inline]
+    pub(crate) fn object_bounds(&self, o: u32) -> Aabb {
+        self.bounds[o as usize]
+    }
+
+    /// A point on the surface of object `o`, area-weighted over its non-degenerate
+    /// triangles, from two uniform numbers in [0, 1) and one more for the triangle choice.
+    /// `None` when the object has no area. `scene` is the scene `self` was built from.
+    pub(crate) fn surface_point(
+        &self,
+        scene: &Scene,
+        o: u32,
+        pick: f64,
+        r1: f64,
+        r2: f64,
+    ) -> Option<DVec3> {
+        let a = &self.areas[o as usize];
+        if a.end == a.start {
+            return None;
+        }
+        let run = &self.area_cdf[a.start as usize..a.end as usize];
+        let total = run[run.len() - 1];
+        let x = pick * total;
+        let i = run.partition_point(|&c| c <= x).min(run.len() - 1);
+        let t = self.area_tri[a.start as usize + i];
+        let [p0, p1, p2] = scene.triangle(t as usize).map(|p| p.as_dvec3());
+        let s = r1.sqrt();
+        Some(p0 * (1.0 - s) + p1 * (s * (1.0 - r2)) + p2 * (s * r2))
+    }
+
+    /// The point where a witness ray meets scene triangle `t`, in double precision (plane
+    /// intersection), falling back to `origin + t_f32 * direction` for an edge-on hit.
+    pub(crate) fn precise_hit(
+        scene: &Scene,
+        triangle: u32,
+        origin: Vec3,
+        direction: Vec3,
+        t: f32,
+    ) -> Vec3 {
+        let [a, b, c] = scene.triangle(triangle as usize).map(|p| p.as_dvec3());
+        let o = origin.as_dvec3();
+        let d = direction.as_dvec3();
+        let n = (b - a).cross(c - a);
+        let den = n.dot(d);
+        let tt = if den != 0.0 { n.dot(a - o) / den } else { f64::from(t) };
+        (o + d * tt).as_vec3()
+    }
+}
+
+/// A length that stands for the size of the scene: the largest absolute coordinate plus the
+/// largest extent (1 for an empty scene).
+fn scene_scale(scene: &Scene) -> f32 {
+    let b = scene.bounds();
+    if b.is_empty() {
+        return 1.0;
+    }
+    let m = b.min.abs().max(b.max.abs()).max_element() + b.size().max_element();
+    if m.is_finite() && m > 0.0 { m } else { 1.0 }
+}
+
+/// The per-ray part of the watertight test: a shear that maps the ray to the +z axis.
+///
+/// `mx`, `my` and `mz` hold the shear as dot products so the per-triangle work is a few
+/// SIMD operations. Each vertex's transformed coordinates depend only on the vertex and the
+/// ray, which is all watertightness needs.
+#[derive(Clone, Copy, Debug)]
+struct Shear {
+    origin: Vec3A,
+    mx: Vec3A,
+    my: Vec3A,
+    mz: Vec3A,
+}
+
+impl Shear {
+    #[inline]
+    fn new(origin: Vec3A, d: Vec3A) -> Shear {
+        let a = d.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sx = d[kx] / d[kz];
+        let sy = d[ky] / d[kz];
+        let sz = 1.0 / d[kz];
+        let mut mx = Vec3A::ZERO;
+        mx[kx] = 1.0;
+        mx[kz] = -sx;
+        let mut my = Vec3A::ZERO;
+        my[ky] = 1.0;
+        my[kz] = -sy;
+        let mut mz = Vec3A::ZERO;
+        mz[kz] = sz;
+        Shear { origin, mx, my, mz }
+    }
+
+    /// Distance to the triangle when the ray hits it with `0 <= t <= tmax`.
+    #[inline(always)]
+    fn intersect(&self, tri: &[Vec3A; 3], tmax: f32) -> Option<f32> {
+        let a = tri[0] - self.origin;
+        let b = tri[1] - self.origin;
+        let c = tri[2] - self.origin;
+        let (ax, ay) = (a.dot(self.mx), a.dot(self.my));
+        let (bx, by) = (b.dot(self.mx), b.dot(self.my));
+        let (cx, cy) = (c.dot(self.mx), c.dot(self.my));
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            // Exact in double precision: products of two floats fit a double.
+            let e = |px: f32, py: f32, qx: f32, qy: f32| {
+                (f64::from(px) * f64::from(qy) - f64::from(py) * f64::from(qx)) as f32
+            };
+            u = e(cx, cy, bx, by);
+            v = e(ax, ay, cx, cy);
+            w = e(bx, by, ax, ay);
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let mut det = u + v + w;
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let (az, bz, cz) = (a.dot(self.mz), b.dot(self.mz), c.dot(self.mz));
+        let mut tt = u * az + v * bz + w * cz;
+        if det < 0.0 {
+            tt = -tt;
+            det = -det;
+        }
+        if tt.is_nan() || tt < 0.0 || tt > tmax * det {
+            return None;
+        }
+        let t = tt / det;
+        (t.is_finite() && t <= tmax).then_some(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::vec3;
+    use std::path::Path;
+
+    fn quad(z: f32, half: f32) -> Vec<[Vec3; 3]> {
+        let (a, b, c, d) = (
+            vec3(-half, -half, z),
+            vec3(half, -half, z),
+            vec3(half, half, z),
+            vec3(-half, half, z),
+        );
+        vec![[a, b, c], [a, c, d]]
+    }
+
+    #[test]
+    fn ray_through_the_shared_diagonal_of_a_quad_hits_it() {
+        let scene = Scene::from_objects(
+            Path::new("mem"),
+            vec![("wall".into(), quad(5.0, 1.0), true)],
+        );
+        let rays = SceneRays::new(&scene);
+        assert_eq!(rays.triangles(), 2);
+        // The diagonal from (-1,-1) to (1,1): points (s, s, 5).
+        for i in 0..2001 {
+            let s = -0.999 + 1.998 * (i as f32) / 2000.0;
+            let hits = rays.trace(Vec3::ZERO, vec3(s, s, 5.0), false);
+            assert!(!hits.is_empty(), "leak through the diagonal at s = {s}");
+            assert!(hits.iter().all(|h| h.object == 0));
+        }
+    }
+
+    #[test]
+    fn a_single_triangle_scene_is_traced() {
+        let tri = vec![[vec3(-1.0, -1.0, 3.0), vec3(1.0, -1.0, 3.0), vec3(0.0, 1.0, 3.0)]];
+        let scene = Scene::from_objects(Path::new("mem"), vec![("t".into(), tri, true)]);
+        let rays = SceneRays::new(&scene);
+        let hits = rays.trace(Vec3::ZERO, Vec3::Z, false);
+        assert_eq!(hits.len(), 1);
+        assert!((hits[0].t - 3.0).abs() < 1e-6);
+        assert!(rays.trace(Vec3::ZERO, -Vec3::Z, false).is_empty());
+    }
+
+    #[test]
+    fn see_through_triangles_are_reported_and_passed_unless_they_block() {
+        let scene = Scene::from_objects(
+            Path::new("mem"),
+            vec![
+                ("card".into(), quad(2.0, 1.0), false),
+                ("wall".into(), quad(4.0, 1.0), true),
+                ("behind".into(), quad(6.0, 1.0), true),
+            ],
+        );
+        let rays = SceneRays::new(&scene);
+        let d = vec3(0.1, 0.2, 1.0);
+        let objs: Vec<u32> = rays.trace(Vec3::ZERO, d, false).iter().map(|h| h.object).collect();
+        assert_eq!(objs, vec![0, 1]);
+        let objs: Vec<u32> = rays.trace(Vec3::ZERO, d, true).iter().map(|h| h.object).collect();
+        assert_eq!(objs, vec![0]);
+    }
+
+    #[test]
+    fn degenerate_triangles_are_left_out() {
+        let flat = vec![[vec3(0.0, 0.0, 2.0), vec3(1.0, 1.0, 2.0), vec3(2.0, 2.0, 2.0)]];
+        let scene = Scene::from_objects(
+            Path::new("mem"),
+            vec![("flat".into(), flat, true), ("wall".into(), quad(4.0, 5.0), true)],
+        );
+        let rays = SceneRays::new(&scene);
+        assert_eq!(rays.triangles(), 2);
+        assert_eq!(rays.targetable_objects(), &[1]);
+        let hits = rays.trace(Vec3::ZERO, vec3(1.0, 0.5, 2.0), false);
+        assert_eq!(hits.len(), 1);
+        assert_eq!(hits[0].object, 1);
+    }
+
+    #[test]
+    fn surface_points_lie_on_the_object() {
+        let scene = Scene::from_objects(
+            Path::new("mem"),
+            vec![("wall".into(), quad(4.0, 2.0), true)],
+        );
+        let rays = SceneRays::new(&scene);
+        for i in 0..100 {
+            let f = i as f64 / 100.0;
+            let p = rays.surface_point(&scene, 0, f, (f * 7.3) % 1.0, (f * 3.1) % 1.0).unwrap();
+            assert!((p.z - 4.0).abs() < 1e-9 && p.x.abs() <= 2.0 && p.y.abs() <= 2.0);
+        }
+    }
+}

@@ -1,0 +1,226 @@
+//! Analytic scenes for the baking core (issue 2): walls, slits, fusion of abutting walls,
+//! objects in and across the cell, a closed room, and an object seen from one corner only.
+//! Each expectation follows from the geometry; brute-force rays check the visible cases.
+
+use glam::Vec3;
+use std::path::Path;
+use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::bake::{BakeSettings, bake};
+use umbrasweep::geom::{Aabb, box_triangles};
+use umbrasweep::scene::Scene;
+
+type Obj = (String, Vec<[Vec3; 3]>, bool);
+
+fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
+    (name.into(), box_triangles(Vec3::from(min), Vec3::from(max)), true)
+}
+
+fn quad(name: &str, a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Obj {
+    (name.into(), vec![[a, b, c], [a, c, d]], true)
+}
+
+fn unit_cell() -> Aabb {
+    Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
+}
+
+/// Bakes one cell with the default settings and returns the visible object names.
+fn visible(objects: Vec<Obj>, cell: Aabb) -> Vec<String> {
+    let scene = Scene::from_objects(Path::new("analytic"), objects);
+    let r = bake(&scene, &[cell], &BakeSettings::default(), &CpuBackend::new(), None).unwrap();
+    r.cells[0]
+        .visible
+        .iter()
+        .map(|&o| scene.objects[o as usize].name.clone())
+        .collect()
+}
+
+/// First object hit by the ray (brute force, Möller–Trumbore).
+fn first_hit(objects: &[Obj], origin: Vec3, dir: Vec3) -> Option<String> {
+    let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
+    let mut best = (f64::INFINITY, None);
+    for (name, tris, _) in objects {
+        for t in tris {
+            let [a, b, c] = t.map(|p| p.as_dvec3());
+            let (e1, e2) = (b - a, c - a);
+            let p = d.cross(e2);
+            let det = e1.dot(p);
+            if det.abs() < 1e-12 {
+                continue;
+            }
+            let s = o - a;
+            let u = s.dot(p) / det;
+            let q = s.cross(e1);
+            let v = d.dot(q) / det;
+            let dist = e2.dot(q) / det;
+            if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dist > 0.0 && dist < best.0 {
+                best = (dist, Some(name.clone()));
+            }
+        }
+    }
+    best.1
+}
+
+fn has(v: &[String], name: &str) -> bool {
+    v.iter().any(|n| n == name)
+}
+
+#[test]
+fn an_object_behind_a_large_wall_is_hidden() {
+    let objects = vec![
+        cube("wall", [-20.0, -20.0, 5.0], [20.0, 20.0, 5.5]),
+        cube("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]),
+        cube("in_view", [-1.0, -1.0, -11.0], [1.0, 1.0, -10.0]),
+    ];
+    let v = visible(objects, unit_cell());
+    assert!(has(&v, "wall"));
+    assert!(!has(&v, "target"), "{v:?}");
+    assert!(has(&v, "in_view"));
+}
+
+#[test]
+fn an_object_seen_through_a_slit_is_visible() {
+    let objects = vec![
+        cube("left", [-20.0, -20.0, 5.0], [-0.15, 20.0, 5.5]),
+        cube("right", [0.15, -20.0, 5.0], [20.0, 20.0, 5.5]),
+        cube("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]),
+    ];
+    // Ground truth: the ray from the cell centre through the slit reaches the target.
+    assert_eq!(
+        first_hit(&objects, Vec3::ZERO, Vec3::Z).as_deref(),
+        Some("target")
+    );
+    let v = visible(objects, unit_cell());
+    assert!(has(&v, "target"), "{v:?}");
+}
+
+#[test]
+fn two_abutting_walls_hide_together_what_neither_hides_alone() {
+    let z = 5.0;
+    let wall_a = quad(
+        "wall_a",
+        Vec3::new(-20.0, -20.0, z),
+        Vec3::new(0.0, -20.0, z),
+        Vec3::new(0.0, 20.0, z),
+        Vec3::new(-20.0, 20.0, z),
+    );
+    let wall_b = quad(
+        "wall_b",
+        Vec3::new(0.0, -20.0, z),
+        Vec3::new(20.0, -20.0, z),
+        Vec3::new(20.0, 20.0, z),
+        Vec3::new(0.0, 20.0, z),
+    );
+    let target = cube("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+    let both = visible(
+        vec![wall_a.clone(), wall_b.clone(), target.clone()],
+        unit_cell(),
+    );
+    assert!(!has(&both, "target"), "fusion hides the target: {both:?}");
+    let a_only = visible(vec![wall_a, target.clone()], unit_cell());
+    assert!(has(&a_only, "target"));
+    let b_only = visible(vec![wall_b, target], unit_cell());
+    assert!(has(&b_only, "target"));
+}
+
+#[test]
+fn objects_inside_or_straddling_the_cell_are_visible() {
+    // A closed room around the cell would hide anything outside; these are not outside.
+    let mut objects = room();
+    objects.push(cube("inside", [-0.1, -0.1, -0.1], [0.1, 0.1, 0.1]));
+    objects.push(cube("straddling", [0.3, -0.2, -0.2], [2.0, 0.2, 0.2]));
+    objects.push(cube("touching", [0.5, 0.3, 0.3], [1.0, 0.4, 0.4]));
+    let v = visible(objects, unit_cell());
+    for name in ["inside", "straddling", "touching"] {
+        assert!(has(&v, name), "{name} must be visible: {v:?}");
+    }
+}
+
+/// Six thick walls enclosing [-3, 3]³, overlapping at the edges.
+fn room() -> Vec<Obj> {
+    let (a, b) = (3.0, 3.5);
+    vec![
+        cube("room+x", [a, -b, -b], [b, b, b]),
+        cube("room-x", [-b, -b, -b], [-a, b, b]),
+        cube("room+y", [-b, a, -b], [b, b, b]),
+        cube("room-y", [-b, -b, -b], [b, -a, b]),
+        cube("room+z", [-b, -b, a], [b, b, b]),
+        cube("room-z", [-b, -b, -b], [b, b, -a]),
+    ]
+}
+
+#[test]
+fn a_cell_inside_a_closed_room_hides_everything_outside() {
+    let mut objects = room();
+    let mut outside = Vec::new();
+    for (i, c) in [
+        [10.0, 0.0, 0.0],
+        [-10.0, 0.0, 0.0],
+        [0.0, 10.0, 0.0],
+        [0.0, -10.0, 0.0],
+        [0.0, 0.0, 10.0],
+        [0.0, 0.0, -10.0],
+        [8.0, 8.0, 8.0],
+        [-8.0, 6.0, -7.0],
+        [9.0, -9.0, 0.0],
+    ]
+    .iter()
+    .enumerate()
+    {
+        let name = format!("outside{i}");
+        let c = Vec3::from(*c);
+        objects.push(cube(&name, (c - 0.5).into(), (c + 0.5).into()));
+        outside.push(name);
+    }
+    let v = visible(objects, unit_cell());
+    for w in ["room+x", "room-x", "room+y", "room-y", "room+z", "room-z"] {
+        assert!(has(&v, w), "the walls are visible");
+    }
+    for name in &outside {
+        assert!(!has(&v, name), "{name} is outside the closed room: {v:?}");
+    }
+}
+
+#[test]
+fn an_object_seen_from_one_corner_only_stays_visible() {
+    // A wall with a small square hole; the target sits on the line from the cell's corner
+    // (0.5, 0.5, 0.5) through the hole, far behind.
+    let (h0, h1) = (2.0f32, 2.3f32);
+    let mut objects = vec![
+        cube("wall_low", [-20.0, -20.0, 5.0], [20.0, h0, 5.5]),
+        cube("wall_high", [-20.0, h1, 5.0], [20.0, 20.0, 5.5]),
+        cube("wall_left", [-20.0, h0, 5.0], [h0, h1, 5.5]),
+        cube("wall_right", [h1, h0, 5.0], [20.0, h1, 5.5]),
+    ];
+    let corner = Vec3::splat(0.5);
+    let hole = Vec3::new(0.5 * (h0 + h1), 0.5 * (h0 + h1), 5.25);
+    let dir = (hole - corner).normalize();
+    let t = (15.0 - corner.z) / dir.z;
+    let c = corner + dir * t;
+    objects.push(cube("target", (c - 0.1).into(), (c + 0.1).into()));
+    // Ground truth: visible from (just inside) the corner, hidden from the centre.
+    let eye = corner - Vec3::splat(1e-4);
+    assert_eq!(
+        first_hit(&objects, eye, (c - eye).normalize()).as_deref(),
+        Some("target")
+    );
+    assert_ne!(
+        first_hit(&objects, Vec3::ZERO, c.normalize()).as_deref(),
+        Some("target")
+    );
+    let v = visible(objects, unit_cell());
+    assert!(has(&v, "target"), "{v:?}");
+}
+
+#[test]
+fn settings_are_checked() {
+    let scene = Scene::from_objects(
+        Path::new("t"),
+        vec![cube("a", [1.0, 1.0, 1.0], [2.0, 2.0, 2.0])],
+    );
+    let bad = BakeSettings {
+        resolution: 300,
+        ..BakeSettings::default()
+    };
+    let err = bake(&scene, &[unit_cell()], &bad, &CpuBackend::new(), None).unwrap_err();
+    assert!(err.to_string().contains("power of two"), "{err}");
+}

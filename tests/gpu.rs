@@ -1,0 +1,507 @@
+//! Tests of the wgpu backend: shader validation with naga, and GPU Depth Maps against the CPU
+//! reference on analytic jobs (random triangles, quads and boxes on every axis and side,
+//! resolutions 16–256, slice rings), plus the adapter handling rule: without an adapter a test
+//! prints why and passes, unless the environment variable `CI` is set, where it fails.
+//!
+//! Benchmark (lavapipe numbers in the backend's report):
+//! `cargo test --release --test gpu -- --ignored --nocapture bench`.
+#![cfg(feature = "bake")]
+
+use glam::{DVec2, DVec3};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use std::sync::OnceLock;
+use umbrasweep::backend::cpu::{self, CpuBackend, Scratch};
+use umbrasweep::backend::gpu::{self, GpuBackend};
+use umbrasweep::backend::{
+    BackendError, DepthMap, OccluderSet, PlaneFrame, PlaneJob, RasterBackend,
+};
+use umbrasweep::geom::DAabb;
+
+// ---------------------------------------------------------------------------------------------
+// Shaders
+
+#[test]
+fn shaders_validate_with_naga() {
+    assert!(!gpu::SHADERS.is_empty());
+    for &(path, source) in gpu::SHADERS {
+        let module = naga::front::wgsl::parse_str(source)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(source, path)));
+        let mut validator = naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::default(),
+        );
+        if let Err(e) = validator.validate(&module) {
+            panic!("{}", e.emit_to_string_with_path(source, path));
+        }
+        assert!(
+            source.lines().next().is_some_and(|l| l.starts_with("//")),
+            "{path} starts with a comment saying what the pass does"
+        );
+    }
+}
+
+#[test]
+fn shader_files_are_all_listed() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let name = entry.unwrap().file_name().into_string().unwrap();
+        if name.ends_with(".wgsl") {
+            let path = format!("shaders/{name}");
+            assert!(
+                gpu::SHADERS.iter().any(|(p, _)| *p == path),
+                "{path} is not in gpu::SHADERS, so it is not validated"
+            );
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Adapter handling
+
+/// The shared backend, or `None` (after printing why) when there is no adapter outside CI.
+fn backend() -> Option<&'static GpuBackend> {
+    static BACKEND: OnceLock<Option<GpuBackend>> = OnceLock::new();
+    BACKEND
+        .get_or_init(|| match GpuBackend::new() {
+            Ok(b) => {
+                eprintln!("gpu tests on {}", b.adapter().unwrap_or_default());
+                Some(b)
+            }
+            Err(BackendError::NoAdapter(why)) => {
+                if std::env::var_os("CI").is_some() {
+                    panic!("CI is set but the GPU backend found no adapter: {why}");
+                }
+                eprintln!("skipping GPU comparison: {why}");
+                None
+            }
+            Err(e) => panic!("GPU backend failed to start: {e}"),
+        })
+        .as_ref()
+}
+
+#[test]
+fn backend_reports_its_name_and_adapter() {
+    let Some(b) = backend() else { return };
+    assert_eq!(b.name(), "gpu");
+    let adapter = b.adapter().expect("an adapter name");
+    assert!(!adapter.is_empty());
+    let info = b.adapter_info();
+    assert_eq!(info.name, adapter);
+    // A software adapter is never "hardware".
+    if info.device_type == wgpu::DeviceType::Cpu {
+        // Another, hardware adapter may exist, but then new() would have picked it first.
+        assert!(!gpu::hardware_adapter_available());
+    }
+}
+
+#[test]
+fn empty_input_gives_empty_output() {
+    let Some(b) = backend() else { return };
+    assert!(b.render(&[]).unwrap().is_empty());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Analytic jobs
+
+fn frame(res: u32, axis: usize, positive: bool, cell_half: f64) -> PlaneFrame {
+    let s = if positive { 1.0 } else { -1.0 };
+    PlaneFrame {
+        cell: DAabb {
+            min: DVec3::splat(-cell_half),
+            max: DVec3::splat(cell_half),
+        },
+        axis,
+        positive,
+        position: s * (cell_half + 10.0),
+        rect_min: DVec2::new(-9.0, -9.0),
+        rect_max: DVec2::new(9.0, 9.0),
+        resolution: res,
+    }
+}
+
+/// A world point from in-plane `(u, v)` and a distance `d` beyond the cell's face.
+fn point(f: &PlaneFrame, u: f64, v: f64, d: f64) -> DVec3 {
+    let (ua, va) = f.uv_axes();
+    let mut p = DVec3::ZERO;
+    p[ua] = u;
+    p[va] = v;
+    p[f.axis] = f.face() + f.sign() * d;
+    p
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Shape {
+    Triangle,
+    Quad,
+    Box,
+}
+
+fn random_occluder(rng: &mut Pcg64, f: &PlaneFrame, shape: Shape) -> Vec<DVec3> {
+    let (cu, cv) = (rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0));
+    let d = rng.random_range(1.0..22.0);
+    let size: f64 = rng.random_range(0.5..7.0);
+    match shape {
+        Shape::Triangle => (0..3)
+            .map(|_| {
+                point(
+                    f,
+                    cu + rng.random_range(-size..size),
+                    cv + rng.random_range(-size..size),
+                    d + rng.random_range(-0.9..3.0),
+                )
+            })
+            .collect(),
+        Shape::Quad | Shape::Box => {
+            // A parallelogram (planar, convex) or a parallelepiped, in random orientation.
+            let mut axis = || {
+                DVec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-0.3..0.3),
+                ) * size
+            };
+            let (a, b) = (axis(), axis());
+            let c = DVec3::new(0.0, 0.0, rng.random_range(0.1..0.9));
+            let centre = DVec3::new(cu, cv, d + 1.0);
+            let corners: Vec<DVec3> = if matches!(shape, Shape::Quad) {
+                vec![centre - a - b, centre + a - b, centre + a + b, centre - a + b]
+            } else {
+                (0..8)
+                    .map(|k| {
+                        let sx = if k & 1 != 0 { 1.0 } else { -1.0 };
+                        let sy = if k & 2 != 0 { 1.0 } else { -1.0 };
+                        let sz = if k & 4 != 0 { 1.0 } else { -1.0 };
+                        centre + a * sx + b * sy + c * sz
+                    })
+                    .collect()
+            };
+            corners.iter().map(|q| point(f, q.x, q.y, q.z)).collect()
+        }
+    }
+}
+
+/// Square loop (closed) of half-size `h` around `(cu, cv)`, in world `(u, v)`.
+fn square(cu: f64, cv: f64, h: f64, rot: f64) -> Vec<[DVec2; 2]> {
+    let c: Vec<DVec2> = (0..4)
+        .map(|k| {
+            let a = rot + k as f64 * std::f64::consts::FRAC_PI_2;
+            DVec2::new(cu, cv) + DVec2::new(a.cos(), a.sin()) * h * std::f64::consts::SQRT_2
+        })
+        .collect();
+    (0..4).map(|k| [c[k], c[(k + 1) % 4]]).collect()
+}
+
+/// A polygon ring: outer n-gon and inner n-gon (a hole), both closed loops.
+fn ring(cu: f64, cv: f64, r0: f64, r1: f64, n: usize) -> Vec<[DVec2; 2]> {
+    let mut segs = Vec::new();
+    for r in [r0, r1] {
+        let p: Vec<DVec2> = (0..n)
+            .map(|k| {
+                let a = k as f64 / n as f64 * std::f64::consts::TAU + 0.1;
+                DVec2::new(cu + r * a.cos(), cv + r * a.sin())
+            })
+            .collect();
+        segs.extend((0..n).map(|k| [p[k], p[(k + 1) % n]]));
+    }
+    segs
+}
+
+/// How far, in pixels, pixel `(i, j)`'s centre is from failing the CPU's eroded test for the
+/// Projection of `pts` (negative: fails it). Only computed for `pts` whose Projection exists.
+fn slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> Option<f64> {
+    let mut scratch = Scratch::default();
+    if !cpu::projection_polygon(f, &f.cell.corners(), pts, &mut scratch) {
+        return None;
+    }
+    let c = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+    let poly = &scratch.poly;
+    let n = poly.len();
+    (0..n)
+        .map(|e| {
+            let (a, b) = (poly[e], poly[(e + 1) % n]);
+            let nrm = DVec2::new(-(b.y - a.y), b.x - a.x);
+            (nrm.dot(c - a) - 0.5 * (nrm.x.abs() + nrm.y.abs())) / nrm.length()
+        })
+        .reduce(f64::min)
+}
+
+/// Compares a GPU map with the CPU reference: the GPU must never cover a pixel with a smaller
+/// Depth than the CPU (i.e. never cover what the CPU leaves uncovered), uncovered pixels must be
+/// exactly `+inf`, and every pixel only the CPU covers must be a near-tie of an edge.
+/// Returns (CPU-only pixels, covered pixels).
+fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> (usize, usize) {
+    let res = job.frame.resolution;
+    assert_eq!(gpu.resolution, res);
+    assert_eq!(gpu.depth.len(), (res * res) as usize);
+    let mut cpu_only = 0;
+    for (k, (&g, &c)) in gpu.depth.iter().zip(&cpu_map.depth).enumerate() {
+        let (i, j) = (k as u32 % res, k as u32 / res);
+        assert!(!g.is_nan(), "NaN at ({i}, {j})");
+        if g.is_infinite() {
+            assert_eq!(g, f32::INFINITY, "uncovered is +inf at ({i}, {j})");
+        }
+        assert!(
+            c <= g,
+            "GPU covers ({i}, {j}) at {res}² with Depth {g} but the CPU has {c} (axis {}, {})",
+            job.frame.axis,
+            job.frame.positive
+        );
+        if c < g {
+            cpu_only += 1;
+            // The CPU's covering occluder(s) at Depth c: the pixel must be within a rounding
+            // error of one of their eroded edges.
+            let near = (0..job.occluders.len()).any(|o| {
+                let pts = job.occluders.get(o);
+                let d = pts
+                    .iter()
+                    .map(|&p| job.frame.depth(p))
+                    .fold(f64::NEG_INFINITY, f64::max);
+                umbrasweep::backend::depth_up(d) == c
+                    && slack(&job.frame, pts, i, j).is_some_and(|s| s < 1e-3)
+            });
+            assert!(near, "CPU-only pixel ({i}, {j}) at {res}² is not on an edge");
+        }
+    }
+    (cpu_only, cpu_map.covered())
+}
+
+fn run_and_compare(b: &GpuBackend, jobs: &[PlaneJob]) -> (usize, usize) {
+    let gpu_maps = b.render(jobs).expect("GPU render");
+    let cpu_maps = CpuBackend::new().render(jobs).unwrap();
+    assert_eq!(gpu_maps.len(), jobs.len());
+    let (mut diff, mut covered) = (0, 0);
+    for ((job, g), c) in jobs.iter().zip(&gpu_maps).zip(&cpu_maps) {
+        let (d, n) = compare(job, g, c);
+        diff += d;
+        covered += n;
+    }
+    (diff, covered)
+}
+
+fn random_jobs(seed: u64, shape: Shape, count: usize, resolutions: &[u32]) -> Vec<PlaneJob> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut jobs = Vec::new();
+    for &res in resolutions {
+        for axis in 0..3 {
+            for positive in [true, false] {
+                let f = frame(res, axis, positive, rng.random_range(0.1..1.0));
+                let mut occ = OccluderSet::default();
+                for _ in 0..count {
+                    occ.push(random_occluder(&mut rng, &f, shape));
+                }
+                jobs.push(PlaneJob {
+                    frame: f,
+                    occluders: occ,
+                    slices: vec![],
+                });
+            }
+        }
+    }
+    jobs
+}
+
+fn check_shape(shape: Shape, seed: u64) {
+    let Some(b) = backend() else { return };
+    let jobs = random_jobs(seed, shape, 60, &[16, 32, 64, 128, 256]);
+    assert_eq!(jobs.len(), 30, "a cell's worth of planes in one call");
+    let (diff, covered) = run_and_compare(b, &jobs);
+    eprintln!("{shape:?}: {diff} CPU-only pixels of {covered} covered");
+    assert!(covered > 10_000, "the scenes cover something ({covered})");
+    assert!(diff * 100 <= covered, "{diff} of {covered} pixels disagree");
+}
+
+#[test]
+fn random_triangles_match_the_cpu() {
+    check_shape(Shape::Triangle, 1);
+}
+
+#[test]
+fn random_quads_match_the_cpu() {
+    check_shape(Shape::Quad, 2);
+}
+
+#[test]
+fn random_boxes_match_the_cpu() {
+    check_shape(Shape::Box, 3);
+}
+
+/// Two halves of a square never add up across their diagonal, and overlapping occluders keep
+/// the minimum Depth, including negative Depths (occluders between the face and the plane).
+#[test]
+fn halves_do_not_add_up_and_minimum_depth_wins() {
+    let Some(b) = backend() else { return };
+    let f = frame(64, 2, true, 0.5);
+    let q = |u: f64, v: f64, d: f64| point(&f, u, v, d);
+    let mut two = OccluderSet::default();
+    two.push([q(-4.0, -4.0, 8.0), q(4.0, -4.0, 8.0), q(4.0, 4.0, 8.0)]);
+    two.push([q(-4.0, -4.0, 8.0), q(4.0, 4.0, 8.0), q(-4.0, 4.0, 8.0)]);
+    // Far, big, positive Depth and near, small, negative Depth.
+    let mut stack = OccluderSet::default();
+    stack.push([q(-9.0, -9.0, 14.0), q(9.0, -9.0, 14.0), q(9.0, 9.0, 14.0), q(-9.0, 9.0, 14.0)]);
+    stack.push([q(-3.0, -3.0, 5.0), q(3.0, -3.0, 5.0), q(3.0, 3.0, 5.0), q(-3.0, 3.0, 5.0)]);
+    let jobs = [
+        PlaneJob {
+            frame: f.clone(),
+            occluders: two,
+            slices: vec![],
+        },
+        PlaneJob {
+            frame: f.clone(),
+            occluders: stack,
+            slices: vec![],
+        },
+    ];
+    let maps = b.render(&jobs).unwrap();
+    let diag = (0..64).filter(|&k| maps[0].depth[k * 64 + k].is_finite()).count();
+    assert_eq!(diag, 0, "no diagonal pixel is covered by either half");
+    assert!(maps[0].covered() > 100);
+    assert_eq!(maps[1].depth[32 * 64 + 32], -5.0, "near occluder's Depth");
+    assert_eq!(maps[1].depth[64 + 1], 4.0, "far occluder's Depth");
+    run_and_compare(b, &jobs);
+}
+
+#[test]
+fn slices_match_the_cpu_exactly() {
+    let Some(b) = backend() else { return };
+    let mut rng = Pcg64::seed_from_u64(7);
+    let mut jobs = Vec::new();
+    for (n, res) in [16u32, 32, 64, 128, 256].into_iter().enumerate() {
+        let f = frame(res, n % 3, n % 2 == 0, 0.5);
+        let mut slices = ring(0.5, -0.3, 7.0, 3.0, 5 + n);
+        slices.extend(square(-6.0, 6.0, 2.0, 0.3));
+        // Some jobs also with occluders (slices and Projections merge by minimum).
+        let mut occ = OccluderSet::default();
+        if n % 2 == 1 {
+            for _ in 0..20 {
+                occ.push(random_occluder(&mut rng, &f, Shape::Triangle));
+            }
+        }
+        jobs.push(PlaneJob {
+            frame: f,
+            occluders: occ,
+            slices,
+        });
+    }
+    let gpu_maps = b.render(&jobs).unwrap();
+    for (job, g) in jobs.iter().zip(&gpu_maps) {
+        let c = cpu::render_job(job);
+        assert!(c.depth.contains(&0.0), "slices fill something");
+        if job.occluders.is_empty() {
+            assert_eq!(g, &c, "slice-only maps are identical");
+        } else {
+            compare(job, g, &c);
+        }
+    }
+}
+
+/// Planes without occluders, planes whose occluders are all rejected, and repeated calls
+/// (resources reused) all give the CPU's answer.
+#[test]
+fn empty_planes_and_repeated_calls() {
+    let Some(b) = backend() else { return };
+    let f = frame(32, 1, false, 0.5);
+    let mut behind = OccluderSet::default();
+    // A point not beyond the cell's face: rejected by both backends.
+    behind.push([
+        point(&f, 0.0, 0.0, -2.0),
+        point(&f, 5.0, 0.0, 5.0),
+        point(&f, 0.0, 5.0, 5.0),
+    ]);
+    let jobs = vec![
+        PlaneJob {
+            frame: f.clone(),
+            occluders: OccluderSet::default(),
+            slices: vec![],
+        },
+        PlaneJob {
+            frame: f.clone(),
+            occluders: behind,
+            slices: vec![],
+        },
+    ];
+    for _ in 0..3 {
+        let maps = b.render(&jobs).unwrap();
+        for m in &maps {
+            assert_eq!(m, &DepthMap::new(32));
+        }
+        let more = random_jobs(11, Shape::Triangle, 30, &[64]);
+        run_and_compare(b, &more);
+    }
+}
+
+/// Large planes: several submissions (the render-target budget) in one call.
+#[test]
+fn many_large_planes_are_split_into_submissions() {
+    let Some(b) = backend() else { return };
+    let jobs = random_jobs(5, Shape::Quad, 10, &[2048, 1024]);
+    let (diff, covered) = run_and_compare(b, &jobs);
+    assert!(diff * 100 <= covered.max(1), "{diff} of {covered}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Benchmark
+
+/// ms per plane at 256² for ~1,000 and ~10,000 triangles (lavapipe: run in release).
+#[test]
+#[ignore = "benchmark: cargo test --release --test gpu -- --ignored --nocapture"]
+fn bench_planes() {
+    let Some(b) = backend() else { return };
+    let cpu_backend = CpuBackend::new();
+    for count in [1_000usize, 10_000] {
+        let mut rng = Pcg64::seed_from_u64(count as u64);
+        let mut jobs = Vec::new();
+        for p in 0..6 {
+            let f = frame(256, p / 2, p % 2 == 0, 0.5);
+            let mut occ = OccluderSet::default();
+            for _ in 0..count {
+                // City-like: many small and medium triangles.
+                let (cu, cv) = (rng.random_range(-10.0..10.0), rng.random_range(-10.0..10.0));
+                let d = rng.random_range(1.0..30.0);
+                let s: f64 = rng.random_range(0.3..3.0);
+                occ.push(
+                    (0..3)
+                        .map(|_| {
+                            point(
+                                &f,
+                                cu + rng.random_range(-s..s),
+                                cv + rng.random_range(-s..s),
+                                d + rng.random_range(0.0..1.0),
+                            )
+                        })
+                        .collect::<Vec<_>>(),
+                );
+            }
+            jobs.push(PlaneJob {
+                frame: f,
+                occluders: occ,
+                slices: vec![],
+            });
+        }
+        b.render(&jobs).unwrap(); // warm-up: pools, pipeline compile
+        let reps = 5;
+        let t = std::time::Instant::now();
+        let mut maps = Vec::new();
+        for _ in 0..reps {
+            maps = b.render(&jobs).unwrap();
+        }
+        let gpu_ms = t.elapsed().as_secs_f64() * 1e3 / (reps * jobs.len()) as f64;
+        let t = std::time::Instant::now();
+        let mut cpu_maps = Vec::new();
+        for _ in 0..reps {
+            cpu_maps = cpu_backend.render(&jobs).unwrap();
+        }
+        let cpu_ms = t.elapsed().as_secs_f64() * 1e3 / (reps * jobs.len()) as f64;
+        let covered: usize = cpu_maps.iter().map(|m| m.covered()).sum();
+        let diff: usize = jobs
+            .iter()
+            .zip(&maps)
+            .zip(&cpu_maps)
+            .map(|((j, g), c)| compare(j, g, c).0)
+            .sum();
+        println!(
+            "{count} triangles/plane, 256², 6 planes per call: gpu {gpu_ms:.2} ms/plane, \
+             cpu backend {cpu_ms:.2} ms/plane; {diff} of {covered} covered pixels CPU-only"
+        );
+    }
+}
