@@ -1,15 +1,14 @@
-// umbrasweep — occluder Projection pass (one instanced draw per plane, one instance per occluder).
+// umbrasweep — occluder Projection pass: one draw per plane over all of its occluders.
 //
-// Each instance is the pixel rectangle [rect.xy, rect.zw) that can hold covered pixels (the
-// intersection of the occluder's 8 view bounding boxes, eroded by half a pixel, clipped to the
-// plane). The fragment shader tests the pixel centre against every remaining edge of the
-// occluder's 8 views; the CPU has already shrunk each edge by the pixel's half-extent along its
-// normal, plus a margin covering both the CPU's f64 error and this shader's f32 error. A pixel
-// that passes all edges lies entirely inside all 8 views of this occluder and receives its
-// Depth; the R32Float target keeps the minimum (blend operation Min).
-//
-// Edge k of an instance is edges[edge_start + k] = (nx, ny, c, 0): the pixel passes when
-// nx * (x - x0) + ny * (y - y0) >= c, with (x, y) the pixel centre and (x0, y0) = rect.xy.
+// Each occluder is drawn as its view from cell corner 0, clipped to the pixel rectangle that
+// can hold covered pixels (a superset of its Projection), and has a record in `data`:
+//   data[r]         = (x0 | y0 << 16, bitcast depth, edge count, 0)
+//   data[r + 1 + k] = (bitcast nx, bitcast ny, bitcast c, 0)       for k < edge count
+// The fragment shader tests the pixel centre against every remaining edge of the occluder's 8
+// views. The CPU has already shrunk each edge by the pixel's half-extent along its normal and
+// added a margin covering its own f64 error and this shader's f32 error, so a pixel that passes
+// every edge lies entirely inside all 8 views of this occluder; it receives the occluder's
+// Depth, and the R32Float target keeps the minimum (blend operation Min).
 
 struct Params {
     // 2 / resolution: pixel coordinates to NDC (exact for a power-of-two resolution).
@@ -20,44 +19,40 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> edges: array<vec4<f32>>;
+@group(0) @binding(1) var<storage, read> data: array<vec4<u32>>;
 
-struct Instance {
-    @location(0) rect: vec4<u32>,
-    @location(1) depth: f32,
-    @location(2) edge_range: vec2<u32>,
+struct Vertex {
+    @location(0) pos: vec2<f32>,
+    @location(1) record: u32,
 }
 
 struct Varyings {
     @builtin(position) position: vec4<f32>,
     @location(0) @interpolate(flat) origin: vec2<f32>,
     @location(1) @interpolate(flat) depth: f32,
-    @location(2) @interpolate(flat) edge_range: vec2<u32>,
+    // First edge index and one past the last.
+    @location(2) @interpolate(flat) edges: vec2<u32>,
 }
 
 @vertex
-fn vs_main(@builtin(vertex_index) vertex: u32, inst: Instance) -> Varyings {
-    // Triangle strip over the rectangle's corners: (x0,y0) (x1,y0) (x0,y1) (x1,y1).
-    let corner = vec2<u32>(vertex & 1u, vertex >> 1u);
-    let px = vec2<f32>(select(inst.rect.xy, inst.rect.zw, corner == vec2<u32>(1u, 1u)));
+fn vs_main(v: Vertex) -> Varyings {
+    let rec = data[v.record];
     // Framebuffer y grows downwards, NDC y upwards: row j of the target is pixel row j.
-    let ndc = px * params.ndc_scale - vec2<f32>(1.0, 1.0);
+    let ndc = v.pos * params.ndc_scale - vec2<f32>(1.0, 1.0);
     var out: Varyings;
     out.position = vec4<f32>(ndc.x, -ndc.y, 0.0, 1.0);
-    out.origin = vec2<f32>(inst.rect.xy);
-    out.depth = inst.depth;
-    out.edge_range = inst.edge_range;
+    out.origin = vec2<f32>(f32(rec.x & 0xffffu), f32(rec.x >> 16u));
+    out.depth = bitcast<f32>(rec.y);
+    out.edges = vec2<u32>(v.record + 1u, v.record + 1u + rec.z);
     return out;
 }
 
 @fragment
 fn fs_main(in: Varyings) -> @location(0) vec4<f32> {
-    // Pixel centre relative to the rectangle's origin: exact (small integers + 0.5).
+    // Pixel centre relative to the record's origin: exact (small integers + 0.5).
     let d = in.position.xy - in.origin;
-    let start = in.edge_range.x;
-    let end = start + in.edge_range.y;
-    for (var k = start; k < end; k++) {
-        let e = edges[k];
+    for (var k = in.edges.x; k < in.edges.y; k++) {
+        let e = bitcast<vec4<f32>>(data[k]);
         if (e.x * d.x + e.y * d.y < e.z) {
             discard;
         }

@@ -8,7 +8,7 @@ use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
 use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
 use crate::project::occluders::{self, Occluders};
-use crate::project::planes::{PlaneSettings, Sliceable, cell_jobs};
+use crate::project::planes::{PlaneSettings, Placement, Sliceable, cell_jobs};
 use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
 use crate::scene::Scene;
 use obvhs::bvh2::Bvh2;
@@ -28,6 +28,8 @@ pub struct BakeSettings {
     /// Further planes per direction through the middle of the heaviest closed occluders,
     /// receiving their slices. Default 1.
     pub slice_planes: u32,
+    /// Where the planes of a direction go. Default geometric spacing.
+    pub placement: Placement,
     /// Treat non-opaque (alpha-tested, blended) triangles as occluders. May cull visible
     /// objects. Default false.
     pub alpha_occluders: bool,
@@ -45,6 +47,7 @@ impl BakeSettings {
             extend: 1.5,
             planes: 4,
             slice_planes: 1,
+            placement: Placement::Geometric,
             alpha_occluders: false,
             occluders: None,
             improved_projection: true,
@@ -80,6 +83,7 @@ impl BakeSettings {
             extend: self.extend,
             planes: self.planes,
             slice_planes: self.slice_planes,
+            placement: self.placement,
         }
     }
 }
@@ -381,6 +385,7 @@ pub fn to_document(
             extend: settings.extend,
             planes: settings.planes,
             slice_planes: settings.slice_planes,
+            placement: format!("{:?}", settings.placement).to_lowercase(),
             alpha_occluders: settings.alpha_occluders,
             occluders: settings.occluders.clone(),
             improved_projection: settings.improved_projection,

@@ -11,6 +11,15 @@ use umbrasweep::bake::{self, BakeSettings};
 use umbrasweep::geom::Aabb;
 use umbrasweep::{cells, scene};
 
+/// Where each direction's planes go.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PlacementChoice {
+    /// Geometric spacing from the nearest to the far occluders (measured best).
+    Geometric,
+    /// Weighted quantiles of the occluders' distances.
+    Quantile,
+}
+
 /// Which raster backend runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum BackendChoice {
@@ -33,10 +42,10 @@ pub struct BakeArgs {
     #[arg(long, conflicts_with_all = ["grid_box", "grid_size"], required_unless_present = "grid_box")]
     pub cells: Option<PathBuf>,
     /// A regular grid of cells filling this box: minx,miny,minz,maxx,maxy,maxz.
-    #[arg(long, value_delimiter = ',', num_args = 6, requires = "grid_size", allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', requires = "grid_size", allow_hyphen_values = true)]
     pub grid_box: Option<Vec<f32>>,
     /// Cells per axis of --grid-box: nx,ny,nz.
-    #[arg(long, value_delimiter = ',', num_args = 3, requires = "grid_box")]
+    #[arg(long, value_delimiter = ',', requires = "grid_box")]
     pub grid_size: Option<Vec<u32>>,
     /// Output PVS document (.json).
     #[arg(short, long)]
@@ -57,6 +66,9 @@ pub struct BakeArgs {
     /// occluders, which receive their cross-sections (slices) at Depth 0.
     #[arg(long, default_value_t = BakeSettings::default_settings().slice_planes)]
     pub slice_planes: u32,
+    /// Where each direction's planes go.
+    #[arg(long, value_enum, default_value_t = PlacementChoice::Geometric)]
+    pub placement: PlacementChoice,
     /// Only objects whose name matches this glob pattern are occluders (e.g. 'building*');
     /// every object stays an occludee.
     #[arg(long)]
@@ -81,6 +93,12 @@ fn read_cells(a: &BakeArgs) -> anyhow::Result<Vec<Aabb>> {
     let (Some(b), Some(n)) = (&a.grid_box, &a.grid_size) else {
         bail!("give --cells FILE or --grid-box with --grid-size");
     };
+    if b.len() != 6 {
+        bail!("--grid-box takes 6 numbers: minx,miny,minz,maxx,maxy,maxz (got {})", b.len());
+    }
+    if n.len() != 3 {
+        bail!("--grid-size takes 3 counts: nx,ny,nz (got {})", n.len());
+    }
     let bounds = Aabb::new(Vec3::new(b[0], b[1], b[2]), Vec3::new(b[3], b[4], b[5]));
     Ok(cells::grid(bounds, [n[0], n[1], n[2]])?)
 }
@@ -99,6 +117,10 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         extend: a.extend,
         planes: a.planes,
         slice_planes: a.slice_planes,
+        placement: match a.placement {
+            PlacementChoice::Geometric => umbrasweep::project::planes::Placement::Geometric,
+            PlacementChoice::Quantile => umbrasweep::project::planes::Placement::Quantile,
+        },
         alpha_occluders: a.alpha_occluders,
         occluders: a.occluders.clone(),
         improved_projection: !a.no_improved_projection,

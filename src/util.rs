@@ -26,6 +26,14 @@ pub fn write_atomic_with(
     };
     let mut tmp = tempfile::NamedTempFile::new_in(dir)
         .map_err(|e| format!("{}: cannot create a temporary file in {}: {e}", path.display(), dir.display()))?;
+    // Temporary files are created 0600; the result should have the usual permissions.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = tmp
+            .as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644));
+    }
     {
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         f(&mut w).map_err(|e| format!("{}: write failed: {e}", path.display()))?;

@@ -708,3 +708,129 @@ fn cli_writes_what_the_library_makes() {
     };
     assert_eq!(body(&obj), body(&lib));
 }
+
+// ---------------------------------------------------------------------------------------
+// Shipped data and recipes
+
+/// The commands of data/README.md's `sh` block, joined over `\` continuations.
+fn readme_commands() -> Vec<Vec<String>> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("data/README.md")).unwrap();
+    let block = text
+        .split("```sh")
+        .nth(1)
+        .unwrap()
+        .split("```")
+        .next()
+        .unwrap();
+    block
+        .replace("\\\n", " ")
+        .lines()
+        .map(|l| l.split_whitespace().map(String::from).collect::<Vec<_>>())
+        .filter(|w| !w.is_empty())
+        .collect()
+}
+
+#[test]
+fn data_files_are_remade_byte_for_byte_by_the_readme_commands() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let commands = readme_commands();
+    assert_eq!(commands.len(), 2);
+    let mut made = Vec::new();
+    for words in commands {
+        assert_eq!(&words[..2], ["umbrasweep", "gen"]);
+        let args: Vec<String> = words[2..]
+            .iter()
+            .map(|w| match w.strip_prefix("data/") {
+                Some(name) => {
+                    made.push(name.to_string());
+                    s(&dir.path().join(name)).to_string()
+                }
+                None => w.clone(),
+            })
+            .collect();
+        let out = bin().arg("gen").args(&args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    made.sort();
+    assert_eq!(
+        made,
+        [
+            "demo_city.obj",
+            "demo_city_cells.json",
+            "demo_forest.obj",
+            "demo_forest_cells.json"
+        ]
+    );
+    for name in &made {
+        let shipped = std::fs::read(root.join("data").join(name)).unwrap();
+        let fresh = std::fs::read(dir.path().join(name)).unwrap();
+        assert!(
+            shipped == fresh,
+            "data/{name} differs from what data/README.md's command makes now"
+        );
+        assert!(shipped.len() < 2_000_000, "data/{name} is too large");
+    }
+    // The shipped scenes load, and their cells are as described.
+    let city = scene::load(&root.join("data/demo_city.obj")).unwrap();
+    assert_eq!(city.objects.len(), 65);
+    assert!(city.objects[1..].iter().all(|o| o.closed));
+    let cells = umbrasweep::cells::load_json(&root.join("data/demo_city_cells.json")).unwrap();
+    assert_eq!(cells.len(), 24);
+    let forest = scene::load(&root.join("data/demo_forest.obj")).unwrap();
+    assert_eq!(forest.objects.len(), 1 + 60 * 5);
+    assert!(
+        forest
+            .objects
+            .iter()
+            .filter(|o| o.name.ends_with("_trunk"))
+            .all(|o| o.closed)
+    );
+    let cells = umbrasweep::cells::load_json(&root.join("data/demo_forest_cells.json")).unwrap();
+    assert_eq!(cells.len(), 10);
+}
+
+#[test]
+fn documented_recipes_equal_the_presets() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, args: &[&str]| {
+        let obj = dir.path().join(format!("{name}.obj"));
+        let mut all = vec!["forest", "-o", s(&obj), "--trees", "30", "--leaves", "40"];
+        all.extend_from_slice(args);
+        let out = gen_cli(&all);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        std::fs::read(obj).unwrap()
+    };
+    let recipe = [
+        "--leaf-size",
+        "1.5",
+        "--crown-base",
+        "0.3",
+        "--area-per-tree",
+        "17",
+        "--crown-split",
+        "4",
+    ];
+    assert_eq!(run("c1", &recipe), run("c2", &["--preset", "coarse"]));
+    let fine = [
+        "--leaf-size",
+        "0.5",
+        "--crown-base",
+        "0.3",
+        "--area-per-tree",
+        "17",
+        "--crown-split",
+        "4",
+    ];
+    assert_eq!(run("f1", &fine), run("f2", &["--preset", "fine"]));
+    assert_ne!(run("c3", &recipe), run("f3", &fine));
+}

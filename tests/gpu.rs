@@ -11,10 +11,10 @@ use glam::{DVec2, DVec3};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use std::sync::OnceLock;
-use umbrasweep::backend::cpu::{self, CpuBackend, Scratch};
+use umbrasweep::backend::cpu::{self, CpuBackend};
 use umbrasweep::backend::gpu::{self, GpuBackend};
 use umbrasweep::backend::{
-    BackendError, DepthMap, OccluderSet, PlaneFrame, PlaneJob, RasterBackend,
+    BackendError, DepthMap, OccluderSet, PlaneFrame, PlaneJob, RasterBackend, depth_up,
 };
 use umbrasweep::geom::DAabb;
 
@@ -207,76 +207,112 @@ fn ring(cu: f64, cv: f64, r0: f64, r1: f64, n: usize) -> Vec<[DVec2; 2]> {
     segs
 }
 
-/// How far, in pixels, pixel `(i, j)`'s centre is from failing the CPU's eroded test for the
-/// Projection of `pts` (negative: fails it). Only computed for `pts` whose Projection exists.
-fn slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> Option<f64> {
-    let mut scratch = Scratch::default();
-    if !cpu::projection_polygon(f, &f.cell.corners(), pts, &mut scratch) {
-        return None;
-    }
+/// How far, in pixels, pixel `(i, j)`'s centre lies inside the half-pixel-eroded views of
+/// `pts` — each of the 8 views' hulls on its own, no clipping: the contract's definition of
+/// "the closed pixel square lies inside all 8 views". Negative: outside some view.
+fn view_slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> f64 {
     let c = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
-    let poly = &scratch.poly;
-    let n = poly.len();
-    (0..n)
-        .map(|e| {
-            let (a, b) = (poly[e], poly[(e + 1) % n]);
-            let nrm = DVec2::new(-(b.y - a.y), b.x - a.x);
-            (nrm.dot(c - a) - 0.5 * (nrm.x.abs() + nrm.y.abs())) / nrm.length()
-        })
-        .reduce(f64::min)
+    let mut hull = Vec::new();
+    let mut slack = f64::INFINITY;
+    for v in f.cell.corners() {
+        let q: Vec<DVec2> = pts.iter().map(|&p| f.to_pixel(f.project(v, p))).collect();
+        cpu::convex_hull(&q, &mut hull);
+        if hull.len() < 3 {
+            return f64::NEG_INFINITY;
+        }
+        for e in 0..hull.len() {
+            let (a, b) = (hull[e], hull[(e + 1) % hull.len()]);
+            let n = DVec2::new(-(b.y - a.y), b.x - a.x);
+            slack = slack.min((n.dot(c - a) - 0.5 * (n.x.abs() + n.y.abs())) / n.length());
+        }
+    }
+    slack
 }
 
-/// Compares a GPU map with the CPU reference: the GPU must never cover a pixel with a smaller
-/// Depth than the CPU (i.e. never cover what the CPU leaves uncovered), uncovered pixels must be
-/// exactly `+inf`, and every pixel only the CPU covers must be a near-tie of an edge.
-/// Returns (CPU-only pixels, covered pixels).
-fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> (usize, usize) {
-    let res = job.frame.resolution;
+fn occluder_depth(f: &PlaneFrame, pts: &[DVec3]) -> f32 {
+    depth_up(
+        pts.iter()
+            .map(|&p| f.depth(p))
+            .fold(f64::NEG_INFINITY, f64::max),
+    )
+}
+
+/// Disagreements between a GPU map and the CPU reference on one job.
+#[derive(Debug, Default, Clone, Copy)]
+struct Diff {
+    /// Pixels the CPU gives a smaller Depth (the GPU misses a near-tie pixel).
+    cpu_only: usize,
+    /// Pixels the GPU gives a smaller Depth: each verified to lie inside all 8 views of an
+    /// occluder of that Depth by at least the CPU's margin (a CPU-reference miss).
+    gpu_only: usize,
+    /// Pixels the CPU covers.
+    covered: usize,
+}
+
+impl std::ops::AddAssign for Diff {
+    fn add_assign(&mut self, o: Diff) {
+        self.cpu_only += o.cpu_only;
+        self.gpu_only += o.gpu_only;
+        self.covered += o.covered;
+    }
+}
+
+/// Compares a GPU map with the CPU reference. Uncovered must be exactly `+inf`. Every pixel
+/// where the two differ is checked against the contract itself, per occluder and per view:
+/// a pixel only the CPU covers must be within the f32 error band of a view edge of the occluder giving
+/// it that Depth, and a pixel the GPU covers with a smaller Depth than the CPU must lie inside
+/// all 8 views of an occluder of that Depth by at least the CPU's margin — otherwise the GPU
+/// would be less conservative than the contract, and the test fails.
+fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> Diff {
+    let f = &job.frame;
+    let res = f.resolution;
     assert_eq!(gpu.resolution, res);
     assert_eq!(gpu.depth.len(), (res * res) as usize);
-    let mut cpu_only = 0;
+    let mut diff = Diff {
+        covered: cpu_map.covered(),
+        ..Diff::default()
+    };
+    let occluders_at = |d: f32| {
+        (0..job.occluders.len())
+            .map(|o| job.occluders.get(o))
+            .filter(move |pts| occluder_depth(f, pts) == d)
+    };
     for (k, (&g, &c)) in gpu.depth.iter().zip(&cpu_map.depth).enumerate() {
         let (i, j) = (k as u32 % res, k as u32 / res);
         assert!(!g.is_nan(), "NaN at ({i}, {j})");
         if g.is_infinite() {
             assert_eq!(g, f32::INFINITY, "uncovered is +inf at ({i}, {j})");
         }
-        assert!(
-            c <= g,
-            "GPU covers ({i}, {j}) at {res}² with Depth {g} but the CPU has {c} (axis {}, {})",
-            job.frame.axis,
-            job.frame.positive
-        );
-        if c < g {
-            cpu_only += 1;
-            // The CPU's covering occluder(s) at Depth c: the pixel must be within a rounding
-            // error of one of their eroded edges.
-            let near = (0..job.occluders.len()).any(|o| {
-                let pts = job.occluders.get(o);
-                let d = pts
-                    .iter()
-                    .map(|&p| job.frame.depth(p))
-                    .fold(f64::NEG_INFINITY, f64::max);
-                umbrasweep::backend::depth_up(d) == c
-                    && slack(&job.frame, pts, i, j).is_some_and(|s| s < 1e-3)
-            });
+        if g < c {
+            diff.gpu_only += 1;
+            let legit = occluders_at(g).any(|pts| view_slack(f, pts, i, j) >= cpu::MARGIN);
+            assert!(
+                legit,
+                "GPU covers ({i}, {j}) at {res}² with Depth {g} (CPU: {c}) but no occluder of \
+                 that Depth covers it (axis {}, positive {})",
+                f.axis,
+                f.positive
+            );
+        } else if c < g {
+            diff.cpu_only += 1;
+            // The GPU's extra shrink: the CPU's margin plus 2⁻²¹·(extent + 1) px of f32 error.
+            let band = 1e-3 + res as f64 / (1u64 << 20) as f64;
+            let near = occluders_at(c).any(|pts| view_slack(f, pts, i, j) < band);
             assert!(near, "CPU-only pixel ({i}, {j}) at {res}² is not on an edge");
         }
     }
-    (cpu_only, cpu_map.covered())
+    diff
 }
 
-fn run_and_compare(b: &GpuBackend, jobs: &[PlaneJob]) -> (usize, usize) {
+fn run_and_compare(b: &GpuBackend, jobs: &[PlaneJob]) -> Diff {
     let gpu_maps = b.render(jobs).expect("GPU render");
     let cpu_maps = CpuBackend::new().render(jobs).unwrap();
     assert_eq!(gpu_maps.len(), jobs.len());
-    let (mut diff, mut covered) = (0, 0);
+    let mut diff = Diff::default();
     for ((job, g), c) in jobs.iter().zip(&gpu_maps).zip(&cpu_maps) {
-        let (d, n) = compare(job, g, c);
-        diff += d;
-        covered += n;
+        diff += compare(job, g, c);
     }
-    (diff, covered)
+    diff
 }
 
 fn random_jobs(seed: u64, shape: Shape, count: usize, resolutions: &[u32]) -> Vec<PlaneJob> {
@@ -305,10 +341,10 @@ fn check_shape(shape: Shape, seed: u64) {
     let Some(b) = backend() else { return };
     let jobs = random_jobs(seed, shape, 60, &[16, 32, 64, 128, 256]);
     assert_eq!(jobs.len(), 30, "a cell's worth of planes in one call");
-    let (diff, covered) = run_and_compare(b, &jobs);
-    eprintln!("{shape:?}: {diff} CPU-only pixels of {covered} covered");
-    assert!(covered > 10_000, "the scenes cover something ({covered})");
-    assert!(diff * 100 <= covered, "{diff} of {covered} pixels disagree");
+    let d = run_and_compare(b, &jobs);
+    eprintln!("{shape:?}: {d:?}");
+    assert!(d.covered > 10_000, "the scenes cover something ({d:?})");
+    assert!(d.cpu_only * 100 <= d.covered, "too many near-tie pixels: {d:?}");
 }
 
 #[test]
@@ -356,8 +392,10 @@ fn halves_do_not_add_up_and_minimum_depth_wins() {
     let diag = (0..64).filter(|&k| maps[0].depth[k * 64 + k].is_finite()).count();
     assert_eq!(diag, 0, "no diagonal pixel is covered by either half");
     assert!(maps[0].covered() > 100);
+    // Pixel rect ±9 at 64²: 0.28125 per pixel; near views span ±5.5, far views ±6.29.
     assert_eq!(maps[1].depth[32 * 64 + 32], -5.0, "near occluder's Depth");
-    assert_eq!(maps[1].depth[64 + 1], 4.0, "far occluder's Depth");
+    assert_eq!(maps[1].depth[10 * 64 + 10], 4.0, "far occluder's Depth");
+    assert!(maps[1].depth[5 * 64 + 5].is_infinite(), "outside both");
     run_and_compare(b, &jobs);
 }
 
@@ -435,8 +473,8 @@ fn empty_planes_and_repeated_calls() {
 fn many_large_planes_are_split_into_submissions() {
     let Some(b) = backend() else { return };
     let jobs = random_jobs(5, Shape::Quad, 10, &[2048, 1024]);
-    let (diff, covered) = run_and_compare(b, &jobs);
-    assert!(diff * 100 <= covered.max(1), "{diff} of {covered}");
+    let d = run_and_compare(b, &jobs);
+    assert!(d.cpu_only * 100 <= d.covered.max(1), "{d:?}");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -479,29 +517,71 @@ fn bench_planes() {
             });
         }
         b.render(&jobs).unwrap(); // warm-up: pools, pipeline compile
+        // Minimum over repetitions: the machine may be shared.
         let reps = 5;
-        let t = std::time::Instant::now();
-        let mut maps = Vec::new();
+        let (mut gpu_ms, mut setup_ms, mut maps) = (f64::INFINITY, f64::INFINITY, Vec::new());
         for _ in 0..reps {
+            let t = std::time::Instant::now();
             maps = b.render(&jobs).unwrap();
+            gpu_ms = gpu_ms.min(t.elapsed().as_secs_f64() * 1e3 / jobs.len() as f64);
+            setup_ms = setup_ms.min(b.last_stats().setup.as_secs_f64() * 1e3 / jobs.len() as f64);
         }
-        let gpu_ms = t.elapsed().as_secs_f64() * 1e3 / (reps * jobs.len()) as f64;
-        let t = std::time::Instant::now();
-        let mut cpu_maps = Vec::new();
+        let (mut cpu_ms, mut cpu_maps) = (f64::INFINITY, Vec::new());
         for _ in 0..reps {
+            let t = std::time::Instant::now();
             cpu_maps = cpu_backend.render(&jobs).unwrap();
+            cpu_ms = cpu_ms.min(t.elapsed().as_secs_f64() * 1e3 / jobs.len() as f64);
         }
-        let cpu_ms = t.elapsed().as_secs_f64() * 1e3 / (reps * jobs.len()) as f64;
+        println!("{count}: gpu {gpu_ms:.2} ms/plane");
         let covered: usize = cpu_maps.iter().map(|m| m.covered()).sum();
-        let diff: usize = jobs
-            .iter()
-            .zip(&maps)
-            .zip(&cpu_maps)
-            .map(|((j, g), c)| compare(j, g, c).0)
-            .sum();
+        let mut diff = Diff::default();
+        for ((j, g), c) in jobs.iter().zip(&maps).zip(&cpu_maps) {
+            diff += compare(j, g, c);
+        }
+        println!("{:?}", b.last_stats());
         println!(
-            "{count} triangles/plane, 256², 6 planes per call: gpu {gpu_ms:.2} ms/plane, \
-             cpu backend {cpu_ms:.2} ms/plane; {diff} of {covered} covered pixels CPU-only"
+            "{count} triangles/plane, 256², 6 planes per call: gpu {gpu_ms:.2} ms/plane \
+             (CPU setup {setup_ms:.2}), cpu backend {cpu_ms:.2} ms/plane; {diff:?}; {covered} covered"
         );
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// A CPU-reference issue found by these comparisons (reported; not the GPU backend's file)
+
+/// `cpu::projection_polygon` can leave near-duplicate vertices (edges ~10⁻¹⁴ px long) after
+/// clipping; `cpu::fill_convex` then erodes such an edge along a normal whose direction is
+/// rounding noise, a half-plane that may cut off most of the Projection. Conservative (it only
+/// uncovers), but it is where all the `gpu_only` pixels of the comparisons come from. Un-ignore
+/// once the CPU backend drops degenerate edges.
+#[test]
+#[ignore = "known CPU-reference issue: degenerate clipped edges (see doc comment)"]
+fn cpu_reference_covers_a_triangle_it_misses_today() {
+    let f = PlaneFrame {
+        cell: DAabb {
+            min: DVec3::splat(-0.5),
+            max: DVec3::splat(0.5),
+        },
+        axis: 0,
+        positive: false,
+        position: -10.0,
+        rect_min: DVec2::new(-8.0, -8.0),
+        rect_max: DVec2::new(8.0, 8.0),
+        resolution: 64,
+    };
+    let tri = [
+        DVec3::new(-2.628855960945415, 8.110144680784256, -5.438125008171043),
+        DVec3::new(-10.949435919824044, 8.535924727613656, -2.6336076127590715),
+        DVec3::new(-4.679093122439994, 2.2980744054368625, -9.389374134012611),
+    ];
+    let slack = view_slack(&f, &tri, 62, 4);
+    assert!(slack > 0.3, "pixel (62, 4) is well inside all 8 views: {slack}");
+    let mut occ = OccluderSet::default();
+    occ.push(tri);
+    let map = cpu::render_job(&PlaneJob {
+        frame: f,
+        occluders: occ,
+        slices: vec![],
+    });
+    assert!(map.depth[4 * 64 + 62].is_finite(), "CPU covers {} pixels", map.covered());
 }

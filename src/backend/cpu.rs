@@ -132,6 +132,7 @@ pub fn projection_polygon(
                 let p1 = scratch.hull[(e + 1) % scratch.hull.len()];
                 clip_half_plane(&scratch.poly, p0, p1, &mut scratch.tmp);
                 std::mem::swap(&mut scratch.poly, &mut scratch.tmp);
+                drop_near_duplicates(&mut scratch.poly);
                 if scratch.poly.len() < 3 {
                     return false;
                 }
@@ -166,6 +167,22 @@ pub fn convex_hull(points: &[DVec2], out: &mut Vec<DVec2>) {
         out.push(p);
     }
     out.pop();
+}
+
+/// Removes vertices within 1e-7 pixel of their predecessor (clipping leaves such pairs): an
+/// edge that short has a normal made of rounding noise, and its erosion could cut the polygon
+/// anywhere. Dropping a vertex of a convex polygon only shrinks it, so this stays conservative.
+fn drop_near_duplicates(poly: &mut Vec<DVec2>) {
+    const EPS2: f64 = 1e-14;
+    let mut k = 0;
+    while k < poly.len() && poly.len() > 1 {
+        let next = (k + 1) % poly.len();
+        if poly[k].distance_squared(poly[next]) < EPS2 {
+            poly.remove(next);
+        } else {
+            k += 1;
+        }
+    }
 }
 
 /// Keeps the part of convex polygon `poly` on the left of the directed line `a → b`.
@@ -409,6 +426,36 @@ mod tests {
         assert!(covered > 100, "a big triangle covers many pixels, got {covered}");
         // Sampling the border can only accept pixels that touch an edge within 1/8 pixel.
         assert!(brute_only < 40, "{brute_only} pixels missed");
+    }
+
+    #[test]
+    fn near_duplicate_vertices_do_not_erase_a_projection() {
+        // Found by the GPU comparison: clipping left a ~1e-14 px edge whose noisy normal cut
+        // off the pixel (62, 4), which lies well inside all 8 views.
+        let f = PlaneFrame {
+            cell: DAabb {
+                min: DVec3::splat(-0.5),
+                max: DVec3::splat(0.5),
+            },
+            axis: 0,
+            positive: false,
+            position: -10.0,
+            rect_min: DVec2::new(-8.0, -8.0),
+            rect_max: DVec2::new(8.0, 8.0),
+            resolution: 64,
+        };
+        let mut occ = OccluderSet::default();
+        occ.push([
+            DVec3::new(-2.628855960945415, 8.110144680784256, -5.438125008171043),
+            DVec3::new(-10.949435919824044, 8.535924727613656, -2.6336076127590715),
+            DVec3::new(-4.679093122439994, 2.2980744054368625, -9.389374134012611),
+        ]);
+        let map = render_job(&PlaneJob {
+            frame: f,
+            occluders: occ,
+            slices: vec![],
+        });
+        assert!(map.depth[4 * 64 + 62].is_finite(), "covers {}", map.covered());
     }
 
     #[test]

@@ -153,6 +153,67 @@ pub fn grid(bounds: Aabb, n: [u32; 3]) -> Result<Vec<Aabb>, CellError> {
     Ok(cells)
 }
 
+/// Up to `count` cells of `size` at eye height in the free space of a scene: positions on a
+/// seeded jittered grid over the scene's ground extent (the `up` axis is y), `height` above the
+/// lowest point, kept when the cell overlaps no object's bounds except ground-like objects
+/// (those spanning more than a quarter of the scene's ground area). For real scenes (a city's
+/// streets) where no generator made cells. Deterministic for a seed.
+pub fn free_cells(
+    objects: &[Aabb],
+    count: usize,
+    size: Vec3,
+    height: f32,
+    seed: u64,
+) -> Vec<Aabb> {
+    let scene = objects
+        .iter()
+        .filter(|b| !b.is_empty())
+        .fold(Aabb::EMPTY, |a, b| a.union(b));
+    if scene.is_empty() || count == 0 {
+        return Vec::new();
+    }
+    let ground_area = (scene.max.x - scene.min.x) * (scene.max.z - scene.min.z);
+    let solid: Vec<&Aabb> = objects
+        .iter()
+        .filter(|b| {
+            !b.is_empty() && (b.max.x - b.min.x) * (b.max.z - b.min.z) < 0.25 * ground_area
+        })
+        .collect();
+    // A fine jittered grid, visited in a seeded pseudo-random order.
+    let n = 256usize;
+    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut order: Vec<usize> = (0..n * n).collect();
+    for i in (1..order.len()).rev() {
+        let j = (next() * (i + 1) as f64) as usize;
+        order.swap(i, j.min(i));
+    }
+    let mut out = Vec::new();
+    for k in order {
+        let (i, j) = (k % n, k / n);
+        let fx = (i as f64 + next()) / n as f64;
+        let fz = (j as f64 + next()) / n as f64;
+        let cx = scene.min.x + (scene.max.x - scene.min.x) * fx as f32;
+        let cz = scene.min.z + (scene.max.z - scene.min.z) * fz as f32;
+        let min = Vec3::new(cx - 0.5 * size.x, scene.min.y + height, cz - 0.5 * size.z);
+        let cell = Aabb::new(min, min + size);
+        // Keep a margin of half a cell around buildings.
+        let probe = Aabb::new(cell.min - 0.5 * size, cell.max + 0.5 * size);
+        if solid.iter().all(|b| !b.overlaps(&probe)) && !out.iter().any(|c: &Aabb| c.overlaps(&probe)) {
+            out.push(cell);
+            if out.len() == count {
+                break;
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -166,6 +227,20 @@ mod tests {
         assert_eq!(cells[5].max, b.max);
         assert_eq!(cells[1].min.x, 1.0);
         assert_eq!(cells[3].min.z, 1.0);
+    }
+
+    #[test]
+    fn free_cells_avoid_objects_and_are_deterministic() {
+        let ground = Aabb::new(Vec3::new(0.0, 0.0, 0.0), Vec3::new(100.0, 0.1, 100.0));
+        let block = Aabb::new(Vec3::new(30.0, 0.0, 30.0), Vec3::new(60.0, 30.0, 60.0));
+        let objs = [ground, block];
+        let a = free_cells(&objs, 20, Vec3::new(2.0, 2.0, 2.0), 1.0, 7);
+        assert_eq!(a.len(), 20);
+        assert_eq!(a, free_cells(&objs, 20, Vec3::new(2.0, 2.0, 2.0), 1.0, 7));
+        for c in &a {
+            assert!(!c.overlaps(&block));
+            assert_eq!(c.min.y, 1.0);
+        }
     }
 
     #[test]

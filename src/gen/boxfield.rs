@@ -109,7 +109,9 @@ impl Obb {
 /// # Errors
 /// [`GenError::Options`] for bad sizes or counts.
 pub fn boxfield(o: &BoxfieldOptions) -> Result<Generated, GenError> {
-    if o.boxes == 0 || !(o.extent > 0.0) || !(o.box_size[0] > 0.0 && o.box_size[0] <= o.box_size[1])
+    if o.boxes == 0
+        || !super::positive(o.extent)
+        || !(o.box_size[0] > 0.0 && o.box_size[0] <= o.box_size[1])
     {
         return Err(GenError::Options(
             "--boxes must be at least 1, --extent positive and --box-size MIN,MAX positive with MIN at most MAX".into(),

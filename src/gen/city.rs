@@ -1,4 +1,4 @@
-//! `gen city`: a grid of blocks of closed box buildings (stacked storeys, some H or T shaped,
+//! `gen city`: a grid of blocks of closed box buildings (a podium and a set-back tower, some H or T shaped,
 //! rotated up to 30°), streets between the blocks, a ground quad, and view cells along the
 //! streets at eye height.
 
@@ -23,7 +23,7 @@ pub struct CityOptions {
     pub building_width: [f32; 2],
     /// Height range of a building.
     pub heights: [f32; 2],
-    /// Nominal storey height; each storey is its own box (or boxes).
+    /// Nominal storey height: setbacks happen at a whole storey.
     pub floor_height: f32,
     /// Largest rotation about the vertical, in degrees.
     pub max_rotation_deg: f32,
@@ -203,8 +203,9 @@ fn storey_parts(shape: u8, w: f32, d: f32) -> Vec<[f32; 4]> {
     }
 }
 
-/// One building: a stack of storeys, each one box or (H, T) a few overlapping boxes, inset
-/// by 0.05 on odd storeys and set back above a random storey, so no two boxes share a corner.
+/// One building: a podium (one box, or for H and T shapes a few overlapping boxes) and, above
+/// a setback at a random storey for half of the taller buildings, a narrower tower embedded
+/// in it; no two boxes share a corner.
 fn building(o: &CityOptions, plan: &Plan, name: String, centre: Vec2, id: u64) -> GenObject {
     let mut rng = rng_for(o.seed, 3, id);
     let w = uniform(&mut rng, o.building_width[0], o.building_width[1]);
@@ -233,23 +234,21 @@ fn building(o: &CityOptions, plan: &Plan, name: String, centre: Vec2, id: u64) -
         );
 
     let mut b = GenObject::new(name);
-    let sh = h / storeys as f32;
-    for k in 0..storeys {
-        let (y0, y1) = (
-            k as f32 * sh,
-            if k + 1 == storeys {
-                h
-            } else {
-                (k + 1) as f32 * sh
-            },
-        );
-        let inset = if k % 2 == 1 { 0.05 } else { 0.0 };
-        let parts = match setback {
-            Some(sb) if k >= sb => storey_parts(0, w * setback_scale, d * setback_scale),
-            _ => storey_parts(shape, w, d),
-        };
+    // Tiers, not storeys: the podium (one box, or the overlapping boxes of an H or T) up to the
+    // setback, then a narrower tower whose base sits inside the podium, so the boxes overlap
+    // rather than abut (abutting boxes would leave a crack between their Projections).
+    let top_of_podium = setback.map_or(h, |sb| sb as f32 * (h / storeys as f32));
+    let mut tiers = vec![(0.0, top_of_podium, storey_parts(shape, w, d))];
+    if top_of_podium < h {
+        let base = (top_of_podium - TOWER_EMBED).max(0.0);
+        tiers.push((
+            base,
+            h,
+            storey_parts(0, w * setback_scale, d * setback_scale),
+        ));
+    }
+    for (y0, y1, parts) in tiers {
         for [x0, x1, z0, z1] in parts {
-            let (x0, x1, z0, z1) = (x0 + inset, x1 - inset, z0 + inset, z1 - inset);
             let corners = std::array::from_fn(|i| {
                 let x = if i & 1 != 0 { x1 } else { x0 };
                 let y = if i & 2 != 0 { y1 } else { y0 };
@@ -265,6 +264,9 @@ fn building(o: &CityOptions, plan: &Plan, name: String, centre: Vec2, id: u64) -
     }
     b
 }
+
+/// How far a set-back tower reaches down into its podium.
+const TOWER_EMBED: f32 = 1.0;
 
 /// Cells on the centre lines of the streets between blocks: along each x street over the
 /// whole city, then along each z street between the junctions.

@@ -110,11 +110,12 @@ impl ForestOptions {
         }
     }
 
-    /// The shipped demo (`data/demo_forest.obj`): 60 trees × 200 leaves.
+    /// The shipped demo (`data/demo_forest.obj`): 60 trees × 200 leaves, 10 cells.
     pub const fn demo() -> Self {
         ForestOptions {
             trees: 60,
             leaves: 200,
+            max_cells: Some(10),
             ..Self::coarse()
         }
     }
@@ -234,7 +235,7 @@ fn check_common(o: &ForestOptions) -> Result<(), GenError> {
         ));
     }
     if o.path {
-        if !(o.path_width > 0.0) || !(o.path_curve >= 0.0 && o.path_curve <= 0.25) {
+        if !super::positive(o.path_width) || !(0.0..=0.25).contains(&o.path_curve) {
             return bad(format!(
                 "--path-width {} must be positive and --path-curve {} in [0, 0.25]",
                 o.path_width, o.path_curve
@@ -341,7 +342,7 @@ fn side(o: &ForestOptions, area: f32, r: f32) -> f32 {
 }
 
 fn layout(o: &ForestOptions, extent: f32, r: f32) -> Result<(Vec<Vec2>, Vec<Aabb>), GenError> {
-    let path = o.path.then(|| Path {
+    let path = o.path.then_some(Path {
         extent,
         amplitude: o.path_curve * extent,
         half_width: 0.5 * o.path_width,
@@ -376,7 +377,7 @@ pub fn forest(o: &ForestOptions) -> Result<Generated, GenError> {
             "--crown-height and --crown-radius must be positive, --crown-base not negative".into(),
         );
     }
-    if !(o.trunk_radius > 0.0) || o.trunk_sides < 3 {
+    if !super::positive(o.trunk_radius) || o.trunk_sides < 3 {
         return bad("--trunk-radius must be positive and --trunk-sides at least 3".into());
     }
     if !(0.0..1.0).contains(&o.size_jitter) {

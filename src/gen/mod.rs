@@ -65,11 +65,12 @@
 //! apart (a grid, centred on the origin), after the test city of the ray space factorization
 //! paper (Leyvand et al. 2003): each building `building_I_J` (I, J: its lot in the whole
 //! city) is `--building-width MIN,MAX` (9–12) wide and deep, `--heights MIN,MAX` tall, rotated
-//! by up to `--max-rotation` degrees (30) about the vertical, made of one stacked box per storey
-//! (`--floor-height`, 3); some are H or T shaped (three or two boxes per storey), some set
-//! back above a storey. Every box is a closed, outward 12-triangle box and no two boxes of a
-//! building share an edge or a corner (storeys alternate a 0.05 inset), so every building is a
-//! closed 2-manifold. Object `ground` is a quad under the whole city. Cells (`--cell-size`,
+//! by up to `--max-rotation` degrees (30) about the vertical: a podium (one box, or two or
+//! three overlapping boxes for T and H shapes) and, for half of the buildings of 3 storeys
+//! (`--floor-height`, 3) or more, a narrower tower set back above a storey, its base embedded
+//! 1 unit in the podium (overlapping boxes fuse in the Projections; abutting ones would leave a
+//! crack). Every box is a closed, outward 12-triangle box and no two boxes of a building share
+//! an edge or a corner, so every building is a closed 2-manifold. Object `ground` is a quad under the whole city. Cells (`--cell-size`,
 //! default 3,2,3, y from 1) line the centre lines of the streets between blocks, junctions
 //! once. Example: `umbrasweep gen city --blocks 12 -o city.obj --cells-out city_cells.json`.
 //!
@@ -293,6 +294,11 @@ pub(crate) fn rng_for(seed: u64, stream: u64, index: u64) -> rand_pcg::Pcg64Mcg 
     rand_pcg::Pcg64Mcg::seed_from_u64(mix(mix(mix(seed) ^ stream) ^ index))
 }
 
+/// True for a finite number above zero.
+pub(crate) fn positive(x: f32) -> bool {
+    x > 0.0 && x.is_finite()
+}
+
 /// Uniform in `[a, b)` (or `a` when `a >= b`).
 pub(crate) fn uniform(rng: &mut impl Rng, a: f32, b: f32) -> f32 {
     if b > a {
@@ -378,7 +384,7 @@ pub struct CommonArgs {
     /// Keep at most N cells, spread evenly over the path, streets or free grid cells.
     #[arg(long, value_name = "N")]
     pub cells: Option<usize>,
-    /// Size of the cells: X (a cube) or X,Y,Z [forest: 1,1,1; city: 3,2,3; boxfield: 5].
+    /// Size of the cells: X (a cube) or X,Y,Z (default forest: 1,1,1; city: 3,2,3; boxfield: 5).
     #[arg(long, value_name = "X[,Y,Z]", value_parser = parse_size3)]
     pub cell_size: Option<Vec3>,
 }
@@ -392,7 +398,7 @@ pub enum ForestPreset {
     Fine,
     /// The paper's forest: the coarse forest with 7,750 trees (7.8 M triangles).
     Paper,
-    /// The shipped demo: 60 trees × 200 leaves.
+    /// The shipped demo: 60 trees × 200 leaves, 10 cells.
     Demo,
 }
 
@@ -404,46 +410,46 @@ pub struct ForestArgs {
     /// Start from these options (other flags override single values).
     #[arg(long, value_enum)]
     pub preset: Option<ForestPreset>,
-    /// Number of trees [100].
+    /// Number of trees (default 100).
     #[arg(long)]
     pub trees: Option<u32>,
-    /// Leaves per tree [1000].
+    /// Leaves per tree (default 1000).
     #[arg(long)]
     pub leaves: Option<u32>,
-    /// Leaf diameter: MIN,MAX, or S for 0.8·S,1.2·S [1.5].
+    /// Leaf diameter: MIN,MAX, or S for 0.8·S,1.2·S (default 1.5).
     #[arg(long, value_name = "S|MIN,MAX", value_parser = parse_pair)]
     pub leaf_size: Option<Pair>,
     /// Emit leaves as planar quads instead of triangles.
     #[arg(long)]
     pub leaf_quads: bool,
-    /// Vertical extent of the crowns [4.5].
+    /// Vertical extent of the crowns (default 4.5).
     #[arg(long)]
     pub crown_height: Option<f32>,
-    /// Height where the crowns start [0.3].
+    /// Height where the crowns start (default 0.3).
     #[arg(long)]
     pub crown_base: Option<f32>,
-    /// Horizontal radius of the crowns [2.2].
+    /// Horizontal radius of the crowns (default 2.2).
     #[arg(long)]
     pub crown_radius: Option<f32>,
-    /// Split each crown into N objects (angular sectors around the trunk) [4].
+    /// Split each crown into N objects (angular sectors around the trunk) (default 4).
     #[arg(long, value_name = "N")]
     pub crown_split: Option<u32>,
-    /// Trunk radius [0.15].
+    /// Trunk radius (default 0.15).
     #[arg(long)]
     pub trunk_radius: Option<f32>,
-    /// Sides of the trunk prism [6].
+    /// Sides of the trunk prism (default 6).
     #[arg(long)]
     pub trunk_sides: Option<u32>,
     /// Side of the square forest (instead of --area-per-tree).
     #[arg(long, conflicts_with = "area_per_tree")]
     pub extent: Option<f32>,
-    /// Ground area per tree in m², giving the side of the forest [17; tree models: from the model].
+    /// Ground area per tree in m², giving the side of the forest (default 17; tree models: from the model).
     #[arg(long)]
     pub area_per_tree: Option<f32>,
-    /// Width of the trunk-free lane around the path's centre line [4].
+    /// Width of the trunk-free lane around the path's centre line (default 4).
     #[arg(long)]
     pub path_width: Option<f32>,
-    /// Amplitude of the path's sine, as a fraction of the extent (0: straight) [0.05].
+    /// Amplitude of the path's sine, as a fraction of the extent (0: straight) (default 0.05).
     #[arg(long)]
     pub path_curve: Option<f32>,
     /// No path: trees anywhere, no cells.
@@ -455,7 +461,7 @@ pub struct ForestArgs {
     /// Scale the tree model to this height (before --scale-jitter).
     #[arg(long, requires = "tree_model")]
     pub model_height: Option<f32>,
-    /// Random scale of each model instance: 1 ± this [0.2].
+    /// Random scale of each model instance: 1 ± this (default 0.2).
     #[arg(long, requires = "tree_model")]
     pub scale_jitter: Option<f32>,
 }
@@ -465,28 +471,28 @@ pub struct ForestArgs {
 pub struct CityArgs {
     #[command(flatten)]
     pub common: CommonArgs,
-    /// Blocks: N (N×N) or NX,NZ [12].
+    /// Blocks: N (N×N) or NX,NZ (default 12).
     #[arg(long, value_name = "N|NX,NZ", value_parser = parse_count2)]
     pub blocks: Option<[u32; 2]>,
-    /// Width of the streets between blocks [10].
+    /// Width of the streets between blocks (default 10).
     #[arg(long)]
     pub street_width: Option<f32>,
-    /// Buildings per block: N (N×N) or NX,NZ [2].
+    /// Buildings per block: N (N×N) or NX,NZ (default 2).
     #[arg(long, value_name = "N|NX,NZ", value_parser = parse_count2)]
     pub buildings_per_block: Option<[u32; 2]>,
-    /// Width and depth of buildings: MIN,MAX [9,12].
+    /// Width and depth of buildings: MIN,MAX (default 9,12).
     #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair)]
     pub building_width: Option<Pair>,
-    /// Heights of buildings: MIN,MAX [6,36].
+    /// Heights of buildings: MIN,MAX (default 6,36).
     #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair)]
     pub heights: Option<Pair>,
-    /// Storey height: each storey is its own box (or boxes) [3].
+    /// Storey height; a tower's setback happens at a whole storey (default 3).
     #[arg(long)]
     pub floor_height: Option<f32>,
-    /// Largest rotation of a building about the vertical, in degrees [30].
+    /// Largest rotation of a building about the vertical, in degrees (default 30).
     #[arg(long)]
     pub max_rotation: Option<f32>,
-    /// Fraction of H- and T-shaped buildings [0.4].
+    /// Fraction of H- and T-shaped buildings (default 0.4).
     #[arg(long)]
     pub shaped: Option<f32>,
 }
@@ -496,13 +502,13 @@ pub struct CityArgs {
 pub struct BoxfieldArgs {
     #[command(flatten)]
     pub common: CommonArgs,
-    /// Number of boxes [200].
+    /// Number of boxes (default 200).
     #[arg(long)]
     pub boxes: Option<u32>,
-    /// Side of the cube holding the box centres [100].
+    /// Side of the cube holding the box centres (default 100).
     #[arg(long)]
     pub extent: Option<f32>,
-    /// Box side lengths: MIN,MAX (or S for S,S) [1,10].
+    /// Box side lengths: MIN,MAX (or S for S,S) (default 1,10).
     #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair)]
     pub box_size: Option<Pair>,
 }
@@ -600,7 +606,8 @@ impl ForestArgs {
         if let Some(p) = self.leaf_size {
             o.leaf_size = match p.1 {
                 Some(_) => min_max(p, "--leaf-size")?,
-                None => [0.8 * p.0, 1.2 * p.0],
+                // In f64, so `1.5` gives exactly the presets' `[1.2, 1.8]`.
+                None => [(0.8 * p.0 as f64) as f32, (1.2 * p.0 as f64) as f32],
             };
         }
         o.leaf_quads |= self.leaf_quads;
@@ -751,6 +758,12 @@ pub fn run(args: &GenArgs) -> anyhow::Result<()> {
         check_writable(c, "--cells-out")?;
     }
 
+    if let GenKind::Forest(a) = &args.kind
+        && a.no_path
+        && common.cells_out.is_some()
+    {
+        bail!("--cells-out: the forest's cells lie on its path; drop --no-path");
+    }
     let (mut generated, kind) = match &args.kind {
         GenKind::Forest(a) => {
             let o = a.options()?;

@@ -146,7 +146,7 @@ fn fixed4(out: &mut Vec<u8>, x: f32) {
     let mut frac = k % 10_000;
     if frac != 0 {
         let mut digits = 4;
-        while frac % 10 == 0 {
+        while frac.is_multiple_of(10) {
             frac /= 10;
             digits -= 1;
         }

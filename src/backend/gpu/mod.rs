@@ -58,7 +58,7 @@ pub mod setup;
 
 use super::{BackendError, DepthMap, PlaneJob, RasterBackend, cpu};
 use rayon::prelude::*;
-use setup::{Edge, Instance, PlaneSetup, Scratch};
+use setup::{Output, PlaneSetup, Scratch, Vertex};
 use std::collections::HashMap;
 use std::num::NonZeroU64;
 use std::sync::mpsc;
@@ -96,12 +96,13 @@ pub struct GpuBackend {
     layout: wgpu::BindGroupLayout,
     /// First device-lost or uncaptured error message; once set, every call fails.
     failure: Arc<Mutex<Option<String>>>,
-    /// Largest storage binding, in edges (a multiple of the offset alignment).
-    max_chunk_edges: usize,
+    /// Largest storage binding, in 16-byte words.
+    max_chunk_words: usize,
     storage_align: u64,
     max_buffer: u64,
     max_texture: u32,
     pool: Mutex<Pool>,
+    stats: Mutex<RenderStats>,
 }
 
 impl std::fmt::Debug for GpuBackend {
@@ -112,11 +113,38 @@ impl std::fmt::Debug for GpuBackend {
     }
 }
 
+/// What the last [`render`](RasterBackend::render) call did, for reports and benchmarks.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RenderStats {
+    /// Planes in the call.
+    pub planes: usize,
+    /// Planes sent to the GPU (the others had no occluder that can cover a pixel).
+    pub gpu_planes: usize,
+    /// Queue submissions (one unless memory budgets split the call).
+    pub submissions: usize,
+    /// Render passes (one per GPU plane).
+    pub passes: usize,
+    /// Draw calls (one per GPU plane unless its edges exceed one storage binding).
+    pub draws: usize,
+    /// Occluders drawn (after the quick rejects), their triangles, and their view edges.
+    pub occluders: usize,
+    pub triangles: usize,
+    pub edges: usize,
+    /// Bytes written to GPU buffers (vertices, records and edges, uniforms).
+    pub bytes_uploaded: u64,
+    /// Bytes copied back from the GPU (padded rows included).
+    pub bytes_read_back: u64,
+    /// Wall time of the CPU setup (parallel), of the GPU section (upload to read-back), total.
+    pub setup: Duration,
+    pub gpu: Duration,
+    pub total: Duration,
+}
+
 /// GPU resources reused across calls.
 #[derive(Default)]
 struct Pool {
-    instances: Option<wgpu::Buffer>,
-    edges: Option<wgpu::Buffer>,
+    vertices: Option<wgpu::Buffer>,
+    data: Option<wgpu::Buffer>,
     uniforms: Option<wgpu::Buffer>,
     targets: HashMap<u32, Vec<Target>>,
 }
@@ -131,17 +159,17 @@ struct Target {
 
 /// A job's CPU-side preparation.
 struct Prepared {
-    instances: Vec<Instance>,
-    edges: Vec<Edge>,
-    /// Draw chunks: instance range and edge range (edge indices of the chunk's instances are
-    /// relative to the edge range's start).
+    /// Records, edges and geometry; vertices' record indices are relative to their chunk.
+    out: Output,
+    occluders: usize,
+    /// Draw chunks: vertex range and data range.
     chunks: Vec<Chunk>,
 }
 
 #[derive(Clone, Debug)]
 struct Chunk {
-    instances: std::ops::Range<u32>,
-    edges: std::ops::Range<usize>,
+    vertices: std::ops::Range<u32>,
+    data: std::ops::Range<usize>,
 }
 
 /// Adapter ranking: hardware first, software rasterisers last.
@@ -269,7 +297,7 @@ impl GpuBackend {
                 },
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: false,
@@ -284,11 +312,7 @@ impl GpuBackend {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let attributes = wgpu::vertex_attr_array![
-            0 => Uint32x4,
-            1 => Float32,
-            2 => Uint32x2,
-        ];
+        let attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Uint32];
         let blend = wgpu::BlendComponent {
             src_factor: wgpu::BlendFactor::One,
             dst_factor: wgpu::BlendFactor::One,
@@ -302,13 +326,13 @@ impl GpuBackend {
                 entry_point: Some("vs_main"),
                 compilation_options: Default::default(),
                 buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<Instance>() as u64,
-                    step_mode: wgpu::VertexStepMode::Instance,
+                    array_stride: std::mem::size_of::<Vertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
                     attributes: &attributes,
                 })],
             },
             primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleStrip,
+                topology: wgpu::PrimitiveTopology::TriangleList,
                 cull_mode: None,
                 ..Default::default()
             },
@@ -334,7 +358,7 @@ impl GpuBackend {
 
         let storage_align = limits.min_storage_buffer_offset_alignment.max(16) as u64;
         let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
-        let max_chunk_edges = ((max_binding / storage_align * storage_align) / 16) as usize;
+        let max_chunk_words = ((max_binding / storage_align * storage_align) / 16) as usize;
         Ok(GpuBackend {
             adapter_name: info.name.clone(),
             device,
@@ -342,17 +366,23 @@ impl GpuBackend {
             pipeline,
             layout,
             failure,
-            max_chunk_edges,
+            max_chunk_words,
             storage_align,
             max_buffer: limits.max_buffer_size,
             max_texture: limits.max_texture_dimension_2d,
             pool: Mutex::default(),
+            stats: Mutex::default(),
         })
     }
 
     /// The adapter's information (name, backend, device type, driver).
     pub fn adapter_info(&self) -> wgpu::AdapterInfo {
         self.device.adapter_info()
+    }
+
+    /// Counters and timings of the last [`render`](RasterBackend::render) call (of any thread).
+    pub fn last_stats(&self) -> RenderStats {
+        self.stats.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     fn check_failure(&self) -> Result<(), BackendError> {
@@ -363,70 +393,79 @@ impl GpuBackend {
         }
     }
 
-    /// CPU setup of one job: instances and edges of every occluder, split into draw chunks.
+    /// CPU setup of one job: records, edges and geometry of every occluder, split into draw
+    /// chunks whose data fits one storage binding.
     fn prepare(&self, job: &PlaneJob) -> Result<Prepared, BackendError> {
         let frame = &job.frame;
         let ps = PlaneSetup::new(frame);
         let n = job.occluders.len();
-        let parts: Vec<(Vec<Instance>, Vec<Edge>)> = (0..n.div_ceil(SETUP_TASK))
+        let parts: Vec<(Output, usize)> = (0..n.div_ceil(SETUP_TASK))
             .into_par_iter()
             .map(|t| {
                 let mut scratch = Scratch::default();
-                let (mut inst, mut edges) = (Vec::new(), Vec::new());
+                let mut out = Output::default();
+                let mut count = 0;
                 for k in t * SETUP_TASK..((t + 1) * SETUP_TASK).min(n) {
                     let pts = job.occluders.get(k);
                     let depth = pts
                         .iter()
                         .map(|&p| frame.depth(p))
                         .fold(f64::NEG_INFINITY, f64::max);
-                    if let Some(i) = setup::occluder(&ps, pts, depth, &mut scratch, &mut edges, 0)
-                    {
-                        inst.push(i);
+                    if setup::occluder(&ps, pts, depth, &mut scratch, &mut out) {
+                        count += 1;
                     }
                 }
-                (inst, edges)
+                (out, count)
             })
             .collect();
-        let mut instances = Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum());
-        let mut edges = Vec::with_capacity(parts.iter().map(|p| p.1.len()).sum());
-        for (inst, e) in parts {
-            let base = edges.len() as u32;
-            instances.extend(inst.into_iter().map(|mut i| {
-                i.edge_range[0] += base;
-                i
+        let mut out = Output {
+            data: Vec::with_capacity(parts.iter().map(|p| p.0.data.len()).sum()),
+            vertices: Vec::with_capacity(parts.iter().map(|p| p.0.vertices.len()).sum()),
+        };
+        let mut occluders = 0;
+        for (part, count) in parts {
+            let base = out.data.len() as u32;
+            out.data.extend_from_slice(&part.data);
+            out.vertices.extend(part.vertices.iter().map(|v| Vertex {
+                record: v.record + base,
+                ..*v
             }));
-            edges.extend_from_slice(&e);
+            occluders += count;
         }
-        // Split into chunks whose edges fit one storage binding; rebase edge indices.
+        // Split into chunks whose data fits one storage binding; rebase record indices.
         let mut chunks = Vec::new();
-        let (mut first, mut base) = (0usize, 0usize);
-        for k in 0..instances.len() {
-            let [start, count] = instances[k].edge_range;
-            let end = (start + count) as usize;
-            if count as usize > self.max_chunk_edges {
-                return Err(BackendError::Device(format!(
-                    "an occluder has {count} edges, more than one storage binding holds"
-                )));
+        let (mut first, mut base, mut current) = (0usize, 0usize, u32::MAX);
+        for k in 0..out.vertices.len() {
+            let rec = out.vertices[k].record;
+            if rec != current {
+                current = rec;
+                let end = rec as usize + 1 + out.data[rec as usize][2] as usize;
+                if end - rec as usize > self.max_chunk_words {
+                    return Err(BackendError::Device(format!(
+                        "an occluder has {} edges, more than one storage binding holds",
+                        end - rec as usize - 1
+                    )));
+                }
+                if end - base > self.max_chunk_words {
+                    chunks.push(Chunk {
+                        vertices: first as u32..k as u32,
+                        data: base..rec as usize,
+                    });
+                    first = k;
+                    base = rec as usize;
+                }
             }
-            if end - base > self.max_chunk_edges {
-                chunks.push(Chunk {
-                    instances: first as u32..k as u32,
-                    edges: base..start as usize,
-                });
-                first = k;
-                base = start as usize;
-            }
-            instances[k].edge_range[0] -= base as u32;
+            out.vertices[k].record = rec - base as u32;
         }
-        if first < instances.len() {
+        if first < out.vertices.len() {
             chunks.push(Chunk {
-                instances: first as u32..instances.len() as u32,
-                edges: base..edges.len(),
+                vertices: first as u32..out.vertices.len() as u32,
+                data: base..out.data.len(),
             });
         }
         Ok(Prepared {
-            instances,
-            edges,
+            out,
+            occluders,
             chunks,
         })
     }
@@ -503,36 +542,37 @@ impl GpuBackend {
         prepared: &[Prepared],
         todo: &[usize],
         out: &mut [Option<DepthMap>],
+        stats: &mut RenderStats,
     ) -> Result<(), BackendError> {
         let scope = ErrorScopes::push(&self.device);
         // Layout of the shared buffers.
-        let inst_size = std::mem::size_of::<Instance>() as u64;
-        let mut inst_total = 0u64;
-        let mut edge_total = 0u64;
-        let mut first_instance = Vec::with_capacity(todo.len());
+        let vert_size = std::mem::size_of::<Vertex>() as u64;
+        let mut vert_total = 0u64;
+        let mut data_total = 0u64;
+        let mut first_vertex = Vec::with_capacity(todo.len());
         let mut chunk_offsets: Vec<Vec<u64>> = Vec::with_capacity(todo.len());
         for &j in todo {
             let p = &prepared[j];
-            first_instance.push((inst_total / inst_size) as u32);
-            inst_total += p.instances.len() as u64 * inst_size;
+            first_vertex.push((vert_total / vert_size) as u32);
+            vert_total += p.out.vertices.len() as u64 * vert_size;
             let mut offs = Vec::with_capacity(p.chunks.len());
             for c in &p.chunks {
-                offs.push(edge_total);
-                edge_total += ((c.edges.len() as u64) * 16).next_multiple_of(self.storage_align);
+                offs.push(data_total);
+                data_total += ((c.data.len() as u64) * 16).next_multiple_of(self.storage_align);
             }
             chunk_offsets.push(offs);
         }
         self.ensure_buffer(
-            &mut pool.instances,
-            inst_total.max(inst_size),
+            &mut pool.vertices,
+            vert_total.max(vert_size),
             wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-            "occluder instances",
+            "occluder geometry",
         )?;
         self.ensure_buffer(
-            &mut pool.edges,
-            edge_total.max(16),
+            &mut pool.data,
+            data_total.max(16),
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            "occluder view edges",
+            "occluder records and view edges",
         )?;
         self.ensure_buffer(
             &mut pool.uniforms,
@@ -540,8 +580,8 @@ impl GpuBackend {
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             "plane uniforms",
         )?;
-        let (Some(inst_buf), Some(edge_buf), Some(uni_buf)) =
-            (&pool.instances, &pool.edges, &pool.uniforms)
+        let (Some(vert_buf), Some(data_buf), Some(uni_buf)) =
+            (&pool.vertices, &pool.data, &pool.uniforms)
         else {
             unreachable!("buffers were just ensured");
         };
@@ -549,17 +589,20 @@ impl GpuBackend {
         let mut uniforms = vec![0u8; todo.len() * UNIFORM_STRIDE as usize];
         for (w, &j) in todo.iter().enumerate() {
             let p = &prepared[j];
-            if !p.instances.is_empty() {
+            if !p.out.vertices.is_empty() {
                 self.queue.write_buffer(
-                    inst_buf,
-                    first_instance[w] as u64 * inst_size,
-                    bytemuck::cast_slice(&p.instances),
+                    vert_buf,
+                    first_vertex[w] as u64 * vert_size,
+                    bytemuck::cast_slice(&p.out.vertices),
                 );
             }
             for (c, &off) in p.chunks.iter().zip(&chunk_offsets[w]) {
-                if !c.edges.is_empty() {
-                    self.queue
-                        .write_buffer(edge_buf, off, bytemuck::cast_slice(&p.edges[c.edges.clone()]));
+                if !c.data.is_empty() {
+                    self.queue.write_buffer(
+                        data_buf,
+                        off,
+                        bytemuck::cast_slice(&p.out.data[c.data.clone()]),
+                    );
                 }
             }
             let scale = 2.0f32 / jobs[j].frame.resolution as f32;
@@ -567,6 +610,19 @@ impl GpuBackend {
             uniforms[o..o + 4].copy_from_slice(&scale.to_le_bytes());
         }
         self.queue.write_buffer(uni_buf, 0, &uniforms);
+        stats.submissions += 1;
+        stats.passes += todo.len();
+        stats.bytes_uploaded += vert_total + uniforms.len() as u64;
+        for &j in todo {
+            let p = &prepared[j];
+            stats.draws += p.chunks.len();
+            stats.occluders += p.occluders;
+            stats.triangles += p.out.vertices.len() / 3;
+            stats.edges += p.out.data.len() - p.occluders;
+            stats.bytes_uploaded += p.out.data.len() as u64 * 16;
+            let r = jobs[j].frame.resolution as u64;
+            stats.bytes_read_back += (r * 4).next_multiple_of(256) * r;
+        }
 
         // Targets from the pool, per resolution.
         let mut taken: HashMap<u32, usize> = HashMap::new();
@@ -597,7 +653,7 @@ impl GpuBackend {
                 .iter()
                 .zip(&chunk_offsets[w])
                 .map(|(c, &off)| {
-                    let size = ((c.edges.len() as u64) * 16).max(16);
+                    let size = ((c.data.len() as u64) * 16).max(16);
                     self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some("projection chunk bind group"),
                         layout: &self.layout,
@@ -613,7 +669,7 @@ impl GpuBackend {
                             wgpu::BindGroupEntry {
                                 binding: 1,
                                 resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                                    buffer: edge_buf,
+                                    buffer: data_buf,
                                     offset: off,
                                     size: NonZeroU64::new(size),
                                 }),
@@ -645,11 +701,11 @@ impl GpuBackend {
                     multiview_mask: None,
                 });
                 pass.set_pipeline(&self.pipeline);
-                pass.set_vertex_buffer(0, inst_buf.slice(..));
-                let base = first_instance[w];
+                pass.set_vertex_buffer(0, vert_buf.slice(..));
+                let base = first_vertex[w];
                 for (c, bg) in p.chunks.iter().zip(&bind_groups) {
                     pass.set_bind_group(0, bg, &[]);
-                    pass.draw(0..4, base + c.instances.start..base + c.instances.end);
+                    pass.draw(base + c.vertices.start..base + c.vertices.end, 0..1);
                 }
             }
             encoder.copy_texture_to_buffer(
@@ -814,16 +870,22 @@ impl RasterBackend for GpuBackend {
                 )));
             }
         }
+        let t0 = Instant::now();
+        let mut stats = RenderStats {
+            planes: jobs.len(),
+            ..RenderStats::default()
+        };
         // CPU setup outside the lock: other threads may render concurrently.
         let prepared: Vec<Prepared> = jobs
             .par_iter()
             .map(|j| self.prepare(j))
             .collect::<Result<_, _>>()?;
+        stats.setup = t0.elapsed();
         let mut out: Vec<Option<DepthMap>> = vec![None; jobs.len()];
         // Planes nothing covers skip the GPU.
         let mut gpu_jobs = Vec::new();
         for (j, p) in prepared.iter().enumerate() {
-            if p.instances.is_empty() {
+            if p.out.vertices.is_empty() {
                 let mut map = DepthMap::new(jobs[j].frame.resolution);
                 if let Some(mask) = slice_mask(&jobs[j]) {
                     merge_mask(&mut map, &mask);
@@ -841,8 +903,8 @@ impl RasterBackend for GpuBackend {
             let r = jobs[j].frame.resolution as u64;
             let t = r * r * 4 + (r * 4).next_multiple_of(256) * r;
             let p = &prepared[j];
-            let d = p.instances.len() as u64 * std::mem::size_of::<Instance>() as u64
-                + p.edges.len() as u64 * 16
+            let d = p.out.vertices.len() as u64 * std::mem::size_of::<Vertex>() as u64
+                + p.out.data.len() as u64 * 16
                 + p.chunks.len() as u64 * self.storage_align;
             match waves.last_mut() {
                 Some(w) if tgt + t <= TARGET_BUDGET && data + d <= data_budget => {
@@ -857,12 +919,17 @@ impl RasterBackend for GpuBackend {
                 }
             }
         }
+        stats.gpu_planes = gpu_jobs.len();
         if !waves.is_empty() {
             let mut pool = self.pool.lock().unwrap_or_else(|e| e.into_inner());
+            let t1 = Instant::now();
             for wave in &waves {
-                self.render_wave(&mut pool, jobs, &prepared, wave, &mut out)?;
+                self.render_wave(&mut pool, jobs, &prepared, wave, &mut out, &mut stats)?;
             }
+            stats.gpu = t1.elapsed();
         }
+        stats.total = t0.elapsed();
+        *self.stats.lock().unwrap_or_else(|e| e.into_inner()) = stats;
         Ok(out
             .into_iter()
             .map(|m| m.expect("every job rendered"))

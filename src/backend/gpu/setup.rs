@@ -1,207 +1,220 @@
-//! Per-occluder CPU setup for the GPU backend: projects an occluder from the cell's 8 corners
-//! (f64, the same arithmetic and quick rejects as [`cpu::projection_polygon`]), builds the
-//! 8 views' convex hulls, erodes every hull edge by the pixel's half-extent, and turns each edge
-//! into an `f32` half-plane `n·(p − o) ≥ c` relative to the instance's pixel origin `o`, with `c`
-//! rounded *up* after adding a bound on every `f32` error the fragment shader can make. The GPU
-//! then only tests pixel centres (`shaders/projection.wgsl`).
+//! Per-occluder CPU setup for the GPU backend. The occluder's Projection polygon is computed
+//! exactly as the CPU backend does ([`cpu::projection_polygon`]: project the points from the 8
+//! cell corners in f64, 8 small hulls, intersected by clipping — the same quick rejects and the
+//! same polygon), then each polygon edge, eroded by the pixel's half-extent along its normal,
+//! becomes an `f32` half-plane `n·(p − o) ≥ c` relative to a per-occluder pixel origin `o`,
+//! with `c` rounded *up* after adding a bound on every `f32` error the fragment shader can make.
+//! The geometry drawn is the polygon clipped to the plane. The GPU then does the per-pixel work
+//! (`shaders/projection.wgsl`).
 //!
 //! # Error bound
 //!
 //! The shader evaluates `nx·dx + ny·dy` with `d = centre − o` exact (`d` is a small integer plus
 //! ½) and `n = n̂` rounded to `f32`, where `n̂` is the f64 inward normal scaled to
-//! `|n̂ₓ| + |n̂_y| = 1` (so the half-pixel erosion is exactly `½`). With `D` the rectangle's
-//! larger side in pixels (`|dx|, |dy| ≤ D`) and `u = 2⁻²⁴`:
+//! `|n̂ₓ| + |n̂_y| = 1` (so the half-pixel erosion is exactly `½`). With `D` a bound on `|dx|`,
+//! `|dy|` over the fragments drawn and `u = 2⁻²⁴`:
 //! * rounding `n̂` to `f32` moves the value by at most `u·D`;
 //! * the product-sum in `f32` (with or without fused multiply-add) errs by at most
 //!   `γ₂·(1+u)·D ≈ 2u·D`.
 //!
-//! So an error of `3u·D` covers correctly rounded arithmetic; we add `2⁻²¹·(D + 1)` (`8u`
-//! per pixel of `D`), leaving room for GPUs whose arithmetic is a few ulps off, plus a bound
-//! on the f64 error of the edge's offset. A pixel the shader accepts therefore satisfies the
-//! exact f64 test with the CPU backend's [`MARGIN`], i.e. the GPU never covers a pixel the exact
-//! rule would not. At 256² this is at most ~1.2·10⁻⁴ px on top of the CPU's 10⁻⁴ px.
+//! So `3u·D` covers correctly rounded arithmetic (Vulkan, Metal and D3D12 require it for
+//! `+` and `×`); we add `2⁻²¹·(D + 1)` (`8u` per pixel of `D`), leaving room for a GPU a few
+//! ulps off, plus a bound on the f64 error of the edge's offset, and use the CPU backend's
+//! [`MARGIN`] (`10⁻⁴` px) as is. A pixel the shader accepts therefore passes the CPU's exact
+//! eroded test with its margin: the GPU never covers a pixel the CPU rule would not. At 256²
+//! the extra shrink is at most ~1.2·10⁻⁴ px; at 2048², 10⁻³ px.
 //!
 //! [`cpu::projection_polygon`]: crate::backend::cpu::projection_polygon
 //! [`MARGIN`]: crate::backend::cpu::MARGIN
 
-use crate::backend::cpu::MARGIN;
+use crate::backend::cpu::{self, MARGIN};
 use crate::backend::{PlaneFrame, depth_up};
 use glam::{DVec2, DVec3};
 
-/// One occluder as drawn by the GPU: a pixel rectangle, its Depth and its edges.
+/// One vertex of an occluder's geometry: its position in pixel coordinates and the index of
+/// the occluder's record in the plane's data buffer.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Instance {
-    /// Pixel rectangle `[x0, x1) × [y0, y1)` that may hold covered pixels: `[x0, y0, x1, y1]`.
-    pub rect: [u32; 4],
-    /// The occluder's Depth (maximum point Depth, rounded up to `f32`).
-    pub depth: f32,
-    /// First edge (index into the chunk's edge array) and number of edges.
-    pub edge_range: [u32; 2],
+pub struct Vertex {
+    pub pos: [f32; 2],
+    pub record: u32,
 }
 
-/// One eroded edge: the pixel centre `p` passes when `n·(p − o) ≥ c`; stored `[nx, ny, c, 0]`.
-pub type Edge = [f32; 4];
+/// One 16-byte word of a plane's data buffer (`array<vec4<u32>>` in the shader). An occluder
+/// is a *record* `[x0 | y0 << 16, depth bits, edge count, 0]` — the pixel origin `o = (x0, y0)`
+/// its edges are relative to, and its Depth (maximum point Depth rounded up to `f32`) —
+/// followed by its edges `[nx, ny, c, 0]` (`f32` bits): a pixel centre `p` passes an edge when
+/// `nx·(p − o).x + ny·(p − o).y ≥ c`.
+pub type Word = [u32; 4];
 
-/// Extra relative error allowance of the fragment shader's product-sum, per pixel of extent.
+/// Data and geometry of a run of occluders.
+#[derive(Clone, Debug, Default)]
+pub struct Output {
+    /// Records and edges.
+    pub data: Vec<Word>,
+    /// Triangle list: the occluders' geometry; `record` indexes `data`.
+    pub vertices: Vec<Vertex>,
+}
+
+impl Output {
+    pub fn clear(&mut self) {
+        self.data.clear();
+        self.vertices.clear();
+    }
+}
+
+/// Relative error allowance of the fragment shader's product-sum, per pixel of extent.
 const F32_ERR_PER_PX: f64 = 1.0 / (1u64 << 21) as f64;
 /// Relative error allowance of the f64 offset computation.
 const F64_REL_ERR: f64 = 8.0 * f64::EPSILON;
+/// How far (pixels) the rasteriser may generate fragments outside the geometry polygon
+/// (vertex snapping is at most 1/16 px in Vulkan, Metal and D3D12; `f32` vertices add < 10⁻³).
+const RASTER_SLOP: f64 = 0.125;
 
 /// Per-plane constants of the setup.
 #[derive(Clone, Debug)]
 pub struct PlaneSetup {
+    frame: PlaneFrame,
     corners: [DVec3; 8],
-    axis: usize,
-    sign: f64,
-    u: usize,
-    v: usize,
-    position: f64,
-    rect_min: DVec2,
-    inv_px: DVec2,
-    resolution: u32,
 }
 
 impl PlaneSetup {
     /// Precomputes the plane's constants.
     pub fn new(frame: &PlaneFrame) -> Self {
-        let (u, v) = frame.uv_axes();
         PlaneSetup {
+            frame: frame.clone(),
             corners: frame.cell.corners(),
-            axis: frame.axis,
-            sign: frame.sign(),
-            u,
-            v,
-            position: frame.position,
-            rect_min: frame.rect_min,
-            inv_px: DVec2::ONE / frame.pixel_size(),
-            resolution: frame.resolution,
         }
     }
 }
 
 /// Reusable buffers of [`occluder`].
-#[derive(Default, Debug)]
+#[derive(Default)]
 pub struct Scratch {
-    projected: Vec<DVec2>,
-    sorted: Vec<DVec2>,
-    hull: Vec<DVec2>,
+    cpu: cpu::Scratch,
+    geometry: Vec<DVec2>,
+    tmp: Vec<DVec2>,
 }
 
-/// Sets up one occluder: appends its edges to `edges` (indices relative to `edge_base`) and
-/// returns its instance, or `None` when it cannot cover a whole pixel (the same quick rejects
-/// as the CPU backend, plus an edge that no pixel centre of the rectangle passes). On `None`,
-/// `edges` is left as it was.
+/// Sets up one occluder: appends its record and edges to `out.data` and its geometry (the
+/// Projection polygon clipped to the plane, as a triangle fan) to `out.vertices`. Returns
+/// false, leaving `out` as it was, when it cannot cover a whole pixel: the CPU backend's quick
+/// rejects, or an edge that no fragment of the geometry can pass.
 pub fn occluder(
     ps: &PlaneSetup,
     pts: &[DVec3],
     depth: f64,
     scratch: &mut Scratch,
-    edges: &mut Vec<Edge>,
-    edge_base: usize,
-) -> Option<Instance> {
-    let (a, s, ua, va) = (ps.axis, ps.sign, ps.u, ps.v);
-    let mut lo = DVec2::NEG_INFINITY;
-    let mut hi = DVec2::INFINITY;
-    scratch.projected.clear();
-    for &c in &ps.corners {
-        let mut vlo = DVec2::INFINITY;
-        let mut vhi = DVec2::NEG_INFINITY;
-        for &p in pts {
-            let dz = s * (p[a] - c[a]);
-            if dz <= 0.0 || !dz.is_finite() {
-                return None;
-            }
-            let t = s * (ps.position - c[a]) / dz;
-            let q = DVec2::new(c[ua] + (p[ua] - c[ua]) * t, c[va] + (p[va] - c[va]) * t);
-            let q = (q - ps.rect_min) * ps.inv_px;
-            vlo = vlo.min(q);
-            vhi = vhi.max(q);
-            scratch.projected.push(q);
-        }
-        lo = lo.max(vlo);
-        hi = hi.min(vhi);
-        if hi.x.floor() - lo.x.ceil() < 1.0 || hi.y.floor() - lo.y.ceil() < 1.0 {
-            return None;
+    out: &mut Output,
+) -> bool {
+    if !cpu::projection_polygon(&ps.frame, &ps.corners, pts, &mut scratch.cpu) {
+        return false;
+    }
+    let poly = &scratch.cpu.poly;
+    let r = ps.frame.resolution as f64;
+    // Geometry: the polygon clipped to the plane (keeps vertex coordinates small, so neither
+    // the rasteriser's clipping nor f32 vertices lose precision).
+    let g = &mut scratch.geometry;
+    g.clear();
+    g.extend_from_slice(poly);
+    for (p0, p1) in [
+        (DVec2::new(0.0, 0.0), DVec2::new(r, 0.0)),
+        (DVec2::new(r, 0.0), DVec2::new(r, r)),
+        (DVec2::new(r, r), DVec2::new(0.0, r)),
+        (DVec2::new(0.0, r), DVec2::new(0.0, 0.0)),
+    ] {
+        clip_half_plane(g, p0, p1, &mut scratch.tmp);
+        std::mem::swap(g, &mut scratch.tmp);
+        if g.len() < 3 {
+            return false;
         }
     }
-    let r = ps.resolution as f64;
-    if hi.x <= 0.0 || hi.y <= 0.0 || lo.x >= r || lo.y >= r {
-        return None;
+    let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
+    for q in g.iter() {
+        lo = lo.min(*q);
+        hi = hi.max(*q);
     }
-    // Pixels whose whole square lies inside the bounding box: i ∈ [ceil(lo), floor(hi) − 1].
-    let x0 = lo.x.ceil().max(0.0);
-    let y0 = lo.y.ceil().max(0.0);
-    let x1 = hi.x.floor().min(r);
-    let y1 = hi.y.floor().min(r);
-    if x1 <= x0 || y1 <= y0 {
-        return None;
-    }
-    let origin = DVec2::new(x0, y0);
-    // Pixel centres relative to the origin span [0.5, w − 0.5] × [0.5, h − 0.5].
-    let (w, h) = (x1 - x0, y1 - y0);
-    let ext = w.max(h);
+    // Pixel origin of the edges; fragments lie in [lo − slop, hi + slop] ∩ [0, r]².
+    let origin = lo.floor().max(DVec2::ZERO);
+    let ext = (hi.ceil() - origin).max_element() + 1.0;
     let f32_err = F32_ERR_PER_PX * (ext + 1.0);
-    let cmin = DVec2::splat(0.5);
-    let cmax = DVec2::new(w - 0.5, h - 0.5);
 
-    let start = edges.len();
-    let n = pts.len();
-    for ci in 0..8 {
-        let chunk = &scratch.projected[ci * n..(ci + 1) * n];
-        hull_ccw(chunk, &mut scratch.sorted, &mut scratch.hull);
-        let m = scratch.hull.len();
-        if m < 3 {
-            edges.truncate(start);
-            return None;
+    let record = out.data.len();
+    out.data.push([
+        origin.x as u32 | (origin.y as u32) << 16,
+        depth_up(depth).to_bits(),
+        0,
+        0,
+    ]);
+    let m = poly.len();
+    for e in 0..m {
+        let p0 = poly[e];
+        let p1 = poly[(e + 1) % m];
+        // Inward normal of a counter-clockwise edge, scaled to |nx| + |ny| = 1.
+        let nrm = DVec2::new(-(p1.y - p0.y), p1.x - p0.x);
+        let l1 = nrm.x.abs() + nrm.y.abs();
+        if l1 == 0.0 || !l1.is_finite() {
+            out.data.truncate(record);
+            return false;
         }
-        for e in 0..m {
-            let p0 = scratch.hull[e];
-            let p1 = scratch.hull[(e + 1) % m];
-            // Inward normal of a counter-clockwise edge, scaled to |nx| + |ny| = 1.
-            let nrm = DVec2::new(-(p1.y - p0.y), p1.x - p0.x);
-            let l1 = nrm.x.abs() + nrm.y.abs();
-            if l1 == 0.0 || !l1.is_finite() {
-                edges.truncate(start);
-                return None;
-            }
-            let nh = nrm / l1;
-            let rel = p0 - origin;
-            let off = nh.x * rel.x + nh.y * rel.y;
-            let f64_err = F64_REL_ERR * (nh.x.abs() * rel.x.abs() + nh.y.abs() * rel.y.abs());
-            // n̂·d ≥ n̂·(p0 − o) + ½ + MARGIN·|n̂|₂ is the CPU's eroded test; add the error bounds.
-            let c = off + 0.5 + MARGIN * nh.length() + f64_err + f32_err;
-            // Range of n̂·d over the rectangle's pixel centres (a linear function: at corners).
-            let (lx, hx) = if nh.x >= 0.0 {
-                (nh.x * cmin.x, nh.x * cmax.x)
-            } else {
-                (nh.x * cmax.x, nh.x * cmin.x)
-            };
-            let (ly, hy) = if nh.y >= 0.0 {
-                (nh.y * cmin.y, nh.y * cmax.y)
-            } else {
-                (nh.y * cmax.y, nh.y * cmin.y)
-            };
-            let (dmin, dmax) = (lx + ly, hx + hy);
-            if dmax < c - f32_err {
-                // No pixel centre can pass this edge, neither exactly nor on the GPU.
-                edges.truncate(start);
-                return None;
-            }
-            if dmin >= c + f32_err {
-                // Every pixel centre passes, even with the GPU's error: the edge is redundant.
-                continue;
-            }
-            let nx = flush_tiny(nh.x as f32);
-            let ny = flush_tiny(nh.y as f32);
-            edges.push([nx, ny, depth_up(c), 0.0]);
+        let nh = nrm / l1;
+        let rel = p0 - origin;
+        let off = nh.x * rel.x + nh.y * rel.y;
+        let f64_err = F64_REL_ERR * (nh.x.abs() * rel.x.abs() + nh.y.abs() * rel.y.abs());
+        // The CPU's eroded test is n̂·d ≥ n̂·(p0 − o) + ½ + MARGIN·|n̂|₂ (|n̂|₂ ≤ |n̂|₁ = 1);
+        // add the error bounds so that the f32 test implies it.
+        let c = off + 0.5 + MARGIN + f64_err + f32_err;
+        // Range of n̂·d over the geometry (linear: extremes at its vertices).
+        let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
+        for q in g.iter() {
+            let v = nh.dot(*q - origin);
+            dmin = dmin.min(v);
+            dmax = dmax.max(v);
+        }
+        if dmax + RASTER_SLOP < c - f32_err {
+            // No fragment can pass this edge, neither exactly nor on the GPU.
+            out.data.truncate(record);
+            return false;
+        }
+        if dmin - RASTER_SLOP >= c + f32_err {
+            // Every fragment passes, even with the GPU's error: redundant (clipped away).
+            continue;
+        }
+        let nx = flush_tiny(nh.x as f32);
+        let ny = flush_tiny(nh.y as f32);
+        out.data
+            .push([nx.to_bits(), ny.to_bits(), depth_up(c).to_bits(), 0]);
+    }
+    out.data[record][2] = (out.data.len() - record - 1) as u32;
+    let rec = record as u32;
+    let vert = |q: DVec2| Vertex {
+        pos: [q.x as f32, q.y as f32],
+        record: rec,
+    };
+    for k in 1..g.len() - 1 {
+        out.vertices
+            .extend_from_slice(&[vert(g[0]), vert(g[k]), vert(g[k + 1])]);
+    }
+    true
+}
+
+/// Keeps the part of convex polygon `poly` on the left of the directed line `a → b`.
+fn clip_half_plane(poly: &[DVec2], a: DVec2, b: DVec2, out: &mut Vec<DVec2>) {
+    out.clear();
+    let d = b - a;
+    let side = |p: DVec2| d.perp_dot(p - a);
+    let n = poly.len();
+    for i in 0..n {
+        let p = poly[i];
+        let q = poly[(i + 1) % n];
+        let (sp, sq) = (side(p), side(q));
+        if sp >= 0.0 {
+            out.push(p);
+        }
+        if (sp >= 0.0) != (sq >= 0.0) {
+            out.push(p + (q - p) * (sp / (sp - sq)));
         }
     }
-    Some(Instance {
-        rect: [x0 as u32, y0 as u32, x1 as u32, y1 as u32],
-        depth: depth_up(depth),
-        edge_range: [(start - edge_base) as u32, (edges.len() - start) as u32],
-    })
 }
 
 /// Flushes denormal-range values to zero (GPUs may): changes `n·d` by less than 10⁻³⁰·D.
@@ -209,58 +222,38 @@ fn flush_tiny(x: f32) -> f32 {
     if x.abs() < 1e-30 { 0.0 } else { x }
 }
 
-/// 2D convex hull (counter-clockwise, collinear points dropped, duplicates merged), the same
-/// result as [`cpu::convex_hull`](crate::backend::cpu::convex_hull) without allocating.
-/// Triangles, the common case, skip the sort.
-fn hull_ccw(points: &[DVec2], sorted: &mut Vec<DVec2>, out: &mut Vec<DVec2>) {
-    out.clear();
-    if let [p0, p1, p2] = *points {
-        let o = (p1 - p0).perp_dot(p2 - p0);
-        if o > 0.0 {
-            out.extend_from_slice(&[p0, p1, p2]);
-        } else if o < 0.0 {
-            out.extend_from_slice(&[p0, p2, p1]);
-        }
-        // Collinear or repeated points: no area, nothing covered (the CPU agrees).
-        return;
-    }
-    sorted.clear();
-    sorted.extend_from_slice(points);
-    sorted.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    sorted.dedup();
-    if sorted.len() < 3 {
-        return;
-    }
-    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
-    for &p in sorted.iter() {
-        while out.len() >= 2 && cross(out[out.len() - 2], out[out.len() - 1], p) <= 0.0 {
-            out.pop();
-        }
-        out.push(p);
-    }
-    let lower = out.len() + 1;
-    for &p in sorted.iter().rev().skip(1) {
-        while out.len() >= lower && cross(out[out.len() - 2], out[out.len() - 1], p) <= 0.0 {
-            out.pop();
-        }
-        out.push(p);
-    }
-    out.pop();
-}
-
-/// Emulates the fragment shader on the CPU (f32, the shader's exact expression), for tests.
-pub fn emulate(res: u32, instances: &[Instance], edges: &[Edge]) -> Vec<f32> {
+/// Emulates the pipeline on the CPU for tests: each triangle covers the pixel centres inside
+/// it (closed), whose records' edges are then tested with the shader's exact `f32` expression.
+pub fn emulate(res: u32, out: &Output) -> Vec<f32> {
     let mut map = vec![f32::INFINITY; (res * res) as usize];
-    for inst in instances {
-        let [x0, y0, x1, y1] = inst.rect;
-        let es = &edges[inst.edge_range[0] as usize..][..inst.edge_range[1] as usize];
-        for j in y0..y1 {
-            for i in x0..x1 {
-                let dx = (i as f32 + 0.5) - x0 as f32;
-                let dy = (j as f32 + 0.5) - y0 as f32;
-                if es.iter().all(|e| e[0] * dx + e[1] * dy >= e[2]) {
+    for tri in out.vertices.chunks_exact(3) {
+        let p: [DVec2; 3] = std::array::from_fn(|k| DVec2::new(tri[k].pos[0] as f64, tri[k].pos[1] as f64));
+        let rec = out.data[tri[0].record as usize];
+        let (ox, oy) = ((rec[0] & 0xffff) as f32, (rec[0] >> 16) as f32);
+        let depth = f32::from_bits(rec[1]);
+        let edges = &out.data[tri[0].record as usize + 1..][..rec[2] as usize];
+        let lo = p[0].min(p[1]).min(p[2]).max(DVec2::ZERO);
+        let hi = p[0].max(p[1]).max(p[2]).min(DVec2::splat(res as f64));
+        let area = (p[1] - p[0]).perp_dot(p[2] - p[0]);
+        for j in lo.y.floor() as u32..hi.y.ceil() as u32 {
+            for i in lo.x.floor() as u32..hi.x.ceil() as u32 {
+                let c = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+                let inside = (0..3).all(|k| {
+                    let e = (p[(k + 1) % 3] - p[k]).perp_dot(c - p[k]);
+                    e * area.signum() >= 0.0
+                });
+                if !inside || i >= res || j >= res {
+                    continue;
+                }
+                let dx = (i as f32 + 0.5) - ox;
+                let dy = (j as f32 + 0.5) - oy;
+                let pass = edges.iter().all(|e| {
+                    let [nx, ny, c] = [0, 1, 2].map(|k| f32::from_bits(e[k]));
+                    nx * dx + ny * dy >= c
+                });
+                if pass {
                     let d = &mut map[(j * res + i) as usize];
-                    *d = d.min(inst.depth);
+                    *d = d.min(depth);
                 }
             }
         }
@@ -271,7 +264,7 @@ pub fn emulate(res: u32, instances: &[Instance], edges: &[Edge]) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::cpu::{self, convex_hull};
+    use crate::backend::cpu::convex_hull;
     use crate::backend::{OccluderSet, PlaneJob};
     use crate::geom::DAabb;
 
@@ -302,27 +295,6 @@ mod tests {
         }
         fn range(&mut self, a: f64, b: f64) -> f64 {
             a + (b - a) * self.f()
-        }
-    }
-
-    #[test]
-    fn hull_matches_the_cpu_hull() {
-        let mut rng = Rng(0x9e3779b97f4a7c15);
-        let (mut sorted, mut out, mut reference) = (Vec::new(), Vec::new(), Vec::new());
-        for n in [3usize, 4, 5, 8, 8, 12] {
-            for _ in 0..50 {
-                let pts: Vec<DVec2> = (0..n)
-                    .map(|_| DVec2::new(rng.range(-5.0, 5.0), rng.range(-5.0, 5.0)))
-                    .collect();
-                hull_ccw(&pts, &mut sorted, &mut out);
-                convex_hull(&pts, &mut reference);
-                assert_eq!(out.len(), reference.len());
-                // Same cyclic sequence.
-                let k = reference.iter().position(|p| *p == out[0]).unwrap();
-                for (e, p) in out.iter().enumerate() {
-                    assert_eq!(*p, reference[(k + e) % reference.len()]);
-                }
-            }
         }
     }
 
@@ -380,7 +352,7 @@ mod tests {
             let reference = cpu::render_job(&job);
             let ps = PlaneSetup::new(&f);
             let mut scratch = Scratch::default();
-            let (mut inst, mut edges, mut which) = (Vec::new(), Vec::new(), Vec::new());
+            let (mut all, mut which) = (Output::default(), Vec::new());
             let depth_of = |pts: &[DVec3]| {
                 pts.iter()
                     .map(|&p| f.depth(p))
@@ -388,16 +360,24 @@ mod tests {
             };
             for k in 0..job.occluders.len() {
                 let pts = job.occluders.get(k);
-                if let Some(i) = occluder(&ps, pts, depth_of(pts), &mut scratch, &mut edges, 0) {
-                    inst.push(i);
-                    which.push(k);
+                let mut one = Output::default();
+                if occluder(&ps, pts, depth_of(pts), &mut scratch, &mut one) {
+                    assert!(!one.vertices.is_empty() && one.vertices.len() % 3 == 0);
+                    let base = all.data.len() as u32;
+                    all.data.extend_from_slice(&one.data);
+                    all.vertices
+                        .extend(one.vertices.iter().map(|v| Vertex {
+                            record: v.record + base,
+                            ..*v
+                        }));
+                    which.push((k, one));
                 }
             }
-            let gpu = emulate(res, &inst, &edges);
-            // Per-pixel check against each instance.
-            for (n, ins) in inst.iter().enumerate() {
-                let one = emulate(res, std::slice::from_ref(ins), &edges);
-                let pts = job.occluders.get(which[n]);
+            let gpu = emulate(res, &all);
+            // Per-pixel check against each occluder on its own.
+            for (k, one) in &which {
+                let one = emulate(res, one);
+                let pts = job.occluders.get(*k);
                 for (k, d) in one.iter().enumerate() {
                     if d.is_finite() {
                         let (i, j) = (k as u32 % res, k as u32 / res);
