@@ -14,7 +14,8 @@ fn main() -> Result<(), String> {
     let height: f32 = a[4].parse().map_err(|e| format!("HEIGHT: {e}"))?;
     let seed: u64 = a.get(6).map(|s| s.parse().unwrap_or(1)).unwrap_or(1);
     let bounds: Vec<_> = scene.objects.iter().map(|o| o.bounds).collect();
-    let cells = umbrasweep::cells::free_cells(&bounds, count, Vec3::new(size, 2.0, size), height, seed);
+    let cells =
+        umbrasweep::cells::free_cells(&bounds, count, Vec3::new(size, 2.0, size), height, seed);
     umbrasweep::cells::save_json(Path::new(&a[5]), &cells)?;
     println!("{} cells written to {}", cells.len(), a[5]);
     Ok(())

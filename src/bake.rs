@@ -8,7 +8,9 @@ use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
 use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
 use crate::project::occluders::{self, Occluders};
-use crate::project::planes::{PlaneSettings, Placement, Sliceable, cell_jobs};
+use crate::project::planes::{
+    Placement, PlaneSettings, Sliceable, cell_jobs, plan_directions, plane_job,
+};
 use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
 use crate::scene::Scene;
 use obvhs::bvh2::Bvh2;
@@ -66,13 +68,22 @@ impl BakeSettings {
             ));
         }
         if !(self.extend.is_finite() && self.extend >= 1.0) {
-            return Err(format!("--extend {}: must be a number ≥ 1 (e.g. 1.5)", self.extend));
+            return Err(format!(
+                "--extend {}: must be a number ≥ 1 (e.g. 1.5)",
+                self.extend
+            ));
         }
         if self.planes == 0 || self.planes > 64 {
-            return Err(format!("--planes {}: must be between 1 and 64", self.planes));
+            return Err(format!(
+                "--planes {}: must be between 1 and 64",
+                self.planes
+            ));
         }
         if self.slice_planes > 16 {
-            return Err(format!("--slice-planes {}: must be between 0 and 16", self.slice_planes));
+            return Err(format!(
+                "--slice-planes {}: must be between 0 and 16",
+                self.slice_planes
+            ));
         }
         Ok(())
     }
@@ -153,10 +164,16 @@ impl<'a> Prepared<'a> {
             Some(pat) => {
                 let glob = globset::Glob::new(pat)
                     .map_err(|e| {
-                        BakeError::Settings(format!("--occluders {pat:?}: not a valid pattern: {e}"))
+                        BakeError::Settings(format!(
+                            "--occluders {pat:?}: not a valid pattern: {e}"
+                        ))
                     })?
                     .compile_matcher();
-                scene.objects.iter().map(|o| glob.is_match(&o.name)).collect()
+                scene
+                    .objects
+                    .iter()
+                    .map(|o| glob.is_match(&o.name))
+                    .collect()
             }
         };
         let occluders = occluders::prepare(scene, &is_occluder, settings.alpha_occluders);
@@ -209,14 +226,36 @@ impl<'a> Prepared<'a> {
     /// The backend's failure.
     pub fn cell(&self, cell: &Aabb, backend: &dyn RasterBackend) -> Result<CellResult, BakeError> {
         let start = Instant::now();
-        let jobs = self.jobs(cell);
-        let maps = backend.render(&jobs)?;
-        let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
         let n = self.scene.objects.len();
         let mut hidden = vec![false; n];
+        let mut node_hidden = vec![false; self.bvh.as_ref().map_or(0, |b| b.nodes.len())];
         let cell64 = cell.to_f64();
-        for (job, hdm) in jobs.iter().zip(&hdms) {
-            self.traverse(job, hdm, &cell64, &mut hidden);
+        let ps = self.settings.plane_settings();
+        let plans = plan_directions(&cell64, &self.occluders, &self.sliceable, &ps);
+        let rounds = plans.iter().map(|p| p.distances.len()).max().unwrap_or(0);
+        let (mut planes, mut projected) = (0, 0);
+        // Round k renders the k-th plane of every direction (nearest first); occluders of
+        // objects hidden by earlier rounds are left out of later ones.
+        for k in 0..rounds {
+            let jobs: Vec<PlaneJob> = plans
+                .par_iter()
+                .filter(|p| k < p.distances.len())
+                .filter_map(|p| {
+                    plane_job(p, k, self.scene, &self.sliceable, &ps, &|o| {
+                        hidden[o as usize]
+                    })
+                })
+                .collect();
+            if jobs.is_empty() {
+                continue;
+            }
+            let maps = backend.render(&jobs)?;
+            let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
+            for (job, hdm) in jobs.iter().zip(&hdms) {
+                self.traverse(job, hdm, &cell64, &mut hidden, &mut node_hidden);
+            }
+            planes += jobs.len();
+            projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
         }
         let visible = (0..n as u32)
             .filter(|&o| !hidden[o as usize] && !self.scene.objects[o as usize].bounds.is_empty())
@@ -224,16 +263,27 @@ impl<'a> Prepared<'a> {
         Ok(CellResult {
             visible,
             ms: start.elapsed().as_secs_f64() * 1e3,
-            planes: jobs.len(),
-            occluders_projected: jobs.iter().map(|j| j.occluders.len()).sum(),
+            planes,
+            occluders_projected: projected,
         })
     }
 
-    /// Tests the object BVH against one plane, marking hidden objects.
-    fn traverse(&self, job: &PlaneJob, hdm: &Hdm, cell: &DAabb, hidden: &mut [bool]) {
+    /// Tests the object BVH against one plane, marking hidden objects, and nodes whose whole
+    /// subtree is hidden (skipped on the following planes).
+    fn traverse(
+        &self,
+        job: &PlaneJob,
+        hdm: &Hdm,
+        cell: &DAabb,
+        hidden: &mut [bool],
+        node_hidden: &mut [bool],
+    ) {
         let Some(bvh) = &self.bvh else { return };
         let mut stack = vec![0u32];
         while let Some(ni) = stack.pop() {
+            if node_hidden[ni as usize] {
+                continue;
+            }
             let node = &bvh.nodes[ni as usize];
             let b = DAabb {
                 min: glam::Vec3::from(node.aabb.min).as_dvec3(),
@@ -241,7 +291,7 @@ impl<'a> Prepared<'a> {
             };
             match self.test_box(job, hdm, &b, cell) {
                 Coverage::Hidden => {
-                    mark_hidden(bvh, ni, hidden);
+                    mark_hidden(bvh, ni, hidden, node_hidden);
                     continue;
                 }
                 Coverage::Empty => continue,
@@ -258,6 +308,9 @@ impl<'a> Prepared<'a> {
                         hidden[o] = true;
                     }
                 }
+                node_hidden[ni as usize] = (0..node.prim_count).all(|k| {
+                    hidden[bvh.primitive_indices[(node.first_index + k) as usize] as usize]
+                });
             } else {
                 stack.push(node.first_index);
                 stack.push(node.first_index + 1);
@@ -265,14 +318,23 @@ impl<'a> Prepared<'a> {
         }
     }
 
-    /// The occlusion test of one box on one plane. `Partial` when undecided (including boxes
-    /// the plane cannot judge: touching the cell, not beyond the face, or projecting outside
-    /// the plane's rectangle).
+    /// The occlusion test of one box on one plane: `Hidden`; `Empty` when nothing inside the
+    /// box can be hidden on this plane (it lies on the cell's side of the face, its Projection
+    /// misses the plane's rectangle, or covers no occluded pixel of it — a child's Projection
+    /// lies inside its parent's); `Partial` otherwise, including boxes touching the cell.
     fn test_box(&self, job: &PlaneJob, hdm: &Hdm, b: &DAabb, cell: &DAabb) -> Coverage {
-        if b.is_empty() || b.overlaps(cell) {
-            return Coverage::Partial;
+        if b.is_empty() {
+            return Coverage::Empty;
         }
         let frame = &job.frame;
+        let a = frame.axis;
+        let far = if frame.positive { b.max[a] } else { b.min[a] };
+        if frame.sign() * (far - frame.face()) <= 0.0 {
+            return Coverage::Empty;
+        }
+        if b.overlaps(cell) {
+            return Coverage::Partial;
+        }
         let Some(sp) = span(frame, b) else {
             return Coverage::Partial;
         };
@@ -280,7 +342,21 @@ impl<'a> Prepared<'a> {
         let (lo, hi) = standard_rect(frame, b);
         let standard = match pixel_rect(frame, lo, hi) {
             Some([i0, j0, i1, j1]) => hdm.test(i0, j0, i1, j1, depth),
-            None => Coverage::Partial,
+            None => {
+                // Partly outside the plane: only the part inside can hold a descendant.
+                let (clo, chi) = (lo.max(frame.rect_min), hi.min(frame.rect_max));
+                if !(clo.x <= chi.x && clo.y <= chi.y) {
+                    return Coverage::Empty;
+                }
+                match pixel_rect(frame, clo, chi) {
+                    Some([i0, j0, i1, j1])
+                        if hdm.test(i0, j0, i1, j1, f32::INFINITY) == Coverage::Empty =>
+                    {
+                        Coverage::Empty
+                    }
+                    _ => Coverage::Partial,
+                }
+            }
         };
         if standard != Coverage::Partial || !(sp.in_front && self.settings.improved_projection) {
             return standard;
@@ -295,9 +371,10 @@ impl<'a> Prepared<'a> {
     }
 }
 
-fn mark_hidden(bvh: &Bvh2, node: u32, hidden: &mut [bool]) {
+fn mark_hidden(bvh: &Bvh2, node: u32, hidden: &mut [bool], node_hidden: &mut [bool]) {
     let mut stack = vec![node];
     while let Some(ni) = stack.pop() {
+        node_hidden[ni as usize] = true;
         let n = &bvh.nodes[ni as usize];
         if n.is_leaf() {
             for k in 0..n.prim_count {
@@ -353,7 +430,11 @@ pub fn median(values: &[f64]) -> f64 {
     let mut v = values.to_vec();
     v.sort_by(f64::total_cmp);
     let m = v.len() / 2;
-    if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
 }
 
 /// Builds the JSON PVS document of a bake, with its summary.

@@ -42,7 +42,12 @@ pub struct BakeArgs {
     #[arg(long, conflicts_with_all = ["grid_box", "grid_size"], required_unless_present = "grid_box")]
     pub cells: Option<PathBuf>,
     /// A regular grid of cells filling this box: minx,miny,minz,maxx,maxy,maxz.
-    #[arg(long, value_delimiter = ',', requires = "grid_size", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        requires = "grid_size",
+        allow_hyphen_values = true
+    )]
     pub grid_box: Option<Vec<f32>>,
     /// Cells per axis of --grid-box: nx,ny,nz.
     #[arg(long, value_delimiter = ',', requires = "grid_box")]
@@ -94,7 +99,10 @@ fn read_cells(a: &BakeArgs) -> anyhow::Result<Vec<Aabb>> {
         bail!("give --cells FILE or --grid-box with --grid-size");
     };
     if b.len() != 6 {
-        bail!("--grid-box takes 6 numbers: minx,miny,minz,maxx,maxy,maxz (got {})", b.len());
+        bail!(
+            "--grid-box takes 6 numbers: minx,miny,minz,maxx,maxy,maxz (got {})",
+            b.len()
+        );
     }
     if n.len() != 3 {
         bail!("--grid-size takes 3 counts: nx,ny,nz (got {})", n.len());
@@ -159,14 +167,20 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         .with_context(|| "writing the PVS")?;
     if !a.quiet {
         let s = doc.summary.as_ref().expect("bake writes a summary");
-        eprintln!("scene       {} (loaded in {load_s:.2} s)", a.scene.display());
+        eprintln!(
+            "scene       {} (loaded in {load_s:.2} s)",
+            a.scene.display()
+        );
         for w in &scene.warnings {
             eprintln!("warning     {w}");
         }
         eprintln!(
             "backend     {}{}",
             s.backend,
-            s.adapter.as_ref().map(|x| format!(" ({x})")).unwrap_or_default()
+            s.adapter
+                .as_ref()
+                .map(|x| format!(" ({x})"))
+                .unwrap_or_default()
         );
         eprintln!("cells       {}", s.cells);
         eprintln!("objects     {}", s.objects);

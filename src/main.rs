@@ -6,7 +6,11 @@ use std::process::ExitCode;
 mod cli_bake;
 
 #[derive(Parser, Debug)]
-#[command(name = "umbrasweep", version, about = "Conservative PVS baking with extended projections")]
+#[command(
+    name = "umbrasweep",
+    version,
+    about = "Conservative PVS baking with extended projections"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -24,8 +24,13 @@ pub fn write_atomic_with(
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .map_err(|e| format!("{}: cannot create a temporary file in {}: {e}", path.display(), dir.display()))?;
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| {
+        format!(
+            "{}: cannot create a temporary file in {}: {e}",
+            path.display(),
+            dir.display()
+        )
+    })?;
     // Temporary files are created 0600; the result should have the usual permissions.
     #[cfg(unix)]
     {
@@ -37,7 +42,8 @@ pub fn write_atomic_with(
     {
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         f(&mut w).map_err(|e| format!("{}: write failed: {e}", path.display()))?;
-        w.flush().map_err(|e| format!("{}: write failed: {e}", path.display()))?;
+        w.flush()
+            .map_err(|e| format!("{}: write failed: {e}", path.display()))?;
     }
     tmp.persist(path)
         .map_err(|e| format!("{}: cannot write: {}", path.display(), e.error))?;

@@ -12,7 +12,11 @@ use umbrasweep::scene::Scene;
 type Obj = (String, Vec<[Vec3; 3]>, bool);
 
 fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
-    (name.into(), box_triangles(Vec3::from(min), Vec3::from(max)), true)
+    (
+        name.into(),
+        box_triangles(Vec3::from(min), Vec3::from(max)),
+        true,
+    )
 }
 
 fn quad(name: &str, a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Obj {
@@ -26,7 +30,14 @@ fn unit_cell() -> Aabb {
 /// Bakes one cell with the default settings and returns the visible object names.
 fn visible(objects: Vec<Obj>, cell: Aabb) -> Vec<String> {
     let scene = Scene::from_objects(Path::new("analytic"), objects);
-    let r = bake(&scene, &[cell], &BakeSettings::default(), &CpuBackend::new(), None).unwrap();
+    let r = bake(
+        &scene,
+        &[cell],
+        &BakeSettings::default(),
+        &CpuBackend::new(),
+        None,
+    )
+    .unwrap();
     r.cells[0]
         .visible
         .iter()

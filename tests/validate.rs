@@ -43,7 +43,12 @@ fn cuboid(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
 /// A wall in the plane `z`, made of the grid cells between the given x and y breaks,
 /// leaving out the grid cells for which `hole(i, j)` is true. Neighbouring grid cells share
 /// their corners exactly (no T-junction), and diagonals alternate.
-fn grid_wall(z: f32, xs: &[f32], ys: &[f32], hole: impl Fn(usize, usize) -> bool) -> Vec<[Vec3; 3]> {
+fn grid_wall(
+    z: f32,
+    xs: &[f32],
+    ys: &[f32],
+    hole: impl Fn(usize, usize) -> bool,
+) -> Vec<[Vec3; 3]> {
     let mut out = Vec::new();
     for i in 0..xs.len() - 1 {
         for j in 0..ys.len() - 1 {
@@ -65,7 +70,9 @@ fn grid_wall(z: f32, xs: &[f32], ys: &[f32], hole: impl Fn(usize, usize) -> bool
 }
 
 fn breaks(lo: f32, hi: f32, n: usize) -> Vec<f32> {
-    (0..=n).map(|i| lo + (hi - lo) * i as f32 / n as f32).collect()
+    (0..=n)
+        .map(|i| lo + (hi - lo) * i as f32 / n as f32)
+        .collect()
 }
 
 fn scene(objects: Vec<Obj>) -> Scene {
@@ -162,7 +169,11 @@ fn object_behind_a_big_closed_wall_is_never_found() {
     ]);
     let rays = SceneRays::new(&s);
     let vs = sample_cell(&rays, &s, cell(), 300_000, 3, 0, false);
-    assert_eq!(vs.visible, vec![0], "the hidden box leaked through the wall");
+    assert_eq!(
+        vs.visible,
+        vec![0],
+        "the hidden box leaked through the wall"
+    );
     // And a PVS without it is fine.
     let report = check(&s, &doc(&s, vec![0], false), &opts(100_000)).unwrap();
     assert_eq!(report.false_culls, 0);
@@ -208,21 +219,35 @@ fn object_seen_only_through_a_narrow_slit_is_found() {
         .witness_of(1)
         .expect("the target behind the slit was not found")
         .expect("found by a ray");
-    assert!(w.phase >= 2, "expected the targeted rounds to find it, got phase {}", w.phase);
+    assert!(
+        w.phase >= 2,
+        "expected the targeted rounds to find it, got phase {}",
+        w.phase
+    );
     assert!(strictly_inside(w.origin, &cell()));
     assert!(on_object(&s, 1, w.hit));
     // The ray passes the wall plane inside the slit.
     let t = (5.0 - w.origin.z) / w.direction.z;
     let at_wall = w.origin + w.direction * t;
-    assert!(at_wall.x.abs() <= 0.0031 && at_wall.y.abs() <= 0.1001, "{at_wall:?}");
-    assert!(vs.witness_of(2).is_none(), "the box fully behind the wall was seen");
+    assert!(
+        at_wall.x.abs() <= 0.0031 && at_wall.y.abs() <= 0.1001,
+        "{at_wall:?}"
+    );
+    assert!(
+        vs.witness_of(2).is_none(),
+        "the box fully behind the wall was seen"
+    );
 }
 
 #[test]
 fn alpha_wall_hides_only_when_alpha_occluders_is_set() {
     let xs = breaks(-50.0, 50.0, 4);
     let s = scene(vec![
-        ("foliage".into(), grid_wall(5.0, &xs, &xs, |_, _| false), false),
+        (
+            "foliage".into(),
+            grid_wall(5.0, &xs, &xs, |_, _| false),
+            false,
+        ),
         (
             "behind".into(),
             cuboid(vec3(-1.0, -1.0, 10.0), vec3(1.0, 1.0, 12.0)),
@@ -277,7 +302,10 @@ fn missing_visible_object_is_a_false_cull_with_a_witness_ray() {
     assert_eq!(c.visible, vec![0, 1, 2]);
     assert_eq!((c.pvs, c.vs), (2, 3));
     let f = &c.false_culls[0];
-    assert_eq!((f.object, f.name.as_str(), f.reason.as_str()), (2, "side", "ray"));
+    assert_eq!(
+        (f.object, f.name.as_str(), f.reason.as_str()),
+        (2, "side", "ray")
+    );
     let (origin, dir, hit) = (f.origin.unwrap(), f.direction.unwrap(), f.hit.unwrap());
     assert!(strictly_inside(origin, &cell()), "origin {origin:?}");
     assert!(on_object(&s, 2, hit), "hit {hit:?}");
@@ -289,7 +317,10 @@ fn missing_visible_object_is_a_false_cull_with_a_witness_ray() {
     // Culled percentages count what the PVS drops.
     assert!((c.objects_culled_percent - 50.0).abs() < 1e-9);
     let table = r.table();
-    assert!(table.contains("FALSE CULL cell 0: object 2 \"side\""), "{table}");
+    assert!(
+        table.contains("FALSE CULL cell 0: object 2 \"side\""),
+        "{table}"
+    );
 }
 
 #[test]
@@ -324,7 +355,10 @@ fn mismatched_pvs_and_zero_rays_are_bad_input() {
     d.objects.pop();
     let e = check(&s, &d, &opts(10)).unwrap_err();
     assert!(matches!(e, ValidateError::SceneMismatch(_)));
-    assert!(e.to_string().contains("the PVS was baked from another scene"));
+    assert!(
+        e.to_string()
+            .contains("the PVS was baked from another scene")
+    );
     let mut d = doc(&s, vec![0, 1, 2], false);
     d.objects[3].name = "other".into();
     assert!(matches!(
@@ -332,7 +366,10 @@ fn mismatched_pvs_and_zero_rays_are_bad_input() {
         Err(ValidateError::SceneMismatch(_))
     ));
     let d = doc(&s, vec![0, 1, 2], false);
-    assert!(matches!(check(&s, &d, &opts(0)), Err(ValidateError::NoRays)));
+    assert!(matches!(
+        check(&s, &d, &opts(0)),
+        Err(ValidateError::NoRays)
+    ));
     let mut d = doc(&s, vec![0], false);
     d.cells[0].min = [f32::NAN, 0.0, 0.0];
     assert!(matches!(
@@ -386,7 +423,9 @@ fn obj_scene(dir: &Path, scene: &Scene) -> Option<PathBuf> {
             None
         }
         Err(e) => {
-            eprintln!("note: the OBJ importer cannot load the test scene yet ({e}); CLI part skipped");
+            eprintln!(
+                "note: the OBJ importer cannot load the test scene yet ({e}); CLI part skipped"
+            );
             None
         }
     }
@@ -413,7 +452,12 @@ fn cli_false_cull_exits_1_and_writes_json() {
         json.as_os_str(),
     ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert_eq!(out.status.code(), Some(1), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(stdout.contains("FALSE CULL"), "{stdout}");
     let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert_eq!(v["false_culls"], 1);
@@ -424,14 +468,28 @@ fn cli_false_cull_exits_1_and_writes_json() {
     assert_eq!(c["false_culls"][0]["object"], 2);
     assert_eq!(c["false_culls"][0]["name"], "side");
     for k in ["origin", "direction", "hit"] {
-        assert_eq!(c["false_culls"][0][k].as_array().map(|a| a.len()), Some(3), "{k}");
+        assert_eq!(
+            c["false_culls"][0][k].as_array().map(|a| a.len()),
+            Some(3),
+            "{k}"
+        );
     }
     assert_eq!((c["pvs"].as_u64(), c["vs"].as_u64()), (Some(2), Some(3)));
 
     // A conservative PVS exits 0.
     write_doc(&doc(&s, vec![0, 1, 2, 3], false), &pvs);
-    let out = validate(&[obj.as_os_str(), pvs.as_os_str(), "--rays".as_ref(), "20000".as_ref()]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stdout));
+    let out = validate(&[
+        obj.as_os_str(),
+        pvs.as_os_str(),
+        "--rays".as_ref(),
+        "20000".as_ref(),
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
 }
 
 #[test]
@@ -447,7 +505,12 @@ fn cli_bad_input_exits_2() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("error:"));
     // --rays 0.
-    let out = validate(&[missing.as_os_str(), pvs.as_os_str(), "--rays".as_ref(), "0".as_ref()]);
+    let out = validate(&[
+        missing.as_os_str(),
+        pvs.as_os_str(),
+        "--rays".as_ref(),
+        "0".as_ref(),
+    ]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--rays"));
     // Malformed and missing PVS (read before the scene).
@@ -466,7 +529,12 @@ fn cli_bad_input_exits_2() {
     d.objects[2].name = "renamed".into();
     write_doc(&d, &pvs);
     let json = dir.path().join("out.json");
-    let out = validate(&[obj.as_os_str(), pvs.as_os_str(), "--json".as_ref(), json.as_os_str()]);
+    let out = validate(&[
+        obj.as_os_str(),
+        pvs.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
     assert_eq!(out.status.code(), Some(2));
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("the PVS was baked from another scene"),

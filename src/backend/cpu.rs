@@ -97,10 +97,7 @@ pub fn projection_polygon(
                 return false;
             }
             let t = s * (frame.position - v[a]) / dz;
-            let q = DVec2::new(
-                v[ua] + (p[ua] - v[ua]) * t,
-                v[va] + (p[va] - v[va]) * t,
-            );
+            let q = DVec2::new(v[ua] + (p[ua] - v[ua]) * t, v[va] + (p[va] - v[va]) * t);
             let q = (q - rect_min) * inv_px;
             vlo = vlo.min(q);
             vhi = vhi.max(q);
@@ -375,8 +372,10 @@ mod tests {
         for a in 0..=n {
             for b in 0..=n {
                 let uv = f.rect_min
-                    + DVec2::new(i as f64 + a as f64 / n as f64, j as f64 + b as f64 / n as f64)
-                        * px;
+                    + DVec2::new(
+                        i as f64 + a as f64 / n as f64,
+                        j as f64 + b as f64 / n as f64,
+                    ) * px;
                 for &v in &corners {
                     let p: Vec<DVec2> = tri.iter().map(|&x| f.project(v, x)).collect();
                     let s0 = (p[1] - p[0]).perp_dot(uv - p[0]);
@@ -416,14 +415,24 @@ mod tests {
                 let brute = covered_brute(&f, tri, i, j);
                 if ours {
                     covered += 1;
-                    assert!(brute, "pixel ({i},{j}) marked covered but is not fully inside");
-                    assert_eq!(map.depth[(j * 32 + i) as usize], -1.0, "Depth is the max Depth");
+                    assert!(
+                        brute,
+                        "pixel ({i},{j}) marked covered but is not fully inside"
+                    );
+                    assert_eq!(
+                        map.depth[(j * 32 + i) as usize],
+                        -1.0,
+                        "Depth is the max Depth"
+                    );
                 } else if brute {
                     brute_only += 1;
                 }
             }
         }
-        assert!(covered > 100, "a big triangle covers many pixels, got {covered}");
+        assert!(
+            covered > 100,
+            "a big triangle covers many pixels, got {covered}"
+        );
         // Sampling the border can only accept pixels that touch an edge within 1/8 pixel.
         assert!(brute_only < 40, "{brute_only} pixels missed");
     }
@@ -455,7 +464,11 @@ mod tests {
             occluders: occ,
             slices: vec![],
         });
-        assert!(map.depth[4 * 64 + 62].is_finite(), "covers {}", map.covered());
+        assert!(
+            map.depth[4 * 64 + 62].is_finite(),
+            "covers {}",
+            map.covered()
+        );
     }
 
     #[test]
@@ -524,7 +537,9 @@ mod tests {
                 DVec2::new(h, h),
                 DVec2::new(-h, h),
             ];
-            (0..4).map(move |k| [c[k], c[(k + 1) % 4]]).collect::<Vec<_>>()
+            (0..4)
+                .map(move |k| [c[k], c[(k + 1) % 4]])
+                .collect::<Vec<_>>()
         };
         let mut segs = sq(5.0);
         segs.extend(sq(2.0));

@@ -15,7 +15,9 @@ pub enum CellError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{path}: not a cells file: {message} (expected {{\"cells\": [{{\"min\": [x,y,z], \"max\": [x,y,z]}}, …]}})")]
+    #[error(
+        "{path}: not a cells file: {message} (expected {{\"cells\": [{{\"min\": [x,y,z], \"max\": [x,y,z]}}, …]}})"
+    )]
     Parse { path: PathBuf, message: String },
     #[error("{origin}: cell {index}: {message}")]
     BadCell {
@@ -141,9 +143,21 @@ pub fn grid(bounds: Aabb, n: [u32; 3]) -> Result<Vec<Aabb>, CellError> {
                 let min = bounds.min + size * idx;
                 // The last cell ends exactly on the box.
                 let max = Vec3::new(
-                    if i + 1 == n[0] { bounds.max.x } else { bounds.min.x + size.x * (i + 1) as f32 },
-                    if j + 1 == n[1] { bounds.max.y } else { bounds.min.y + size.y * (j + 1) as f32 },
-                    if k + 1 == n[2] { bounds.max.z } else { bounds.min.z + size.z * (k + 1) as f32 },
+                    if i + 1 == n[0] {
+                        bounds.max.x
+                    } else {
+                        bounds.min.x + size.x * (i + 1) as f32
+                    },
+                    if j + 1 == n[1] {
+                        bounds.max.y
+                    } else {
+                        bounds.min.y + size.y * (j + 1) as f32
+                    },
+                    if k + 1 == n[2] {
+                        bounds.max.z
+                    } else {
+                        bounds.min.z + size.z * (k + 1) as f32
+                    },
                 );
                 cells.push(Aabb::new(min, max));
             }
@@ -158,13 +172,7 @@ pub fn grid(bounds: Aabb, n: [u32; 3]) -> Result<Vec<Aabb>, CellError> {
 /// lowest point, kept when the cell overlaps no object's bounds except ground-like objects
 /// (those spanning more than a quarter of the scene's ground area). For real scenes (a city's
 /// streets) where no generator made cells. Deterministic for a seed.
-pub fn free_cells(
-    objects: &[Aabb],
-    count: usize,
-    size: Vec3,
-    height: f32,
-    seed: u64,
-) -> Vec<Aabb> {
+pub fn free_cells(objects: &[Aabb], count: usize, size: Vec3, height: f32, seed: u64) -> Vec<Aabb> {
     let scene = objects
         .iter()
         .filter(|b| !b.is_empty())
@@ -175,9 +183,7 @@ pub fn free_cells(
     let ground_area = (scene.max.x - scene.min.x) * (scene.max.z - scene.min.z);
     let solid: Vec<&Aabb> = objects
         .iter()
-        .filter(|b| {
-            !b.is_empty() && (b.max.x - b.min.x) * (b.max.z - b.min.z) < 0.25 * ground_area
-        })
+        .filter(|b| !b.is_empty() && (b.max.x - b.min.x) * (b.max.z - b.min.z) < 0.25 * ground_area)
         .collect();
     // A fine jittered grid, visited in a seeded pseudo-random order.
     let n = 256usize;
@@ -204,7 +210,9 @@ pub fn free_cells(
         let cell = Aabb::new(min, min + size);
         // Keep a margin of half a cell around buildings.
         let probe = Aabb::new(cell.min - 0.5 * size, cell.max + 0.5 * size);
-        if solid.iter().all(|b| !b.overlaps(&probe)) && !out.iter().any(|c: &Aabb| c.overlaps(&probe)) {
+        if solid.iter().all(|b| !b.overlaps(&probe))
+            && !out.iter().any(|c: &Aabb| c.overlaps(&probe))
+        {
             out.push(cell);
             if out.len() == count {
                 break;

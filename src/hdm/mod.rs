@@ -72,14 +72,11 @@ impl Hdm {
     pub fn test(&self, i0: u32, j0: u32, i1: u32, j1: u32, depth: f32) -> Coverage {
         debug_assert!(i0 <= i1 && j0 <= j1 && i1 < self.resolution && j1 < self.resolution);
         let mut level = 0usize;
-        // Lift to the coarsest level that still has ≤ 2×2 texels over the rectangle.
-        while level + 1 < self.max.len() {
-            let l = level + 1;
-            if (i1 >> l) - (i0 >> l) <= 1 && (j1 >> l) - (j0 >> l) <= 1 {
-                level = l;
-            } else {
-                break;
-            }
+        // The finest level where the rectangle spans at most 2×2 texels.
+        while level + 1 < self.max.len()
+            && ((i1 >> level) - (i0 >> level) > 1 || (j1 >> level) - (j0 >> level) > 1)
+        {
+            level += 1;
         }
         let r = self.resolution >> level;
         let mut any_covered = false;
@@ -173,7 +170,9 @@ mod tests {
         let mut map = DepthMap::new(res);
         let mut x = 12345u64;
         for (k, d) in map.depth.iter_mut().enumerate() {
-            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             let r = (x >> 33) as u32 % 100;
             let block = (k as u32 % res) / 8 + (k as u32 / res) / 8;
             *d = if block % 3 == 0 && r < 97 {

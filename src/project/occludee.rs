@@ -161,7 +161,8 @@ mod tests {
             for j in 0..27 {
                 let s = DVec3::new((j % 3) as f64, ((j / 3) % 3) as f64, (j / 9) as f64) / 2.0;
                 let q = f.project(eye, lerp(b.min, b.max, s));
-                if q.x < lo.x - 1e-9 || q.y < lo.y - 1e-9 || q.x > hi.x + 1e-9 || q.y > hi.y + 1e-9 {
+                if q.x < lo.x - 1e-9 || q.y < lo.y - 1e-9 || q.x > hi.x + 1e-9 || q.y > hi.y + 1e-9
+                {
                     return false;
                 }
             }

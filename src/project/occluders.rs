@@ -84,16 +84,16 @@ const MAX_SOLID_TRIANGLES: usize = 256;
 /// edge project as one polygon, with no crack at their seam.
 pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Occluders {
     // 1. Per object: solids, and the triangles left over.
-    let per_object: Vec<(Vec<DVec3>, Vec<OccluderPart>, OccluderStats, Vec<[Vec3; 3]>)> =
-        (0..scene.objects.len())
-            .into_par_iter()
-            .map(|o| {
-                if !is_occluder[o] {
-                    return Default::default();
-                }
-                prepare_object(scene, o as u32, alpha_occluders)
-            })
-            .collect();
+    let per_object: Vec<(Vec<DVec3>, Vec<OccluderPart>, OccluderStats, Vec<[Vec3; 3]>)> = (0
+        ..scene.objects.len())
+        .into_par_iter()
+        .map(|o| {
+            if !is_occluder[o] {
+                return Default::default();
+            }
+            prepare_object(scene, o as u32, alpha_occluders)
+        })
+        .collect();
     let mut out = Occluders::default();
     // 2. Weld the leftover triangles of all objects together.
     let mut index: HashMap<[u32; 3], u32> = HashMap::new();
@@ -210,7 +210,15 @@ fn prepare_object(
         if comp_tris.len() <= MAX_SOLID_TRIANGLES
             && let Some(solid) = convex_solid(&verts, &comp_tris)
         {
-            push_part(&mut points, &mut parts, object, solid, PartKind::Solid, 0.0, 0.0);
+            push_part(
+                &mut points,
+                &mut parts,
+                object,
+                solid,
+                PartKind::Solid,
+                0.0,
+                0.0,
+            );
             stats.solids += 1;
             continue;
         }
@@ -276,7 +284,10 @@ fn components(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<Vec<usize>> {
             })
             .push(i);
     }
-    order.into_iter().map(|r| groups.remove(&r).unwrap()).collect()
+    order
+        .into_iter()
+        .map(|r| groups.remove(&r).unwrap())
+        .collect()
 }
 
 /// When the triangles form a closed, outward-oriented convex solid, its vertices shrunk toward
@@ -303,12 +314,10 @@ fn convex_solid(verts: &[DVec3], tris: &[[u32; 3]]) -> Option<Vec<DVec3>> {
     ids.dedup();
     let pts: Vec<DVec3> = ids.iter().map(|&i| verts[i as usize]).collect();
     let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
-    let size = pts
-        .iter()
-        .fold(DAabb::EMPTY, |mut b, &p| {
-            b.grow(p);
-            b
-        });
+    let size = pts.iter().fold(DAabb::EMPTY, |mut b, &p| {
+        b.grow(p);
+        b
+    });
     let extent = (size.max - size.min).max_element();
     let scale = extent.max(size.max.abs().max(size.min.abs()).max_element());
     let tol = 1e-5 * extent + 4.0 * f32::EPSILON as f64 * scale;
@@ -316,7 +325,11 @@ fn convex_solid(verts: &[DVec3], tris: &[[u32; 3]]) -> Option<Vec<DVec3>> {
     let mut rho = f64::INFINITY;
     let mut signed_volume = 0.0;
     for t in tris {
-        let (a, b, cc) = (verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]);
+        let (a, b, cc) = (
+            verts[t[0] as usize],
+            verts[t[1] as usize],
+            verts[t[2] as usize],
+        );
         signed_volume += a.dot(b.cross(cc));
         let n = (b - a).cross(cc - a);
         let len = n.length();
@@ -349,6 +362,84 @@ pub struct MergedPolygon {
     pub inradius: f64,
 }
 
+/// The unused coplanar triangles edge-connected to `seed`, and their boundary as one loop
+/// (collinear vertices dropped), when that boundary is a single convex loop.
+fn convex_region(
+    seed: usize,
+    tris: &[[u32; 3]],
+    by_edge: &HashMap<(u32, u32), usize>,
+    used: &[bool],
+    coplanar: &impl Fn(usize) -> bool,
+    turn: &impl Fn(u32, u32, u32) -> bool,
+) -> Option<(Vec<u32>, Vec<usize>)> {
+    const MAX_REGION: usize = 4096;
+    let mut region = vec![seed];
+    let mut seen: std::collections::HashSet<usize> = [seed].into_iter().collect();
+    let mut k = 0;
+    while k < region.len() {
+        let t = tris[region[k]];
+        k += 1;
+        for e in 0..3 {
+            if let Some(&o) = by_edge.get(&(t[(e + 1) % 3], t[e]))
+                && !used[o]
+                && !seen.contains(&o)
+                && coplanar(o)
+            {
+                if region.len() >= MAX_REGION {
+                    return None;
+                }
+                seen.insert(o);
+                region.push(o);
+            }
+        }
+    }
+    if region.len() < 2 {
+        return None;
+    }
+    // Boundary: directed edges whose reverse is not in the region; must chain into one loop.
+    let in_region = |a: u32, b: u32| by_edge.get(&(a, b)).is_some_and(|t| seen.contains(t));
+    let mut next: HashMap<u32, u32> = HashMap::new();
+    for &t in &region {
+        let tr = tris[t];
+        for e in 0..3 {
+            let (a, b) = (tr[e], tr[(e + 1) % 3]);
+            if !in_region(b, a) && next.insert(a, b).is_some() {
+                return None; // a vertex with two outgoing boundary edges: not a simple loop
+            }
+        }
+    }
+    let start = *next.keys().next()?;
+    let mut loop_verts = vec![start];
+    let mut v = next[&start];
+    while v != start {
+        if loop_verts.len() > next.len() {
+            return None;
+        }
+        loop_verts.push(v);
+        v = *next.get(&v)?;
+    }
+    if loop_verts.len() != next.len() {
+        return None; // several loops: holes or separate pieces
+    }
+    // Convex, with collinear vertices dropped.
+    let m = loop_verts.len();
+    let mut out = Vec::with_capacity(m);
+    for i in 0..m {
+        let (a, b, c) = (
+            loop_verts[(i + m - 1) % m],
+            loop_verts[i],
+            loop_verts[(i + 1) % m],
+        );
+        if !turn(a, b, c) {
+            return None;
+        }
+        if !turn(c, b, a) {
+            out.push(b); // a real corner (not collinear)
+        }
+    }
+    (out.len() >= 3).then_some((out, region))
+}
+
 /// Greedy merge of edge-adjacent coplanar triangles into convex polygons.
 pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> {
     let mut by_edge: HashMap<(u32, u32), usize> = HashMap::with_capacity(tris.len() * 3);
@@ -358,7 +449,11 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
         }
     }
     let normal = |t: &[u32; 3]| {
-        let (a, b, c) = (verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]);
+        let (a, b, c) = (
+            verts[t[0] as usize],
+            verts[t[1] as usize],
+            verts[t[2] as usize],
+        );
         (b - a).cross(c - a)
     };
     let mut order: Vec<usize> = (0..tris.len()).collect();
@@ -383,6 +478,23 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
             let m = (b - a).length() * (c - b).length();
             t >= -1e-9 * m
         };
+        let coplanar = |t: usize| {
+            let n2 = normal(&tris[t]).normalize();
+            n2.dot(n) >= 1.0 - 1e-9
+                && tris[t]
+                    .iter()
+                    .all(|&v| (n.dot(verts[v as usize]) - d).abs() <= plane_tol)
+        };
+        // The whole coplanar region first: when its boundary is one convex loop (a wall cut
+        // into a grid of quads), it is one polygon, whatever order a greedy merge would take.
+        if let Some((loop_verts, region)) =
+            convex_region(seed, &tris, &by_edge, &used, &coplanar, &turn)
+        {
+            for t in region {
+                used[t] = true;
+            }
+            poly = loop_verts;
+        }
         let mut changed = true;
         while changed {
             changed = false;
@@ -461,10 +573,7 @@ mod tests {
 
     #[test]
     fn a_flat_grid_merges_into_one_convex_polygon() {
-        let scene = Scene::from_objects(
-            Path::new("t"),
-            vec![("wall".into(), quad_grid(4), true)],
-        );
+        let scene = Scene::from_objects(Path::new("t"), vec![("wall".into(), quad_grid(4), true)]);
         let occ = prepare(&scene, &[true], false);
         assert_eq!(occ.parts.len(), 1, "{:?}", occ.parts.len());
         let b = occ.parts[0].bounds;
@@ -514,10 +623,7 @@ mod tests {
 
     #[test]
     fn non_opaque_triangles_are_not_occluders_unless_asked() {
-        let scene = Scene::from_objects(
-            Path::new("t"),
-            vec![("leaf".into(), quad_grid(1), false)],
-        );
+        let scene = Scene::from_objects(Path::new("t"), vec![("leaf".into(), quad_grid(1), false)]);
         assert!(prepare(&scene, &[true], false).parts.is_empty());
         assert_eq!(prepare(&scene, &[true], true).parts.len(), 1);
         assert!(prepare(&scene, &[false], true).parts.is_empty());

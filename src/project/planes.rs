@@ -84,17 +84,25 @@ impl Sliceable {
     }
 }
 
-/// Occluder points of one direction after cutting at the face.
+/// Occluder parts of one direction: their distances and extents, and (after cutting at the
+/// face) their points.
+#[derive(Default)]
 struct DirParts {
+    /// Index of each part in `Occluders::parts`.
+    index: Vec<u32>,
     set: OccluderSet,
     /// Far distance beyond the face, per part.
     far: Vec<f64>,
     /// Solid-angle weight per part.
     weight: Vec<f64>,
+    /// Near distance beyond the face (after the cut), per part.
+    near: Vec<f64>,
+    /// Extents along the plane's two axes, per part.
+    extent: Vec<DVec2>,
 }
 
-/// Builds the plane jobs of one cell: up to `planes` per direction, skipping planes that no
-/// occluder reaches.
+/// Builds all plane jobs of one cell: up to `planes + slice_planes` per direction, skipping
+/// planes that no occluder reaches.
 pub fn cell_jobs(
     cell: &DAabb,
     scene: &Scene,
@@ -102,123 +110,239 @@ pub fn cell_jobs(
     sliceable: &Sliceable,
     settings: &PlaneSettings,
 ) -> Vec<PlaneJob> {
+    let plans = plan_directions(cell, occ, sliceable, settings);
     let mut jobs = Vec::new();
-    for axis in 0..3 {
-        for positive in [true, false] {
-            direction_jobs(cell, scene, occ, sliceable, settings, axis, positive, &mut jobs);
+    for plan in &plans {
+        for k in 0..plan.distances.len() {
+            jobs.extend(plane_job(plan, k, scene, sliceable, settings, &|_| false));
         }
     }
     jobs
 }
 
-#[allow(clippy::too_many_arguments)]
-fn direction_jobs(
+/// One direction of one cell: its occluder parts cut at the face and its plane distances
+/// (nearest first).
+pub struct DirectionPlan {
+    cell: DAabb,
+    axis: usize,
+    positive: bool,
+    face: f64,
+    parts: DirParts,
+    /// Object of each part (for skipping occluders already known hidden).
+    part_object: Vec<u32>,
+    /// Plane distances beyond the face, ascending.
+    pub distances: Vec<f64>,
+}
+
+/// Plans the six directions of a cell.
+pub fn plan_directions(
     cell: &DAabb,
-    scene: &Scene,
+    occ: &Occluders,
+    sliceable: &Sliceable,
+    settings: &PlaneSettings,
+) -> Vec<DirectionPlan> {
+    let mut plans = Vec::with_capacity(6);
+    for axis in 0..3 {
+        for positive in [true, false] {
+            if let Some(p) = plan_direction(cell, occ, sliceable, settings, axis, positive) {
+                plans.push(p);
+            }
+        }
+    }
+    plans
+}
+
+fn plan_direction(
+    cell: &DAabb,
     occ: &Occluders,
     sliceable: &Sliceable,
     settings: &PlaneSettings,
     axis: usize,
     positive: bool,
-    jobs: &mut Vec<PlaneJob>,
-) {
-    let s = if positive { 1.0 } else { -1.0 };
-    let face = if positive { cell.max[axis] } else { cell.min[axis] };
+) -> Option<DirectionPlan> {
+    let face = if positive {
+        cell.max[axis]
+    } else {
+        cell.min[axis]
+    };
     let depth_len = cell.max[axis] - cell.min[axis];
     let cell_size = (cell.max - cell.min).max_element();
     let eps = 1e-9 * face.abs().max(cell_size) + 1e-7 * cell_size;
-    let parts = cut_parts(cell, occ, axis, positive, face, eps);
-    if parts.set.is_empty() {
-        return;
-    }
-    let corners = cell.corners();
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    // Plane distances from the parts' bounds alone, then cut only the parts that may project
+    // onto one of the planes.
+    let summary = summarize(cell, occ, axis, positive, face, eps);
+    if summary.index.is_empty() {
+        return None;
+    }
     let mut distances = plane_distances(
-        &parts,
+        &summary,
         settings.planes as usize,
         depth_len,
         settings.placement,
     );
-    for d in slice_distances(cell, sliceable, axis, positive, settings.slice_planes as usize) {
+    for d in slice_distances(
+        cell,
+        sliceable,
+        axis,
+        positive,
+        settings.slice_planes as usize,
+    ) {
         if distances.iter().all(|&l| (d - l).abs() > 1e-3 * l.max(d)) {
             distances.push(d);
         }
     }
-    for tp in distances {
-        let position = face + s * tp;
-        // The frame: the 90° frustum from the face at this distance, extended.
-        let half = DVec2::new(
-            0.5 * (cell.max[u] - cell.min[u]) + tp,
-            0.5 * (cell.max[v] - cell.min[v]) + tp,
-        ) * settings.extend;
-        let center = DVec2::new(
-            0.5 * (cell.max[u] + cell.min[u]),
-            0.5 * (cell.max[v] + cell.min[v]),
-        );
-        let (fmin, fmax) = (center - half, center + half);
-        let probe = PlaneFrame {
-            cell: *cell,
-            axis,
-            positive,
-            position,
-            rect_min: fmin,
-            rect_max: fmax,
-            resolution: settings.resolution,
-        };
-        // Projection bounding boxes, clipped to the frame.
-        let mut kept: Vec<(usize, DVec2, DVec2)> = Vec::new();
-        for k in 0..parts.set.len() {
-            if let Some((lo, hi)) = projection_bounds(&probe, &corners, parts.set.get(k)) {
-                let (lo, hi) = (lo.max(fmin), hi.min(fmax));
-                if lo.x < hi.x && lo.y < hi.y {
-                    kept.push((k, lo, hi));
-                }
-            }
-        }
-        // Slices of closed objects the plane cuts, when the cell is outside them.
-        let mut slices = Vec::new();
-        for (i, b) in sliceable.bounds.iter().enumerate() {
-            if b.min[axis] < position && position < b.max[axis] && !b.overlaps(cell) {
-                slice_object(scene, sliceable.objects[i], axis, position, &mut slices);
-            }
-        }
-        let mut rmin = DVec2::INFINITY;
-        let mut rmax = DVec2::NEG_INFINITY;
-        for &(_, lo, hi) in &kept {
-            rmin = rmin.min(lo);
-            rmax = rmax.max(hi);
-        }
-        for seg in &slices {
-            for p in seg {
-                rmin = rmin.min(p.max(fmin));
-                rmax = rmax.max(p.min(fmax));
-            }
-        }
-        if !(rmin.x < rmax.x && rmin.y < rmax.y) {
+    distances.sort_by(f64::total_cmp);
+    let cell_uv = DVec2::new(cell.max[u] - cell.min[u], cell.max[v] - cell.min[v]);
+    let useful: Vec<u32> = (0..summary.index.len())
+        .filter(|&i| {
+            distances.iter().any(|&tp| {
+                may_project(
+                    summary.near[i],
+                    summary.far[i],
+                    summary.extent[i],
+                    cell_uv,
+                    tp,
+                )
+            })
+        })
+        .map(|i| summary.index[i])
+        .collect();
+    let parts = cut_parts(cell, occ, &useful, axis, positive, face, eps);
+    let part_object = parts
+        .index
+        .iter()
+        .map(|&k| occ.parts[k as usize].object)
+        .collect();
+    Some(DirectionPlan {
+        cell: *cell,
+        axis,
+        positive,
+        face,
+        parts,
+        part_object,
+        distances,
+    })
+}
+
+/// The job of plane `k` of a direction, leaving out occluders (and slices) of objects for
+/// which `skip` is true — objects already proven hidden add no occlusion, and leaving an
+/// occluder out is always conservative. `None` when nothing projects onto the plane.
+pub fn plane_job(
+    plan: &DirectionPlan,
+    k: usize,
+    scene: &Scene,
+    sliceable: &Sliceable,
+    settings: &PlaneSettings,
+    skip: &dyn Fn(u32) -> bool,
+) -> Option<PlaneJob> {
+    let cell = &plan.cell;
+    let (axis, positive) = (plan.axis, plan.positive);
+    let s = if positive { 1.0 } else { -1.0 };
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let parts = &plan.parts;
+    let corners = cell.corners();
+    let cell_uv = DVec2::new(cell.max[u] - cell.min[u], cell.max[v] - cell.min[v]);
+    let tp = plan.distances[k];
+    let position = plan.face + s * tp;
+    // The frame: the 90° frustum from the face at this distance, extended.
+    let half = DVec2::new(
+        0.5 * (cell.max[u] - cell.min[u]) + tp,
+        0.5 * (cell.max[v] - cell.min[v]) + tp,
+    ) * settings.extend;
+    let center = DVec2::new(
+        0.5 * (cell.max[u] + cell.min[u]),
+        0.5 * (cell.max[v] + cell.min[v]),
+    );
+    let (fmin, fmax) = (center - half, center + half);
+    let probe = PlaneFrame {
+        cell: *cell,
+        axis,
+        positive,
+        position,
+        rect_min: fmin,
+        rect_max: fmax,
+        resolution: settings.resolution,
+    };
+    // Projection bounding boxes, clipped to the frame.
+    let mut kept: Vec<(usize, DVec2, DVec2)> = Vec::new();
+    for i in 0..parts.set.len() {
+        if skip(plan.part_object[i])
+            || !may_project(parts.near[i], parts.far[i], parts.extent[i], cell_uv, tp)
+        {
             continue;
         }
-        let frame = PlaneFrame {
-            rect_min: rmin,
-            rect_max: rmax,
-            ..probe
-        };
-        let px = frame.pixel_size();
-        let mut set = OccluderSet::default();
-        for &(k, lo, hi) in &kept {
-            // A Projection narrower than a pixel covers no whole pixel.
-            if hi.x - lo.x >= px.x && hi.y - lo.y >= px.y {
-                set.push(parts.set.get(k).iter().copied());
+        if let Some((lo, hi)) = projection_bounds(&probe, &corners, parts.set.get(i)) {
+            let (lo, hi) = (lo.max(fmin), hi.min(fmax));
+            if lo.x < hi.x && lo.y < hi.y {
+                kept.push((i, lo, hi));
             }
         }
-        if set.is_empty() && slices.is_empty() {
-            continue;
-        }
-        jobs.push(PlaneJob {
-            frame,
-            occluders: set,
-            slices,
-        });
     }
+    // Slices of closed objects the plane cuts, when the cell is outside them.
+    let mut slices = Vec::new();
+    for (i, b) in sliceable.bounds.iter().enumerate() {
+        if b.min[axis] < position
+            && position < b.max[axis]
+            && !b.overlaps(cell)
+            && !skip(sliceable.objects[i])
+        {
+            slice_object(scene, sliceable.objects[i], axis, position, &mut slices);
+        }
+    }
+    let mut rmin = DVec2::INFINITY;
+    let mut rmax = DVec2::NEG_INFINITY;
+    for &(_, lo, hi) in &kept {
+        rmin = rmin.min(lo);
+        rmax = rmax.max(hi);
+    }
+    for seg in &slices {
+        for p in seg {
+            rmin = rmin.min(p.max(fmin));
+            rmax = rmax.max(p.min(fmax));
+        }
+    }
+    if !(rmin.x < rmax.x && rmin.y < rmax.y) {
+        return None;
+    }
+    let frame = PlaneFrame {
+        rect_min: rmin,
+        rect_max: rmax,
+        ..probe
+    };
+    let px = frame.pixel_size();
+    let mut set = OccluderSet::default();
+    for &(i, lo, hi) in &kept {
+        // A Projection narrower than a pixel covers no whole pixel.
+        if hi.x - lo.x >= px.x && hi.y - lo.y >= px.y {
+            set.push(parts.set.get(i).iter().copied());
+        }
+    }
+    if set.is_empty() && slices.is_empty() {
+        return None;
+    }
+    Some(PlaneJob {
+        frame,
+        occluders: set,
+        slices,
+    })
+}
+
+/// A quick necessary condition for a part at distances `near..far` beyond the face, with
+/// extents `e` along the plane, to have a non-empty Projection on a plane at distance `tp`:
+/// views from corners `c` apart drift by about `c·|tp − t| / min(t, tp)` relative to the part's
+/// own size, so a part smaller than that drift on either axis projects to nothing. Dropping an
+/// occluder can only keep more objects visible, so the slack factor of 2 only costs time.
+fn may_project(near: f64, far: f64, e: DVec2, c: DVec2, tp: f64) -> bool {
+    let t = if tp < near {
+        near
+    } else if tp > far {
+        far
+    } else {
+        return true;
+    };
+    let drift = (tp - t).abs() / t.min(tp).max(1e-12);
+    e.x * 2.0 >= c.x * drift && e.y * 2.0 >= c.y * drift
 }
 
 /// Intersection of the bounding boxes of the 8 views of `pts` (world `(u, v)`), or `None`
@@ -247,8 +371,8 @@ pub fn projection_bounds(
     Some((lo, hi))
 }
 
-/// The occluder parts reaching beyond the face, cut at `face + eps` when they cross it.
-fn cut_parts(
+/// The parts reaching beyond the face, from their bounds only (no points copied).
+fn summarize(
     cell: &DAabb,
     occ: &Occluders,
     axis: usize,
@@ -258,14 +382,7 @@ fn cut_parts(
 ) -> DirParts {
     let s = if positive { 1.0 } else { -1.0 };
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let mut out = DirParts {
-        set: OccluderSet::default(),
-        far: Vec::new(),
-        weight: Vec::new(),
-    };
-    let dist = |p: DVec3| s * (p[axis] - face);
-    let mut buf: Vec<DVec3> = Vec::new();
-    let corners = cell.corners();
+    let mut out = DirParts::default();
     for (k, part) in occ.parts.iter().enumerate() {
         let b = &part.bounds;
         let (near, far) = if positive {
@@ -277,6 +394,45 @@ fn cut_parts(
         if far_t <= eps {
             continue;
         }
+        let extent = (b.max[u] - b.min[u]).max(b.max[v] - b.min[v]);
+        let d = far_t.max(cell.max[axis] - cell.min[axis]);
+        out.index.push(k as u32);
+        out.far.push(far_t);
+        out.near.push((s * (near - face)).max(eps));
+        out.extent
+            .push(DVec2::new(b.max[u] - b.min[u], b.max[v] - b.min[v]));
+        out.weight.push(extent * extent / (d * d));
+    }
+    out
+}
+
+/// The points of parts `only` (indices into `occ.parts`, all reaching beyond the face), cut
+/// at `face + eps` when they cross it.
+fn cut_parts(
+    cell: &DAabb,
+    occ: &Occluders,
+    only: &[u32],
+    axis: usize,
+    positive: bool,
+    face: f64,
+    eps: f64,
+) -> DirParts {
+    let s = if positive { 1.0 } else { -1.0 };
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut out = DirParts::default();
+    let dist = |p: DVec3| s * (p[axis] - face);
+    let mut buf: Vec<DVec3> = Vec::new();
+    let corners = cell.corners();
+    for &k in only {
+        let k = k as usize;
+        let part = &occ.parts[k];
+        let b = &part.bounds;
+        let (near, far) = if positive {
+            (b.min[axis], b.max[axis])
+        } else {
+            (b.max[axis], b.min[axis])
+        };
+        let far_t = s * (far - face);
         let pts = occ.part_points(k);
         buf.clear();
         if s * (near - face) > eps {
@@ -296,10 +452,12 @@ fn cut_parts(
         {
             continue;
         }
-        let extent = (b.max[u] - b.min[u]).max(b.max[v] - b.min[v]);
-        let d = far_t.max(cell.max[axis] - cell.min[axis]);
+        out.index.push(k as u32);
         out.far.push(far_t);
-        out.weight.push(extent * extent / (d * d));
+        out.near.push((s * (near - face)).max(eps));
+        out.extent
+            .push(DVec2::new(b.max[u] - b.min[u], b.max[v] - b.min[v]));
+        out.weight.push(0.0);
         out.set.push(buf.iter().copied());
     }
     out
@@ -343,7 +501,11 @@ fn clip_polygon(pts: &[DVec3], f: impl Fn(DVec3) -> f64, out: &mut Vec<DVec3>) {
             out.push(p);
         }
         if (fp >= 0.0) != (fq >= 0.0) {
-            let (a, fa, b, fb) = if fp >= 0.0 { (p, fp, q, fq) } else { (q, fq, p, fp) };
+            let (a, fa, b, fb) = if fp >= 0.0 {
+                (p, fp, q, fq)
+            } else {
+                (q, fq, p, fp)
+            };
             if let Some(x) = cut_point(a, fa, b, fb, &f) {
                 out.push(x);
             }
@@ -384,7 +546,11 @@ fn slice_distances(
         return Vec::new();
     }
     let s = if positive { 1.0 } else { -1.0 };
-    let face = if positive { cell.max[axis] } else { cell.min[axis] };
+    let face = if positive {
+        cell.max[axis]
+    } else {
+        cell.min[axis]
+    };
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let depth_len = cell.max[axis] - cell.min[axis];
     let mut cands: Vec<(f64, f64)> = Vec::new();
@@ -430,12 +596,7 @@ fn cut_point(a: DVec3, fa: f64, b: DVec3, fb: f64, f: &impl Fn(DVec3) -> f64) ->
 /// side (at least one cell depth) to the 95th percentile of the far sides and snaps each to the
 /// occluder far side just before it; [`Placement::Quantile`] takes weighted quantiles of the far
 /// sides.
-fn plane_distances(
-    parts: &DirParts,
-    n: usize,
-    cell_depth: f64,
-    placement: Placement,
-) -> Vec<f64> {
+fn plane_distances(parts: &DirParts, n: usize, cell_depth: f64, placement: Placement) -> Vec<f64> {
     let mut order: Vec<usize> = (0..parts.far.len()).collect();
     order.sort_by(|&a, &b| parts.far[a].total_cmp(&parts.far[b]));
     let total: f64 = parts.weight.iter().sum();
@@ -449,9 +610,17 @@ fn plane_distances(
         let hi = fars[(fars.len() * 95 / 100).min(fars.len() - 1)].max(lo * 1.01);
         let mut out: Vec<f64> = Vec::new();
         for k in 0..n {
-            let target = if n == 1 { lo } else { lo * (hi / lo).powf(k as f64 / (n - 1) as f64) };
+            let target = if n == 1 {
+                lo
+            } else {
+                lo * (hi / lo).powf(k as f64 / (n - 1) as f64)
+            };
             let i = fars.partition_point(|&f| f <= target);
-            let d = if i == 0 { behind(fars[0]) } else { behind(fars[i - 1]) };
+            let d = if i == 0 {
+                behind(fars[0])
+            } else {
+                behind(fars[i - 1])
+            };
             if out.iter().all(|&l| (d - l).abs() > 0.02 * l.max(d)) {
                 out.push(d);
             }
@@ -515,17 +684,26 @@ mod tests {
         set.push([DVec3::ZERO; 3]);
         set.push([DVec3::ZERO; 3]);
         let parts = DirParts {
+            index: vec![0, 1],
             set,
             far: vec![2.0, 10.0],
             weight: vec![3.0, 1.0],
+            near: vec![1.0, 9.0],
+            extent: vec![DVec2::ONE, DVec2::ONE],
         };
         let d = plane_distances(&parts, 2, 1.0, Placement::Quantile);
         assert_eq!(d.len(), 2);
-        assert!(d[0] > 2.0 && d[0] < 2.1 && d[1] > 10.0 && d[1] < 10.1, "{d:?}");
+        assert!(
+            d[0] > 2.0 && d[0] < 2.1 && d[1] > 10.0 && d[1] < 10.1,
+            "{d:?}"
+        );
         let one = plane_distances(&parts, 1, 1.0, Placement::Quantile);
         let geo = plane_distances(&parts, 2, 1.0, Placement::Geometric);
         assert_eq!(geo.len(), 2);
-        assert!(geo[0] > 2.0 && geo[0] < 2.1 && geo[1] > 10.0 && geo[1] < 10.1, "{geo:?}");
+        assert!(
+            geo[0] > 2.0 && geo[0] < 2.1 && geo[1] > 10.0 && geo[1] < 10.1,
+            "{geo:?}"
+        );
         assert!(one[0] > 2.0 && one[0] < 2.1, "{one:?}");
     }
 }

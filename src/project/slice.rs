@@ -53,10 +53,7 @@ mod tests {
 
     #[test]
     fn a_box_slices_into_a_closed_rectangle() {
-        let tris = crate::geom::box_triangles(
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(2.0, 4.0, 6.0),
-        );
+        let tris = crate::geom::box_triangles(Vec3::new(0.0, 0.0, 0.0), Vec3::new(2.0, 4.0, 6.0));
         let scene = Scene::from_objects(Path::new("t"), vec![("b".into(), tris, true)]);
         let mut segs = Vec::new();
         slice_object(&scene, 0, 2, 3.0, &mut segs);

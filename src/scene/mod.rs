@@ -85,9 +85,13 @@ impl Scene {
 
     /// Bounds of the whole scene.
     pub fn bounds(&self) -> Aabb {
-        self.objects
-            .iter()
-            .fold(Aabb::EMPTY, |b, o| if o.bounds.is_empty() { b } else { b.union(&o.bounds) })
+        self.objects.iter().fold(Aabb::EMPTY, |b, o| {
+            if o.bounds.is_empty() {
+                b
+            } else {
+                b.union(&o.bounds)
+            }
+        })
     }
 
     /// Number of triangles with zero area (skipped as occluders, counted in summaries).
@@ -145,7 +149,11 @@ impl Scene {
             )));
         }
         let n = self.vertices.len() as u32;
-        if let Some(t) = self.triangles.iter().position(|t| t.iter().any(|&i| i >= n)) {
+        if let Some(t) = self
+            .triangles
+            .iter()
+            .position(|t| t.iter().any(|&i| i >= n))
+        {
             return Err(invalid(format!("triangle {t} indexes a missing vertex")));
         }
         if self.triangles.len() != self.opaque.len() {
@@ -154,7 +162,10 @@ impl Scene {
         let mut next = 0u32;
         for o in &self.objects {
             if o.triangles.start != next || o.triangles.end < o.triangles.start {
-                return Err(invalid(format!("object {} has a bad triangle range", o.name)));
+                return Err(invalid(format!(
+                    "object {} has a bad triangle range",
+                    o.name
+                )));
             }
             next = o.triangles.end;
         }

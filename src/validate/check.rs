@@ -26,6 +26,7 @@ pub enum ValidateError {
     /// A cell of the PVS is not a valid box.
     #[error("PVS cell {index} is not a valid box (min {min:?}, max {max:?})")]
     BadCell {
+        /// Position of the cell in the PVS.
         index: usize,
         min: [f32; 3],
         max: [f32; 3],
@@ -78,7 +79,9 @@ pub struct FalseCull {
 /// The check of one cell.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CellReport {
+    /// Cell corner (as in the PVS).
     pub min: [f32; 3],
+    /// Cell corner (as in the PVS).
     pub max: [f32; 3],
     /// The sampled visible set (VS), ascending.
     pub visible: Vec<u32>,
@@ -106,16 +109,21 @@ pub struct CellReport {
 /// so two runs can be compared byte for byte.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Report {
+    /// One entry per PVS cell, in PVS order.
     pub cells: Vec<CellReport>,
     /// Total number of false culls over all cells.
     pub false_culls: usize,
     /// Cells with at least one false cull.
     pub cells_with_false_culls: usize,
+    /// Rays asked for per cell (`--rays`).
     pub rays_per_cell: u64,
+    /// Seed of the random rays (`--seed`).
     pub seed: u64,
     /// Whether see-through triangles blocked rays (the PVS setting `alpha_occluders`).
     pub alpha_occluders: bool,
+    /// Objects in the scene.
     pub objects: usize,
+    /// Triangles in the scene (degenerate ones included).
     pub triangles: usize,
     /// Sum of |PVS| over sum of |VS| (`None` when no cell sees anything).
     pub pvs_over_vs: Option<f64>,
@@ -166,13 +174,14 @@ impl Report {
                 c.false_culls.len()
             );
         }
-        let n = self.cells.len().max(1) as f64;
+        // Totals: sums of |PVS| and |VS| (and their ratio), mean culled percentages (the same
+        // as the percentages of all cells' objects and triangles), sums of the counts.
         let _ = writeln!(
             s,
-            "{:>6} {:>7.1} {:>7.1} {:>7} {:>10.1} {:>10.1} {:>5} {:>11}",
-            "mean",
-            self.cells.iter().map(|c| c.pvs as f64).sum::<f64>() / n,
-            self.cells.iter().map(|c| c.vs as f64).sum::<f64>() / n,
+            "{:>6} {:>7} {:>7} {:>7} {:>10.1} {:>10.1} {:>5} {:>11}",
+            "total",
+            self.cells.iter().map(|c| c.pvs).sum::<usize>(),
+            self.cells.iter().map(|c| c.vs).sum::<usize>(),
             ratio(self.pvs_over_vs),
             self.objects_culled_percent,
             self.triangles_culled_percent,

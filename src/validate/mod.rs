@@ -71,8 +71,13 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
     // The PVS first: reading it is cheap, loading a big scene is not.
     let doc = crate::pvs::json::read(&args.pvs).map_err(anyhow::Error::msg)?;
     let scene = crate::scene::load(&args.scene)?;
-    check_input(&scene, &doc, args.rays)
-        .with_context(|| format!("{} does not fit {}", args.pvs.display(), args.scene.display()))?;
+    check_input(&scene, &doc, args.rays).with_context(|| {
+        format!(
+            "{} does not fit {}",
+            args.pvs.display(),
+            args.scene.display()
+        )
+    })?;
     let opts = CheckOptions {
         rays: args.rays,
         seed: args.seed,
@@ -80,17 +85,32 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
     };
     let index = SceneRays::new(&scene);
     let report = check_with(&index, &scene, &doc, &opts)?;
-    print!("{}", report.table());
-    println!(
-        "{} rays in {:.2} s ({:.2} M rays/s, {} threads)",
+    let text = format!(
+        "{}{} rays in {:.2} s ({:.2} M rays/s, {} threads)\n",
+        report.table(),
         report.rays_cast,
         report.seconds,
         report.rays_per_second() / 1e6,
         rayon::current_num_threads()
     );
+    // A closed stdout (`| head`) must not hide the verdict: the exit code and --json still
+    // count.
+    let _ = std::io::Write::write_all(&mut std::io::stdout().lock(), text.as_bytes());
     if let Some(path) = &args.json {
         let bytes = serde_json::to_vec_pretty(&report)?;
-        crate::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
+        write_report(path, &bytes)?;
     }
     Ok(if report.false_culls > 0 { 1 } else { 0 })
+}
+
+/// Writes the `--json` report: atomically (temporary file, then rename) for a regular file,
+/// directly for an existing special file such as `/dev/stdout` or a pipe, which a rename
+/// would replace.
+fn write_report(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() && !m.is_dir() => {
+            std::fs::write(path, bytes).with_context(|| format!("{}: cannot write", path.display()))
+        }
+        _ => crate::util::write_atomic(path, bytes).map_err(anyhow::Error::msg),
+    }
 }

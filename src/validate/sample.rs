@@ -182,13 +182,21 @@ fn targeted_origin(rng: &mut Pcg64Mcg, cell: &Aabb) -> Vec3 {
             let r = rng.next_u64();
             let axis = (r % 3) as usize;
             let inset = size[axis] * 1e-6;
-            p[axis] = if r & 4 != 0 { hi[axis] - inset } else { lo[axis] + inset };
+            p[axis] = if r & 4 != 0 {
+                hi[axis] - inset
+            } else {
+                lo[axis] + inset
+            };
         }
         3 => {
             let r = rng.next_u64();
             for axis in 0..3 {
                 let d = size[axis] * (1e-6 + 0.02 * unit(rng));
-                p[axis] = if r & (1 << axis) != 0 { hi[axis] - d } else { lo[axis] + d };
+                p[axis] = if r & (1 << axis) != 0 {
+                    hi[axis] - d
+                } else {
+                    lo[axis] + d
+                };
             }
         }
         _ => {}
@@ -234,8 +242,7 @@ fn make_ray(
         dir = target_point(rng, rays, o) - origin.as_dvec3();
     }
     let len = dir.length();
-    let mut d = if len > 1e-12 * (1.0 + origin.as_dvec3().abs().max_element()) && len.is_finite()
-    {
+    let mut d = if len > 1e-12 * (1.0 + origin.as_dvec3().abs().max_element()) && len.is_finite() {
         (dir / len).as_vec3()
     } else {
         Vec3::ZERO
@@ -264,12 +271,21 @@ struct Scratch {
     rays: Vec<(Vec3, Vec3)>,
 }
 
-/// Samples the visible set of `cell` with `rays` rays (see the [module docs](self) for the
-/// phases). `rays_index` is the [`SceneRays`] built from `scene`; `cell_index` selects the
-/// cell's random streams (use the cell's position in the PVS); `alpha_blocks` makes
-/// see-through triangles block like opaque ones (the PVS setting `alpha_occluders`).
+/// Samples the visible set of `cell` with `rays` rays. `rays_index` is the [`SceneRays`]
+/// built from `scene`; `cell_index` selects the cell's random streams (use the cell's position
+/// in the PVS); `alpha_blocks` makes see-through triangles block like opaque ones (the PVS
+/// setting `alpha_occluders`).
 ///
-/// Runs on the current rayon pool; the result does not depend on its size.
+/// The budget is cut at tenths (`b(k) = rays·k/10`): rays `[0, b2)` start uniformly in the
+/// cell with directions uniform on the sphere; rays `[b2, b5)` are aimed at a random point of
+/// a random object (inside its bounds or on its surface, area-weighted); rays `[b5, b10)` are
+/// five targeted rounds aimed only at the objects not found by the earlier rounds, half of
+/// them starting on the cell's faces or near its corners. When every object with area has
+/// been found, the remaining rays are not cast ([`CellSample::rays_cast`]).
+///
+/// Runs on the current rayon pool; the result does not depend on its size: rays are cut into
+/// chunks of [`CHUNK`] with their own random streams, and an object's witness is the ray
+/// with the smallest index.
 pub fn sample_cell(
     rays_index: &SceneRays,
     scene: &Scene,
@@ -351,8 +367,7 @@ pub(crate) fn sample_cell_progress(
                     // then overlap instead of stalling one ray at a time.
                     s.rays.clear();
                     s.rays.extend(
-                        (begin..end)
-                            .map(|_| make_ray(phase.kind, &mut rng, &cell, targets, index)),
+                        (begin..end).map(|_| make_ray(phase.kind, &mut rng, &cell, targets, index)),
                     );
                     for (ray, &(o, d)) in (begin..end).zip(&s.rays) {
                         index.trace_raw(o, d, alpha_blocks, &mut s.hits);
@@ -453,7 +468,10 @@ mod tests {
         let cell = Aabb::new(vec3(1.0, 2.0, 3.0), vec3(1.5, 2.001, 40.0));
         let mut rng = chunk_rng(1, 2, 3, 4);
         for _ in 0..20_000 {
-            for p in [uniform_origin(&mut rng, &cell), targeted_origin(&mut rng, &cell)] {
+            for p in [
+                uniform_origin(&mut rng, &cell),
+                targeted_origin(&mut rng, &cell),
+            ] {
                 assert!(p.cmpgt(cell.min).all() && p.cmplt(cell.max).all(), "{p:?}");
             }
         }
@@ -471,7 +489,11 @@ mod tests {
     #[test]
     fn overlapping_object_is_visible_by_definition() {
         // A zero-area triangle inside the cell: no ray can hit it, its bounds overlap the cell.
-        let tiny = vec![[vec3(0.0, 0.0, 0.0), vec3(0.5, 0.0, 0.0), vec3(0.25, 0.0, 0.0)]];
+        let tiny = vec![[
+            vec3(0.0, 0.0, 0.0),
+            vec3(0.5, 0.0, 0.0),
+            vec3(0.25, 0.0, 0.0),
+        ]];
         let scene = Scene::from_objects(Path::new("mem"), vec![("tiny".into(), tiny, true)]);
         let index = SceneRays::new(&scene);
         let cell = Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0));

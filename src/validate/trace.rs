@@ -160,11 +160,17 @@ impl SceneRays {
                     weights.push(area);
                     samples.push(SampleTri {
                         corners: tri,
-                        entry: AliasEntry { keep: 1.0, alias: 0 },
+                        entry: AliasEntry {
+                            keep: 1.0,
+                            alias: 0,
+                        },
                     });
                 }
             }
-            for (s, e) in samples[start as usize..].iter_mut().zip(alias_table(&weights)) {
+            for (s, e) in samples[start as usize..]
+                .iter_mut()
+                .zip(alias_table(&weights))
+            {
                 s.entry = e;
             }
             let end = samples.len() as u32;
@@ -303,7 +309,11 @@ impl SceneRays {
         let d = direction.as_dvec3();
         let n = (b - a).cross(c - a);
         let den = n.dot(d);
-        let tt = if den != 0.0 { n.dot(a - o) / den } else { f64::from(t) };
+        let tt = if den != 0.0 {
+            n.dot(a - o) / den
+        } else {
+            f64::from(t)
+        };
         (o + d * tt).as_vec3()
     }
 }
@@ -314,8 +324,14 @@ impl SceneRays {
 fn alias_table(weights: &[f64]) -> Vec<AliasEntry> {
     let n = weights.len();
     let total: f64 = weights.iter().sum();
-    let mut table = vec![AliasEntry { keep: 1.0, alias: 0 }; n];
-    if n == 0 || !(total > 0.0) {
+    let mut table = vec![
+        AliasEntry {
+            keep: 1.0,
+            alias: 0
+        };
+        n
+    ];
+    if n == 0 || total.is_nan() || total <= 0.0 {
         return table;
     }
     let mut p: Vec<f64> = weights.iter().map(|w| w * n as f64 / total).collect();
@@ -473,7 +489,11 @@ mod tests {
 
     #[test]
     fn a_single_triangle_scene_is_traced() {
-        let tri = vec![[vec3(-1.0, -1.0, 3.0), vec3(1.0, -1.0, 3.0), vec3(0.0, 1.0, 3.0)]];
+        let tri = vec![[
+            vec3(-1.0, -1.0, 3.0),
+            vec3(1.0, -1.0, 3.0),
+            vec3(0.0, 1.0, 3.0),
+        ]];
         let scene = Scene::from_objects(Path::new("mem"), vec![("t".into(), tri, true)]);
         let rays = SceneRays::new(&scene);
         let hits = rays.trace(Vec3::ZERO, Vec3::Z, false);
@@ -494,18 +514,33 @@ mod tests {
         );
         let rays = SceneRays::new(&scene);
         let d = vec3(0.1, 0.2, 1.0);
-        let objs: Vec<u32> = rays.trace(Vec3::ZERO, d, false).iter().map(|h| h.object).collect();
+        let objs: Vec<u32> = rays
+            .trace(Vec3::ZERO, d, false)
+            .iter()
+            .map(|h| h.object)
+            .collect();
         assert_eq!(objs, vec![0, 1]);
-        let objs: Vec<u32> = rays.trace(Vec3::ZERO, d, true).iter().map(|h| h.object).collect();
+        let objs: Vec<u32> = rays
+            .trace(Vec3::ZERO, d, true)
+            .iter()
+            .map(|h| h.object)
+            .collect();
         assert_eq!(objs, vec![0]);
     }
 
     #[test]
     fn degenerate_triangles_are_left_out() {
-        let flat = vec![[vec3(0.0, 0.0, 2.0), vec3(1.0, 1.0, 2.0), vec3(2.0, 2.0, 2.0)]];
+        let flat = vec![[
+            vec3(0.0, 0.0, 2.0),
+            vec3(1.0, 1.0, 2.0),
+            vec3(2.0, 2.0, 2.0),
+        ]];
         let scene = Scene::from_objects(
             Path::new("mem"),
-            vec![("flat".into(), flat, true), ("wall".into(), quad(4.0, 5.0), true)],
+            vec![
+                ("flat".into(), flat, true),
+                ("wall".into(), quad(4.0, 5.0), true),
+            ],
         );
         let rays = SceneRays::new(&scene);
         assert_eq!(rays.triangles(), 2);
@@ -538,7 +573,9 @@ mod tests {
         let rays = SceneRays::new(&scene);
         for i in 0..100 {
             let f = i as f64 / 100.0;
-            let p = rays.surface_point(0, f, (f * 7.3) % 1.0, (f * 3.1) % 1.0).unwrap();
+            let p = rays
+                .surface_point(0, f, (f * 7.3) % 1.0, (f * 3.1) % 1.0)
+                .unwrap();
             assert!((p.z - 4.0).abs() < 1e-9 && p.x.abs() <= 2.0 && p.y.abs() <= 2.0);
         }
     }

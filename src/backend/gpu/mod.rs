@@ -1,54 +1,64 @@
 //! The wgpu backend: occluder extended Projections rasterised on the GPU, with exactly the
 //! contract of [`crate::backend`] and at least the conservativeness of the CPU reference
-//! ([`cpu`](crate::backend::cpu)).
+//! ([`cpu`]).
 //!
-//! # Design: one instanced draw per plane, the 8 views tested per pixel in the fragment shader
+//! # Design: one draw per plane, coverage tested per pixel in the fragment shader
 //!
 //! Appendix A of Durand et al. 2000 counts the views in the stencil buffer: per occluder, draw
 //! its 8 views incrementing the stencil, then draw where the stencil equals 8 writing depth and
-//! resetting it. The stencil must be reset between occluders (views of different occluders must
-//! never add up), so that needs at least two draws and two pipeline switches *per occluder*
-//! — 20,000 draws for a 10,000-triangle plane, bound by the CPU's draw submission rather than
-//! the GPU — plus conservatively shrunk view polygons whose vertices the rasteriser snaps to its
-//! sub-pixel grid (1/256 px on most hardware), an error far larger than ours.
+//! resetting the stencil. Views of different occluders must never add up, so the stencil must
+//! be reset between occluders: at least two draws with different pipelines *per occluder* —
+//! 20,000 draws for a 10,000-triangle plane, bound by the CPU's command submission rather than
+//! by the GPU — and the "whole pixel inside" rule needs view polygons shrunk by half a pixel
+//! whose vertices the rasteriser snaps to its sub-pixel grid (1/256 px on most hardware, 1/16
+//! allowed), an error far larger than the 10⁻⁴ px of the CPU reference.
 //!
-//! Instead each occluder is one *instance* of one draw per plane: a quad over the pixels that
-//! can be covered (the intersection of the 8 views' bounding boxes, shrunk by half a pixel,
-//! clipped to the plane), whose fragment shader evaluates the occluder's view edges at the
-//! pixel centre and discards unless all pass. Each edge was shrunk on the CPU by the pixel's
-//! half-extent along its normal (`½(|nₓ|+|n_y|)`), so "the centre passes every shrunk edge of
-//! the 8 views" is exactly "the closed pixel square lies inside all 8 views" — per occluder, so
-//! views of different occluders never add up. The CPU adds the CPU backend's margin plus a
-//! proven bound on the shader's `f32` error and rounds the offsets up, so a rounding can only
-//! uncover a pixel, never cover one (see [`setup`] for the bound). Per-pixel cost is one
-//! multiply-add and compare per edge, against storage data shared by the whole instance.
+//! Instead every occluder is a few triangles of *one* draw per plane, and the fragment shader
+//! decides coverage with edge functions. Per occluder the CPU computes (f64, rayon, before the
+//! GPU section) the Projection polygon exactly as the CPU backend does — project the points
+//! from the 8 cell corners, 8 small hulls, intersect them by clipping, the same quick rejects —
+//! and turns each polygon edge, shrunk by the pixel's half-extent along its normal
+//! (`½(|nₓ|+|n_y|)`), into an `f32` half-plane with its offset rounded up after adding the
+//! CPU's margin and a proven bound on the shader's `f32` error ([`setup`]). The geometry drawn
+//! is the polygon itself (clipped to the plane); the fragment shader tests the pixel centre
+//! against the occluder's eroded edges and discards unless all pass. "The centre passes every
+//! eroded edge of the intersection" is exactly "the closed pixel square lies inside all 8
+//! views" (erosion distributes over intersection), per occluder, so views of different
+//! occluders never add up, and a rounding can only uncover a pixel, never cover one.
 //!
-//! The CPU's per-occluder setup (project the points from the 8 corners, 8 small hulls, one
-//! `f32` half-plane per hull edge, edges that every pixel centre of the quad passes dropped) is
-//! done in f64 with rayon, in parallel across planes and across occluders, before the GPU
-//! section; the GPU does all the per-pixel work.
+//! Why clip on the CPU rather than send all 8 views' edges and let the GPU intersect them?
+//! Measured on planes of 10,000 random triangles at 256² (lavapipe, 2 shared cores): sending
+//! the views' edges (minus those no fragment of the drawn geometry can fail) cost 3.9 ms of CPU
+//! setup per plane — deciding which of the ~24 edges matter cost more than clipping — with ~15
+//! edges and ~380 bytes per occluder, and 58 ms per plane in all; clipping costs 2.9 ms of
+//! setup, leaves ~3 edges and ~110 bytes per occluder and a geometry that hugs the covered
+//! pixels, and 8 ms per plane in all. On a real GPU, where the fragment work is negligible
+//! either way, it still means less CPU time and 3.5× fewer bytes to upload.
 //!
 //! The Depth Map is an `R32Float` colour target cleared to `+inf` with blend operation `Min`
-//! (feature [`wgpu::Features::FLOAT32_BLENDABLE`]): every float Depth, negative or huge, is kept
-//! exactly, the minimum over occluders, and `+inf` stays where nothing covers.
+//! (feature [`wgpu::Features::FLOAT32_BLENDABLE`]): every float Depth, negative or huge, is
+//! kept exactly, the minimum over occluders, and `+inf` stays where nothing covers.
 //!
-//! Slices are filled on the CPU with [`cpu::fill_slices`](crate::backend::cpu::fill_slices) as a
-//! mask *while the GPU renders* and merged on read-back (a per-row crossing scan: tens of µs per
-//! plane at 256², cheaper than uploading the segments and running a stencil fill and an erosion
-//! pass, and bit-identical to the CPU reference).
+//! Slices are filled on the CPU with [`cpu::fill_slices`] as a
+//! mask during the setup and merged on read-back (a per-row crossing scan: ~75 µs per plane
+//! at 256², cheaper than uploading the segments and running a stencil fill and an erosion pass,
+//! and bit-identical to the CPU reference).
 //!
 //! # Per `render` call
 //!
 //! All jobs (a cell's 6–30 planes) are prepared in parallel, uploaded into shared, grown-only
-//! instance/edge/uniform buffers, encoded in one command buffer — per plane one render pass, one
-//! draw per chunk of the edge buffer (one chunk unless the plane's edges exceed the device's
-//! storage binding size), one texture-to-buffer copy — and submitted once; all staging buffers
-//! are mapped at once, the slice masks are computed, and the device is polled with a timeout.
-//! Render targets and staging buffers are pooled per resolution. Planes that no occluder can
-//! cover skip the GPU. Jobs are split into several submissions only to bound memory.
+//! vertex/data/uniform buffers, encoded in one command buffer — per plane one render pass, one
+//! draw per chunk of the data buffer (one chunk unless the plane's data exceed the device's
+//! storage binding size), one texture-to-buffer copy — and submitted once; then all staging
+//! buffers are mapped at once and the device is polled with a timeout. Render targets and
+//! staging buffers are pooled per resolution. Planes no occluder can cover skip the GPU. Jobs
+//! are split into several submissions only to bound memory (256 MiB of targets, 512 MiB of
+//! data). The CPU setup runs outside the backend's lock, so cells baked on several threads
+//! prepare their planes while another cell's are on the GPU.
 //!
-//! Per plane: 1 render pass, 1 draw (instanced, 4 vertices per occluder), `res² × 4` bytes read
-//! back (rows padded to 256 bytes below 64², i.e. `256 × res` bytes then).
+//! Per plane: 1 render pass, 1 draw (≈ 1.2 triangles per occluder drawn), `res² × 4` bytes read
+//! back (rows padded to 256 bytes below 64², i.e. `256 × res` bytes then). See
+//! [`GpuBackend::last_stats`].
 //!
 //! Device loss, out-of-memory and validation errors become [`BackendError::Device`]: errors are
 //! caught by error scopes and by an uncaptured-error handler, loss by the device-lost callback,
@@ -77,7 +87,7 @@ const PROJECTION_WGSL: &str = SHADERS[0].1;
 const SETUP_TASK: usize = 1024;
 /// Bytes of render targets + staging buffers one submission may use.
 const TARGET_BUDGET: u64 = 256 << 20;
-/// Bytes of instance + edge data one submission may use (also capped by the device).
+/// Bytes of vertex + record/edge data one submission may use (also capped by the device).
 const DATA_BUDGET: u64 = 512 << 20;
 /// Stride of per-plane uniforms (WebGPU's maximum `min_uniform_buffer_offset_alignment`).
 const UNIFORM_STRIDE: u64 = 256;
@@ -124,9 +134,9 @@ pub struct RenderStats {
     pub submissions: usize,
     /// Render passes (one per GPU plane).
     pub passes: usize,
-    /// Draw calls (one per GPU plane unless its edges exceed one storage binding).
+    /// Draw calls (one per GPU plane unless its data exceed one storage binding).
     pub draws: usize,
-    /// Occluders drawn (after the quick rejects), their triangles, and their view edges.
+    /// Occluders drawn (after the quick rejects), their triangles and their eroded edges.
     pub occluders: usize,
     pub triangles: usize,
     pub edges: usize,
@@ -164,6 +174,8 @@ struct Prepared {
     occluders: usize,
     /// Draw chunks: vertex range and data range.
     chunks: Vec<Chunk>,
+    /// The slices as a map (`0` inside, `+inf` elsewhere), merged on read-back.
+    mask: Option<DepthMap>,
 }
 
 #[derive(Clone, Debug)]
@@ -259,7 +271,9 @@ impl GpuBackend {
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         }))
-        .map_err(|e| BackendError::Device(format!("cannot create a device on {}: {e}", info.name)))?;
+        .map_err(|e| {
+            BackendError::Device(format!("cannot create a device on {}: {e}", info.name))
+        })?;
 
         let failure: Arc<Mutex<Option<String>>> = Arc::default();
         {
@@ -357,7 +371,9 @@ impl GpuBackend {
         scope.check()?;
 
         let storage_align = limits.min_storage_buffer_offset_alignment.max(16) as u64;
-        let max_binding = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         let max_chunk_words = ((max_binding / storage_align * storage_align) / 16) as usize;
         Ok(GpuBackend {
             adapter_name: info.name.clone(),
@@ -378,6 +394,13 @@ impl GpuBackend {
     /// The adapter's information (name, backend, device type, driver).
     pub fn adapter_info(&self) -> wgpu::AdapterInfo {
         self.device.adapter_info()
+    }
+
+    /// Destroys the device, as a driver reset would lose it: every later call fails with
+    /// [`BackendError::Device`]. For tests of the failure path.
+    #[doc(hidden)]
+    pub fn simulate_device_loss(&self) {
+        self.device.destroy();
     }
 
     /// Counters and timings of the last [`render`](RasterBackend::render) call (of any thread).
@@ -467,6 +490,7 @@ impl GpuBackend {
             out,
             occluders,
             chunks,
+            mask: slice_mask(job),
         })
     }
 
@@ -487,7 +511,9 @@ impl GpuBackend {
                 self.max_buffer
             )));
         }
-        let cap = size.next_power_of_two().clamp(1 << 16, self.max_buffer.max(size));
+        let cap = size
+            .next_power_of_two()
+            .clamp(1 << 16, self.max_buffer.max(size));
         if let Some(old) = slot.take() {
             old.destroy();
         }
@@ -743,12 +769,6 @@ impl GpuBackend {
         drop(tx);
         scope.check()?;
 
-        // While the GPU works: slice masks on the CPU.
-        let masks: Vec<Option<DepthMap>> = todo
-            .par_iter()
-            .map(|&j| slice_mask(&jobs[j]))
-            .collect();
-
         // Wait, polling with a timeout so a lost device cannot hang us.
         let start = Instant::now();
         let mut mapped = vec![false; todo.len()];
@@ -760,7 +780,10 @@ impl GpuBackend {
                 timeout: Some(POLL_SLICE),
             }) {
                 Ok(_) | Err(wgpu::PollError::Timeout) => {}
-                Err(e) => return Err(BackendError::Device(format!("poll failed: {e}"))),
+                Err(e) => {
+                    self.check_failure()?;
+                    return Err(BackendError::Device(format!("poll failed: {e}")));
+                }
             }
             while let Ok((w, r)) = rx.try_recv() {
                 r.map_err(|e| BackendError::Device(format!("read-back failed: {e}")))?;
@@ -798,7 +821,7 @@ impl GpuBackend {
                 }
             }
             target.staging.unmap();
-            if let Some(mask) = &masks[w] {
+            if let Some(mask) = &prepared[j].mask {
                 merge_mask(&mut map, mask);
             }
             out[j] = Some(map);
@@ -863,10 +886,12 @@ impl RasterBackend for GpuBackend {
         self.check_failure()?;
         for job in jobs {
             let r = job.frame.resolution;
-            if r == 0 || r > self.max_texture {
+            // Records pack pixel origins into 16 bits each.
+            let max = self.max_texture.min(1 << 15);
+            if r == 0 || r > max {
                 return Err(BackendError::Device(format!(
-                    "plane resolution {r} is outside 1..={} supported by {}",
-                    self.max_texture, self.adapter_name
+                    "plane resolution {r} is outside 1..={max} supported by {}",
+                    self.adapter_name
                 )));
             }
         }
@@ -887,8 +912,8 @@ impl RasterBackend for GpuBackend {
         for (j, p) in prepared.iter().enumerate() {
             if p.out.vertices.is_empty() {
                 let mut map = DepthMap::new(jobs[j].frame.resolution);
-                if let Some(mask) = slice_mask(&jobs[j]) {
-                    merge_mask(&mut map, &mask);
+                if let Some(mask) = &p.mask {
+                    merge_mask(&mut map, mask);
                 }
                 out[j] = Some(map);
             } else {

@@ -36,7 +36,9 @@ use glam::{DVec2, DVec3};
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Vertex {
+    /// Position in pixel coordinates (pixel `(i, j)` spans `[i, i+1] × [j, j+1]`).
     pub pos: [f32; 2],
+    /// Index of the occluder's record in its chunk of the data buffer.
     pub record: u32,
 }
 
@@ -57,6 +59,7 @@ pub struct Output {
 }
 
 impl Output {
+    /// Empties both, keeping the allocations.
     pub fn clear(&mut self) {
         self.data.clear();
         self.vertices.clear();
@@ -227,7 +230,8 @@ fn flush_tiny(x: f32) -> f32 {
 pub fn emulate(res: u32, out: &Output) -> Vec<f32> {
     let mut map = vec![f32::INFINITY; (res * res) as usize];
     for tri in out.vertices.chunks_exact(3) {
-        let p: [DVec2; 3] = std::array::from_fn(|k| DVec2::new(tri[k].pos[0] as f64, tri[k].pos[1] as f64));
+        let p: [DVec2; 3] =
+            std::array::from_fn(|k| DVec2::new(tri[k].pos[0] as f64, tri[k].pos[1] as f64));
         let rec = out.data[tri[0].record as usize];
         let (ox, oy) = ((rec[0] & 0xffff) as f32, (rec[0] >> 16) as f32);
         let depth = f32::from_bits(rec[1]);
@@ -365,11 +369,10 @@ mod tests {
                     assert!(!one.vertices.is_empty() && one.vertices.len() % 3 == 0);
                     let base = all.data.len() as u32;
                     all.data.extend_from_slice(&one.data);
-                    all.vertices
-                        .extend(one.vertices.iter().map(|v| Vertex {
-                            record: v.record + base,
-                            ..*v
-                        }));
+                    all.vertices.extend(one.vertices.iter().map(|v| Vertex {
+                        record: v.record + base,
+                        ..*v
+                    }));
                     which.push((k, one));
                 }
             }
