@@ -3,7 +3,7 @@
 //! them, builds each plane's Hierarchical Depth Map and tests the occludees, walking the object
 //! BVH and stopping at hidden and at fully visible nodes. Cells run in parallel (rayon).
 
-use crate::backend::{BackendError, PlaneJob, RasterBackend, depth_down};
+use crate::backend::{BackendError, DepthMap, PlaneJob, RasterBackend, depth_down};
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
 use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
@@ -225,6 +225,20 @@ impl<'a> Prepared<'a> {
     /// # Errors
     /// The backend's failure.
     pub fn cell(&self, cell: &Aabb, backend: &dyn RasterBackend) -> Result<CellResult, BakeError> {
+        self.cell_observed(cell, backend, &mut |_, _, _| {})
+    }
+
+    /// Bakes one cell, handing every rendered plane to `observe` (its job, its Depth Map and
+    /// its Hierarchical Depth Map) before its occludees are tested: for dumps and reports.
+    ///
+    /// # Errors
+    /// The backend's failure.
+    pub fn cell_observed(
+        &self,
+        cell: &Aabb,
+        backend: &dyn RasterBackend,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    ) -> Result<CellResult, BakeError> {
         let start = Instant::now();
         let n = self.scene.objects.len();
         let mut hidden = vec![false; n];
@@ -251,7 +265,8 @@ impl<'a> Prepared<'a> {
             }
             let maps = backend.render(&jobs)?;
             let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
-            for (job, hdm) in jobs.iter().zip(&hdms) {
+            for ((job, map), hdm) in jobs.iter().zip(&maps).zip(&hdms) {
+                observe(job, map, hdm);
                 self.traverse(job, hdm, &cell64, &mut hidden, &mut node_hidden);
             }
             planes += jobs.len();
@@ -398,13 +413,42 @@ pub fn bake(
     backend: &dyn RasterBackend,
     progress: Option<&(dyn Fn(usize) + Sync)>,
 ) -> Result<BakeResult, BakeError> {
+    bake_observed(scene, cells, settings, backend, progress, None)
+}
+
+/// Observer of every rendered plane: `(cell index, plane index within the cell, job, Depth
+/// Map, Hierarchical Depth Map)`.
+pub type PlaneObserver<'a> = &'a (dyn Fn(usize, usize, &PlaneJob, &DepthMap, &Hdm) + Sync);
+
+/// [`bake`], handing every rendered plane to `observe` (for dumps and reports).
+///
+/// # Errors
+/// Invalid settings, or the backend's failure (no partial result).
+pub fn bake_observed(
+    scene: &Scene,
+    cells: &[Aabb],
+    settings: &BakeSettings,
+    backend: &dyn RasterBackend,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+    observe: Option<PlaneObserver>,
+) -> Result<BakeResult, BakeError> {
     let start = Instant::now();
     let prepared = Prepared::new(scene, settings)?;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cells_out: Result<Vec<CellResult>, BakeError> = cells
         .par_iter()
-        .map(|c| {
-            let r = prepared.cell(c, backend);
+        .enumerate()
+        .map(|(ci, c)| {
+            let r = match observe {
+                None => prepared.cell(c, backend),
+                Some(f) => {
+                    let mut k = 0;
+                    prepared.cell_observed(c, backend, &mut |job, map, hdm| {
+                        f(ci, k, job, map, hdm);
+                        k += 1;
+                    })
+                }
+            };
             let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             if let Some(p) = progress {
                 p(k);

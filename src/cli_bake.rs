@@ -85,6 +85,15 @@ pub struct BakeArgs {
     /// Disable the improved occludee Projection (Durand §4).
     #[arg(long)]
     pub no_improved_projection: bool,
+    /// Write every plane's maps of the baked cells as OpenEXR files into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub dump_exr: Option<PathBuf>,
+    /// Write every plane's maps as 8-bit PNG previews into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub dump_png: Option<PathBuf>,
+    /// Limit --dump-exr/--dump-png to these cell indices (e.g. 0,5,9).
+    #[arg(long, value_delimiter = ',', value_name = "I,J,…")]
+    pub dump_cells: Option<Vec<usize>>,
     /// No progress bar or summary.
     #[arg(short, long)]
     pub quiet: bool,
@@ -111,11 +120,17 @@ fn read_cells(a: &BakeArgs) -> anyhow::Result<Vec<Aabb>> {
     Ok(cells::grid(bounds, [n[0], n[1], n[2]])?)
 }
 
-/// Picks the backend.
+/// Picks the backend: `auto` takes the GPU only when a hardware adapter exists (a software
+/// adapter such as lavapipe is slower than the CPU backend on the same cores).
 pub fn make_backend(choice: BackendChoice) -> anyhow::Result<Box<dyn RasterBackend>> {
+    use umbrasweep::backend::gpu::{GpuBackend, hardware_adapter_available};
     match choice {
-        BackendChoice::Cpu | BackendChoice::Auto => Ok(Box::new(CpuBackend::new())),
-        BackendChoice::Gpu => bail!("the GPU backend is not built yet; use --backend cpu"),
+        BackendChoice::Cpu => Ok(Box::new(CpuBackend::new())),
+        BackendChoice::Auto if !hardware_adapter_available() => Ok(Box::new(CpuBackend::new())),
+        BackendChoice::Auto | BackendChoice::Gpu => match GpuBackend::new() {
+            Ok(b) => Ok(Box::new(b)),
+            Err(e) => bail!("--backend gpu: {e} (use --backend cpu)"),
+        },
     }
 }
 
@@ -134,17 +149,20 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         improved_projection: !a.no_improved_projection,
     };
     settings.check().map_err(anyhow::Error::msg)?;
-    if a.output.extension().and_then(|e| e.to_str()) != Some("json") {
-        bail!(
-            "{}: unsupported output format (use a .json file name)",
+    let binary = match a.output.extension().and_then(|e| e.to_str()) {
+        Some("json") => false,
+        Some("pvs") => true,
+        _ => bail!(
+            "{}: unsupported output format (use a .json or .pvs file name)",
             a.output.display()
-        );
-    }
+        ),
+    };
     let cells = read_cells(a)?;
     let t = std::time::Instant::now();
     let scene = scene::load(&a.scene)?;
     let load_s = t.elapsed().as_secs_f64();
     let backend = make_backend(a.backend)?;
+    let backend = backend.as_ref();
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -159,12 +177,41 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         b
     };
     let progress = |k: usize| bar.set_position(k as u64);
-    let result = bake::bake(&scene, &cells, &settings, backend.as_ref(), Some(&progress))?;
+    let dump = umbrasweep::inspect::DumpOptions {
+        exr: a.dump_exr.clone(),
+        png: a.dump_png.clone(),
+        cells: a.dump_cells.clone(),
+    };
+    let dump_error = std::sync::Mutex::new(None::<String>);
+    let observe = |ci: usize, k: usize, job: &_, map: &_, hdm: &_| {
+        if dump.cells.as_ref().is_some_and(|c| !c.contains(&ci)) {
+            return;
+        }
+        if let Err(e) = umbrasweep::inspect::dump_plane(&dump, ci, k, job, map, hdm) {
+            dump_error.lock().expect("not poisoned").get_or_insert(e);
+        }
+    };
+    let dumping = dump.exr.is_some() || dump.png.is_some();
+    let result = bake::bake_observed(
+        &scene,
+        &cells,
+        &settings,
+        backend,
+        Some(&progress),
+        dumping.then_some(&observe as bake::PlaneObserver),
+    )?;
     bar.finish_and_clear();
+    if let Some(e) = dump_error.into_inner().expect("not poisoned") {
+        bail!("dumping the planes: {e}");
+    }
     let doc = bake::to_document(&scene, &cells, &result, &settings);
-    umbrasweep::pvs::json::write(&a.output, &doc)
-        .map_err(anyhow::Error::msg)
-        .with_context(|| "writing the PVS")?;
+    if binary {
+        umbrasweep::pvs::binary::write(&a.output, &doc)
+    } else {
+        umbrasweep::pvs::json::write(&a.output, &doc)
+    }
+    .map_err(anyhow::Error::msg)
+    .with_context(|| "writing the PVS")?;
     if !a.quiet {
         let s = doc.summary.as_ref().expect("bake writes a summary");
         eprintln!(
@@ -183,6 +230,14 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 .unwrap_or_default()
         );
         eprintln!("cells       {}", s.cells);
+        let planes: usize = result.cells.iter().map(|c| c.planes).sum();
+        let occ: usize = result.cells.iter().map(|c| c.occluders_projected).sum();
+        let n = result.cells.len().max(1);
+        eprintln!(
+            "planes      {:.1} per cell, {:.0} occluder Projections per cell",
+            planes as f64 / n as f64,
+            occ as f64 / n as f64
+        );
         eprintln!("objects     {}", s.objects);
         eprintln!(
             "triangles   {} ({} occluders, {} degenerate skipped)",

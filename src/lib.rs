@@ -30,6 +30,8 @@ pub mod backend;
 #[cfg(feature = "bake")]
 pub mod bake;
 #[cfg(feature = "bake")]
+pub mod bench;
+#[cfg(feature = "bake")]
 pub mod cells;
 /// Scene generators (`umbrasweep gen`); files live in `src/gen/` (`gen` is reserved in Rust 2024).
 #[cfg(feature = "bake")]
@@ -37,6 +39,8 @@ pub mod cells;
 pub mod generate;
 #[cfg(feature = "bake")]
 pub mod hdm;
+#[cfg(feature = "bake")]
+pub mod inspect;
 #[cfg(feature = "bake")]
 pub mod project;
 #[cfg(feature = "bake")]

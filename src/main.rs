@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod cli_bake;
+mod cli_inspect;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -24,6 +25,12 @@ enum Command {
     Validate(umbrasweep::validate::ValidateArgs),
     /// Generate a test scene (forest, city, boxfield) as OBJ, with matching view cells.
     Gen(umbrasweep::generate::GenArgs),
+    /// Bake and validate a fixed set of scenes with each backend and print one table.
+    Bench(umbrasweep::bench::BenchArgs),
+    /// Summarise a binary PVS file, list a cell's objects, or print it as JSON.
+    Inspect(cli_inspect::InspectArgs),
+    /// Write a static HTML report of a PVS: top-down picture, per-cell table, plane previews.
+    Report(umbrasweep::inspect::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +39,9 @@ fn main() -> ExitCode {
         Command::Bake(a) => cli_bake::run(a).map(|_| 0),
         Command::Validate(a) => umbrasweep::validate::run(a),
         Command::Gen(a) => umbrasweep::generate::run(a).map(|_| 0),
+        Command::Bench(a) => umbrasweep::bench::run(a).map(|_| 0),
+        Command::Inspect(a) => cli_inspect::run(a).map(|_| 0),
+        Command::Report(a) => umbrasweep::inspect::run_report(a).map(|_| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code as u8),

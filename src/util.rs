@@ -20,6 +20,22 @@ pub fn write_atomic_with(
     path: &Path,
     f: impl FnOnce(&mut std::io::BufWriter<&mut std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), String> {
+    // Special files (a pipe, /dev/stdout, /dev/null) are written in place: renaming over
+    // them would replace the device with a regular file.
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+        && !meta.is_dir()
+    {
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| format!("{}: cannot write: {e}", path.display()))?;
+        let mut w = std::io::BufWriter::new(&mut file);
+        f(&mut w).map_err(|e| format!("{}: write failed: {e}", path.display()))?;
+        w.flush()
+            .map_err(|e| format!("{}: write failed: {e}", path.display()))?;
+        return Ok(());
+    }
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),

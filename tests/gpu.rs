@@ -3,8 +3,7 @@
 //! resolutions 16–256, slice rings), plus the adapter handling rule: without an adapter a test
 //! prints why and passes, unless the environment variable `CI` is set, where it fails.
 //!
-//! Benchmark (lavapipe numbers in the backend's report):
-//! `cargo test --release --test gpu -- --ignored --nocapture bench`.
+//! Timings come from the CLI: `umbrasweep bake … --backend gpu` against `--backend cpu`.
 #![cfg(feature = "bake")]
 
 use glam::{DVec2, DVec3, Vec3};
@@ -536,86 +535,6 @@ fn many_large_planes_are_split_into_submissions() {
 // ---------------------------------------------------------------------------------------------
 // Benchmark
 
-/// ms per plane at 256² for ~1,000 and ~10,000 triangles (lavapipe: run in release).
-#[test]
-#[ignore = "benchmark: cargo test --release --test gpu -- --ignored --nocapture"]
-fn bench_planes() {
-    let Some(b) = backend() else { return };
-    let cpu_backend = CpuBackend::new();
-    for count in [1_000usize, 10_000] {
-        let mut rng = Pcg64::seed_from_u64(count as u64);
-        let mut jobs = Vec::new();
-        for p in 0..6 {
-            let f = frame(256, p / 2, p % 2 == 0, 0.5);
-            let mut occ = OccluderSet::default();
-            for _ in 0..count {
-                // City-like: many small and medium triangles.
-                let (cu, cv) = (rng.random_range(-10.0..10.0), rng.random_range(-10.0..10.0));
-                let d = rng.random_range(1.0..30.0);
-                let s: f64 = rng.random_range(0.3..3.0);
-                occ.push(
-                    (0..3)
-                        .map(|_| {
-                            point(
-                                &f,
-                                cu + rng.random_range(-s..s),
-                                cv + rng.random_range(-s..s),
-                                d + rng.random_range(0.0..1.0),
-                            )
-                        })
-                        .collect::<Vec<_>>(),
-                );
-            }
-            jobs.push(PlaneJob {
-                frame: f,
-                occluders: occ,
-                slices: vec![],
-            });
-        }
-        b.render(&jobs).unwrap(); // warm-up: pools, pipeline compile
-        // Minimum over repetitions: the machine may be shared.
-        let reps = 5;
-        let (mut gpu_ms, mut setup_ms, mut maps) = (f64::INFINITY, f64::INFINITY, Vec::new());
-        for _ in 0..reps {
-            let t = std::time::Instant::now();
-            maps = b.render(&jobs).unwrap();
-            gpu_ms = gpu_ms.min(t.elapsed().as_secs_f64() * 1e3 / jobs.len() as f64);
-            setup_ms = setup_ms.min(b.last_stats().setup.as_secs_f64() * 1e3 / jobs.len() as f64);
-        }
-        let (mut cpu_ms, mut cpu_maps) = (f64::INFINITY, Vec::new());
-        for _ in 0..reps {
-            let t = std::time::Instant::now();
-            cpu_maps = cpu_backend.render(&jobs).unwrap();
-            cpu_ms = cpu_ms.min(t.elapsed().as_secs_f64() * 1e3 / jobs.len() as f64);
-        }
-        let covered: usize = cpu_maps.iter().map(|m| m.covered()).sum();
-        let mut diff = Diff::default();
-        for ((j, g), c) in jobs.iter().zip(&maps).zip(&cpu_maps) {
-            diff += compare(j, g, c);
-        }
-        println!("{:?}", b.last_stats());
-        if count == 1_000 {
-            // Slices are merged from a CPU mask: its cost per 256² plane (rings of 2 × 32 edges).
-            let f = frame(256, 2, true, 0.5);
-            let segs = ring(0.5, -0.3, 7.0, 3.0, 32);
-            let t = std::time::Instant::now();
-            for _ in 0..100 {
-                let mut m = DepthMap::new(256);
-                cpu::fill_slices(&mut m, &f, &segs);
-                std::hint::black_box(&m);
-            }
-            println!(
-                "slice mask: {:.1} µs/plane",
-                t.elapsed().as_secs_f64() * 1e4
-            );
-        }
-        println!(
-            "{count} triangles/plane, 256², 6 planes per call: gpu {gpu_ms:.2} ms/plane \
-             (CPU setup {setup_ms:.2}), cpu backend {cpu_ms:.2} ms/plane; {diff:?}; {covered} covered"
-        );
-    }
-}
-
 // ---------------------------------------------------------------------------------------------
 // Regression: degenerate clipped edges
 
@@ -841,34 +760,4 @@ fn bake_pvs_is_identical_on_analytic_scenes() {
         };
         assert_eq!(hidden > 0, hides, "hidden pairs: {hidden}");
     }
-}
-
-/// Whole-bake timing on a generated city, both backends (release; lavapipe numbers in the
-/// backend's report).
-#[test]
-#[ignore = "benchmark: cargo test --release --test gpu -- --ignored --nocapture"]
-fn bench_city_bake() {
-    let Some(b) = backend() else { return };
-    let options = CityOptions {
-        max_cells: Some(24),
-        ..CityOptions::with_blocks(4, 4)
-    };
-    let city = generate::city(&options).unwrap();
-    let scene = city.to_scene("city 4×4");
-    let settings = BakeSettings::default();
-    let c = bake(&scene, &city.cells, &settings, &CpuBackend::new(), None).unwrap();
-    let g = bake(&scene, &city.cells, &settings, b, None).unwrap();
-    for (cc, gc) in c.cells.iter().zip(&g.cells) {
-        assert_eq!(cc.visible, gc.visible);
-    }
-    let planes: usize = g.cells.iter().map(|c| c.planes).sum();
-    let occ: usize = g.cells.iter().map(|c| c.occluders_projected).sum();
-    println!(
-        "city 4×4: {} triangles, {} cells, {planes} planes, {occ} occluder Projections: \
-         cpu {:.2} s, gpu {:.2} s",
-        city.triangle_count(),
-        city.cells.len(),
-        c.seconds,
-        g.seconds
-    );
 }

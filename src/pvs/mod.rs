@@ -85,5 +85,6 @@ pub struct PvsSettings {
     pub improved_projection: bool,
 }
 
+pub mod binary;
 #[cfg(feature = "bake")]
 pub mod json;
