@@ -230,6 +230,9 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 .unwrap_or_default()
         );
         eprintln!("cells       {}", s.cells);
+        if let Some(line) = backend.stats_summary(s.cells) {
+            eprintln!("gpu         {line}");
+        }
         let planes: usize = result.cells.iter().map(|c| c.planes).sum();
         let occ: usize = result.cells.iter().map(|c| c.occluders_projected).sum();
         let n = result.cells.len().max(1);

@@ -172,6 +172,11 @@ pub trait RasterBackend: Send + Sync {
     fn adapter(&self) -> Option<String> {
         None
     }
+    /// A line of counters for the bake summary (passes, draws, bytes read back per cell), where
+    /// the backend keeps them.
+    fn stats_summary(&self, _cells: usize) -> Option<String> {
+        None
+    }
     /// Rasterises the jobs' occluder Projections and slices into one Depth Map per job, in
     /// order. Jobs are independent; a backend may run them in any order or concurrently.
     ///

@@ -1,10 +1,653 @@
-//! `umbrasweep bench` (placeholder until it lands).
+//! `umbrasweep bench`: bakes a fixed set of scenes with each backend, validates every baked
+//! cell against ray-sampled ground truth, and prints one table (see `docs/bench.md`).
+//!
+//! The scenes are generated in memory — a city ([`CityOptions`] 12×12 blocks, street cells),
+//! the coarse forest (path cells; 150 trees with `--quick`, all 1,500 otherwise), a boxfield —
+//! and, when the shared scene folder exists (`../shared/scenes` from the current directory,
+//! or `--shared DIR`), the real ones: `urban/sionna_munich.glb` and `urban/sionna_etoile.glb`
+//! (cells from [`free_cells`](crate::cells::free_cells), 4×2×4 m at 1 m), `levels/zdm2.obj`
+//! (a Cube 2 map in Cube units: cells 64×32×64 at 16 above the lowest point) and a small forest
+//! of `foliage/tree_poinciana.glb` instances ([`forest_of_models`]).
+//!
+//! Every backend bakes the same cells (the GPU backend the first `--gpu-cells` of them); the
+//! sampled visible set of a cell is computed once and compared with each backend's PVS.
+//! Progress goes to stderr, the table to stdout, the rows to `--json` if asked. Benchmarks are
+//! measurements, not tests: nothing here asserts a timing.
+
+use crate::backend::RasterBackend;
+use crate::backend::cpu::CpuBackend;
+use crate::backend::gpu::GpuBackend;
+use crate::bake::{BakeSettings, bake, median};
+use crate::cells::free_cells;
+use crate::generate::{
+    BoxfieldOptions, CityOptions, ForestOptions, TreeModel, boxfield, city, forest,
+    forest_of_models,
+};
+use crate::geom::Aabb;
+use crate::pvs::PvsCell;
+use crate::scene::Scene;
+use crate::validate::{CellSample, SceneRays, cell_report, sample_cell};
+use anyhow::Context as _;
+use glam::Vec3;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Which backends `umbrasweep bench` runs.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BenchBackend {
+    /// The CPU backend only.
+    Cpu,
+    /// The GPU backend only (an error when no adapter exists).
+    Gpu,
+    /// The CPU backend, and the GPU backend when an adapter exists.
+    All,
+}
 
 /// Options of `umbrasweep bench`.
 #[derive(clap::Args, Debug, Clone)]
-pub struct BenchArgs {}
+#[command(after_help = "Examples:
+  umbrasweep bench --quick
+  umbrasweep bench --backend cpu --json bench.json
+  umbrasweep bench --quick --scenes city,boxfield --cells 2 --rays 10000")]
+pub struct BenchArgs {
+    /// A small version that runs in a few minutes: 5 cells per scene, 3 on the GPU, 250,000
+    /// rays per cell, a forest of 150 trees.
+    #[arg(long)]
+    pub quick: bool,
+    /// Cells per scene (default 20, 5 with --quick).
+    #[arg(long, value_name = "N")]
+    pub cells: Option<usize>,
+    /// Cells per scene on the GPU backend, the first of the CPU's (default 10, 3 with
+    /// --quick: software rasterisers such as lavapipe are slow).
+    #[arg(long, value_name = "N")]
+    pub gpu_cells: Option<usize>,
+    /// Validation rays per cell (default 1,000,000, 250,000 with --quick).
+    #[arg(long, value_name = "N")]
+    pub rays: Option<u64>,
+    /// Seed of the generated scenes, of the free-space cells and of the validation rays.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Backends to run.
+    #[arg(long, value_enum, default_value_t = BenchBackend::All)]
+    pub backend: BenchBackend,
+    /// The shared scene folder (default: ../shared/scenes when it exists).
+    #[arg(long, value_name = "DIR")]
+    pub shared: Option<PathBuf>,
+    /// Only these scenes (comma-separated): city, forest, boxfield, munich, etoile, zdm2,
+    /// poinciana.
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    pub scenes: Option<Vec<String>>,
+    /// Also write the rows as JSON to this file.
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+}
 
-/// Runs `umbrasweep bench`.
-pub fn run(_args: &BenchArgs) -> anyhow::Result<()> {
-    anyhow::bail!("bench is not built yet")
+/// One row of the table: one scene baked by one backend.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BenchRow {
+    /// Scene name (`city`, `forest`, `sionna_munich`, …).
+    pub scene: String,
+    /// Triangles in the scene.
+    pub triangles: usize,
+    /// Objects in the scene.
+    pub objects: usize,
+    /// Cells baked and validated.
+    pub cells: usize,
+    /// `cpu` or `gpu`.
+    pub backend: String,
+    /// The GPU adapter, if any.
+    pub adapter: Option<String>,
+    /// Median bake time per cell (the bake's per-cell `ms`).
+    pub median_ms_per_cell: f64,
+    /// Median time to sample one cell's visible set with `rays_per_cell` rays.
+    pub validate_ms_per_cell: f64,
+    /// Mean over cells of the percentage of objects culled.
+    pub objects_culled_percent: f64,
+    /// Mean over cells of the percentage of triangles culled.
+    pub triangles_culled_percent: f64,
+    /// Mean over cells of |PVS| / |VS| (cells with an empty VS left out).
+    pub pvs_over_vs: Option<f64>,
+    /// Objects sampled visible but missing from the PVS, over all cells (must be 0).
+    pub false_culls: usize,
+    /// Mean projection planes rendered per cell.
+    pub planes_per_cell: f64,
+    /// Validation rays per cell.
+    pub rays_per_cell: u64,
+}
+
+/// A whole benchmark run: the `--json` document.
+#[derive(Clone, Debug, Serialize)]
+pub struct Bench {
+    /// `"umbrasweep-bench"`.
+    pub format: String,
+    /// `--quick` was given.
+    pub quick: bool,
+    /// Validation rays per cell.
+    pub rays_per_cell: u64,
+    /// Seed of scenes, cells and rays.
+    pub seed: u64,
+    /// Worker threads (rayon).
+    pub threads: usize,
+    /// One row per scene and backend.
+    pub rows: Vec<BenchRow>,
+    /// Scenes or backends skipped, and why.
+    pub skipped: Vec<String>,
+    /// Wall-clock time of the whole run, seconds.
+    pub seconds: f64,
+}
+
+/// The scenes of the benchmark, in table order.
+const SCENES: [&str; 7] = [
+    "city",
+    "forest",
+    "boxfield",
+    "munich",
+    "etoile",
+    "zdm2",
+    "poinciana",
+];
+
+/// A scene ready to bake.
+struct BenchScene {
+    name: String,
+    scene: Scene,
+    cells: Vec<Aabb>,
+}
+
+/// Settings after defaults.
+struct Plan {
+    cells: usize,
+    gpu_cells: usize,
+    rays: u64,
+    shared: Option<PathBuf>,
+}
+
+impl Plan {
+    fn new(args: &BenchArgs) -> anyhow::Result<Plan> {
+        let q = args.quick;
+        let cells = args.cells.unwrap_or(if q { 5 } else { 20 });
+        let gpu_cells = args.gpu_cells.unwrap_or(if q { 3 } else { 10 }).min(cells);
+        let rays = args.rays.unwrap_or(if q { 250_000 } else { 1_000_000 });
+        if cells == 0 || rays == 0 {
+            anyhow::bail!("--cells and --rays must be at least 1");
+        }
+        let shared = match &args.shared {
+            Some(d) if d.is_dir() => Some(d.clone()),
+            Some(d) => anyhow::bail!("--shared {}: not a directory", d.display()),
+            None => Some(PathBuf::from("../shared/scenes")).filter(|d| d.is_dir()),
+        };
+        if let Some(list) = &args.scenes
+            && let Some(bad) = list.iter().find(|s| !SCENES.contains(&s.as_str()))
+        {
+            anyhow::bail!(
+                "--scenes {bad}: unknown scene (one of {})",
+                SCENES.join(", ")
+            );
+        }
+        Ok(Plan {
+            cells,
+            gpu_cells,
+            rays,
+            shared,
+        })
+    }
+}
+
+/// Builds scene `name`; `Ok(Err(reason))` when it needs the shared folder or a file in it
+/// that is absent.
+fn build(name: &str, args: &BenchArgs, plan: &Plan) -> anyhow::Result<Result<BenchScene, String>> {
+    let n = plan.cells;
+    let seed = args.seed;
+    let generated = |g: crate::generate::Generated, name: &str| BenchScene {
+        name: name.into(),
+        scene: g.to_scene(name),
+        cells: g.cells,
+    };
+    let shared_file = |rel: &str| -> Result<PathBuf, String> {
+        match &plan.shared {
+            None => Err(format!(
+                "{name}: skipped, no shared scene folder (../shared/scenes or --shared DIR)"
+            )),
+            Some(d) => {
+                let p = d.join(rel);
+                if p.is_file() {
+                    Ok(p)
+                } else {
+                    Err(format!("{name}: skipped, {} is missing", p.display()))
+                }
+            }
+        }
+    };
+    let load = |p: &Path| crate::scene::load(p).with_context(|| format!("{}", p.display()));
+    let free = |scene: &Scene, size: Vec3, height: f32| {
+        let bounds: Vec<Aabb> = scene.objects.iter().map(|o| o.bounds).collect();
+        free_cells(&bounds, n, size, height, seed)
+    };
+    Ok(Ok(match name {
+        "city" => generated(
+            city(&CityOptions {
+                seed,
+                max_cells: Some(n),
+                ..CityOptions::with_blocks(12, 12)
+            })?,
+            "city",
+        ),
+        "forest" => generated(
+            forest(&ForestOptions {
+                seed,
+                trees: if args.quick { 150 } else { 1500 },
+                max_cells: Some(n),
+                ..ForestOptions::coarse()
+            })?,
+            "forest",
+        ),
+        "boxfield" => generated(
+            boxfield(&BoxfieldOptions {
+                seed,
+                max_cells: Some(n),
+                ..BoxfieldOptions::default()
+            })?,
+            "boxfield",
+        ),
+        "munich" | "etoile" => {
+            let file = format!("urban/sionna_{name}.glb");
+            let path = match shared_file(&file) {
+                Ok(p) => p,
+                Err(why) => return Ok(Err(why)),
+            };
+            let scene = load(&path)?;
+            let cells = free(&scene, Vec3::new(4.0, 2.0, 4.0), 1.0);
+            BenchScene {
+                name: format!("sionna_{name}"),
+                scene,
+                cells,
+            }
+        }
+        "zdm2" => {
+            let path = match shared_file("levels/zdm2.obj") {
+                Ok(p) => p,
+                Err(why) => return Ok(Err(why)),
+            };
+            let scene = load(&path)?;
+            // Cube 2 units (a player is ~16 tall; the map spans ~870 × 324 × 610).
+            let cells = free(&scene, Vec3::new(64.0, 32.0, 64.0), 16.0);
+            BenchScene {
+                name: "zdm2".into(),
+                scene,
+                cells,
+            }
+        }
+        "poinciana" => {
+            let path = match shared_file("foliage/tree_poinciana.glb") {
+                Ok(p) => p,
+                Err(why) => return Ok(Err(why)),
+            };
+            let model = TreeModel::from_scene(&load(&path)?);
+            let g = forest_of_models(
+                &ForestOptions {
+                    seed,
+                    trees: if args.quick { 6 } else { 16 },
+                    area_per_tree: None,
+                    max_cells: Some(n),
+                    ..ForestOptions::default()
+                },
+                &model,
+            )?;
+            generated(g, "poinciana_forest")
+        }
+        other => anyhow::bail!("unknown scene {other}"),
+    }))
+}
+
+/// Runs the benchmark and returns its rows (progress on stderr).
+///
+/// # Errors
+/// Bad options, a shared scene that exists but cannot be loaded, `--backend gpu` without an
+/// adapter, or a backend failure.
+pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
+    let start = Instant::now();
+    let plan = Plan::new(args)?;
+    let settings = BakeSettings::default();
+    let mut skipped = Vec::new();
+
+    let cpu = CpuBackend::new();
+    let gpu = match args.backend {
+        BenchBackend::Cpu => None,
+        BenchBackend::Gpu => Some(GpuBackend::new().context("--backend gpu")?),
+        BenchBackend::All => match GpuBackend::new() {
+            Ok(g) => Some(g),
+            Err(e) => {
+                skipped.push(format!("gpu: skipped, {e}"));
+                eprintln!("bench: gpu skipped: {e}");
+                None
+            }
+        },
+    };
+    let mut backends: Vec<(&dyn RasterBackend, usize)> = Vec::new();
+    if args.backend != BenchBackend::Gpu {
+        backends.push((&cpu, plan.cells));
+    }
+    if let Some(g) = &gpu {
+        backends.push((g, plan.gpu_cells));
+    }
+
+    let mut rows = Vec::new();
+    for name in SCENES {
+        if let Some(list) = &args.scenes
+            && !list.iter().any(|s| s == name)
+        {
+            continue;
+        }
+        let t = Instant::now();
+        eprintln!("bench: {name}: preparing");
+        let bs = match build(name, args, &plan)? {
+            Ok(s) => s,
+            Err(why) => {
+                eprintln!("bench: {why}");
+                skipped.push(why);
+                continue;
+            }
+        };
+        let scene = &bs.scene;
+        eprintln!(
+            "bench: {}: {} triangles, {} objects, {} cells ({:.1} s)",
+            bs.name,
+            scene.triangles.len(),
+            scene.objects.len(),
+            bs.cells.len(),
+            t.elapsed().as_secs_f64()
+        );
+        if bs.cells.is_empty() {
+            let why = format!("{}: skipped, no free cell found", bs.name);
+            eprintln!("bench: {why}");
+            skipped.push(why);
+            continue;
+        }
+        let index = SceneRays::new(scene);
+        // Sampled visible set and its time, per cell, shared by the backends.
+        let mut samples: Vec<Option<(CellSample, f64)>> = vec![None; bs.cells.len()];
+        for &(backend, max_cells) in &backends {
+            let cells = &bs.cells[..max_cells.min(bs.cells.len())];
+            let t = Instant::now();
+            eprintln!(
+                "bench: {}: baking {} cells on {}",
+                bs.name,
+                cells.len(),
+                backend.name()
+            );
+            let result = bake(scene, cells, &settings, backend, None)
+                .with_context(|| format!("{}: bake on {}", bs.name, backend.name()))?;
+            eprintln!(
+                "bench: {}: baked in {:.1} s; validating with {} rays per cell",
+                bs.name,
+                t.elapsed().as_secs_f64(),
+                plan.rays
+            );
+            let mut reports = Vec::new();
+            for (i, (cell, r)) in cells.iter().zip(&result.cells).enumerate() {
+                let (sample, _) = samples[i].get_or_insert_with(|| {
+                    let t = Instant::now();
+                    let s =
+                        sample_cell(&index, scene, *cell, plan.rays, args.seed, i as u64, false);
+                    (s, t.elapsed().as_secs_f64() * 1e3)
+                });
+                let pvs = PvsCell {
+                    min: cell.min.to_array(),
+                    max: cell.max.to_array(),
+                    visible: r.visible.clone(),
+                    ms: r.ms,
+                };
+                reports.push(cell_report(scene, &pvs, sample));
+            }
+            let nc = cells.len() as f64;
+            let ratios: Vec<f64> = reports.iter().filter_map(|r| r.pvs_over_vs).collect();
+            let false_culls = reports.iter().map(|r| r.false_culls.len()).sum();
+            for (i, r) in reports.iter().enumerate() {
+                for f in &r.false_culls {
+                    eprintln!(
+                        "bench: FALSE CULL {} [{}] cell {i} {:?}–{:?}: object {} {:?}, ray \
+                         origin {:?} direction {:?}",
+                        bs.name,
+                        backend.name(),
+                        r.min,
+                        r.max,
+                        f.object,
+                        f.name,
+                        f.origin,
+                        f.direction
+                    );
+                }
+            }
+            let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
+            let vms: Vec<f64> = samples[..cells.len()]
+                .iter()
+                .flatten()
+                .map(|s| s.1)
+                .collect();
+            rows.push(BenchRow {
+                scene: bs.name.clone(),
+                triangles: scene.triangles.len(),
+                objects: scene.objects.len(),
+                cells: cells.len(),
+                backend: backend.name().into(),
+                adapter: backend.adapter(),
+                median_ms_per_cell: median(&ms),
+                validate_ms_per_cell: median(&vms),
+                objects_culled_percent: reports
+                    .iter()
+                    .map(|r| r.objects_culled_percent)
+                    .sum::<f64>()
+                    / nc,
+                triangles_culled_percent: reports
+                    .iter()
+                    .map(|r| r.triangles_culled_percent)
+                    .sum::<f64>()
+                    / nc,
+                pvs_over_vs: (!ratios.is_empty())
+                    .then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
+                false_culls,
+                planes_per_cell: result.cells.iter().map(|c| c.planes as f64).sum::<f64>() / nc,
+                rays_per_cell: plan.rays,
+            });
+        }
+        eprintln!(
+            "bench: {}: done in {:.1} s",
+            bs.name,
+            t.elapsed().as_secs_f64()
+        );
+    }
+    Ok(Bench {
+        format: "umbrasweep-bench".into(),
+        quick: args.quick,
+        rays_per_cell: plan.rays,
+        seed: args.seed,
+        threads: rayon::current_num_threads(),
+        rows,
+        skipped,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The columns of the table, in order.
+pub const COLUMNS: [&str; 12] = [
+    "scene",
+    "triangles",
+    "objects",
+    "cells",
+    "backend",
+    "median ms/cell",
+    "validate ms/cell",
+    "% culled",
+    "% tris culled",
+    "PVS/VS",
+    "false culls",
+    "planes/cell",
+];
+
+impl Bench {
+    /// The table: a header line, then a Markdown table (one row per scene and backend), then
+    /// the adapters and anything skipped.
+    pub fn table(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "umbrasweep bench{}: {} validation rays per cell{}, seed {}, {} threads, {:.0} s",
+            if self.quick { " --quick" } else { "" },
+            self.rays_per_cell,
+            if self.rays_per_cell < 1_000_000 {
+                " (fewer than the full bench's 1,000,000)"
+            } else {
+                ""
+            },
+            self.seed,
+            self.threads,
+            self.seconds
+        );
+        out.push('\n');
+        let cells: Vec<[String; 12]> = self
+            .rows
+            .iter()
+            .map(|r| {
+                [
+                    r.scene.clone(),
+                    r.triangles.to_string(),
+                    r.objects.to_string(),
+                    r.cells.to_string(),
+                    r.backend.clone(),
+                    format!("{:.1}", r.median_ms_per_cell),
+                    format!("{:.1}", r.validate_ms_per_cell),
+                    format!("{:.1}", r.objects_culled_percent),
+                    format!("{:.1}", r.triangles_culled_percent),
+                    r.pvs_over_vs.map_or("–".into(), |v| format!("{v:.2}")),
+                    r.false_culls.to_string(),
+                    format!("{:.1}", r.planes_per_cell),
+                ]
+            })
+            .collect();
+        let mut width: Vec<usize> = COLUMNS.iter().map(|c| c.chars().count()).collect();
+        for row in &cells {
+            for (w, c) in width.iter_mut().zip(row) {
+                *w = (*w).max(c.chars().count());
+            }
+        }
+        let line = |out: &mut String, row: &[String]| {
+            out.push('|');
+            for (k, (c, w)) in row.iter().zip(&width).enumerate() {
+                let pad = w - c.chars().count();
+                if k == 0 || k == 4 {
+                    let _ = write!(out, " {c}{} |", " ".repeat(pad));
+                } else {
+                    let _ = write!(out, " {}{c} |", " ".repeat(pad));
+                }
+            }
+            out.push('\n');
+        };
+        let header: Vec<String> = COLUMNS.iter().map(|c| c.to_string()).collect();
+        line(&mut out, &header);
+        out.push('|');
+        for (k, w) in width.iter().enumerate() {
+            let dashes = "-".repeat(*w);
+            if k == 0 || k == 4 {
+                let _ = write!(out, " {dashes} |");
+            } else {
+                let _ = write!(out, " {}: |", &dashes[1..]);
+            }
+        }
+        out.push('\n');
+        for row in &cells {
+            line(&mut out, row);
+        }
+        let mut adapters: Vec<&str> = self
+            .rows
+            .iter()
+            .filter_map(|r| r.adapter.as_deref())
+            .collect();
+        adapters.dedup();
+        out.push('\n');
+        for a in adapters {
+            let _ = writeln!(out, "gpu adapter: {a}");
+        }
+        for s in &self.skipped {
+            let _ = writeln!(out, "{s}");
+        }
+        out
+    }
+}
+
+/// Runs `umbrasweep bench`: progress on stderr, the table on stdout, `--json` if asked.
+///
+/// # Errors
+/// See [`collect`]; or a `--json` file that cannot be written.
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let bench = collect(args)?;
+    print!("{}", bench.table());
+    let false_culls: usize = bench.rows.iter().map(|r| r.false_culls).sum();
+    if false_culls > 0 {
+        eprintln!("bench: {false_culls} FALSE CULLS (see above): the PVS is not conservative");
+    }
+    if let Some(path) = &args.json {
+        let bytes = serde_json::to_vec_pretty(&bench)?;
+        crate::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: BenchArgs,
+    }
+
+    #[test]
+    fn a_tiny_bench_prints_every_column() {
+        let cli = Cli::parse_from([
+            "bench",
+            "--quick",
+            "--scenes",
+            "boxfield,city",
+            "--cells",
+            "1",
+            "--rays",
+            "1000",
+            "--backend",
+            "cpu",
+        ]);
+        let bench = collect(&cli.args).unwrap();
+        assert_eq!(bench.rows.len(), 2);
+        assert!(
+            bench
+                .rows
+                .iter()
+                .all(|r| r.cells == 1 && r.backend == "cpu")
+        );
+        let table = bench.table();
+        let header = table.lines().nth(2).unwrap();
+        let cols: Vec<&str> = header
+            .split('|')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .collect();
+        assert_eq!(cols, COLUMNS);
+        assert_eq!(
+            table
+                .lines()
+                .filter(|l| l.starts_with("| boxfield"))
+                .count(),
+            1
+        );
+    }
+
+    #[test]
+    fn unknown_scenes_are_refused() {
+        let cli = Cli::parse_from(["bench", "--scenes", "moon"]);
+        let err = collect(&cli.args).unwrap_err().to_string();
+        assert!(err.contains("moon"), "{err}");
+    }
 }

@@ -175,7 +175,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             let r = (x >> 33) as u32 % 100;
             let block = (k as u32 % res) / 8 + (k as u32 / res) / 8;
-            *d = if block % 3 == 0 && r < 97 {
+            *d = if block.is_multiple_of(3) && r < 97 {
                 (r % 10) as f32
             } else if r < 30 {
                 f32::INFINITY

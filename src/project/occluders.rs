@@ -84,8 +84,7 @@ const MAX_SOLID_TRIANGLES: usize = 256;
 /// edge project as one polygon, with no crack at their seam.
 pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Occluders {
     // 1. Per object: solids, and the triangles left over.
-    let per_object: Vec<(Vec<DVec3>, Vec<OccluderPart>, OccluderStats, Vec<[Vec3; 3]>)> = (0
-        ..scene.objects.len())
+    let per_object: Vec<ObjectParts> = (0..scene.objects.len())
         .into_par_iter()
         .map(|o| {
             if !is_occluder[o] {
@@ -169,12 +168,11 @@ pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Oc
     out
 }
 
+/// One object's solids (their points and parts), its counts, and its other usable triangles.
+type ObjectParts = (Vec<DVec3>, Vec<OccluderPart>, OccluderStats, Vec<[Vec3; 3]>);
+
 /// One object's convex solids, and its other usable triangles.
-fn prepare_object(
-    scene: &Scene,
-    object: u32,
-    alpha_occluders: bool,
-) -> (Vec<DVec3>, Vec<OccluderPart>, OccluderStats, Vec<[Vec3; 3]>) {
+fn prepare_object(scene: &Scene, object: u32, alpha_occluders: bool) -> ObjectParts {
     let mut stats = OccluderStats::default();
     let range = scene.objects[object as usize].triangles.clone();
     // Weld bit-identical positions.
@@ -488,7 +486,7 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
         // The whole coplanar region first: when its boundary is one convex loop (a wall cut
         // into a grid of quads), it is one polygon, whatever order a greedy merge would take.
         if let Some((loop_verts, region)) =
-            convex_region(seed, &tris, &by_edge, &used, &coplanar, &turn)
+            convex_region(seed, tris, &by_edge, &used, &coplanar, &turn)
         {
             for t in region {
                 used[t] = true;

@@ -99,6 +99,9 @@ struct DirParts {
     near: Vec<f64>,
     /// Extents along the plane's two axes, per part.
     extent: Vec<DVec2>,
+    /// Bounds along the plane's two axes, per part.
+    lo: Vec<DVec2>,
+    hi: Vec<DVec2>,
 }
 
 /// Builds all plane jobs of one cell: up to `planes + slice_planes` per direction, skipping
@@ -264,12 +267,32 @@ pub fn plane_job(
         rect_max: fmax,
         resolution: settings.resolution,
     };
+    // A Projection lies inside the view from the cell's centre, and that inside the view of
+    // the part's bounds: parts whose bounds' view misses the frame are skipped unprojected.
+    let eye = DVec2::new(center.x, center.y);
+    let eye_t = 0.5 * (cell.max[axis] - cell.min[axis]);
+    let view_of_bounds = |i: usize| {
+        let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
+        for t in [parts.near[i], parts.far[i]] {
+            let k = (tp + eye_t) / (t + eye_t);
+            for q in [parts.lo[i], parts.hi[i]] {
+                let p = eye + (q - eye) * k;
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        (lo, hi)
+    };
     // Projection bounding boxes, clipped to the frame.
     let mut kept: Vec<(usize, DVec2, DVec2)> = Vec::new();
     for i in 0..parts.set.len() {
         if skip(plan.part_object[i])
             || !may_project(parts.near[i], parts.far[i], parts.extent[i], cell_uv, tp)
         {
+            continue;
+        }
+        let (vlo, vhi) = view_of_bounds(i);
+        if vhi.x < fmin.x || vhi.y < fmin.y || vlo.x > fmax.x || vlo.y > fmax.y {
             continue;
         }
         if let Some((lo, hi)) = projection_bounds(&probe, &corners, parts.set.get(i)) {
@@ -284,6 +307,10 @@ pub fn plane_job(
     for (i, b) in sliceable.bounds.iter().enumerate() {
         if b.min[axis] < position
             && position < b.max[axis]
+            && b.max[u] >= fmin.x
+            && b.min[u] <= fmax.x
+            && b.max[v] >= fmin.y
+            && b.min[v] <= fmax.y
             && !b.overlaps(cell)
             && !skip(sliceable.objects[i])
         {
@@ -401,6 +428,8 @@ fn summarize(
         out.near.push((s * (near - face)).max(eps));
         out.extent
             .push(DVec2::new(b.max[u] - b.min[u], b.max[v] - b.min[v]));
+        out.lo.push(DVec2::new(b.min[u], b.min[v]));
+        out.hi.push(DVec2::new(b.max[u], b.max[v]));
         out.weight.push(extent * extent / (d * d));
     }
     out
@@ -457,6 +486,8 @@ fn cut_parts(
         out.near.push((s * (near - face)).max(eps));
         out.extent
             .push(DVec2::new(b.max[u] - b.min[u], b.max[v] - b.min[v]));
+        out.lo.push(DVec2::new(b.min[u], b.min[v]));
+        out.hi.push(DVec2::new(b.max[u], b.max[v]));
         out.weight.push(0.0);
         out.set.push(buf.iter().copied());
     }
@@ -481,7 +512,8 @@ fn shrink_bent_polygon(
         sin_min = sin_min.min(normal.dot(d).abs() / (d.length() + radius));
     }
     let w = 2.0 * deviation / sin_min.max(1e-12);
-    if !(w < 0.5 * inradius) {
+    // (Written so that a NaN width also gives up.)
+    if w.partial_cmp(&(0.5 * inradius)) != Some(std::cmp::Ordering::Less) {
         return false;
     }
     let f = 1.0 - w / inradius;
@@ -690,6 +722,8 @@ mod tests {
             weight: vec![3.0, 1.0],
             near: vec![1.0, 9.0],
             extent: vec![DVec2::ONE, DVec2::ONE],
+            lo: vec![DVec2::ZERO; 2],
+            hi: vec![DVec2::ONE; 2],
         };
         let d = plane_distances(&parts, 2, 1.0, Placement::Quantile);
         assert_eq!(d.len(), 2);

@@ -1,15 +1,524 @@
-//! The binary PVS file (placeholder until it lands).
+//! The binary PVS file (`.pvs`): a versioned, checksummed, delta-compressed form of the
+//! [`PvsDocument`], laid out in `docs/pvs-format.md` so that engines in any language can read
+//! it.
+//!
+//! This module holds the format's constants, its checksum ([`crc32`]), the encoder
+//! ([`encode`], and [`write`] with the `bake` feature) and the low-level decoding helpers that
+//! [`PvsDatabase`](super::database::PvsDatabase) uses. Reading a file is
+//! [`PvsDatabase::open`](super::database::PvsDatabase::open); [`read`] turns it back into the
+//! document.
+//!
+//! # Delta-PVS
+//!
+//! Each cell's record holds its visible set XOR-ed with its *parent* cell's set (Durand et al.
+//! 2000, §6.1; Yagel and Ray's difference lists), or the full set for a *key* cell (no parent).
+//! Parents are chosen by a minimum spanning tree over each cell's nearest cells, weighted by the
+//! encoded size of the difference, with an edge to "no parent" weighted by the full set's size,
+//! and the tree's depth is capped at [`MAX_DEPTH`]. Each record is stored as a bitset, as
+//! run lengths or as a list of ids, whichever is smallest.
 
 use super::PvsDocument;
+#[cfg(feature = "bake")]
 use std::path::Path;
 
-/// Writes `doc` as a binary `.pvs` file, atomically.
+/// The first 8 bytes of every `.pvs` file.
+pub const MAGIC: [u8; 8] = *b"UMBRAPVS";
+/// The binary format version this crate writes and reads.
+pub const FORMAT_VERSION: u32 = 1;
+/// Length of the fixed header: magic, version, checksum, payload length.
+pub const HEADER_LEN: usize = 24;
+/// The `parent` value of a key cell (a record holding the full set).
+pub const NO_PARENT: u32 = u32::MAX;
+/// The `length` value of an absent optional string.
+pub const NO_STRING: u32 = u32::MAX;
+/// Record encoding: a bitset of `ceil(objects / 8)` bytes, least significant bit first.
+pub const ENC_BITSET: u8 = 0;
+/// Record encoding: LEB128 run lengths, alternately clear and set, starting with clear.
+pub const ENC_RUNS: u8 = 1;
+/// Record encoding: LEB128 gaps between ascending set ids.
+pub const ENC_LIST: u8 = 2;
+/// Bytes per object record (triangles, min, max).
+pub const OBJECT_RECORD_LEN: usize = 28;
+/// Bytes per cell record (min, max, parent, visible count, data length, encoding, reserved).
+pub const CELL_RECORD_LEN: usize = 40;
+/// The writer's cap on the number of records decoded to rebuild one cell from scratch.
+pub const MAX_DEPTH: u32 = 16;
+/// How many nearest cells (by centre distance) are parent candidates of each cell.
+const NEIGHBOURS: usize = 10;
+
+/// The CRC-32 of `bytes` (IEEE 802.3, reflected polynomial `0xEDB88320`, initial value and
+/// final XOR `0xFFFFFFFF`): the checksum of zlib's `crc32`, PNG and gzip.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    const TABLE: [u32; 256] = {
+        let mut t = [0u32; 256];
+        let mut i = 0;
+        while i < 256 {
+            let mut c = i as u32;
+            let mut k = 0;
+            while k < 8 {
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+                k += 1;
+            }
+            t[i] = c;
+            i += 1;
+        }
+        t
+    };
+    let mut c = 0xFFFF_FFFFu32;
+    for &b in bytes {
+        c = TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
+    }
+    c ^ 0xFFFF_FFFF
+}
+
+/// Bytes of `v` as an unsigned LEB128 varint.
+pub(crate) fn varint_len(v: u32) -> usize {
+    match v {
+        0..0x80 => 1,
+        0x80..0x4000 => 2,
+        0x4000..0x20_0000 => 3,
+        0x20_0000..0x1000_0000 => 4,
+        _ => 5,
+    }
+}
+
+fn put_varint(out: &mut Vec<u8>, mut v: u32) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+/// Reads an unsigned LEB128 varint of at most 5 bytes at `*pos`, advancing it; `None` when
+/// it is cut short or overflows 32 bits.
+pub(crate) fn get_varint(bytes: &[u8], pos: &mut usize) -> Option<u32> {
+    let mut v = 0u32;
+    for k in 0..5 {
+        let b = *bytes.get(*pos)?;
+        *pos += 1;
+        if k == 4 && b > 0x0F {
+            return None;
+        }
+        v |= ((b & 0x7F) as u32) << (7 * k);
+        if b & 0x80 == 0 {
+            return Some(v);
+        }
+    }
+    None
+}
+
+/// Calls `f(start, len)` for each maximal run of set bits, in ascending order.
+pub(crate) fn for_each_run(bits: &[u64], mut f: impl FnMut(u32, u32)) {
+    let mut run: Option<(u32, u32)> = None;
+    for (w, &word) in bits.iter().enumerate() {
+        let mut x = word;
+        let base = (w * 64) as u32;
+        while x != 0 {
+            let tz = x.trailing_zeros();
+            let start = base + tz;
+            let ones = (x >> tz).trailing_ones();
+            match &mut run {
+                Some((s, l)) if *s + *l == start => *l += ones,
+                _ => {
+                    if let Some((s, l)) = run {
+                        f(s, l);
+                    }
+                    run = Some((start, ones));
+                }
+            }
+            if tz + ones >= 64 {
+                break;
+            }
+            x &= !(((1u64 << ones) - 1) << tz);
+        }
+    }
+    if let Some((s, l)) = run {
+        f(s, l);
+    }
+}
+
+/// Encoded sizes of one set of `objects` bits: (bitset, runs, list).
+fn sizes(bits: &[u64], objects: u32) -> [usize; 3] {
+    let (mut runs, mut list) = (0usize, 0usize);
+    let mut end = 0u32; // end of the previous set run
+    let mut next = 0u32; // the smallest id the next list entry may have
+    for_each_run(bits, |s, l| {
+        runs += varint_len(s - end) + varint_len(l);
+        end = s + l;
+        list += varint_len(s - next) + (l as usize - 1);
+        next = s + l;
+    });
+    [objects.div_ceil(8) as usize, runs, list]
+}
+
+/// Appends the record of `bits` in `enc`.
+fn put_record(out: &mut Vec<u8>, bits: &[u64], objects: u32, enc: u8) {
+    match enc {
+        ENC_BITSET => {
+            let n = objects.div_ceil(8) as usize;
+            let start = out.len();
+            for w in bits {
+                out.extend_from_slice(&w.to_le_bytes());
+            }
+            out.truncate(start + n);
+        }
+        ENC_RUNS => {
+            let mut end = 0;
+            for_each_run(bits, |s, l| {
+                put_varint(out, s - end);
+                put_varint(out, l);
+                end = s + l;
+            });
+        }
+        _ => {
+            let mut next = 0;
+            for_each_run(bits, |s, l| {
+                put_varint(out, s - next);
+                for _ in 1..l {
+                    out.push(0);
+                }
+                next = s + l;
+            });
+        }
+    }
+}
+
+fn put_u32(out: &mut Vec<u8>, v: u32) {
+    out.extend_from_slice(&v.to_le_bytes());
+}
+
+fn put_str(out: &mut Vec<u8>, s: &str) -> Result<(), String> {
+    let n = u32::try_from(s.len())
+        .ok()
+        .filter(|&n| n != NO_STRING)
+        .ok_or("a string is longer than 4 GiB")?;
+    put_u32(out, n);
+    out.extend_from_slice(s.as_bytes());
+    Ok(())
+}
+
+fn put_opt_str(out: &mut Vec<u8>, s: Option<&str>) -> Result<(), String> {
+    match s {
+        Some(s) => put_str(out, s),
+        None => {
+            put_u32(out, NO_STRING);
+            Ok(())
+        }
+    }
+}
+
+/// The delta tree: each cell's parent (or [`NO_PARENT`]), chosen by a minimum spanning tree
+/// over nearest neighbours with a virtual root for "store in full", depth-capped.
+fn choose_parents(doc: &PvsDocument, sets: &[Vec<u64>], objects: u32) -> Vec<u32> {
+    let n = sets.len();
+    let centre = |i: usize| {
+        let c = &doc.cells[i];
+        [0, 1, 2].map(|k| 0.5 * (c.min[k] as f64 + c.max[k] as f64))
+    };
+    let centres: Vec<[f64; 3]> = (0..n).map(centre).collect();
+    // Nearest cells by centre distance (ties by index), as an undirected candidate graph.
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let mut near: Vec<(f64, u32)> = Vec::with_capacity(n);
+    for i in 0..n {
+        near.clear();
+        for j in 0..n {
+            if j != i {
+                let d: f64 = (0..3)
+                    .map(|k| (centres[i][k] - centres[j][k]).powi(2))
+                    .sum();
+                near.push((if d.is_nan() { f64::INFINITY } else { d }, j as u32));
+            }
+        }
+        let k = NEIGHBOURS.min(near.len());
+        if k < near.len() {
+            near.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        }
+        for &(_, j) in &near[..k] {
+            adj[i].push(j);
+            adj[j as usize].push(i as u32);
+        }
+    }
+    let mut scratch = vec![0u64; objects.div_ceil(64) as usize];
+    let mut delta_cost = |a: usize, b: usize| {
+        for (s, (x, y)) in scratch.iter_mut().zip(sets[a].iter().zip(&sets[b])) {
+            *s = x ^ y;
+        }
+        sizes(&scratch, objects).into_iter().min().unwrap_or(0)
+    };
+    // Lazy Prim from the virtual root; the heap holds (cost, cell, parent).
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
+    let mut heap = BinaryHeap::new();
+    let mut best = vec![0usize; n];
+    for (i, s) in sets.iter().enumerate() {
+        best[i] = sizes(s, objects).into_iter().min().unwrap_or(0);
+        heap.push(Reverse((best[i], i as u32, NO_PARENT)));
+    }
+    let mut parent = vec![NO_PARENT; n];
+    let mut done = vec![false; n];
+    let mut order = Vec::with_capacity(n);
+    while let Some(Reverse((_, i, p))) = heap.pop() {
+        let i = i as usize;
+        if done[i] {
+            continue;
+        }
+        done[i] = true;
+        parent[i] = p;
+        order.push(i);
+        adj[i].sort_unstable();
+        adj[i].dedup();
+        for &j in &adj[i] {
+            let j = j as usize;
+            if done[j] {
+                continue;
+            }
+            let c = delta_cost(i, j);
+            if c < best[j] {
+                best[j] = c;
+                heap.push(Reverse((c, j as u32, i as u32)));
+            }
+        }
+    }
+    // Cap the depth: parents come before their children in `order`.
+    let mut depth = vec![0u32; n];
+    for &i in &order {
+        let p = parent[i];
+        depth[i] = if p == NO_PARENT {
+            1
+        } else {
+            depth[p as usize] + 1
+        };
+        if depth[i] > MAX_DEPTH {
+            parent[i] = NO_PARENT;
+            depth[i] = 1;
+        }
+    }
+    parent
+}
+
+/// Encodes `doc` as the bytes of a `.pvs` file.
 ///
 /// # Errors
-/// I/O errors, naming the file.
-pub fn write(path: &Path, _doc: &PvsDocument) -> Result<(), String> {
-    Err(format!(
-        "{}: the binary .pvs format is not built yet (use .json)",
-        path.display()
-    ))
+/// A document the format cannot hold: object ids that are not `0, 1, 2…` in order, a cell
+/// whose visible ids are not strictly ascending or name a missing object, or more than
+/// `u32::MAX - 1` cells or objects.
+pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
+    let objects = u32::try_from(doc.objects.len())
+        .ok()
+        .filter(|&n| n != u32::MAX)
+        .ok_or("too many objects for the .pvs format")?;
+    let cells = u32::try_from(doc.cells.len())
+        .ok()
+        .filter(|&n| n != u32::MAX)
+        .ok_or("too many cells for the .pvs format")?;
+    if let Some((i, o)) = doc
+        .objects
+        .iter()
+        .enumerate()
+        .find(|(i, o)| o.id as usize != *i)
+    {
+        return Err(format!(
+            "object {i} has id {}: the .pvs format numbers objects 0, 1, 2… in order",
+            o.id
+        ));
+    }
+    let words = objects.div_ceil(64) as usize;
+    let mut sets = Vec::with_capacity(doc.cells.len());
+    for (i, c) in doc.cells.iter().enumerate() {
+        let mut bits = vec![0u64; words];
+        let mut prev: Option<u32> = None;
+        for &id in &c.visible {
+            if id >= objects {
+                return Err(format!(
+                    "cell {i} lists object {id}, but there are only {objects} objects"
+                ));
+            }
+            if prev.is_some_and(|p| p >= id) {
+                return Err(format!(
+                    "cell {i}: visible ids are not strictly ascending ({} then {id})",
+                    prev.unwrap_or(0)
+                ));
+            }
+            prev = Some(id);
+            bits[(id / 64) as usize] |= 1 << (id % 64);
+        }
+        sets.push(bits);
+    }
+    let parent = choose_parents(doc, &sets, objects);
+
+    let mut p = Vec::new();
+    put_u32(&mut p, objects);
+    put_u32(&mut p, cells);
+    put_str(&mut p, &doc.scene)?;
+    let s = &doc.settings;
+    put_str(&mut p, &s.backend)?;
+    put_u32(&mut p, s.resolution);
+    p.extend_from_slice(&s.extend.to_le_bytes());
+    put_u32(&mut p, s.planes);
+    put_u32(&mut p, s.slice_planes);
+    put_str(&mut p, &s.placement)?;
+    p.push(s.alpha_occluders as u8);
+    put_opt_str(&mut p, s.occluders.as_deref())?;
+    p.push(s.improved_projection as u8);
+    match &doc.summary {
+        None => p.push(0),
+        Some(m) => {
+            p.push(1);
+            for v in [
+                m.cells,
+                m.objects,
+                m.triangles,
+                m.occluder_triangles,
+                m.degenerate_triangles,
+            ] {
+                p.extend_from_slice(&(v as u64).to_le_bytes());
+            }
+            put_str(&mut p, &m.backend)?;
+            put_opt_str(&mut p, m.adapter.as_deref())?;
+            for v in [
+                m.objects_culled_percent,
+                m.triangles_culled_percent,
+                m.median_ms_per_cell,
+                m.total_seconds,
+            ] {
+                p.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    for o in &doc.objects {
+        put_u32(&mut p, o.triangles);
+        for v in o.min.iter().chain(&o.max) {
+            p.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    for o in &doc.objects {
+        put_str(&mut p, &o.name)?;
+    }
+    // Records first (to know their lengths), then the cell table that precedes them.
+    let mut data = Vec::new();
+    let mut table = Vec::with_capacity(doc.cells.len() * CELL_RECORD_LEN);
+    let mut delta = vec![0u64; words];
+    for (i, c) in doc.cells.iter().enumerate() {
+        let set: &[u64] = if parent[i] == NO_PARENT {
+            &sets[i]
+        } else {
+            for (d, (x, y)) in delta
+                .iter_mut()
+                .zip(sets[i].iter().zip(&sets[parent[i] as usize]))
+            {
+                *d = x ^ y;
+            }
+            &delta
+        };
+        let sz = sizes(set, objects);
+        // Smallest wins; ties prefer the bitset, then the list (both decode fastest).
+        let enc = [ENC_BITSET, ENC_LIST, ENC_RUNS]
+            .into_iter()
+            .min_by_key(|&e| sz[e as usize])
+            .unwrap_or(ENC_BITSET);
+        let start = data.len();
+        put_record(&mut data, set, objects, enc);
+        let len = u32::try_from(data.len() - start).map_err(|_| "a record exceeds 4 GiB")?;
+        for v in c.min.iter().chain(&c.max) {
+            table.extend_from_slice(&v.to_le_bytes());
+        }
+        put_u32(&mut table, parent[i]);
+        put_u32(&mut table, c.visible.len() as u32);
+        put_u32(&mut table, len);
+        table.extend_from_slice(&[enc, 0, 0, 0]);
+    }
+    p.extend_from_slice(&table);
+    for c in &doc.cells {
+        p.extend_from_slice(&c.ms.to_le_bytes());
+    }
+    put_u32(
+        &mut p,
+        u32::try_from(data.len()).map_err(|_| "the PVS data exceeds 4 GiB")?,
+    );
+    p.extend_from_slice(&data);
+
+    let mut out = Vec::with_capacity(HEADER_LEN + p.len());
+    out.extend_from_slice(&MAGIC);
+    put_u32(&mut out, FORMAT_VERSION);
+    put_u32(&mut out, crc32(&p));
+    out.extend_from_slice(&(p.len() as u64).to_le_bytes());
+    out.extend_from_slice(&p);
+    Ok(out)
+}
+
+/// Writes `doc` as a binary `.pvs` file, atomically (temporary file, then rename).
+///
+/// # Errors
+/// A document the format cannot hold (see [`encode`]), or I/O errors; messages name the file.
+#[cfg(feature = "bake")]
+pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), String> {
+    let bytes = encode(doc).map_err(|e| format!("{}: {e}", path.display()))?;
+    crate::util::write_atomic(path, &bytes)
+}
+
+/// Reads a `.pvs` file back into the document `bake -o OUT.json` would have written.
+///
+/// # Errors
+/// Any [`PvsError`](super::database::PvsError) of
+/// [`PvsDatabase::open`](super::database::PvsDatabase::open), as a message naming the file.
+pub fn read(path: &std::path::Path) -> Result<PvsDocument, String> {
+    super::database::PvsDatabase::open(path)
+        .map(|db| db.to_document())
+        .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32_check_value() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32(b""), 0);
+    }
+
+    #[test]
+    fn varints_round_trip() {
+        for v in [
+            0,
+            1,
+            127,
+            128,
+            16383,
+            16384,
+            1 << 21,
+            (1 << 28) - 1,
+            1 << 28,
+            u32::MAX,
+        ] {
+            let mut b = Vec::new();
+            put_varint(&mut b, v);
+            assert_eq!(b.len(), varint_len(v));
+            let mut pos = 0;
+            assert_eq!(get_varint(&b, &mut pos), Some(v));
+            assert_eq!(pos, b.len());
+        }
+        assert_eq!(get_varint(&[0x80], &mut 0), None);
+        assert_eq!(get_varint(&[0xFF, 0xFF, 0xFF, 0xFF, 0x1F], &mut 0), None);
+    }
+
+    #[test]
+    fn runs_are_maximal() {
+        let mut bits = vec![0u64; 3];
+        for i in (3..70).chain(100..101).chain(127..130) {
+            bits[i / 64] |= 1 << (i % 64);
+        }
+        let mut runs = Vec::new();
+        for_each_run(&bits, |s, l| runs.push((s, l)));
+        assert_eq!(runs, vec![(3, 67), (100, 1), (127, 3)]);
+        bits = vec![u64::MAX; 2];
+        runs.clear();
+        for_each_run(&bits, |s, l| runs.push((s, l)));
+        assert_eq!(runs, vec![(0, 128)]);
+    }
 }

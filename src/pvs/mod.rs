@@ -86,5 +86,8 @@ pub struct PvsSettings {
 }
 
 pub mod binary;
+pub mod database;
 #[cfg(feature = "bake")]
 pub mod json;
+
+pub use database::{CellId, PvsCursor, PvsDatabase, PvsError, PvsErrorKind};

@@ -113,6 +113,8 @@ pub struct GpuBackend {
     max_texture: u32,
     pool: Mutex<Pool>,
     stats: Mutex<RenderStats>,
+    /// Sums over every call since creation.
+    totals: Mutex<RenderStats>,
 }
 
 impl std::fmt::Debug for GpuBackend {
@@ -148,6 +150,25 @@ pub struct RenderStats {
     pub setup: Duration,
     pub gpu: Duration,
     pub total: Duration,
+}
+
+impl RenderStats {
+    /// Adds another call's counters and timings.
+    pub fn add(&mut self, o: &RenderStats) {
+        self.planes += o.planes;
+        self.gpu_planes += o.gpu_planes;
+        self.submissions += o.submissions;
+        self.passes += o.passes;
+        self.draws += o.draws;
+        self.occluders += o.occluders;
+        self.triangles += o.triangles;
+        self.edges += o.edges;
+        self.bytes_uploaded += o.bytes_uploaded;
+        self.bytes_read_back += o.bytes_read_back;
+        self.setup += o.setup;
+        self.gpu += o.gpu;
+        self.total += o.total;
+    }
 }
 
 /// GPU resources reused across calls.
@@ -388,6 +409,7 @@ impl GpuBackend {
             max_texture: limits.max_texture_dimension_2d,
             pool: Mutex::default(),
             stats: Mutex::default(),
+            totals: Mutex::default(),
         })
     }
 
@@ -401,6 +423,11 @@ impl GpuBackend {
     #[doc(hidden)]
     pub fn simulate_device_loss(&self) {
         self.device.destroy();
+    }
+
+    /// Counters and timings summed over every call since the backend was created.
+    pub fn total_stats(&self) -> RenderStats {
+        self.totals.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     /// Counters and timings of the last [`render`](RasterBackend::render) call (of any thread).
@@ -874,6 +901,23 @@ impl ErrorScopes {
 }
 
 impl RasterBackend for GpuBackend {
+    fn stats_summary(&self, cells: usize) -> Option<String> {
+        let t = self.total_stats();
+        let n = cells.max(1) as f64;
+        Some(format!(
+            "per cell: {:.1} passes, {:.1} draws, {:.1} submissions, {:.0} occluders ({:.0} triangles) drawn, {:.0} KB uploaded, {:.0} KB read back; GPU section {:.1} ms, CPU setup {:.1} ms",
+            t.passes as f64 / n,
+            t.draws as f64 / n,
+            t.submissions as f64 / n,
+            t.occluders as f64 / n,
+            t.triangles as f64 / n,
+            t.bytes_uploaded as f64 / n / 1024.0,
+            t.bytes_read_back as f64 / n / 1024.0,
+            t.gpu.as_secs_f64() * 1e3 / n,
+            t.setup.as_secs_f64() * 1e3 / n,
+        ))
+    }
+
     fn name(&self) -> &'static str {
         "gpu"
     }
@@ -954,6 +998,10 @@ impl RasterBackend for GpuBackend {
             stats.gpu = t1.elapsed();
         }
         stats.total = t0.elapsed();
+        self.totals
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .add(&stats);
         *self.stats.lock().unwrap_or_else(|e| e.into_inner()) = stats;
         Ok(out
             .into_iter()

@@ -1,0 +1,140 @@
+//! One plane as a multi-part OpenEXR file (written with the `exr` crate).
+//!
+//! Parts (layers), each with 32-bit float channels, ZIP compressed, scan lines:
+//! - `plane`: `resolution²` pixels, channels `depth` (the Depth Map; `+inf` where nothing
+//!   projects) and `mask` (1 where covered, i.e. the Depth is finite, else 0);
+//! - `hdm_max_K` and `hdm_min_K` for `K = 1 … log2(resolution)`: `(resolution >> K)²` texels,
+//!   channel `depth`, the maximum and minimum pyramids of the Hierarchical Depth Map (level 0
+//!   is the Depth Map itself and is not repeated).
+//!
+//! Pixel `(i, j)` of the Depth Map (column `i` along the plane's `u` axis, row `j` along `v`)
+//! is EXR pixel `x = i, y = j`: `v` grows downward in image viewers.
+//!
+//! No per-pixel view count is written: neither backend has one (the CPU intersects the 8 views
+//! exactly, the GPU tests each pixel against the views' edges).
+//!
+//! Every part's header carries the plane's frame as custom attributes: `cellIndex`,
+//! `planeIndex`, `resolution`, `occluders`, `sliceEdges`, `coveredPixels` (int); `cellMin`,
+//! `cellMax` (v3f); `planeAxis` (`x`/`y`/`z`), `planeSide` (`+`/`-`), `uvAxes` (e.g. `yz`),
+//! `depthDefinition` (string); `planePosition`, `planeDistance` (double: the plane's coordinate
+//! and its distance from the cell's face); `rectMin`, `rectMax`, `pixelSize` (v2f, world
+//! `(u, v)`).
+
+use crate::backend::{DepthMap, PlaneJob};
+use crate::hdm::Hdm;
+use exr::prelude::*;
+use std::io::Cursor;
+
+/// The part holding `depth` and `mask`.
+pub const PLANE_LAYER: &str = "plane";
+
+/// Encodes one plane's maps as the bytes of an OpenEXR file (see the module docs).
+///
+/// # Errors
+/// The exr crate's message when encoding fails (it should not for a consistent map and HDM).
+pub fn encode(
+    cell: usize,
+    plane: usize,
+    job: &PlaneJob,
+    map: &DepthMap,
+    hdm: &Hdm,
+) -> std::result::Result<Vec<u8>, String> {
+    let res = map.resolution as usize;
+    if map.depth.len() != res * res || hdm.resolution != map.resolution {
+        return Err(format!(
+            "inconsistent maps: {} Depth values and an HDM of {}² for a resolution of {res}",
+            map.depth.len(),
+            hdm.resolution
+        ));
+    }
+    let f = &job.frame;
+    let (u, v) = f.uv_axes();
+    let names = ["x", "y", "z"];
+    let mut attrs = std::collections::HashMap::new();
+    let mut put = |k: &str, a: AttributeValue| {
+        attrs.insert(Text::from(k), a);
+    };
+    let i32_of = |n: usize| AttributeValue::I32(i32::try_from(n).unwrap_or(i32::MAX));
+    put("cellIndex", i32_of(cell));
+    put("planeIndex", i32_of(plane));
+    put("resolution", i32_of(res));
+    put("occluders", i32_of(job.occluders.len()));
+    put("sliceEdges", i32_of(job.slices.len()));
+    put("coveredPixels", i32_of(map.covered()));
+    let v3 = |p: glam::DVec3| AttributeValue::FloatVec3((p.x as f32, p.y as f32, p.z as f32));
+    put("cellMin", v3(f.cell.min));
+    put("cellMax", v3(f.cell.max));
+    put(
+        "planeAxis",
+        AttributeValue::Text(Text::from(names[f.axis.min(2)])),
+    );
+    put(
+        "planeSide",
+        AttributeValue::Text(Text::from(if f.positive { "+" } else { "-" })),
+    );
+    put(
+        "uvAxes",
+        AttributeValue::Text(Text::from(format!("{}{}", names[u], names[v]).as_str())),
+    );
+    put(
+        "depthDefinition",
+        AttributeValue::Text(Text::from(
+            "depth = side * (world[planeAxis] - planePosition); +inf where nothing projects",
+        )),
+    );
+    put("planePosition", AttributeValue::F64(f.position));
+    put(
+        "planeDistance",
+        AttributeValue::F64((f.position - f.face()).abs()),
+    );
+    let v2 = |p: glam::DVec2| AttributeValue::FloatVec2(Vec2(p.x as f32, p.y as f32));
+    put("rectMin", v2(f.rect_min));
+    put("rectMax", v2(f.rect_max));
+    put("pixelSize", v2(f.pixel_size()));
+
+    let layer = |name: &str, size: usize, channels: Vec<(&str, Vec<f32>)>| {
+        let list: Vec<AnyChannel<FlatSamples>> = channels
+            .into_iter()
+            .map(|(n, s)| AnyChannel::new(n, FlatSamples::F32(s)))
+            .collect();
+        let mut la = LayerAttributes::named(name);
+        la.software_name = Some(Text::from("umbrasweep"));
+        la.other = attrs.clone();
+        Layer::new(
+            Vec2(size, size),
+            la,
+            Encoding::SMALL_LOSSLESS,
+            AnyChannels::sort(list.into()),
+        )
+    };
+    let mask: Vec<f32> = map
+        .depth
+        .iter()
+        .map(|d| if d.is_finite() { 1.0 } else { 0.0 })
+        .collect();
+    let mut layers = vec![layer(
+        PLANE_LAYER,
+        res,
+        vec![("depth", map.depth.clone()), ("mask", mask)],
+    )];
+    for (kind, levels) in [("max", &hdm.max), ("min", &hdm.min)] {
+        for (k, level) in levels.iter().enumerate().skip(1) {
+            layers.push(layer(
+                &format!("hdm_{kind}_{k}"),
+                res >> k,
+                vec![("depth", level.clone())],
+            ));
+        }
+    }
+    let image = Image::from_layers(
+        ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(res, res))),
+        layers,
+    );
+    let mut out = Cursor::new(Vec::new());
+    image
+        .write()
+        .non_parallel()
+        .to_buffered(&mut out)
+        .map_err(|e| format!("cannot encode OpenEXR: {e}"))?;
+    Ok(out.into_inner())
+}

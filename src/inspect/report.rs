@@ -1,0 +1,491 @@
+//! `umbrasweep report SCENE PVS.json -o DIR`: a self-contained static HTML page,
+//! `DIR/index.html`, with every image inlined as a `data:` URI (no network resources):
+//!
+//! - a top-down picture of the scene (x to the right, z downward, seen from +y) drawn with
+//!   tiny-skia: each object's footprint (its bounds in x–z) green when in the chosen cell's
+//!   PVS, grey when culled, larger footprints below smaller ones; every cell outlined in blue,
+//!   the chosen one filled orange with a thick outline;
+//! - a per-cell table: index, bounds, PVS size, % of objects culled, bake time;
+//! - the chosen cell's planes, re-baked in-process on the CPU backend with the settings the
+//!   PVS document records: Depth preview and mask of each plane, with its frame, and the
+//!   colour legend (see [`super::preview`]).
+
+use super::preview;
+use crate::backend::cpu::CpuBackend;
+use crate::backend::{DepthMap, PlaneFrame};
+use crate::bake::{self, BakeSettings};
+use crate::geom::Aabb;
+use crate::project::planes::Placement;
+use crate::pvs::PvsDocument;
+use crate::scene::Scene;
+use anyhow::{Context, bail};
+use glam::Vec3;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+/// Options of `umbrasweep report`.
+#[derive(clap::Args, Debug, Clone)]
+#[command(
+    after_help = "Examples:\n  umbrasweep report data/demo_city.obj demo.json -o report/\n  umbrasweep report data/demo_city.obj demo.json -o report/ --cell 5"
+)]
+pub struct ReportArgs {
+    /// The scene the PVS was baked from (.obj, .gltf, .glb).
+    pub scene: PathBuf,
+    /// The PVS document (.json) written by `umbrasweep bake`.
+    pub pvs: PathBuf,
+    /// Output folder (created when missing); the page is DIR/index.html.
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// The cell whose PVS colours the picture and whose planes are previewed.
+    #[arg(long, default_value_t = 0)]
+    pub cell: usize,
+    /// Do not re-bake the chosen cell for the plane previews.
+    #[arg(long)]
+    pub no_previews: bool,
+}
+
+/// One plane preview of the report.
+struct PlanePreview {
+    index: usize,
+    frame: PlaneFrame,
+    occluders: usize,
+    covered: usize,
+    depth_png: Vec<u8>,
+    mask_png: Vec<u8>,
+}
+
+/// Runs `umbrasweep report`.
+///
+/// # Errors
+/// Unreadable or mismatching scene and PVS, a cell index out of range, invalid recorded
+/// settings, or I/O errors writing the page (nothing is written then).
+pub fn run_report(args: &ReportArgs) -> anyhow::Result<()> {
+    let scene = crate::scene::load(&args.scene)?;
+    let doc = crate::pvs::json::read(&args.pvs).map_err(anyhow::Error::msg)?;
+    check_match(&scene, &doc, args)?;
+    if args.cell >= doc.cells.len() {
+        bail!(
+            "--cell {}: {} has {} cells (0 … {})",
+            args.cell,
+            args.pvs.display(),
+            doc.cells.len(),
+            doc.cells.len().saturating_sub(1)
+        );
+    }
+    let topdown = draw_topdown(&scene, &doc, args.cell)?;
+    let (previews, rebaked) = if args.no_previews {
+        (Vec::new(), None)
+    } else {
+        let (p, v) = rebake_cell(&scene, &doc, args.cell)?;
+        (p, Some(v))
+    };
+    let html = page(args, &doc, &topdown, &previews, rebaked.as_deref())?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("{}: cannot create", args.output.display()))?;
+    crate::util::write_atomic(&args.output.join("index.html"), html.as_bytes())
+        .map_err(anyhow::Error::msg)?;
+    Ok(())
+}
+
+/// The scene and the PVS must number the same objects.
+fn check_match(scene: &Scene, doc: &PvsDocument, args: &ReportArgs) -> anyhow::Result<()> {
+    if scene.objects.len() != doc.objects.len() {
+        bail!(
+            "{} has {} objects but {} lists {}: not the scene this PVS was baked from",
+            args.scene.display(),
+            scene.objects.len(),
+            args.pvs.display(),
+            doc.objects.len()
+        );
+    }
+    if let Some((i, (a, b))) = scene
+        .objects
+        .iter()
+        .zip(&doc.objects)
+        .enumerate()
+        .find(|(_, (a, b))| a.name != b.name)
+    {
+        bail!(
+            "object {i} is {:?} in {} but {:?} in {}: not the scene this PVS was baked from",
+            a.name,
+            args.scene.display(),
+            b.name,
+            args.pvs.display()
+        );
+    }
+    Ok(())
+}
+
+fn cell_box(c: &crate::pvs::PvsCell) -> Aabb {
+    Aabb::new(Vec3::from(c.min), Vec3::from(c.max))
+}
+
+/// The bake settings recorded in the document (defaults for fields it lacks).
+///
+/// # Errors
+/// An unknown placement or settings the baker refuses.
+pub fn recorded_settings(doc: &PvsDocument) -> anyhow::Result<BakeSettings> {
+    let d = BakeSettings::default();
+    let s = &doc.settings;
+    let settings = BakeSettings {
+        resolution: if s.resolution == 0 {
+            d.resolution
+        } else {
+            s.resolution
+        },
+        extend: if s.extend == 0.0 { d.extend } else { s.extend },
+        planes: if s.planes == 0 { d.planes } else { s.planes },
+        slice_planes: if s.resolution == 0 {
+            d.slice_planes
+        } else {
+            s.slice_planes
+        },
+        placement: match s.placement.as_str() {
+            "" | "geometric" => Placement::Geometric,
+            "quantile" => Placement::Quantile,
+            other => bail!("settings.placement {other:?}: expected \"geometric\" or \"quantile\""),
+        },
+        alpha_occluders: s.alpha_occluders,
+        occluders: s.occluders.clone(),
+        improved_projection: s.improved_projection || s.resolution == 0,
+    };
+    settings
+        .check()
+        .map_err(|e| anyhow::anyhow!("the PVS document's settings: {e}"))?;
+    Ok(settings)
+}
+
+/// Re-bakes one cell on the CPU, keeping each plane's previews; returns them in rendering
+/// order and the re-baked visible set.
+fn rebake_cell(
+    scene: &Scene,
+    doc: &PvsDocument,
+    cell: usize,
+) -> anyhow::Result<(Vec<PlanePreview>, Vec<u32>)> {
+    let settings = recorded_settings(doc)?;
+    let cells = [cell_box(&doc.cells[cell])];
+    let out: Mutex<Vec<Result<PlanePreview, String>>> = Mutex::new(Vec::new());
+    let observe = |_ci: usize, k: usize, job: &crate::backend::PlaneJob, map: &DepthMap, _: &_| {
+        let d = preview::plane_distance(&job.frame);
+        let p = preview::encode_png(&preview::depth_image(map, d)).and_then(|depth_png| {
+            Ok(PlanePreview {
+                index: k,
+                frame: job.frame.clone(),
+                occluders: job.occluders.len(),
+                covered: map.covered(),
+                depth_png,
+                mask_png: preview::encode_png(&preview::mask_image(map))?,
+            })
+        });
+        out.lock().expect("not poisoned").push(p);
+    };
+    let result = bake::bake_observed(
+        scene,
+        &cells,
+        &settings,
+        &CpuBackend::new(),
+        None,
+        Some(&observe),
+    )?;
+    let mut previews = out
+        .into_inner()
+        .expect("not poisoned")
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(anyhow::Error::msg)?;
+    previews.sort_by_key(|p| p.index);
+    let visible = result
+        .cells
+        .into_iter()
+        .next()
+        .map(|c| c.visible)
+        .unwrap_or_default();
+    Ok((previews, visible))
+}
+
+/// The top-down picture as PNG bytes (see the module docs).
+fn draw_topdown(scene: &Scene, doc: &PvsDocument, cell: usize) -> anyhow::Result<Vec<u8>> {
+    use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform};
+    let mut bounds = scene.bounds();
+    for c in &doc.cells {
+        let b = cell_box(c);
+        bounds = if bounds.is_empty() {
+            b
+        } else {
+            bounds.union(&b)
+        };
+    }
+    if bounds.is_empty() || !bounds.min.is_finite() || !bounds.max.is_finite() {
+        bounds = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    }
+    let (w_world, h_world) = (
+        (bounds.max.x - bounds.min.x).max(1e-6),
+        (bounds.max.z - bounds.min.z).max(1e-6),
+    );
+    const SIDE: f32 = 900.0;
+    const MARGIN: f32 = 10.0;
+    let scale = (SIDE - 2.0 * MARGIN) / w_world.max(h_world);
+    let (w, h) = (
+        (w_world * scale + 2.0 * MARGIN).ceil() as u32,
+        (h_world * scale + 2.0 * MARGIN).ceil() as u32,
+    );
+    let mut pm = Pixmap::new(w.max(1), h.max(1)).context("top-down picture: bad size")?;
+    pm.fill(Color::from_rgba8(250, 250, 247, 255));
+    // World box → pixel rectangle, at least one pixel wide and tall.
+    let rect = |b: &Aabb| {
+        let x0 = MARGIN + (b.min.x - bounds.min.x) * scale;
+        let x1 = (MARGIN + (b.max.x - bounds.min.x) * scale).max(x0 + 1.0);
+        let y0 = MARGIN + (b.min.z - bounds.min.z) * scale;
+        let y1 = (MARGIN + (b.max.z - bounds.min.z) * scale).max(y0 + 1.0);
+        Rect::from_ltrb(x0, y0, x1, y1)
+    };
+    let paint = |r: u8, g: u8, b: u8, a: u8| {
+        let mut p = Paint::default();
+        p.set_color_rgba8(r, g, b, a);
+        p.anti_alias = true;
+        p
+    };
+    let stroke_rect = |pm: &mut Pixmap, r: Rect, p: &Paint, width: f32| {
+        let path = PathBuilder::from_rect(r);
+        let s = Stroke {
+            width,
+            ..Stroke::default()
+        };
+        pm.stroke_path(&path, p, &s, Transform::identity(), None);
+    };
+    let visible: std::collections::HashSet<u32> = doc.cells[cell].visible.iter().copied().collect();
+    let mut order: Vec<usize> = (0..scene.objects.len())
+        .filter(|&o| !scene.objects[o].bounds.is_empty())
+        .collect();
+    let area = |o: usize| {
+        let s = scene.objects[o].bounds.size();
+        s.x * s.z
+    };
+    order.sort_by(|&a, &b| area(b).total_cmp(&area(a)));
+    let (vis_fill, vis_line) = (paint(46, 160, 67, 150), paint(20, 100, 40, 255));
+    let (cul_fill, cul_line) = (paint(160, 160, 160, 110), paint(110, 110, 110, 200));
+    for o in order {
+        let Some(r) = rect(&scene.objects[o].bounds) else {
+            continue;
+        };
+        let (fill, line) = if visible.contains(&(o as u32)) {
+            (&vis_fill, &vis_line)
+        } else {
+            (&cul_fill, &cul_line)
+        };
+        pm.fill_rect(r, fill, Transform::identity(), None);
+        stroke_rect(&mut pm, r, line, 1.0);
+    }
+    let cell_line = paint(40, 90, 210, 230);
+    for (i, c) in doc.cells.iter().enumerate() {
+        if i == cell {
+            continue;
+        }
+        if let Some(r) = rect(&cell_box(c)) {
+            stroke_rect(&mut pm, r, &cell_line, 1.5);
+        }
+    }
+    if let Some(r) = rect(&cell_box(&doc.cells[cell])) {
+        pm.fill_rect(r, &paint(255, 140, 0, 170), Transform::identity(), None);
+        stroke_rect(&mut pm, r, &paint(200, 40, 0, 255), 3.0);
+        // A ring around small cells so that they stay findable.
+        let (cx, cy) = ((r.left() + r.right()) / 2.0, (r.top() + r.bottom()) / 2.0);
+        let rad = (r.width().max(r.height()) / 2.0 + 8.0).max(12.0);
+        if let Some(circle) = PathBuilder::from_circle(cx, cy, rad) {
+            let s = Stroke {
+                width: 2.0,
+                ..Stroke::default()
+            };
+            pm.stroke_path(
+                &circle,
+                &paint(200, 40, 0, 200),
+                &s,
+                Transform::identity(),
+                None,
+            );
+        }
+    }
+    pm.encode_png()
+        .map_err(|e| anyhow::anyhow!("top-down picture: cannot encode PNG: {e}"))
+}
+
+/// Escapes text for HTML.
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn data_uri(png: &[u8]) -> String {
+    format!("data:image/png;base64,{}", preview::base64(png))
+}
+
+fn fmt_v3(v: [f32; 3]) -> String {
+    format!("({:.2}, {:.2}, {:.2})", v[0], v[1], v[2])
+}
+
+/// The whole page.
+fn page(
+    args: &ReportArgs,
+    doc: &PvsDocument,
+    topdown: &[u8],
+    previews: &[PlanePreview],
+    rebaked: Option<&[u32]>,
+) -> anyhow::Result<String> {
+    let n_obj = doc.objects.len().max(1);
+    let chosen = &doc.cells[args.cell];
+    let mut h = String::new();
+    let title = format!(
+        "umbrasweep report: {}",
+        args.pvs.file_name().unwrap_or_default().to_string_lossy()
+    );
+    write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>{}</title>\n<style>{CSS}</style></head><body>\n<h1>{}</h1>\n",
+        esc(&title),
+        esc(&title)
+    )?;
+    let s = &doc.settings;
+    write!(
+        h,
+        "<p class=\"meta\">scene <code>{}</code> · {} objects · {} cells · backend {} · \
+         resolution {} · {} planes + {} slice planes per direction · placement {} · extend {}",
+        esc(&doc.scene),
+        doc.objects.len(),
+        doc.cells.len(),
+        esc(&s.backend),
+        s.resolution,
+        s.planes,
+        s.slice_planes,
+        esc(&s.placement),
+        s.extend
+    )?;
+    if let Some(sum) = &doc.summary {
+        write!(
+            h,
+            " · {:.1} % of objects culled on average · median {:.1} ms per cell",
+            sum.objects_culled_percent, sum.median_ms_per_cell
+        )?;
+    }
+    h.push_str("</p>\n");
+
+    write!(
+        h,
+        "<h2>Cell {} from above</h2>\n<p class=\"meta\">x to the right, z downward, seen from +y. \
+         <span class=\"sw\" style=\"background:#2ea043\"></span> in the PVS of cell {} \
+         ({} objects) · <span class=\"sw\" style=\"background:#a0a0a0\"></span> culled · \
+         <span class=\"sw\" style=\"border:2px solid #285ad2\"></span> cells · \
+         <span class=\"sw\" style=\"background:#ff8c00;border:2px solid #c82800\"></span> \
+         cell {} {} – {}. Footprints are the objects' bounds.</p>\n\
+         <img class=\"top\" alt=\"top-down view of the scene\" src=\"{}\">\n",
+        args.cell,
+        args.cell,
+        chosen.visible.len(),
+        args.cell,
+        fmt_v3(chosen.min),
+        fmt_v3(chosen.max),
+        data_uri(topdown)
+    )?;
+
+    h.push_str("<h2>Planes of the chosen cell</h2>\n");
+    if args.no_previews {
+        h.push_str("<p class=\"meta\">Previews skipped (--no-previews).</p>\n");
+    } else {
+        if let Some(v) = rebaked {
+            let same = v == chosen.visible.as_slice();
+            writeln!(
+                h,
+                "<p class=\"meta\">Re-baked on the CPU with the recorded settings: {} planes, \
+                 PVS of {} objects ({}).</p>",
+                previews.len(),
+                v.len(),
+                if same {
+                    "the same as in the document".to_string()
+                } else {
+                    format!(
+                        "the document lists {}: baked with another backend or version",
+                        chosen.visible.len()
+                    )
+                }
+            )?;
+        }
+        write!(
+            h,
+            "<p class=\"meta\">Each plane: Depth (left) and mask (right); pixel (i, j) at \
+             x = i, y = j (v grows downward). Colour of Depth d: ramp(d / (d + D)), D the \
+             plane's distance from the cell's face.</p>\n\
+             <img class=\"legend\" alt=\"colour legend\" src=\"{}\">\n<div class=\"planes\">\n",
+            data_uri(&preview::encode_png(&preview::legend_image()).map_err(anyhow::Error::msg)?)
+        )?;
+        let names = ["x", "y", "z"];
+        for p in previews {
+            let f = &p.frame;
+            let (u, v) = f.uv_axes();
+            let px = f.pixel_size();
+            writeln!(
+                h,
+                "<figure><img alt=\"Depth\" src=\"{}\"><img alt=\"mask\" src=\"{}\">\
+                 <figcaption>plane {} · {}{} at {:.3} (D = {:.3}) · {}² px of {:.3} × {:.3} · \
+                 {} [{:.2}, {:.2}] × {} [{:.2}, {:.2}] · {} occluders · {:.1} % covered\
+                 </figcaption></figure>",
+                data_uri(&p.depth_png),
+                data_uri(&p.mask_png),
+                p.index,
+                names[f.axis.min(2)],
+                if f.positive { "+" } else { "−" },
+                f.position,
+                (f.position - f.face()).abs(),
+                f.resolution,
+                px.x,
+                px.y,
+                names[u],
+                f.rect_min.x,
+                f.rect_max.x,
+                names[v],
+                f.rect_min.y,
+                f.rect_max.y,
+                p.occluders,
+                100.0 * p.covered as f64 / (f.resolution as f64 * f.resolution as f64).max(1.0)
+            )?;
+        }
+        h.push_str("</div>\n");
+    }
+
+    h.push_str(
+        "<h2>Cells</h2>\n<table><thead><tr><th>cell</th><th>min</th><th>max</th>\
+         <th>PVS size</th><th>% culled</th><th>ms</th></tr></thead><tbody>\n",
+    );
+    for (i, c) in doc.cells.iter().enumerate() {
+        let culled = 100.0 * (1.0 - c.visible.len() as f64 / n_obj as f64);
+        writeln!(
+            h,
+            "<tr{}><td>{i}</td><td>{}</td><td>{}</td><td>{}</td><td>{culled:.1}</td>\
+             <td>{:.1}</td></tr>",
+            if i == args.cell {
+                " class=\"chosen\""
+            } else {
+                ""
+            },
+            fmt_v3(c.min),
+            fmt_v3(c.max),
+            c.visible.len(),
+            c.ms
+        )?;
+    }
+    h.push_str("</tbody></table>\n</body></html>\n");
+    Ok(h)
+}
+
+const CSS: &str = "body{font:14px/1.4 sans-serif;margin:16px;color:#222;background:#fff}\
+h1{font-size:20px}h2{font-size:16px;margin-top:24px}.meta{color:#555}\
+code{background:#f2f2f2;padding:0 3px}\
+.sw{display:inline-block;width:12px;height:12px;vertical-align:middle;box-sizing:border-box}\
+img.top{max-width:100%;border:1px solid #ccc}img.legend{display:block;margin:8px 0}\
+.planes{display:flex;flex-wrap:wrap;gap:12px}\
+figure{margin:0;width:340px}figure img{width:160px;height:160px;image-rendering:pixelated;\
+border:1px solid #ccc;margin-right:4px}figcaption{font-size:12px;color:#444}\
+table{border-collapse:collapse}td,th{border:1px solid #ddd;padding:2px 8px;text-align:right}\
+tr.chosen{background:#ffe3c0;font-weight:bold}";

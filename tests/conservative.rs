@@ -1,0 +1,602 @@
+//! Conservativeness suite: hand-built adversarial scenes, each baked with both backends and
+//! checked against the validate sampler (zero false culls), with the objects the geometry
+//! proves hidden asserted hidden and the objects it proves visible asserted in the PVS (with
+//! a brute-force witness ray, independent of the sampler).
+//!
+//! Cases: an object seen only through a narrow slit; one seen only from one corner of the cell
+//! through two small holes; one hidden only by the fusion of many small overlapping tiles, and
+//! its twin with a hole a few milliradians wide; occluders cutting through the cell; objects
+//! straddling or touching the cell, inside a closed shell around it. Every case runs as built
+//! (unit cell), scaled by 10⁻³, and offset by 10⁵ units on every axis (f32 coordinates).
+//!
+//! The GPU half runs on whatever adapter `GpuBackend::new()` finds (lavapipe here); without
+//! one it prints why and is skipped, except when the environment variable `CI` is set, where
+//! it fails. `UMBRASWEEP_CONSERVATIVE_RAYS` overrides the rays per cell (default 200,000).
+#![cfg(feature = "bake")]
+
+use glam::{DVec3, Vec3};
+use std::path::Path;
+use std::sync::OnceLock;
+use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::backend::gpu::GpuBackend;
+use umbrasweep::backend::{BackendError, RasterBackend};
+use umbrasweep::bake::{BakeSettings, bake};
+use umbrasweep::geom::{Aabb, box_triangles};
+use umbrasweep::scene::Scene;
+use umbrasweep::validate::{CellSample, SceneRays, sample_cell};
+
+// ---------------------------------------------------------------------------------------------
+// Scene description in local (f64) coordinates, placed by a transform
+
+/// Where a case is placed: `p ↦ p · scale + offset`, then rounded to f32.
+#[derive(Clone, Copy, Debug)]
+struct Xf {
+    label: &'static str,
+    scale: f64,
+    offset: f64,
+}
+
+const IDENTITY: Xf = Xf {
+    label: "as built",
+    scale: 1.0,
+    offset: 0.0,
+};
+const SMALL: Xf = Xf {
+    label: "scaled by 1e-3",
+    scale: 1e-3,
+    offset: 0.0,
+};
+const LARGE: Xf = Xf {
+    label: "offset by 1e5",
+    scale: 1.0,
+    offset: 1e5,
+};
+const PLACEMENTS: [Xf; 3] = [IDENTITY, SMALL, LARGE];
+
+impl Xf {
+    fn p(&self, p: DVec3) -> Vec3 {
+        (p * self.scale + DVec3::splat(self.offset)).as_vec3()
+    }
+}
+
+enum Shape {
+    /// A closed axis-aligned box (`box_triangles` of the placed corners).
+    Cuboid(DVec3, DVec3),
+    /// Loose triangles.
+    Triangles(Vec<[DVec3; 3]>),
+}
+
+/// A witness ray proving `object` visible from `cell`: from `origin` (inside the cell)
+/// towards `toward`. The brute-force tracer must see `object` first.
+struct Seen {
+    cell: usize,
+    object: &'static str,
+    origin: DVec3,
+    toward: DVec3,
+}
+
+/// A ray that must *not* see `object` first (documents where an object is not visible).
+struct Blocked {
+    object: &'static str,
+    origin: DVec3,
+    toward: DVec3,
+}
+
+#[derive(Default)]
+struct Case {
+    name: &'static str,
+    objects: Vec<(String, Shape)>,
+    cells: Vec<(DVec3, DVec3)>,
+    /// (cell, object) pairs the geometry proves hidden.
+    hidden: Vec<(usize, &'static str)>,
+    seen: Vec<Seen>,
+    blocked: Vec<Blocked>,
+}
+
+impl Case {
+    fn cuboid(&mut self, name: impl Into<String>, min: [f64; 3], max: [f64; 3]) {
+        self.objects
+            .push((name.into(), Shape::Cuboid(min.into(), max.into())));
+    }
+
+    fn seen(&mut self, cell: usize, object: &'static str, origin: [f64; 3], toward: [f64; 3]) {
+        self.seen.push(Seen {
+            cell,
+            object,
+            origin: origin.into(),
+            toward: toward.into(),
+        });
+    }
+}
+
+fn unit_cell() -> (DVec3, DVec3) {
+    (DVec3::splat(-0.5), DVec3::splat(0.5))
+}
+
+/// A case placed by a transform: the scene and the cells.
+struct Placed {
+    scene: Scene,
+    cells: Vec<Aabb>,
+    /// Local objects, placed, for the brute-force tracer.
+    objects: Vec<(String, Vec<[Vec3; 3]>)>,
+}
+
+fn place(case: &Case, xf: Xf) -> Placed {
+    let objects: Vec<(String, Vec<[Vec3; 3]>)> = case
+        .objects
+        .iter()
+        .map(|(name, shape)| {
+            let tris = match shape {
+                Shape::Cuboid(a, b) => box_triangles(xf.p(*a), xf.p(*b)),
+                Shape::Triangles(t) => t.iter().map(|t| t.map(|p| xf.p(p))).collect(),
+            };
+            (name.clone(), tris)
+        })
+        .collect();
+    let scene = Scene::from_objects(
+        Path::new(case.name),
+        objects
+            .iter()
+            .map(|(n, t)| (n.clone(), t.clone(), true))
+            .collect(),
+    );
+    let cells = case
+        .cells
+        .iter()
+        .map(|(a, b)| Aabb::new(xf.p(*a), xf.p(*b)))
+        .collect();
+    Placed {
+        scene,
+        cells,
+        objects,
+    }
+}
+
+/// The name of the first object the ray hits (brute force over every triangle, Möller–Trumbore
+/// in f64 on the placed f32 vertices).
+fn first_hit(objects: &[(String, Vec<[Vec3; 3]>)], origin: Vec3, toward: Vec3) -> Option<&str> {
+    let o = origin.as_dvec3();
+    let d = (toward.as_dvec3() - o).normalize();
+    let mut best = (f64::INFINITY, None);
+    for (name, tris) in objects {
+        for t in tris {
+            let [a, b, c] = t.map(|p| p.as_dvec3());
+            let (e1, e2) = (b - a, c - a);
+            let p = d.cross(e2);
+            let det = e1.dot(p);
+            if det.abs() < 1e-300 {
+                continue;
+            }
+            let s = o - a;
+            let u = s.dot(p) / det;
+            let q = s.cross(e1);
+            let v = d.dot(q) / det;
+            let dist = e2.dot(q) / det;
+            if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dist > 0.0 && dist < best.0 {
+                best = (dist, Some(name.as_str()));
+            }
+        }
+    }
+    best.1
+}
+
+// ---------------------------------------------------------------------------------------------
+// Backends
+
+/// The shared GPU backend, or `None` (after printing why) when there is no adapter outside CI.
+fn gpu() -> Option<&'static GpuBackend> {
+    static BACKEND: OnceLock<Option<GpuBackend>> = OnceLock::new();
+    BACKEND
+        .get_or_init(|| match GpuBackend::new() {
+            Ok(b) => {
+                eprintln!(
+                    "conservative: gpu half on {}",
+                    b.adapter().unwrap_or_default()
+                );
+                Some(b)
+            }
+            Err(BackendError::NoAdapter(why)) => {
+                if std::env::var_os("CI").is_some() {
+                    panic!("CI is set but the GPU backend found no adapter: {why}");
+                }
+                eprintln!("conservative: skipping the GPU half: {why}");
+                None
+            }
+            Err(e) => panic!("GPU backend failed to start: {e}"),
+        })
+        .as_ref()
+}
+
+fn backends() -> Vec<&'static dyn RasterBackend> {
+    static CPU: OnceLock<CpuBackend> = OnceLock::new();
+    let mut v: Vec<&'static dyn RasterBackend> = vec![CPU.get_or_init(CpuBackend::new)];
+    if let Some(g) = gpu() {
+        v.push(g);
+    }
+    v
+}
+
+fn rays_per_cell() -> u64 {
+    std::env::var("UMBRASWEEP_CONSERVATIVE_RAYS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(200_000)
+}
+
+// ---------------------------------------------------------------------------------------------
+// The check
+
+/// Bakes `case` at every placement with every backend and checks it; panics with every
+/// problem found (scene, placement, backend, cell, object, witness ray).
+fn run(case: &Case) {
+    let rays = rays_per_cell();
+    let mut problems = Vec::new();
+    for xf in PLACEMENTS {
+        let start = std::time::Instant::now();
+        let placed = place(case, xf);
+        let scene = &placed.scene;
+        scene.validate().expect("a valid scene");
+        let id = |name: &str| -> u32 {
+            scene
+                .objects
+                .iter()
+                .position(|o| o.name == name)
+                .unwrap_or_else(|| panic!("{}: no object {name}", case.name)) as u32
+        };
+        let at = format!("{} ({})", case.name, xf.label);
+
+        // Ground truth that does not depend on the sampler.
+        for s in &case.seen {
+            let (o, t) = (xf.p(s.origin), xf.p(s.toward));
+            let cell = placed.cells[s.cell];
+            assert!(
+                o.cmpgt(cell.min).all() && o.cmplt(cell.max).all(),
+                "{at}: witness origin {o:?} is not strictly inside cell {cell:?}"
+            );
+            assert_eq!(
+                first_hit(&placed.objects, o, t),
+                Some(s.object),
+                "{at}: the witness ray {o:?} → {t:?} must see {}",
+                s.object
+            );
+        }
+        for b in &case.blocked {
+            let (o, t) = (xf.p(b.origin), xf.p(b.toward));
+            assert_ne!(
+                first_hit(&placed.objects, o, t),
+                Some(b.object),
+                "{at}: the ray {o:?} → {t:?} must not see {}",
+                b.object
+            );
+        }
+
+        // The sampled visible sets, shared by both backends.
+        let index = SceneRays::new(scene);
+        let samples: Vec<CellSample> = placed
+            .cells
+            .iter()
+            .enumerate()
+            .map(|(i, c)| sample_cell(&index, scene, *c, rays, 7, i as u64, false))
+            .collect();
+        for s in &case.seen {
+            let found = samples[s.cell].witness_of(id(s.object)).is_some();
+            eprintln!(
+                "{at}: cell {} object {}: sampler {}",
+                s.cell,
+                s.object,
+                if found {
+                    "found it"
+                } else {
+                    "did NOT find it (brute-force witness only)"
+                }
+            );
+        }
+
+        for backend in backends() {
+            let r = bake(
+                scene,
+                &placed.cells,
+                &BakeSettings::default(),
+                backend,
+                None,
+            )
+            .unwrap_or_else(|e| panic!("{at}: bake on {} failed: {e}", backend.name()));
+            let who = format!("{at} [{}]", backend.name());
+            for (ci, (cell, sample)) in r.cells.iter().zip(&samples).enumerate() {
+                let pvs = &cell.visible;
+                for (k, &o) in sample.visible.iter().enumerate() {
+                    if pvs.binary_search(&o).is_err() {
+                        let name = &scene.objects[o as usize].name;
+                        problems.push(match &sample.witness[k] {
+                            Some(w) => format!(
+                                "FALSE CULL {who}: cell {ci} {:?}: object {o} {name:?} seen by \
+                                 ray origin {:?} direction {:?} hitting {:?} (triangle {}, ray \
+                                 {}, phase {})",
+                                placed.cells[ci],
+                                w.origin,
+                                w.direction,
+                                w.hit,
+                                w.triangle,
+                                w.ray,
+                                w.phase
+                            ),
+                            None => format!(
+                                "FALSE CULL {who}: cell {ci} {:?}: object {o} {name:?} \
+                                 overlaps the cell",
+                                placed.cells[ci]
+                            ),
+                        });
+                    }
+                }
+                for s in case.seen.iter().filter(|s| s.cell == ci) {
+                    if pvs.binary_search(&id(s.object)).is_err() {
+                        problems.push(format!(
+                            "FALSE CULL {who}: cell {ci}: {} is seen by the ray {:?} → {:?} but \
+                             is not in the PVS {pvs:?}",
+                            s.object,
+                            xf.p(s.origin),
+                            xf.p(s.toward)
+                        ));
+                    }
+                }
+                for &(hc, name) in case.hidden.iter().filter(|h| h.0 == ci) {
+                    if pvs.binary_search(&id(name)).is_ok() {
+                        problems.push(format!(
+                            "NOT HIDDEN {who}: cell {hc}: {name} is provably hidden but is in \
+                             the PVS"
+                        ));
+                    }
+                }
+            }
+        }
+        eprintln!(
+            "{at}: {} objects, {} cells, {rays} rays per cell, {:.2} s",
+            scene.objects.len(),
+            placed.cells.len(),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    assert!(problems.is_empty(), "\n{}", problems.join("\n"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The cases (unit cell [-0.5, 0.5]³ unless said otherwise)
+
+#[test]
+fn an_object_seen_only_through_a_narrow_slit() {
+    // Two walls 0.2 thick at z = 5 leave a slit 0.01 wide (2 mrad from the cell) along y.
+    let mut c = Case {
+        name: "slit",
+        cells: vec![unit_cell()],
+        ..Default::default()
+    };
+    c.cuboid("left", [-20.0, -20.0, 5.0], [-0.005, 20.0, 5.2]);
+    c.cuboid("right", [0.005, -20.0, 5.0], [20.0, 20.0, 5.2]);
+    c.cuboid("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+    // Beyond every line through the slit: |x| ≤ 0.5 + 0.505 · 10.5 / 4.5 < 1.7 at z ≤ 11.
+    c.cuboid("hidden", [4.0, -1.0, 10.0], [6.0, 1.0, 11.0]);
+    c.seen(0, "target", [0.0, 0.0, 0.0], [0.0, 0.3, 10.0]);
+    c.seen(0, "left", [0.0, 0.0, 0.0], [-1.0, 0.0, 5.0]);
+    c.hidden.push((0, "hidden"));
+    c.blocked.push(Blocked {
+        object: "target",
+        origin: [0.3, 0.0, 0.0].into(),
+        toward: [0.3, 0.0, 10.0].into(),
+    });
+    run(&c);
+}
+
+/// A wall `z0..z0+thick` spanning ±30 with a square hole of half-size `h` centred at `(x, y)`,
+/// as four boxes.
+fn holed_wall(c: &mut Case, name: &str, z0: f64, thick: f64, x: f64, y: f64, h: f64) {
+    let (z1, w) = (z0 + thick, 30.0);
+    c.cuboid(format!("{name}_low"), [-w, -w, z0], [w, y - h, z1]);
+    c.cuboid(format!("{name}_high"), [-w, y + h, z0], [w, w, z1]);
+    c.cuboid(format!("{name}_left"), [-w, y - h, z0], [x - h, y + h, z1]);
+    c.cuboid(format!("{name}_right"), [x + h, y - h, z0], [w, y + h, z1]);
+}
+
+#[test]
+fn an_object_seen_from_one_corner_only_through_two_small_holes() {
+    // The line from just inside the corner (0.5, 0.5, 0.5) along d leaves the cell at once
+    // (d.x < 0 going forward, so backwards it exits through the +x face): only points near
+    // that corner see through both holes.
+    let mut c = Case {
+        name: "corner_two_holes",
+        cells: vec![unit_cell()],
+        ..Default::default()
+    };
+    let o = DVec3::splat(0.5 - 0.004);
+    let d = DVec3::new(-0.3, 0.3, 1.0);
+    let on_line = |z: f64| o + d * ((z - o.z) / d.z);
+    let (h, thick) = (0.02, 0.05);
+    let (z1, z2) = (3.0, 6.0);
+    let a = on_line(z1 + 0.5 * thick);
+    let b = on_line(z2 + 0.5 * thick);
+    holed_wall(&mut c, "wall1", z1, thick, a.x, a.y, h);
+    holed_wall(&mut c, "wall2", z2, thick, b.x, b.y, h);
+    let t = on_line(12.5);
+    c.cuboid("target", (t - 0.15).to_array(), (t + 0.15).to_array());
+    c.cuboid("hidden", [-8.0, -1.0, 12.0], [-6.0, 1.0, 13.0]);
+    c.seen(0, "target", o.to_array(), t.to_array());
+    c.hidden.push((0, "hidden"));
+    // Not from the centre, nor from the other corners (just inside them).
+    for k in 0..8 {
+        let corner = DVec3::new(
+            if k & 1 != 0 { 0.49 } else { -0.49 },
+            if k & 2 != 0 { 0.49 } else { -0.49 },
+            if k & 4 != 0 { 0.49 } else { -0.49 },
+        );
+        if k != 7 {
+            c.blocked.push(Blocked {
+                object: "target",
+                origin: corner,
+                toward: t,
+            });
+        }
+    }
+    c.blocked.push(Blocked {
+        object: "target",
+        origin: DVec3::ZERO,
+        toward: t,
+    });
+    run(&c);
+}
+
+/// 21 × 21 thin boxes 1.3 wide on a pitch of 1 (overlapping by 0.3), at z = 5 + 0.02·((i+j)
+/// mod 3) (never coplanar with all neighbours), covering [-10.65, 10.65]² in x, y. With
+/// `gap`, the tile at (0, 0) — the only one covering the point x = y = 0 — is split into two
+/// leaving a hole `gap` wide in x and 0.7 tall in y (the rows ±1 cover |y| ≥ 0.35).
+fn tiles(c: &mut Case, gap: Option<f64>) {
+    for j in -10i32..=10 {
+        for i in -10i32..=10 {
+            let z = 5.0 + 0.02 * f64::from((i + j).rem_euclid(3));
+            let (x, y) = (f64::from(i), f64::from(j));
+            let (lo, hi) = ([x - 0.65, y - 0.65, z], [x + 0.65, y + 0.65, z + 0.05]);
+            match gap {
+                Some(g) if i == 0 && j == 0 => {
+                    c.cuboid("tile_0_0a", lo, [-0.5 * g, hi[1], hi[2]]);
+                    c.cuboid("tile_0_0b", [0.5 * g, lo[1], lo[2]], hi);
+                }
+                _ => c.cuboid(format!("tile_{i}_{j}"), lo, hi),
+            }
+        }
+    }
+}
+
+#[test]
+fn an_object_hidden_only_by_the_fusion_of_many_overlapping_tiles() {
+    let mut c = Case {
+        name: "tile_fusion",
+        cells: vec![unit_cell()],
+        ..Default::default()
+    };
+    tiles(&mut c, None);
+    c.cuboid("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+    c.cuboid("far", [4.0, 4.0, 10.0], [5.0, 5.0, 11.0]);
+    c.hidden.push((0, "target"));
+    c.hidden.push((0, "far"));
+    c.seen(0, "tile_0_0", [0.0, 0.0, 0.0], [0.0, 0.0, 5.0]);
+    run(&c);
+}
+
+#[test]
+fn its_twin_with_a_hole_a_few_milliradians_wide_is_visible() {
+    // The hole is 0.02 wide at z = 5: 4 mrad seen from the cell.
+    let mut c = Case {
+        name: "tile_fusion_hole",
+        cells: vec![unit_cell()],
+        ..Default::default()
+    };
+    tiles(&mut c, Some(0.02));
+    c.cuboid("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+    // Beyond every line through the hole (|x| < 1.8, |y| < 2.5 at z ≤ 11).
+    c.cuboid("far", [4.0, 4.0, 10.0], [5.0, 5.0, 11.0]);
+    c.seen(0, "target", [0.0, 0.0, 0.0], [0.0, 0.1, 10.0]);
+    c.hidden.push((0, "far"));
+    run(&c);
+}
+
+#[test]
+fn occluders_that_cut_through_the_cell() {
+    let mut c = Case {
+        name: "cutting",
+        cells: vec![unit_cell()],
+        ..Default::default()
+    };
+    // A wall through the cell (z in 0.2..0.3), a wall through it the other way (x in
+    // 0.1..0.15, only on the -z side so that the two do not seal a quarter of the cell), and a
+    // pole through it along x.
+    c.cuboid("wall_z", [-20.0, -20.0, 0.2], [20.0, 20.0, 0.3]);
+    c.cuboid("wall_x", [0.1, -20.0, -20.0], [0.15, 20.0, 0.2]);
+    c.cuboid("pole", [-20.0, -0.05, -0.05], [20.0, 0.05, 0.05]);
+    // Seen only from the thin slice z > 0.3 of the cell.
+    c.cuboid("behind_z", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+    // Seen only from the part x > 0.15.
+    c.cuboid("behind_x", [10.0, -1.0, -3.0], [11.0, 1.0, -2.0]);
+    c.cuboid("front", [-11.0, -1.0, -1.0], [-10.0, 1.0, -0.2]);
+    // A far wall seals everything beyond z = 20.
+    c.cuboid("far_wall", [-40.0, -40.0, 20.0], [40.0, 40.0, 21.0]);
+    c.cuboid("beyond", [-1.0, -1.0, 25.0], [1.0, 1.0, 26.0]);
+    c.seen(0, "behind_z", [0.0, 0.3, 0.45], [0.0, 0.3, 10.0]);
+    c.seen(0, "behind_x", [0.4, 0.3, -0.3], [10.0, 0.3, -2.5]);
+    c.seen(0, "front", [-0.3, 0.3, -0.3], [-10.0, 0.3, -0.5]);
+    c.hidden.push((0, "beyond"));
+    c.blocked.push(Blocked {
+        object: "behind_z",
+        origin: DVec3::new(0.0, 0.3, 0.0),
+        toward: DVec3::new(0.0, 0.3, 10.0),
+    });
+    run(&c);
+}
+
+#[test]
+fn objects_straddling_touching_or_around_the_cell() {
+    let mut c = Case {
+        name: "straddling",
+        cells: vec![unit_cell()],
+        ..Default::default()
+    };
+    // A closed room of six thick walls around [-3, 3]³.
+    let (a, b) = (3.0, 3.5);
+    c.cuboid("room+x", [a, -b, -b], [b, b, b]);
+    c.cuboid("room-x", [-b, -b, -b], [-a, b, b]);
+    c.cuboid("room+y", [-b, a, -b], [b, b, b]);
+    c.cuboid("room-y", [-b, -b, -b], [b, -a, b]);
+    c.cuboid("room+z", [-b, -b, a], [b, b, b]);
+    c.cuboid("room-z", [-b, -b, -b], [b, b, -a]);
+    // Inside the room, a closed shell (an ordinary box) around the cell: its bounds contain
+    // the cell; what is inside it is visible, though a solid box would hide it.
+    c.cuboid("shell", [-2.5, -2.5, -2.5], [2.5, 2.5, 2.5]);
+    c.cuboid("inside_shell", [1.2, -0.2, -0.2], [1.6, 0.2, 0.2]);
+    // Straddling the cell boundary, through the shell and the room to the outside.
+    c.cuboid("straddle", [0.3, -0.45, -0.45], [8.0, -0.3, -0.3]);
+    c.objects.push((
+        "straddle_triangle".into(),
+        Shape::Triangles(vec![[
+            DVec3::new(-0.4, 0.4, 0.0),
+            DVec3::new(-9.0, 0.4, 0.2),
+            DVec3::new(-9.0, 0.45, -0.3),
+        ]]),
+    ));
+    // Touching the +x face and the (-,-,-) corner from outside.
+    c.cuboid("touch_face", [0.5, 0.3, 0.3], [1.0, 0.4, 0.4]);
+    c.cuboid("touch_corner", [-1.0, -1.0, -1.0], [-0.5, -0.5, -0.5]);
+    // Outside the room: provably hidden.
+    c.cuboid("outside", [-11.0, -1.0, -1.0], [-10.0, 1.0, 1.0]);
+    c.cuboid("outside_up", [-1.0, 10.0, -1.0], [1.0, 11.0, 1.0]);
+    c.seen(0, "inside_shell", [0.0, 0.0, 0.0], [1.4, 0.0, 0.0]);
+    c.seen(0, "shell", [0.0, 0.0, 0.0], [0.0, 0.0, 3.0]);
+    c.hidden.push((0, "outside"));
+    c.hidden.push((0, "outside_up"));
+    run(&c);
+}
+
+#[test]
+#[ignore]
+fn probe_slit() {
+    let w: f64 = std::env::var("W").map(|s| s.parse().unwrap()).unwrap_or(0.01);
+    let th: f64 = std::env::var("TH").map(|s| s.parse().unwrap()).unwrap_or(0.2);
+    let mut c = Case {
+        name: "slit",
+        cells: vec![unit_cell()],
+        ..Default::default()
+    };
+    c.cuboid("left", [-20.0, -20.0, 5.0], [-0.5 * w, 20.0, 5.0 + th]);
+    c.cuboid("right", [0.5 * w, -20.0, 5.0], [20.0, 20.0, 5.0 + th]);
+    c.cuboid("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+    let p = place(&c, IDENTITY);
+    for (label, s) in [
+        ("default", BakeSettings::default()),
+        ("no slice", BakeSettings { slice_planes: 0, ..BakeSettings::default() }),
+        ("1 plane no slice", BakeSettings { planes: 1, slice_planes: 0, ..BakeSettings::default() }),
+        ("no improved", BakeSettings { improved_projection: false, ..BakeSettings::default() }),
+    ] {
+        let r = bake(&p.scene, &p.cells, &s, &CpuBackend::new(), None).unwrap();
+        eprintln!("w {w} th {th} {label}: {:?}", r.cells[0].visible);
+    }
+    let prep = umbrasweep::bake::Prepared::new(&p.scene, &BakeSettings::default()).unwrap();
+    for j in prep.jobs(&p.cells[0]) {
+        eprintln!("{:?} occluders {} slices {}", j.frame, j.occluders.len(), j.slices.len());
+    }
+}

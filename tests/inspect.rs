@@ -1,0 +1,448 @@
+//! Inspection (issue 6): EXR dumps read back with the exr crate, PNG previews, the HTML
+//! report, and a headless-Chromium screenshot of the report (skipped without Chromium unless
+//! `CI` is set).
+
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::backend::{DepthMap, PlaneJob, depth_up};
+use umbrasweep::bake::{BakeSettings, bake, bake_observed, to_document};
+use umbrasweep::geom::{Aabb, box_triangles};
+use umbrasweep::hdm::Hdm;
+use umbrasweep::inspect::{DumpOptions, ReportArgs, dump_plane, file_stem, run_report};
+use umbrasweep::scene::Scene;
+
+type Obj = (String, Vec<[Vec3; 3]>, bool);
+
+fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
+    (
+        name.into(),
+        box_triangles(Vec3::from(min), Vec3::from(max)),
+        true,
+    )
+}
+
+fn unit_cell() -> Aabb {
+    Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
+}
+
+/// A wall in front of the cell's +z face, an object hidden behind it, one beside the cell.
+fn wall_scene() -> Vec<Obj> {
+    vec![
+        cube("wall", [-1.5, -1.5, 2.0], [1.5, 1.5, 2.2]),
+        cube("hidden", [-0.2, -0.2, 4.0], [0.2, 0.2, 4.4]),
+        cube("beside", [3.0, -0.5, -0.5], [3.5, 0.5, 0.5]),
+    ]
+}
+
+const RES: u32 = 64;
+
+fn settings() -> BakeSettings {
+    BakeSettings {
+        resolution: RES,
+        ..BakeSettings::default()
+    }
+}
+
+/// A fresh temporary folder (removed on drop).
+fn tmp() -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix("umbrasweep-inspect-")
+        .tempdir()
+        .unwrap()
+}
+
+type Seen = Mutex<Vec<(usize, PlaneJob, DepthMap, Hdm)>>;
+
+/// Bakes the wall scene's cell with dumps into `opts`, returning the planes seen.
+fn bake_with_dumps(opts: &DumpOptions) -> Vec<(usize, PlaneJob, DepthMap, Hdm)> {
+    let scene = Scene::from_objects(Path::new("analytic"), wall_scene());
+    let seen: Seen = Mutex::new(Vec::new());
+    let errors = Mutex::new(Vec::new());
+    let observe = |ci: usize, k: usize, job: &PlaneJob, map: &DepthMap, hdm: &Hdm| {
+        if let Err(e) = dump_plane(opts, ci, k, job, map, hdm) {
+            errors.lock().unwrap().push(e);
+        }
+        seen.lock()
+            .unwrap()
+            .push((k, job.clone(), map.clone(), hdm.clone()));
+    };
+    let r = bake_observed(
+        &scene,
+        &[unit_cell()],
+        &settings(),
+        &CpuBackend::new(),
+        None,
+        Some(&observe),
+    )
+    .unwrap();
+    assert_eq!(errors.into_inner().unwrap(), Vec::<String>::new());
+    let names: Vec<&str> = r.cells[0]
+        .visible
+        .iter()
+        .map(|&o| scene.objects[o as usize].name.as_str())
+        .collect();
+    assert_eq!(names, ["wall", "beside"], "the analytic bake itself");
+    let mut seen = seen.into_inner().unwrap();
+    seen.sort_by_key(|s| s.0);
+    seen
+}
+
+fn f32_samples(ch: &exr::prelude::AnyChannel<exr::prelude::FlatSamples>) -> Vec<f32> {
+    match &ch.sample_data {
+        exr::prelude::FlatSamples::F32(v) => v.clone(),
+        other => panic!("channel {} is not f32: {other:?}", ch.name),
+    }
+}
+
+#[test]
+fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
+    use exr::prelude::*;
+    let dir = tmp();
+    let exr_dir = dir.path().join("exr/nested"); // created on demand
+    let opts = DumpOptions {
+        exr: Some(exr_dir.clone()),
+        png: None,
+        cells: None,
+    };
+    let seen = bake_with_dumps(&opts);
+    assert!(!seen.is_empty());
+    let levels = RES.trailing_zeros() as usize;
+    let mut checked_wall = 0;
+    for (k, job, map, hdm) in &seen {
+        let stem = file_stem(0, *k, job);
+        assert!(
+            stem.starts_with(&format!("cell0000_plane{k:02}_")),
+            "{stem}"
+        );
+        let path = exr_dir.join(format!("{stem}.exr"));
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .all_layers()
+            .all_attributes()
+            .from_file(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let layer_names: Vec<String> = image
+            .layer_data
+            .iter()
+            .map(|l| l.attributes.layer_name.as_ref().unwrap().to_string())
+            .collect();
+        let mut expected = vec!["plane".to_string()];
+        expected.extend((1..=levels).map(|l| format!("hdm_max_{l}")));
+        expected.extend((1..=levels).map(|l| format!("hdm_min_{l}")));
+        assert_eq!(layer_names, expected);
+        // The plane layer: depth and mask.
+        let base = &image.layer_data[0];
+        assert_eq!(base.size, Vec2(RES as usize, RES as usize));
+        let chans: Vec<String> = base
+            .channel_data
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        assert_eq!(chans, ["depth", "mask"]);
+        let depth = f32_samples(&base.channel_data.list[0]);
+        let mask = f32_samples(&base.channel_data.list[1]);
+        assert_eq!(depth.len(), (RES * RES) as usize);
+        for (i, (a, b)) in depth.iter().zip(&map.depth).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "{stem}: pixel {i}");
+            assert_eq!(mask[i], if b.is_finite() { 1.0 } else { 0.0 });
+        }
+        // The pyramid levels halve and hold the HDM.
+        for (li, layer) in image.layer_data.iter().enumerate().skip(1) {
+            let (kind, l) = if li <= levels {
+                (&hdm.max, li)
+            } else {
+                (&hdm.min, li - levels)
+            };
+            let side = (RES >> l) as usize;
+            assert_eq!(layer.size, Vec2(side, side), "{stem} layer {li}");
+            assert_eq!(layer.channel_data.list.len(), 1);
+            assert_eq!(layer.channel_data.list[0].name.to_string(), "depth");
+            let v = f32_samples(&layer.channel_data.list[0]);
+            assert_eq!(v.len(), side * side);
+            assert!(
+                v.iter()
+                    .zip(&kind[l])
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
+        // Metadata.
+        let other = &base.attributes.other;
+        assert!(
+            image
+                .layer_data
+                .iter()
+                .all(|l| l.attributes.other == *other)
+        );
+        let text = |k: &str| match other.get(&Text::from(k)) {
+            Some(AttributeValue::Text(t)) => t.to_string(),
+            v => panic!("{k}: {v:?}"),
+        };
+        let f = &job.frame;
+        assert_eq!(text("planeAxis"), ["x", "y", "z"][f.axis]);
+        assert_eq!(text("planeSide"), if f.positive { "+" } else { "-" });
+        match other.get(&Text::from("planePosition")) {
+            Some(AttributeValue::F64(p)) => assert_eq!(*p, f.position),
+            v => panic!("planePosition: {v:?}"),
+        }
+        match other.get(&Text::from("resolution")) {
+            Some(AttributeValue::I32(r)) => assert_eq!(*r, RES as i32),
+            v => panic!("resolution: {v:?}"),
+        }
+        match other.get(&Text::from("cellMin")) {
+            Some(AttributeValue::FloatVec3(v)) => assert_eq!(*v, (-0.5, -0.5, -0.5)),
+            v => panic!("cellMin: {v:?}"),
+        }
+        match other.get(&Text::from("pixelSize")) {
+            Some(AttributeValue::FloatVec2(v)) => {
+                let ps = f.pixel_size();
+                assert_eq!(*v, Vec2(ps.x as f32, ps.y as f32));
+            }
+            v => panic!("pixelSize: {v:?}"),
+        }
+        for key in ["cellMax", "rectMin", "rectMax", "planeDistance", "uvAxes"] {
+            assert!(other.contains_key(&Text::from(key)), "{key}");
+        }
+        // Known values on the +z planes: the plane just behind the wall holds the wall's
+        // Depth (its far face, `2.2`, seen from the plane) where covered; the slice plane
+        // through the wall holds Depth 0 in the wall's cross-section; the corners (beyond
+        // the wall's outline) are uncovered.
+        if f.axis == 2 && f.positive && f.position < 3.0 {
+            let wall = if job.slices.is_empty() {
+                depth_up(2.2f32 as f64 - f.position)
+            } else {
+                0.0
+            };
+            let r = RES as usize;
+            let p = f.to_pixel(glam::DVec2::ZERO);
+            let (i, j) = (p.x.floor() as usize, p.y.floor() as usize);
+            assert!((depth[j * r + i] - wall).abs() <= 1e-5, "{stem}: centre");
+            assert_eq!(mask[j * r + i], 1.0);
+            assert_eq!(
+                depth.iter().filter(|d| d.is_finite()).count(),
+                map.covered()
+            );
+            assert!(
+                depth
+                    .iter()
+                    .all(|&d| !d.is_finite() || (d - wall).abs() <= 1e-5),
+                "{stem}: every covered pixel holds the wall's Depth"
+            );
+            let (lo, hi) = (f.rect_min, f.rect_max);
+            assert!(lo.x < -1.5 && lo.y < -1.5 && hi.x > 1.5 && hi.y > 1.5);
+            for c in [0, r - 1, r * (r - 1), r * r - 1] {
+                assert_eq!(depth[c], f32::INFINITY, "{stem}: corner {c}");
+                assert_eq!(mask[c], 0.0);
+            }
+            let nonempty = map.covered() > r * r / 2;
+            assert!(nonempty, "{stem}: the wall covers most of the plane");
+            checked_wall += 1;
+        }
+    }
+    assert_eq!(
+        checked_wall, 2,
+        "the slice plane and the plane behind the wall"
+    );
+}
+
+#[test]
+fn png_previews_have_the_map_sizes_and_a_legend() {
+    let dir = tmp();
+    let png_dir = dir.path().join("png");
+    let opts = DumpOptions {
+        exr: None,
+        png: Some(png_dir.clone()),
+        cells: None,
+    };
+    let seen = bake_with_dumps(&opts);
+    for (k, job, map, _) in &seen {
+        let stem = file_stem(0, *k, job);
+        for what in ["depth", "mask", "hdm"] {
+            let p = png_dir.join(format!("{stem}_{what}.png"));
+            let img = image::open(&p)
+                .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+                .to_rgb8();
+            assert_eq!(img.dimensions(), (RES, RES), "{}", p.display());
+            if what == "mask" {
+                let white = img.pixels().filter(|p| p.0 == [255, 255, 255]).count();
+                assert_eq!(white, map.covered());
+            }
+        }
+    }
+    let legend = image::open(png_dir.join("legend.png")).unwrap().to_rgb8();
+    assert!(legend.width() >= 200 && legend.height() >= 100);
+}
+
+/// Writes `objects` as an OBJ file (one `o` per object).
+fn write_obj(path: &Path, objects: &[Obj]) {
+    let mut s = String::new();
+    let mut n = 0;
+    for (name, tris, _) in objects {
+        s += &format!("o {name}\n");
+        for t in tris {
+            for p in t {
+                s += &format!("v {} {} {}\n", p.x, p.y, p.z);
+            }
+            s += &format!("f {} {} {}\n", n + 1, n + 2, n + 3);
+            n += 3;
+        }
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+/// Writes a small scene, bakes two cells and writes the PVS: returns (scene, pvs) paths.
+fn scene_and_pvs(dir: &Path) -> (PathBuf, PathBuf) {
+    let scene_path = dir.join("walls.obj");
+    write_obj(&scene_path, &wall_scene());
+    let scene = umbrasweep::scene::load(&scene_path).unwrap();
+    let cells = [
+        unit_cell(),
+        Aabb::new(Vec3::new(1.0, -0.5, -0.5), Vec3::new(2.0, 0.5, 0.5)),
+    ];
+    let r = bake(&scene, &cells, &settings(), &CpuBackend::new(), None).unwrap();
+    let doc = to_document(&scene, &cells, &r, &settings());
+    let pvs = dir.join("walls.json");
+    umbrasweep::pvs::json::write(&pvs, &doc).unwrap();
+    (scene_path, pvs)
+}
+
+fn report(dir: &Path) -> PathBuf {
+    let (scene, pvs) = scene_and_pvs(dir);
+    let out = dir.join("report");
+    run_report(&ReportArgs {
+        scene,
+        pvs,
+        output: out.clone(),
+        cell: 0,
+        no_previews: false,
+    })
+    .unwrap();
+    out.join("index.html")
+}
+
+#[test]
+fn report_is_a_self_contained_page() {
+    let dir = tmp();
+    let index = report(dir.path());
+    let html = std::fs::read_to_string(&index).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert!(!html.contains("http://") && !html.contains("https://"));
+    assert!(!html.contains("url("), "no CSS resources");
+    let srcs: Vec<&str> = html.split("src=\"").skip(1).collect();
+    // Top-down picture, legend, and two images per plane.
+    assert!(srcs.len() >= 4, "{} images", srcs.len());
+    assert!(srcs.iter().all(|s| s.starts_with("data:image/png;base64,")));
+    assert!(html.contains("<table>") && html.contains("class=\"chosen\""));
+    assert!(
+        html.contains("the same as in the document"),
+        "re-bake agrees"
+    );
+}
+
+#[test]
+fn report_refuses_a_pvs_of_another_scene_and_a_missing_cell() {
+    let dir = tmp();
+    let (scene, pvs) = scene_and_pvs(dir.path());
+    let other = dir.path().join("other.obj");
+    write_obj(&other, &wall_scene()[..2]);
+    let args = |scene: &Path, cell| ReportArgs {
+        scene: scene.to_path_buf(),
+        pvs: pvs.clone(),
+        output: dir.path().join("r"),
+        cell,
+        no_previews: true,
+    };
+    let e = run_report(&args(&other, 0)).unwrap_err().to_string();
+    assert!(e.contains("2 objects") && e.contains("lists 3"), "{e}");
+    let e = run_report(&args(&scene, 7)).unwrap_err().to_string();
+    assert!(e.contains("--cell 7"), "{e}");
+    assert!(!dir.path().join("r/index.html").exists());
+    run_report(&args(&scene, 1)).unwrap();
+    assert!(dir.path().join("r/index.html").is_file());
+}
+
+/// Runs `cmd`, killing it after `secs` seconds.
+fn run_with_timeout(cmd: &mut std::process::Command, secs: u64) -> std::process::ExitStatus {
+    let mut child = cmd.spawn().expect("chromium starts");
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        if start.elapsed().as_secs() > secs {
+            let _ = child.kill();
+            panic!("chromium did not finish within {secs} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn report_renders_in_headless_chromium() {
+    let chromium = ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
+        .into_iter()
+        .map(Path::new)
+        .find(|p| p.exists());
+    let Some(chromium) = chromium else {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI is set but Chromium is missing (apt-get install chromium)"
+        );
+        eprintln!("skipped: no /usr/bin/chromium (apt-get install chromium to run this test)");
+        return;
+    };
+    let dir = tmp();
+    let index = report(dir.path());
+    let profile = dir.path().join("profile");
+    let shot = dir.path().join("shot.png");
+    let t = std::time::Instant::now();
+    let status = run_with_timeout(
+        std::process::Command::new(chromium)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--hide-scrollbars",
+            ])
+            .arg(format!("--user-data-dir={}", profile.display()))
+            .arg(format!("--screenshot={}", shot.display()))
+            .arg("--window-size=1200,900")
+            .arg(format!(
+                "file://{}",
+                index.canonicalize().unwrap().display()
+            ))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null()),
+        120,
+    );
+    eprintln!("chromium took {:.1} s", t.elapsed().as_secs_f64());
+    assert!(status.success(), "chromium failed: {status}");
+    let img = image::open(&shot).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (1200, 900));
+    let mut counts = std::collections::HashMap::new();
+    for p in img.pixels() {
+        *counts.entry(p.0).or_insert(0usize) += 1;
+    }
+    let most = counts.values().copied().max().unwrap();
+    let total = (img.width() * img.height()) as usize;
+    assert!(counts.len() >= 20, "only {} colours", counts.len());
+    assert!(
+        most < total * 95 / 100,
+        "one colour covers {most} of {total} pixels"
+    );
+    // The visible objects' green reached the screen.
+    assert!(
+        img.pixels()
+            .any(|p| p.0[1] > 120 && p.0[0] < 140 && p.0[2] < 140 && p.0[1] > p.0[0] + 30),
+        "no green footprint in the screenshot"
+    );
+}
