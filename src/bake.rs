@@ -481,6 +481,23 @@ pub fn median(values: &[f64]) -> f64 {
     }
 }
 
+/// The PVS documents' object table: every object of the scene by id, with its name, triangle
+/// count and bounds.
+pub fn object_table(scene: &Scene) -> Vec<PvsObject> {
+    scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, o)| PvsObject {
+            id: i as u32,
+            name: o.name.clone(),
+            triangles: o.triangles.len() as u32,
+            min: o.bounds.min.to_array(),
+            max: o.bounds.max.to_array(),
+        })
+        .collect()
+}
+
 /// Builds the JSON PVS document of a bake, with its summary.
 pub fn to_document(
     scene: &Scene,
@@ -515,18 +532,7 @@ pub fn to_document(
             occluders: settings.occluders.clone(),
             improved_projection: settings.improved_projection,
         },
-        objects: scene
-            .objects
-            .iter()
-            .enumerate()
-            .map(|(i, o)| PvsObject {
-                id: i as u32,
-                name: o.name.clone(),
-                triangles: o.triangles.len() as u32,
-                min: o.bounds.min.to_array(),
-                max: o.bounds.max.to_array(),
-            })
-            .collect(),
+        objects: object_table(scene),
         cells: cells
             .iter()
             .zip(&result.cells)

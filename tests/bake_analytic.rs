@@ -235,3 +235,36 @@ fn settings_are_checked() {
     let err = bake(&scene, &[unit_cell()], &bad, &CpuBackend::new(), None).unwrap_err();
     assert!(err.to_string().contains("power of two"), "{err}");
 }
+
+#[test]
+fn alpha_tested_walls_hide_nothing_unless_asked_and_occluder_patterns_select() {
+    let wall = |opaque: bool| {
+        let (name, tris, _) = cube("wall", [-20.0, -20.0, 5.0], [20.0, 20.0, 5.5]);
+        (name, tris, opaque)
+    };
+    let target = cube("target", [-1.0, -1.0, 10.0], [1.0, 1.0, 11.0]);
+    let bake_with = |objects: Vec<Obj>, settings: BakeSettings| {
+        let scene = Scene::from_objects(Path::new("analytic"), objects);
+        let r = bake(&scene, &[unit_cell()], &settings, &CpuBackend::new(), None).unwrap();
+        r.cells[0].visible.contains(&1)
+    };
+    // A leaf-card material (not opaque) is an occludee only.
+    assert!(bake_with(vec![wall(false), target.clone()], BakeSettings::default()));
+    // --alpha-occluders treats it as opaque.
+    let alpha = BakeSettings {
+        alpha_occluders: true,
+        ..BakeSettings::default()
+    };
+    assert!(!bake_with(vec![wall(false), target.clone()], alpha));
+    // --occluders 'wa*' keeps the wall; 'tar*' leaves no occluder; the target stays an occludee.
+    let only = |p: &str| BakeSettings {
+        occluders: Some(p.into()),
+        ..BakeSettings::default()
+    };
+    assert!(!bake_with(vec![wall(true), target.clone()], only("wa*")));
+    assert!(bake_with(vec![wall(true), target.clone()], only("tar*")));
+    // A bad pattern is an error, not a panic.
+    let scene = Scene::from_objects(Path::new("t"), vec![wall(true)]);
+    let err = bake(&scene, &[unit_cell()], &only("[x"), &CpuBackend::new(), None).unwrap_err();
+    assert!(err.to_string().contains("--occluders"), "{err}");
+}

@@ -6,7 +6,7 @@ use glam::{Vec3, vec3};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use umbrasweep::geom::Aabb;
-use umbrasweep::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, VERSION};
+use umbrasweep::pvs::{FORMAT, PvsCell, PvsDocument, PvsSettings, VERSION};
 use umbrasweep::scene::Scene;
 use umbrasweep::validate::{CheckOptions, SceneRays, ValidateError, check, sample_cell};
 
@@ -89,18 +89,7 @@ fn doc(scene: &Scene, visible: Vec<u32>, alpha_occluders: bool) -> PvsDocument {
             alpha_occluders,
             ..Default::default()
         },
-        objects: scene
-            .objects
-            .iter()
-            .enumerate()
-            .map(|(i, o)| PvsObject {
-                id: i as u32,
-                name: o.name.clone(),
-                triangles: o.triangles.len() as u32,
-                min: o.bounds.min.to_array(),
-                max: o.bounds.max.to_array(),
-            })
-            .collect(),
+        objects: umbrasweep::bake::object_table(scene),
         cells: vec![PvsCell {
             min: cell().min.to_array(),
             max: cell().max.to_array(),

@@ -182,8 +182,9 @@ fn drop_near_duplicates(poly: &mut Vec<DVec2>) {
     }
 }
 
-/// Keeps the part of convex polygon `poly` on the left of the directed line `a → b`.
-fn clip_half_plane(poly: &[DVec2], a: DVec2, b: DVec2, out: &mut Vec<DVec2>) {
+/// Keeps the part of convex polygon `poly` on the left of the directed line `a → b`
+/// (Sutherland–Hodgman against one half-plane; shared with the GPU backend's setup).
+pub(crate) fn clip_half_plane(poly: &[DVec2], a: DVec2, b: DVec2, out: &mut Vec<DVec2>) {
     out.clear();
     let d = b - a;
     let side = |p: DVec2| d.perp_dot(p - a);

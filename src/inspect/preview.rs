@@ -141,7 +141,7 @@ pub fn legend_image() -> RgbImage {
             img.put_pixel(x0 + x, y0 + y, image::Rgb(c));
         }
     }
-    for (t, label) in [(0.0, "0"), (0.5, "D"), (0.75, "3D"), (0.9, "9D")] {
+    for (t, label) in [(0.0, "d=0"), (0.5, "D"), (0.75, "3D"), (0.9, "9D")] {
         let x = x0 + (t * (bw - 1) as f64).round() as u32;
         for y in y0 + bh..y0 + bh + 5 {
             img.put_pixel(x, y, image::Rgb(ink));
@@ -173,7 +173,7 @@ pub fn legend_image() -> RgbImage {
     img
 }
 
-/// Draws `s` (upper case, digits, a few signs) with a 3×5 font scaled ×2 (8 px advance).
+/// Draws `s` (see [`glyph`]) with a 3×5 font scaled ×2 (8 px advance).
 fn text(img: &mut RgbImage, x0: u32, y0: u32, s: &str, colour: [u8; 3]) {
     for (n, ch) in s.chars().enumerate() {
         let g = glyph(ch);
@@ -196,8 +196,12 @@ fn text(img: &mut RgbImage, x0: u32, y0: u32, s: &str, colour: [u8; 3]) {
     }
 }
 
-/// Rows (top first, 3 bits, left = 4) of a 3×5 glyph; unknown characters are blank.
+/// Rows (top first, 3 bits, left = 4) of a 3×5 glyph: upper case (lower case is drawn upper
+/// case, except `d`, the Depth), digits and a few signs; other characters are blank.
 fn glyph(c: char) -> [u8; 5] {
+    if c == 'd' {
+        return [1, 1, 3, 5, 3];
+    }
     match c.to_ascii_uppercase() {
         '0' => [7, 5, 5, 5, 7],
         '1' => [2, 6, 2, 2, 7],

@@ -4,8 +4,9 @@
 //! - a top-down picture of the scene (x to the right, z downward, seen from +y) drawn with
 //!   tiny-skia: each object's footprint (its bounds in x–z) green when in the chosen cell's
 //!   PVS, grey when culled, larger footprints below smaller ones; every cell outlined in blue,
-//!   the chosen one filled orange with a thick outline;
-//! - a per-cell table: index, bounds, PVS size, % of objects culled, bake time;
+//!   the chosen one filled orange with a thick outline (footprints covering more than a
+//!   quarter of the picture are outlined only);
+//! - beside it, a per-cell table: index, bounds, PVS size, % of objects culled, bake time;
 //! - the chosen cell's planes, re-baked in-process on the CPU backend with the settings the
 //!   PVS document records: Depth preview and mask of each plane, with its frame, and the
 //!   colour legend (see [`super::preview`]).
@@ -274,7 +275,11 @@ fn draw_topdown(scene: &Scene, doc: &PvsDocument, cell: usize) -> anyhow::Result
         } else {
             (&cul_fill, &cul_line)
         };
-        pm.fill_rect(r, fill, Transform::identity(), None);
+        // Grounds and other footprints covering much of the picture are outlined only, so
+        // that they do not tint everything under them.
+        if r.width() * r.height() <= 0.25 * (w * h) as f32 {
+            pm.fill_rect(r, fill, Transform::identity(), None);
+        }
         stroke_rect(&mut pm, r, line, 1.0);
     }
     let cell_line = paint(40, 90, 210, 230);
@@ -372,15 +377,40 @@ fn page(
     }
     h.push_str("</p>\n");
 
+    let mut t = String::new();
+    t.push_str(
+        "<h2>Cells</h2>\n<div class=\"scroll\"><table><thead><tr><th>cell</th><th>min</th><th>max</th>\
+         <th>PVS size</th><th>% culled</th><th>ms</th></tr></thead><tbody>\n",
+    );
+    for (i, c) in doc.cells.iter().enumerate() {
+        let culled = 100.0 * (1.0 - c.visible.len() as f64 / n_obj as f64);
+        writeln!(
+            t,
+            "<tr{}><td>{i}</td><td>{}</td><td>{}</td><td>{}</td><td>{culled:.1}</td>\
+             <td>{:.1}</td></tr>",
+            if i == args.cell {
+                " class=\"chosen\""
+            } else {
+                ""
+            },
+            fmt_v3(c.min),
+            fmt_v3(c.max),
+            c.visible.len(),
+            c.ms
+        )?;
+    }
+    t.push_str("</tbody></table></div>\n");
     write!(
         h,
-        "<h2>Cell {} from above</h2>\n<p class=\"meta\">x to the right, z downward, seen from +y. \
+        "<div class=\"row\"><div class=\"pic\"><h2>Cell {} from above</h2>\n<p class=\"meta\">x to the right, z downward, seen from +y. \
          <span class=\"sw\" style=\"background:#2ea043\"></span> in the PVS of cell {} \
          ({} objects) · <span class=\"sw\" style=\"background:#a0a0a0\"></span> culled · \
          <span class=\"sw\" style=\"border:2px solid #285ad2\"></span> cells · \
          <span class=\"sw\" style=\"background:#ff8c00;border:2px solid #c82800\"></span> \
-         cell {} {} – {}. Footprints are the objects' bounds.</p>\n\
-         <img class=\"top\" alt=\"top-down view of the scene\" src=\"{}\">\n",
+         cell {} {} – {}. Footprints are the objects' bounds; those covering more than a \
+         quarter of the picture (grounds) are outlined only.</p>\n\
+         <img class=\"top\" alt=\"top-down view of the scene\" src=\"{}\"></div>\n\
+         <div class=\"cells\">{t}</div></div>\n",
         args.cell,
         args.cell,
         chosen.visible.len(),
@@ -454,28 +484,7 @@ fn page(
         h.push_str("</div>\n");
     }
 
-    h.push_str(
-        "<h2>Cells</h2>\n<table><thead><tr><th>cell</th><th>min</th><th>max</th>\
-         <th>PVS size</th><th>% culled</th><th>ms</th></tr></thead><tbody>\n",
-    );
-    for (i, c) in doc.cells.iter().enumerate() {
-        let culled = 100.0 * (1.0 - c.visible.len() as f64 / n_obj as f64);
-        writeln!(
-            h,
-            "<tr{}><td>{i}</td><td>{}</td><td>{}</td><td>{}</td><td>{culled:.1}</td>\
-             <td>{:.1}</td></tr>",
-            if i == args.cell {
-                " class=\"chosen\""
-            } else {
-                ""
-            },
-            fmt_v3(c.min),
-            fmt_v3(c.max),
-            c.visible.len(),
-            c.ms
-        )?;
-    }
-    h.push_str("</tbody></table>\n</body></html>\n");
+    h.push_str("</body></html>\n");
     Ok(h)
 }
 
@@ -483,7 +492,9 @@ const CSS: &str = "body{font:14px/1.4 sans-serif;margin:16px;color:#222;backgrou
 h1{font-size:20px}h2{font-size:16px;margin-top:24px}.meta{color:#555}\
 code{background:#f2f2f2;padding:0 3px}\
 .sw{display:inline-block;width:12px;height:12px;vertical-align:middle;box-sizing:border-box}\
-img.top{max-width:100%;border:1px solid #ccc}img.legend{display:block;margin:8px 0}\
+img.top{width:100%;border:1px solid #ccc}\
+.row{display:flex;gap:24px;align-items:flex-start}.pic{flex:0 1 600px}\
+.scroll{max-height:620px;overflow-y:auto}img.legend{display:block;margin:8px 0}\
 .planes{display:flex;flex-wrap:wrap;gap:12px}\
 figure{margin:0;width:340px}figure img{width:160px;height:160px;image-rendering:pixelated;\
 border:1px solid #ccc;margin-right:4px}figcaption{font-size:12px;color:#444}\

@@ -197,7 +197,7 @@ fn plan_direction(
     }
     distances.sort_by(f64::total_cmp);
     let cell_uv = DVec2::new(cell.max[u] - cell.min[u], cell.max[v] - cell.min[v]);
-    let useful: Vec<u32> = (0..summary.index.len())
+    let useful: Vec<usize> = (0..summary.index.len())
         .filter(|&i| {
             distances.iter().any(|&tp| {
                 may_project(
@@ -209,9 +209,8 @@ fn plan_direction(
                 )
             })
         })
-        .map(|i| summary.index[i])
         .collect();
-    let parts = cut_parts(cell, occ, &useful, axis, positive, face, eps);
+    let parts = cut_parts(cell, occ, &summary, &useful, axis, positive, face, eps);
     let part_object = parts
         .index
         .iter()
@@ -435,36 +434,30 @@ fn summarize(
     out
 }
 
-/// The points of parts `only` (indices into `occ.parts`, all reaching beyond the face), cut
-/// at `face + eps` when they cross it.
+/// The entries `only` of `summary`, with their points cut at `face + eps` where the part
+/// crosses the face (parts that vanish in the cut are dropped).
+#[allow(clippy::too_many_arguments)]
 fn cut_parts(
     cell: &DAabb,
     occ: &Occluders,
-    only: &[u32],
+    summary: &DirParts,
+    only: &[usize],
     axis: usize,
     positive: bool,
     face: f64,
     eps: f64,
 ) -> DirParts {
     let s = if positive { 1.0 } else { -1.0 };
-    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let mut out = DirParts::default();
     let dist = |p: DVec3| s * (p[axis] - face);
     let mut buf: Vec<DVec3> = Vec::new();
     let corners = cell.corners();
-    for &k in only {
-        let k = k as usize;
+    for &i in only {
+        let k = summary.index[i] as usize;
         let part = &occ.parts[k];
-        let b = &part.bounds;
-        let (near, far) = if positive {
-            (b.min[axis], b.max[axis])
-        } else {
-            (b.max[axis], b.min[axis])
-        };
-        let far_t = s * (far - face);
         let pts = occ.part_points(k);
         buf.clear();
-        if s * (near - face) > eps {
+        if summary.near[i] > eps {
             buf.extend_from_slice(pts);
         } else {
             match part.kind {
@@ -482,13 +475,12 @@ fn cut_parts(
             continue;
         }
         out.index.push(k as u32);
-        out.far.push(far_t);
-        out.near.push((s * (near - face)).max(eps));
-        out.extent
-            .push(DVec2::new(b.max[u] - b.min[u], b.max[v] - b.min[v]));
-        out.lo.push(DVec2::new(b.min[u], b.min[v]));
-        out.hi.push(DVec2::new(b.max[u], b.max[v]));
-        out.weight.push(0.0);
+        out.far.push(summary.far[i]);
+        out.near.push(summary.near[i]);
+        out.extent.push(summary.extent[i]);
+        out.lo.push(summary.lo[i]);
+        out.hi.push(summary.hi[i]);
+        out.weight.push(summary.weight[i]);
         out.set.push(buf.iter().copied());
     }
     out

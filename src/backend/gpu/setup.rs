@@ -126,7 +126,7 @@ pub fn occluder(
         (DVec2::new(r, r), DVec2::new(0.0, r)),
         (DVec2::new(0.0, r), DVec2::new(0.0, 0.0)),
     ] {
-        clip_half_plane(g, p0, p1, &mut scratch.tmp);
+        crate::backend::cpu::clip_half_plane(g, p0, p1, &mut scratch.tmp);
         std::mem::swap(g, &mut scratch.tmp);
         if g.len() < 3 {
             return false;
@@ -199,25 +199,6 @@ pub fn occluder(
             .extend_from_slice(&[vert(g[0]), vert(g[k]), vert(g[k + 1])]);
     }
     true
-}
-
-/// Keeps the part of convex polygon `poly` on the left of the directed line `a → b`.
-fn clip_half_plane(poly: &[DVec2], a: DVec2, b: DVec2, out: &mut Vec<DVec2>) {
-    out.clear();
-    let d = b - a;
-    let side = |p: DVec2| d.perp_dot(p - a);
-    let n = poly.len();
-    for i in 0..n {
-        let p = poly[i];
-        let q = poly[(i + 1) % n];
-        let (sp, sq) = (side(p), side(q));
-        if sp >= 0.0 {
-            out.push(p);
-        }
-        if (sp >= 0.0) != (sq >= 0.0) {
-            out.push(p + (q - p) * (sp / (sp - sq)));
-        }
-    }
 }
 
 /// Flushes denormal-range values to zero (GPUs may): changes `n·d` by less than 10⁻³⁰·D.
