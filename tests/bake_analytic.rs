@@ -249,7 +249,10 @@ fn alpha_tested_walls_hide_nothing_unless_asked_and_occluder_patterns_select() {
         r.cells[0].visible.contains(&1)
     };
     // A leaf-card material (not opaque) is an occludee only.
-    assert!(bake_with(vec![wall(false), target.clone()], BakeSettings::default()));
+    assert!(bake_with(
+        vec![wall(false), target.clone()],
+        BakeSettings::default()
+    ));
     // --alpha-occluders treats it as opaque.
     let alpha = BakeSettings {
         alpha_occluders: true,
@@ -265,6 +268,13 @@ fn alpha_tested_walls_hide_nothing_unless_asked_and_occluder_patterns_select() {
     assert!(bake_with(vec![wall(true), target.clone()], only("tar*")));
     // A bad pattern is an error, not a panic.
     let scene = Scene::from_objects(Path::new("t"), vec![wall(true)]);
-    let err = bake(&scene, &[unit_cell()], &only("[x"), &CpuBackend::new(), None).unwrap_err();
+    let err = bake(
+        &scene,
+        &[unit_cell()],
+        &only("[x"),
+        &CpuBackend::new(),
+        None,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("--occluders"), "{err}");
 }

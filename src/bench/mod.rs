@@ -2,7 +2,7 @@
 //! cell against ray-sampled ground truth, and prints one table (see `docs/bench.md`).
 //!
 //! The scenes are generated in memory — a city ([`CityOptions`] 12×12 blocks, street cells),
-//! the coarse forest (path cells; 150 trees with `--quick`, all 1,500 otherwise), a boxfield —
+//! the coarse forest (path cells; 300 trees with `--quick`, all 1,500 otherwise), a boxfield —
 //! and, when the shared scene folder exists (`../shared/scenes` from the current directory,
 //! or `--shared DIR`), the real ones: `urban/sionna_munich.glb` and `urban/sionna_etoile.glb`
 //! (cells from [`free_cells`](crate::cells::free_cells), 4×2×4 m at 1 m), `levels/zdm2.obj`
@@ -52,20 +52,20 @@ pub enum BenchBackend {
   umbrasweep bench --backend cpu --json bench.json
   umbrasweep bench --quick --scenes city,boxfield --cells 2 --rays 10000")]
 pub struct BenchArgs {
-    /// A small version that runs in a few minutes: 5 cells per scene, 3 on the GPU, 250,000
-    /// rays per cell, a forest of 150 trees.
+    /// A small version that runs in a few minutes: 10 cells per scene, 3 on the GPU, a forest
+    /// of 300 trees and 6 model trees.
     #[arg(long)]
     pub quick: bool,
-    /// Cells per scene (default 20, 5 with --quick).
+    /// Cells per scene (default 50, 10 with --quick).
     #[arg(long, value_name = "N")]
     pub cells: Option<usize>,
     /// Cells per scene on the GPU backend, the first of the CPU's (default 10, 3 with
     /// --quick: software rasterisers such as lavapipe are slow).
     #[arg(long, value_name = "N")]
     pub gpu_cells: Option<usize>,
-    /// Validation rays per cell (default 1,000,000, 250,000 with --quick).
-    #[arg(long, value_name = "N")]
-    pub rays: Option<u64>,
+    /// Validation rays per cell.
+    #[arg(long, value_name = "N", default_value_t = 1_000_000)]
+    pub rays: u64,
     /// Seed of the generated scenes, of the free-space cells and of the validation rays.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -126,6 +126,10 @@ pub struct Bench {
     pub quick: bool,
     /// Validation rays per cell.
     pub rays_per_cell: u64,
+    /// Cells per scene on the CPU backend (fewer when a scene has fewer).
+    pub cells: usize,
+    /// Cells per scene on the GPU backend (the first of the CPU's).
+    pub gpu_cells: usize,
     /// Seed of scenes, cells and rays.
     pub seed: u64,
     /// Worker threads (rayon).
@@ -167,9 +171,9 @@ struct Plan {
 impl Plan {
     fn new(args: &BenchArgs) -> anyhow::Result<Plan> {
         let q = args.quick;
-        let cells = args.cells.unwrap_or(if q { 5 } else { 20 });
+        let cells = args.cells.unwrap_or(if q { 10 } else { 50 });
         let gpu_cells = args.gpu_cells.unwrap_or(if q { 3 } else { 10 }).min(cells);
-        let rays = args.rays.unwrap_or(if q { 250_000 } else { 1_000_000 });
+        let rays = args.rays;
         if cells == 0 || rays == 0 {
             anyhow::bail!("--cells and --rays must be at least 1");
         }
@@ -237,7 +241,7 @@ fn build(name: &str, args: &BenchArgs, plan: &Plan) -> anyhow::Result<Result<Ben
         "forest" => generated(
             forest(&ForestOptions {
                 seed,
-                trees: if args.quick { 150 } else { 1500 },
+                trees: if args.quick { 300 } else { 1500 },
                 max_cells: Some(n),
                 ..ForestOptions::coarse()
             })?,
@@ -365,92 +369,24 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
             skipped.push(why);
             continue;
         }
-        let index = SceneRays::new(scene);
-        // Sampled visible set and its time, per cell, shared by the backends.
-        let mut samples: Vec<Option<(CellSample, f64)>> = vec![None; bs.cells.len()];
-        for &(backend, max_cells) in &backends {
-            let cells = &bs.cells[..max_cells.min(bs.cells.len())];
-            let t = Instant::now();
-            eprintln!(
-                "bench: {}: baking {} cells on {}",
-                bs.name,
-                cells.len(),
-                backend.name()
-            );
-            let result = bake(scene, cells, &settings, backend, None)
-                .with_context(|| format!("{}: bake on {}", bs.name, backend.name()))?;
-            eprintln!(
-                "bench: {}: baked in {:.1} s; validating with {} rays per cell",
-                bs.name,
-                t.elapsed().as_secs_f64(),
-                plan.rays
-            );
-            let mut reports = Vec::new();
-            for (i, (cell, r)) in cells.iter().zip(&result.cells).enumerate() {
-                let (sample, _) = samples[i].get_or_insert_with(|| {
-                    let t = Instant::now();
-                    let s =
-                        sample_cell(&index, scene, *cell, plan.rays, args.seed, i as u64, false);
-                    (s, t.elapsed().as_secs_f64() * 1e3)
-                });
-                let pvs = PvsCell {
-                    min: cell.min.to_array(),
-                    max: cell.max.to_array(),
-                    visible: r.visible.clone(),
-                    ms: r.ms,
-                };
-                reports.push(cell_report(scene, &pvs, sample));
+        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            bench_scene(&bs, &backends, &settings, &plan, args.seed)
+        }));
+        match run {
+            Ok(r) => rows.extend(r?),
+            Err(panic) => {
+                let msg = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                let why = format!(
+                    "{}: FAILED, the bake or validation panicked: {msg}",
+                    bs.name
+                );
+                eprintln!("bench: {why}");
+                skipped.push(why);
             }
-            let nc = cells.len() as f64;
-            let ratios: Vec<f64> = reports.iter().filter_map(|r| r.pvs_over_vs).collect();
-            let false_culls = reports.iter().map(|r| r.false_culls.len()).sum();
-            for (i, r) in reports.iter().enumerate() {
-                for f in &r.false_culls {
-                    eprintln!(
-                        "bench: FALSE CULL {} [{}] cell {i} {:?}–{:?}: object {} {:?}, ray \
-                         origin {:?} direction {:?}",
-                        bs.name,
-                        backend.name(),
-                        r.min,
-                        r.max,
-                        f.object,
-                        f.name,
-                        f.origin,
-                        f.direction
-                    );
-                }
-            }
-            let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
-            let vms: Vec<f64> = samples[..cells.len()]
-                .iter()
-                .flatten()
-                .map(|s| s.1)
-                .collect();
-            rows.push(BenchRow {
-                scene: bs.name.clone(),
-                triangles: scene.triangles.len(),
-                objects: scene.objects.len(),
-                cells: cells.len(),
-                backend: backend.name().into(),
-                adapter: backend.adapter(),
-                median_ms_per_cell: median(&ms),
-                validate_ms_per_cell: median(&vms),
-                objects_culled_percent: reports
-                    .iter()
-                    .map(|r| r.objects_culled_percent)
-                    .sum::<f64>()
-                    / nc,
-                triangles_culled_percent: reports
-                    .iter()
-                    .map(|r| r.triangles_culled_percent)
-                    .sum::<f64>()
-                    / nc,
-                pvs_over_vs: (!ratios.is_empty())
-                    .then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
-                false_culls,
-                planes_per_cell: result.cells.iter().map(|c| c.planes as f64).sum::<f64>() / nc,
-                rays_per_cell: plan.rays,
-            });
         }
         eprintln!(
             "bench: {}: done in {:.1} s",
@@ -462,12 +398,116 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
         format: "umbrasweep-bench".into(),
         quick: args.quick,
         rays_per_cell: plan.rays,
+        cells: plan.cells,
+        gpu_cells: plan.gpu_cells,
         seed: args.seed,
         threads: rayon::current_num_threads(),
         rows,
         skipped,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Bakes and validates one scene with every backend: one row per backend.
+///
+/// # Errors
+/// A backend failure.
+fn bench_scene(
+    bs: &BenchScene,
+    backends: &[(&dyn RasterBackend, usize)],
+    settings: &BakeSettings,
+    plan: &Plan,
+    seed: u64,
+) -> anyhow::Result<Vec<BenchRow>> {
+    let scene = &bs.scene;
+    let mut out = Vec::new();
+    let index = SceneRays::new(scene);
+    // Sampled visible set and its time, per cell, shared by the backends.
+    let mut samples: Vec<Option<(CellSample, f64)>> = vec![None; bs.cells.len()];
+    for &(backend, max_cells) in backends {
+        let cells = &bs.cells[..max_cells.min(bs.cells.len())];
+        let t = Instant::now();
+        eprintln!(
+            "bench: {}: baking {} cells on {}",
+            bs.name,
+            cells.len(),
+            backend.name()
+        );
+        let result = bake(scene, cells, settings, backend, None)
+            .with_context(|| format!("{}: bake on {}", bs.name, backend.name()))?;
+        eprintln!(
+            "bench: {}: baked in {:.1} s; validating with {} rays per cell",
+            bs.name,
+            t.elapsed().as_secs_f64(),
+            plan.rays
+        );
+        let mut reports = Vec::new();
+        for (i, (cell, r)) in cells.iter().zip(&result.cells).enumerate() {
+            let (sample, _) = samples[i].get_or_insert_with(|| {
+                let t = Instant::now();
+                let s = sample_cell(&index, scene, *cell, plan.rays, seed, i as u64, false);
+                (s, t.elapsed().as_secs_f64() * 1e3)
+            });
+            let pvs = PvsCell {
+                min: cell.min.to_array(),
+                max: cell.max.to_array(),
+                visible: r.visible.clone(),
+                ms: r.ms,
+            };
+            reports.push(cell_report(scene, &pvs, sample));
+        }
+        let nc = cells.len() as f64;
+        let ratios: Vec<f64> = reports.iter().filter_map(|r| r.pvs_over_vs).collect();
+        let false_culls = reports.iter().map(|r| r.false_culls.len()).sum();
+        for (i, r) in reports.iter().enumerate() {
+            for f in &r.false_culls {
+                eprintln!(
+                    "bench: FALSE CULL {} [{}] cell {i} {:?}–{:?}: object {} {:?}, ray \
+                     origin {:?} direction {:?}",
+                    bs.name,
+                    backend.name(),
+                    r.min,
+                    r.max,
+                    f.object,
+                    f.name,
+                    f.origin,
+                    f.direction
+                );
+            }
+        }
+        let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
+        let vms: Vec<f64> = samples[..cells.len()]
+            .iter()
+            .flatten()
+            .map(|s| s.1)
+            .collect();
+        out.push(BenchRow {
+            scene: bs.name.clone(),
+            triangles: scene.triangles.len(),
+            objects: scene.objects.len(),
+            cells: cells.len(),
+            backend: backend.name().into(),
+            adapter: backend.adapter(),
+            median_ms_per_cell: median(&ms),
+            validate_ms_per_cell: median(&vms),
+            objects_culled_percent: reports
+                .iter()
+                .map(|r| r.objects_culled_percent)
+                .sum::<f64>()
+                / nc,
+            triangles_culled_percent: reports
+                .iter()
+                .map(|r| r.triangles_culled_percent)
+                .sum::<f64>()
+                / nc,
+            pvs_over_vs: (!ratios.is_empty())
+                .then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
+            false_culls,
+            planes_per_cell: result.cells.iter().map(|c| c.planes as f64).sum::<f64>() / nc,
+            rays_per_cell: plan.rays,
+        });
+    }
+    Ok(out)
 }
 
 /// The columns of the table, in order.
@@ -493,8 +533,15 @@ impl Bench {
         let mut out = String::new();
         let _ = writeln!(
             out,
-            "umbrasweep bench{}: {} validation rays per cell{}, seed {}, {} threads, {:.0} s",
+            "umbrasweep bench{}: {} cells per scene{}, {} validation rays per cell{}, seed {}, {} \
+             threads, {:.0} s",
             if self.quick { " --quick" } else { "" },
+            self.cells,
+            if self.rows.iter().any(|r| r.backend == "gpu") {
+                format!(" (the GPU only the first {})", self.gpu_cells)
+            } else {
+                String::new()
+            },
             self.rays_per_cell,
             if self.rays_per_cell < 1_000_000 {
                 " (fewer than the full bench's 1,000,000)"

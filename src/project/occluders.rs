@@ -19,8 +19,10 @@ use std::collections::HashMap;
 /// The shape of one convex part.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PartKind {
-    /// A closed convex solid; the points are its (already shrunk) vertices.
-    Solid,
+    /// A closed convex solid; the points are its (already shrunk) vertices. Its interior
+    /// counts as opaque only for eyes outside it: `hull` bounds the unshrunk solid, and a cell
+    /// overlapping it must not use the part as a solid (a ray from inside crosses no triangle).
+    Solid { hull: DAabb },
     /// A planar convex polygon, points in order.
     Polygon {
         /// Unit normal of the fitted plane.
@@ -208,12 +210,18 @@ fn prepare_object(scene: &Scene, object: u32, alpha_occluders: bool) -> ObjectPa
         if comp_tris.len() <= MAX_SOLID_TRIANGLES
             && let Some(solid) = convex_solid(&verts, &comp_tris)
         {
+            let mut hull = DAabb::EMPTY;
+            for t in &comp_tris {
+                for &v in t {
+                    hull.grow(verts[v as usize]);
+                }
+            }
             push_part(
                 &mut points,
                 &mut parts,
                 object,
                 solid,
-                PartKind::Solid,
+                PartKind::Solid { hull },
                 0.0,
                 0.0,
             );
@@ -438,7 +446,12 @@ fn convex_region(
     (out.len() >= 3).then_some((out, region))
 }
 
-/// Greedy merge of edge-adjacent coplanar triangles into convex polygons.
+/// Triangles of earlier pieces one piece may grow through (bounds the work on large flat
+/// regions with holes).
+const MAX_REUSED: usize = 256;
+
+/// Greedy merge of edge-adjacent coplanar triangles into convex polygons; every triangle is in
+/// at least one polygon, and polygons may overlap.
 pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> {
     let mut by_edge: HashMap<(u32, u32), usize> = HashMap::with_capacity(tris.len() * 3);
     for (i, t) in tris.iter().enumerate() {
@@ -493,6 +506,10 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
             }
             poly = loop_verts;
         }
+        // Growth may cross triangles that earlier pieces already cover: pieces then overlap
+        // instead of abutting (an abutting seam is a crack of a pixel or two in every
+        // Projection, since views of two occluders never add up).
+        let mut reused = 0usize;
         let mut changed = true;
         while changed {
             changed = false;
@@ -501,7 +518,7 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
                 let len = poly.len();
                 let (p, q) = (poly[e], poly[(e + 1) % len]);
                 if let Some(&t2) = by_edge.get(&(q, p))
-                    && !used[t2]
+                    && (!used[t2] || reused < MAX_REUSED)
                 {
                     let tri = tris[t2];
                     let r = tri
@@ -514,8 +531,14 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
                         && (n.dot(verts[r as usize]) - d).abs() <= plane_tol;
                     let prev = poly[(e + len - 1) % len];
                     let next = poly[(e + 2) % len];
-                    if coplanar && turn(prev, p, r) && turn(p, r, q) && turn(r, q, next) {
+                    if coplanar
+                        && !poly.contains(&r)
+                        && turn(prev, p, r)
+                        && turn(p, r, q)
+                        && turn(r, q, next)
+                    {
                         poly.insert(e + 1, r);
+                        reused += used[t2] as usize;
                         used[t2] = true;
                         changed = true;
                         continue;
@@ -610,7 +633,7 @@ mod tests {
         let solids: Vec<_> = occ
             .parts
             .iter()
-            .filter(|p| p.kind == PartKind::Solid)
+            .filter(|p| matches!(p.kind, PartKind::Solid { .. }))
             .collect();
         assert_eq!(solids.len(), 1);
         assert_eq!(solids[0].object, 0);

@@ -133,6 +133,8 @@ pub struct DirectionPlan {
     parts: DirParts,
     /// Object of each part (for skipping occluders already known hidden).
     part_object: Vec<u32>,
+    /// Whether each part is a solid (else a planar polygon), for cutting it at a plane.
+    part_solid: Vec<bool>,
     /// Plane distances beyond the face, ascending.
     pub distances: Vec<f64>,
 }
@@ -216,6 +218,11 @@ fn plan_direction(
         .iter()
         .map(|&k| occ.parts[k as usize].object)
         .collect();
+    let part_solid = parts
+        .index
+        .iter()
+        .map(|&k| matches!(occ.parts[k as usize].kind, PartKind::Solid { .. }))
+        .collect();
     Some(DirectionPlan {
         cell: *cell,
         axis,
@@ -223,6 +230,7 @@ fn plan_direction(
         face,
         parts,
         part_object,
+        part_solid,
         distances,
     })
 }
@@ -283,6 +291,17 @@ pub fn plane_job(
         (lo, hi)
     };
     // Projection bounding boxes, clipped to the frame.
+    //
+    // The views of an occluder from the 8 corners bound its views from every point of the cell
+    // only when it lies on one side of the plane: for a point P of the plane, the eyes whose
+    // line through P meets the occluder form one convex cone when the occluder is wholly in
+    // front of P or wholly behind it, but the union of two cones when it crosses the plane, and
+    // then all 8 corners may see P covered while the cell's centre looks past the occluder.
+    // So an occluder crossing the plane is cut into its front and back pieces, each projected
+    // on its own (they do not add up: conservative).
+    let mut pieces = OccluderSet::default();
+    let mut buf: Vec<DVec3> = Vec::new();
+    let dist = |p: DVec3| s * (p[axis] - plan.face);
     let mut kept: Vec<(usize, DVec2, DVec2)> = Vec::new();
     for i in 0..parts.set.len() {
         if skip(plan.part_object[i])
@@ -294,10 +313,30 @@ pub fn plane_job(
         if vhi.x < fmin.x || vhi.y < fmin.y || vlo.x > fmax.x || vlo.y > fmax.y {
             continue;
         }
-        if let Some((lo, hi)) = projection_bounds(&probe, &corners, parts.set.get(i)) {
+        let pts = parts.set.get(i);
+        if parts.near[i] < tp && tp < parts.far[i] {
+            let solid = plan.part_solid[i];
+            for side in [1.0, -1.0] {
+                buf.clear();
+                let f = |p: DVec3| side * (tp - dist(p));
+                if solid {
+                    clip_solid(pts, f, &mut buf);
+                } else {
+                    clip_polygon(pts, f, &mut buf);
+                }
+                if buf.len() >= 3 {
+                    pieces.push(buf.iter().copied());
+                }
+            }
+        } else {
+            pieces.push(pts.iter().copied());
+        }
+    }
+    for k in 0..pieces.len() {
+        if let Some((lo, hi)) = projection_bounds(&probe, &corners, pieces.get(k)) {
             let (lo, hi) = (lo.max(fmin), hi.min(fmax));
             if lo.x < hi.x && lo.y < hi.y {
-                kept.push((i, lo, hi));
+                kept.push((k, lo, hi));
             }
         }
     }
@@ -341,7 +380,7 @@ pub fn plane_job(
     for &(i, lo, hi) in &kept {
         // A Projection narrower than a pixel covers no whole pixel.
         if hi.x - lo.x >= px.x && hi.y - lo.y >= px.y {
-            set.push(parts.set.get(i).iter().copied());
+            set.push(pieces.get(i).iter().copied());
         }
     }
     if set.is_empty() && slices.is_empty() {
@@ -420,6 +459,12 @@ fn summarize(
         if far_t <= eps {
             continue;
         }
+        // A solid the cell may be inside hides nothing for sure from there.
+        if let PartKind::Solid { hull } = part.kind
+            && hull.overlaps(cell)
+        {
+            continue;
+        }
         let extent = (b.max[u] - b.min[u]).max(b.max[v] - b.min[v]);
         let d = far_t.max(cell.max[axis] - cell.min[axis]);
         out.index.push(k as u32);
@@ -462,7 +507,7 @@ fn cut_parts(
         } else {
             match part.kind {
                 PartKind::Polygon { .. } => clip_polygon(pts, |p| dist(p) - eps, &mut buf),
-                PartKind::Solid => clip_solid(pts, |p| dist(p) - eps, &mut buf),
+                PartKind::Solid { .. } => clip_solid(pts, |p| dist(p) - eps, &mut buf),
             }
             if buf.len() < 3 {
                 continue;

@@ -427,7 +427,10 @@ impl GpuBackend {
 
     /// Counters and timings summed over every call since the backend was created.
     pub fn total_stats(&self) -> RenderStats {
-        self.totals.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        self.totals
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     /// Counters and timings of the last [`render`](RasterBackend::render) call (of any thread).

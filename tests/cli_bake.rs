@@ -1,0 +1,175 @@
+//! The `umbrasweep bake` command line: the PVS document it writes (schema, sorted ids, the
+//! summary on stderr) and its answer to bad input (exit code 2, a message naming the file or
+//! option, no output file, no panic).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// A wall in front of a box, both closed, as OBJ.
+const SCENE: &str = "o wall
+v -10 -10 5
+v 10 -10 5
+v 10 10 5
+v -10 10 5
+f 1 2 3 4
+o target
+v -1 -1 10
+v 1 -1 10
+v 1 1 10
+v -1 1 10
+f 5 6 7 8
+o beside
+v 20 -1 -10
+v 22 -1 -10
+v 22 1 -10
+f 9 10 11
+";
+
+const CELLS: &str = r#"{"cells": [{"min": [-0.5, -0.5, -0.5], "max": [0.5, 0.5, 0.5]},
+                                 {"min": [30, 0, 30], "max": [31, 1, 31]}]}"#;
+
+#[test]
+fn bake_writes_the_documented_json_and_a_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write(dir.path(), "s.obj", SCENE);
+    let cells = write(dir.path(), "c.json", CELLS);
+    let out = dir.path().join("pvs.json");
+    let r = bin()
+        .arg("bake")
+        .arg(&scene)
+        .arg("--cells")
+        .arg(&cells)
+        .arg("-o")
+        .arg(&out)
+        .args(["--backend", "cpu"])
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    for key in [
+        "backend     cpu",
+        "cells       2",
+        "objects     3",
+        "culled",
+        "ms per cell",
+    ] {
+        assert!(stderr.contains(key), "summary lacks {key:?}: {stderr}");
+    }
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(doc["format"], "umbrasweep-pvs");
+    assert_eq!(doc["version"], 1);
+    assert_eq!(doc["settings"]["resolution"], 256);
+    let objects = doc["objects"].as_array().unwrap();
+    assert_eq!(objects.len(), 3);
+    assert_eq!(objects[1]["name"], "target");
+    assert_eq!(objects[1]["id"], 1);
+    assert_eq!(objects[0]["triangles"], 2);
+    assert_eq!(objects[1]["min"], serde_json::json!([-1.0, -1.0, 10.0]));
+    let cells = doc["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 2);
+    let visible: Vec<u64> = cells[0]["visible"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    // The wall hides the target from the first cell; the wall and the triangle beside it stay.
+    assert_eq!(visible, vec![0, 2]);
+    assert!(cells[0]["ms"].as_f64().unwrap() >= 0.0);
+    let second: Vec<u64> = cells[1]["visible"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert!(second.windows(2).all(|w| w[0] < w[1]), "sorted ids");
+}
+
+/// Runs `bake` with `args` after the scene, expects exit code 2, a message containing
+/// `needle`, and no output file.
+fn refuses(scene: &Path, args: &[&str], needle: &str) {
+    let dir = scene.parent().unwrap();
+    let out = dir.join("out.json");
+    let _ = std::fs::remove_file(&out);
+    let r = bin()
+        .arg("bake")
+        .arg(scene)
+        .args(args)
+        .arg("-o")
+        .arg(&out)
+        .args(["--backend", "cpu"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{args:?}: {stderr}");
+    assert!(
+        stderr.contains(needle),
+        "{args:?}: expected {needle:?} in {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists(), "{args:?} left an output file");
+}
+
+#[test]
+fn bad_input_exits_2_naming_the_problem_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = write(d, "s.obj", SCENE);
+    let cells = write(d, "c.json", CELLS);
+    let c = cells.to_str().unwrap();
+    // Missing and malformed files.
+    refuses(&d.join("missing.obj"), &["--cells", c], "missing.obj");
+    refuses(
+        &scene,
+        &["--cells", d.join("nope.json").to_str().unwrap()],
+        "nope.json",
+    );
+    let bad_json = write(d, "bad.json", "{\"cells\": [");
+    refuses(&scene, &["--cells", bad_json.to_str().unwrap()], "bad.json");
+    // NaN coordinates and an empty scene.
+    let nan = write(d, "nan.obj", "o a\nv 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    refuses(&nan, &["--cells", c], "nan.obj");
+    let empty = write(d, "empty.obj", "o a\nv 0 0 0\n");
+    refuses(&empty, &["--cells", c], "empty.obj");
+    // Inverted and zero-volume cells.
+    let inverted = write(
+        d,
+        "inv.json",
+        r#"{"cells": [{"min": [1, 1, 1], "max": [0, 2, 2]}]}"#,
+    );
+    refuses(&scene, &["--cells", inverted.to_str().unwrap()], "inv.json");
+    let flat = write(
+        d,
+        "flat.json",
+        r#"{"cells": [{"min": [0, 0, 0], "max": [1, 0, 1]}]}"#,
+    );
+    refuses(&scene, &["--cells", flat.to_str().unwrap()], "zero volume");
+    refuses(
+        &scene,
+        &["--grid-box", "0,0,0,1,1", "--grid-size", "1,1,1"],
+        "--grid-box",
+    );
+    // Settings.
+    refuses(
+        &scene,
+        &["--cells", c, "--resolution", "100"],
+        "power of two",
+    );
+    refuses(
+        &scene,
+        &["--cells", c, "--no-such-option"],
+        "--no-such-option",
+    );
+    refuses(&scene, &["--cells", c, "--occluders", "[x"], "--occluders");
+}
