@@ -6,8 +6,11 @@
 //! Cases: an object seen only through a narrow slit; one seen only from one corner of the cell
 //! through two small holes; one hidden only by the fusion of many small overlapping tiles, and
 //! its twin with a hole a few milliradians wide; occluders cutting through the cell; objects
-//! straddling or touching the cell, inside a closed shell around it. Every case runs as built
-//! (unit cell), scaled by 10⁻³, and offset by 10⁵ units on every axis (f32 coordinates).
+//! straddling or touching the cell, inside a closed shell around it; a slit between two
+//! coplanar open walls; a wall of coplanar quads, whole and with a small hole; and the
+//! regression test of a false cull this suite found (walls cut by the slice plane). Every case
+//! runs as built (unit cell), scaled by 10⁻³, and offset by 10⁵ units on every axis (f32
+//! coordinates).
 //!
 //! The GPU half runs on whatever adapter `GpuBackend::new()` finds (lavapipe here); without
 //! one it prints why and is skipped, except when the environment variable `CI` is set, where

@@ -136,7 +136,7 @@ pub struct Bench {
     pub threads: usize,
     /// One row per scene and backend.
     pub rows: Vec<BenchRow>,
-    /// Scenes or backends skipped, and why.
+    /// Scenes or backends skipped or failed, and why.
     pub skipped: Vec<String>,
     /// Wall-clock time of the whole run, seconds.
     pub seconds: f64,
