@@ -119,10 +119,13 @@ pub fn pixel_rect(frame: &PlaneFrame, lo: DVec2, hi: DVec2) -> Option<[u32; 4]> 
     if !(pl.x >= 0.0 && pl.y >= 0.0 && ph.x <= r && ph.y <= r) {
         return None;
     }
-    let i0 = pl.x.floor() as u32;
-    let j0 = pl.y.floor() as u32;
-    let i1 = (ph.x.floor() as u32).min(frame.resolution - 1);
-    let j1 = (ph.y.floor() as u32).min(frame.resolution - 1);
+    // A rectangle touching the far edge (pixel coordinate == resolution) touches the last
+    // pixel: clamp both ends into the map.
+    let last = frame.resolution - 1;
+    let i0 = (pl.x.floor() as u32).min(last);
+    let j0 = (pl.y.floor() as u32).min(last);
+    let i1 = (ph.x.floor() as u32).min(last);
+    let j1 = (ph.y.floor() as u32).min(last);
     Some([i0, j0, i1.max(i0), j1.max(j0)])
 }
 
@@ -203,6 +206,17 @@ mod tests {
         assert!(lo.x < hi.x && lo.y < hi.y);
         assert!(lo.x >= slo.x && lo.y >= slo.y && hi.x <= shi.x && hi.y <= shi.y);
         assert!((hi - lo).x < (shi - slo).x, "strictly tighter");
+    }
+
+    #[test]
+    fn pixel_rects_touching_the_far_edges_stay_inside_the_map() {
+        let f = frame(10.0);
+        // Rectangle of zero width on the right/top edges of the plane (found on zdm2).
+        let r = pixel_rect(&f, DVec2::splat(50.0), DVec2::splat(50.0)).unwrap();
+        assert_eq!(r, [63, 63, 63, 63]);
+        let r = pixel_rect(&f, DVec2::new(-50.0, 49.0), DVec2::new(50.0, 50.0)).unwrap();
+        assert_eq!(r, [0, 63, 63, 63]);
+        assert!(pixel_rect(&f, DVec2::splat(-51.0), DVec2::ZERO).is_none());
     }
 
     #[test]
