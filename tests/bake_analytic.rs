@@ -2,6 +2,8 @@
 //! objects in and across the cell, a closed room, and an object seen from one corner only.
 //! Each expectation follows from the geometry; brute-force rays check the visible cases.
 
+mod common;
+
 use glam::Vec3;
 use std::path::Path;
 use umbrasweep::backend::cpu::CpuBackend;
@@ -45,30 +47,14 @@ fn visible(objects: Vec<Obj>, cell: Aabb) -> Vec<String> {
         .collect()
 }
 
-/// First object hit by the ray (brute force, Möller–Trumbore).
+/// First object hit by the ray (brute force, see `common::first_hit`).
 fn first_hit(objects: &[Obj], origin: Vec3, dir: Vec3) -> Option<String> {
-    let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
-    let mut best = (f64::INFINITY, None);
-    for (name, tris, _) in objects {
-        for t in tris {
-            let [a, b, c] = t.map(|p| p.as_dvec3());
-            let (e1, e2) = (b - a, c - a);
-            let p = d.cross(e2);
-            let det = e1.dot(p);
-            if det.abs() < 1e-12 {
-                continue;
-            }
-            let s = o - a;
-            let u = s.dot(p) / det;
-            let q = s.cross(e1);
-            let v = d.dot(q) / det;
-            let dist = e2.dot(q) / det;
-            if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dist > 0.0 && dist < best.0 {
-                best = (dist, Some(name.clone()));
-            }
-        }
-    }
-    best.1
+    common::first_hit(
+        objects.iter().map(|(n, t, _)| (n.as_str(), t.as_slice())),
+        origin,
+        dir,
+    )
+    .map(str::to_string)
 }
 
 fn has(v: &[String], name: &str) -> bool {

@@ -17,6 +17,8 @@
 //! it fails. `UMBRASWEEP_CONSERVATIVE_RAYS` overrides the rays per cell (default 1,000,000).
 #![cfg(feature = "bake")]
 
+mod common;
+
 use glam::{DVec3, Vec3};
 use std::path::Path;
 use std::sync::OnceLock;
@@ -158,32 +160,17 @@ fn place(case: &Case, xf: Xf) -> Placed {
     }
 }
 
-/// The name of the first object the ray hits (brute force over every triangle, Möller–Trumbore
-/// in f64 on the placed f32 vertices).
+/// The name of the first object the ray from `origin` toward `toward` hits (brute force, see
+/// `common::first_hit`).
 fn first_hit(objects: &[(String, Vec<[Vec3; 3]>)], origin: Vec3, toward: Vec3) -> Option<&str> {
-    let o = origin.as_dvec3();
-    let d = (toward.as_dvec3() - o).normalize();
-    let mut best = (f64::INFINITY, None);
-    for (name, tris) in objects {
-        for t in tris {
-            let [a, b, c] = t.map(|p| p.as_dvec3());
-            let (e1, e2) = (b - a, c - a);
-            let p = d.cross(e2);
-            let det = e1.dot(p);
-            if det.abs() < 1e-300 {
-                continue;
-            }
-            let s = o - a;
-            let u = s.dot(p) / det;
-            let q = s.cross(e1);
-            let v = d.dot(q) / det;
-            let dist = e2.dot(q) / det;
-            if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dist > 0.0 && dist < best.0 {
-                best = (dist, Some(name.as_str()));
-            }
-        }
-    }
-    best.1
+    let dir = (toward.as_dvec3() - origin.as_dvec3())
+        .normalize()
+        .as_vec3();
+    common::first_hit(
+        objects.iter().map(|(n, t)| (n.as_str(), t.as_slice())),
+        origin,
+        dir,
+    )
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -19,25 +19,7 @@ fn cell() -> Aabb {
 
 /// A closed box (12 triangles, outward facing).
 fn cuboid(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
-    let c = |i: usize| {
-        vec3(
-            if i & 1 != 0 { max.x } else { min.x },
-            if i & 2 != 0 { max.y } else { min.y },
-            if i & 4 != 0 { max.z } else { min.z },
-        )
-    };
-    let faces = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    faces
-        .iter()
-        .flat_map(|f| [[c(f[0]), c(f[1]), c(f[2])], [c(f[0]), c(f[2]), c(f[3])]])
-        .collect()
+    umbrasweep::geom::box_triangles(min, max)
 }
 
 /// A wall in the plane `z`, made of the grid cells between the given x and y breaks,

@@ -1,0 +1,35 @@
+//! Helpers shared by the integration tests: a brute-force ray cast that names the first
+//! object a ray hits, to prove a visibility claim independently of the validator.
+
+use glam::Vec3;
+
+/// The name of the first object hit by the ray from `origin` along `dir` (brute force over
+/// every triangle, Möller–Trumbore in f64 on the f32 vertices).
+pub fn first_hit<'a>(
+    objects: impl IntoIterator<Item = (&'a str, &'a [[Vec3; 3]])>,
+    origin: Vec3,
+    dir: Vec3,
+) -> Option<&'a str> {
+    let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
+    let mut best = (f64::INFINITY, None);
+    for (name, tris) in objects {
+        for t in tris {
+            let [a, b, c] = t.map(|p| p.as_dvec3());
+            let (e1, e2) = (b - a, c - a);
+            let p = d.cross(e2);
+            let det = e1.dot(p);
+            if det.abs() < 1e-300 {
+                continue;
+            }
+            let s = o - a;
+            let u = s.dot(p) / det;
+            let q = s.cross(e1);
+            let v = d.dot(q) / det;
+            let dist = e2.dot(q) / det;
+            if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dist > 0.0 && dist < best.0 {
+                best = (dist, Some(name));
+            }
+        }
+    }
+    best.1
+}
