@@ -302,7 +302,8 @@ pub fn plane_job(
     let mut pieces = OccluderSet::default();
     let mut buf: Vec<DVec3> = Vec::new();
     let dist = |p: DVec3| s * (p[axis] - plan.face);
-    let mut kept: Vec<(usize, DVec2, DVec2)> = Vec::new();
+    // Uncut parts are referenced in place, cut pieces live in `pieces`.
+    let mut sources: Vec<(bool, usize)> = Vec::new();
     for i in 0..parts.set.len() {
         if skip(plan.part_object[i])
             || !may_project(parts.near[i], parts.far[i], parts.extent[i], cell_uv, tp)
@@ -325,18 +326,23 @@ pub fn plane_job(
                     clip_polygon(pts, f, &mut buf);
                 }
                 if buf.len() >= 3 {
+                    sources.push((true, pieces.len()));
                     pieces.push(buf.iter().copied());
                 }
             }
         } else {
-            pieces.push(pts.iter().copied());
+            sources.push((false, i));
         }
     }
-    for k in 0..pieces.len() {
-        if let Some((lo, hi)) = projection_bounds(&probe, &corners, pieces.get(k)) {
+    let points_of = |(cut, k): (bool, usize)| {
+        if cut { pieces.get(k) } else { parts.set.get(k) }
+    };
+    let mut kept: Vec<((bool, usize), DVec2, DVec2)> = Vec::new();
+    for &src in &sources {
+        if let Some((lo, hi)) = projection_bounds(&probe, &corners, points_of(src)) {
             let (lo, hi) = (lo.max(fmin), hi.min(fmax));
             if lo.x < hi.x && lo.y < hi.y {
-                kept.push((k, lo, hi));
+                kept.push((src, lo, hi));
             }
         }
     }
@@ -377,10 +383,10 @@ pub fn plane_job(
     };
     let px = frame.pixel_size();
     let mut set = OccluderSet::default();
-    for &(i, lo, hi) in &kept {
+    for &(src, lo, hi) in &kept {
         // A Projection narrower than a pixel covers no whole pixel.
         if hi.x - lo.x >= px.x && hi.y - lo.y >= px.y {
-            set.push(pieces.get(i).iter().copied());
+            set.push(points_of(src).iter().copied());
         }
     }
     if set.is_empty() && slices.is_empty() {
