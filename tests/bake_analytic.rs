@@ -8,22 +8,10 @@ use glam::Vec3;
 use std::path::Path;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{BakeSettings, bake};
-use umbrasweep::geom::{Aabb, box_triangles};
+use umbrasweep::geom::Aabb;
 use umbrasweep::scene::Scene;
 
-type Obj = (String, Vec<[Vec3; 3]>, bool);
-
-fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
-    (
-        name.into(),
-        box_triangles(Vec3::from(min), Vec3::from(max)),
-        true,
-    )
-}
-
-fn quad(name: &str, a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Obj {
-    (name.into(), vec![[a, b, c], [a, c, d]], true)
-}
+use common::{Obj, cube, quad};
 
 fn unit_cell() -> Aabb {
     Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))

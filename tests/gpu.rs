@@ -6,6 +6,8 @@
 //! Timings come from the CLI: `umbrasweep bake … --backend gpu` against `--backend cpu`.
 #![cfg(feature = "bake")]
 
+mod common;
+
 use glam::{DVec2, DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -18,7 +20,7 @@ use umbrasweep::backend::{
 };
 use umbrasweep::bake::{BakeSettings, bake};
 use umbrasweep::generate::{self, CityOptions};
-use umbrasweep::geom::{Aabb, DAabb, box_triangles};
+use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::scene::Scene;
 
 // ---------------------------------------------------------------------------------------------
@@ -245,28 +247,6 @@ fn ring(cu: f64, cv: f64, r0: f64, r1: f64, n: usize) -> Vec<[DVec2; 2]> {
     segs
 }
 
-/// How far, in pixels, pixel `(i, j)`'s centre lies inside the half-pixel-eroded views of
-/// `pts` — each of the 8 views' hulls on its own, no clipping: the contract's definition of
-/// "the closed pixel square lies inside all 8 views". Negative: outside some view.
-fn view_slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> f64 {
-    let c = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
-    let mut hull = Vec::new();
-    let mut slack = f64::INFINITY;
-    for v in f.cell.corners() {
-        let q: Vec<DVec2> = pts.iter().map(|&p| f.to_pixel(f.project(v, p))).collect();
-        cpu::convex_hull(&q, &mut hull);
-        if hull.len() < 3 {
-            return f64::NEG_INFINITY;
-        }
-        for e in 0..hull.len() {
-            let (a, b) = (hull[e], hull[(e + 1) % hull.len()]);
-            let n = DVec2::new(-(b.y - a.y), b.x - a.x);
-            slack = slack.min((n.dot(c - a) - 0.5 * (n.x.abs() + n.y.abs())) / n.length());
-        }
-    }
-    slack
-}
-
 fn occluder_depth(f: &PlaneFrame, pts: &[DVec3]) -> f32 {
     depth_up(
         pts.iter()
@@ -323,7 +303,7 @@ fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> Diff {
         }
         if g < c {
             diff.gpu_only += 1;
-            let legit = occluders_at(g).any(|pts| view_slack(f, pts, i, j) >= cpu::MARGIN);
+            let legit = occluders_at(g).any(|pts| cpu::contract_slack(f, pts, i, j) >= cpu::MARGIN);
             assert!(
                 legit,
                 "GPU covers ({i}, {j}) at {res}² with Depth {g} (CPU: {c}) but no occluder of \
@@ -334,7 +314,7 @@ fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> Diff {
             diff.cpu_only += 1;
             // The GPU's extra shrink: the CPU's margin plus 2⁻²¹·(extent + 1) px of f32 error.
             let band = 1e-3 + res as f64 / (1u64 << 20) as f64;
-            let near = occluders_at(c).any(|pts| view_slack(f, pts, i, j) < band);
+            let near = occluders_at(c).any(|pts| cpu::contract_slack(f, pts, i, j) < band);
             assert!(
                 near,
                 "CPU-only pixel ({i}, {j}) at {res}² is not on an edge"
@@ -560,7 +540,7 @@ fn degenerate_clipped_edges_do_not_uncover_a_triangle() {
         DVec3::new(-10.949435919824044, 8.535924727613656, -2.6336076127590715),
         DVec3::new(-4.679093122439994, 2.2980744054368625, -9.389374134012611),
     ];
-    let slack = view_slack(&f, &tri, 62, 4);
+    let slack = cpu::contract_slack(&f, &tri, 62, 4);
     assert!(
         slack > 0.3,
         "pixel (62, 4) is well inside all 8 views: {slack}"
@@ -588,19 +568,7 @@ fn degenerate_clipped_edges_do_not_uncover_a_triangle() {
 // ---------------------------------------------------------------------------------------------
 // Whole bakes: the PVS is the same with both backends
 
-type Obj = (String, Vec<[Vec3; 3]>, bool);
-
-fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
-    (
-        name.into(),
-        box_triangles(Vec3::from(min), Vec3::from(max)),
-        true,
-    )
-}
-
-fn quad(name: &str, a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Obj {
-    (name.into(), vec![[a, b, c], [a, c, d]], true)
-}
+use common::{Obj, cube, quad};
 
 /// Bakes with both backends and requires the same visible set per cell. Should the GPU ever
 /// differ, it may only see more (its near-tie pixels are uncovered), and the message says so.

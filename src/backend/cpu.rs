@@ -139,6 +139,29 @@ pub fn projection_polygon(
     true
 }
 
+/// The backend contract's own definition, by brute force, for tests of any backend: how far
+/// (in pixels) the centre of pixel `(i, j)` lies inside every one of the 8 views of `pts`, each
+/// view's hull eroded by half a pixel per axis (no clipping). Positive: the whole pixel is
+/// inside all views, so the occluder covers it; negative infinity for a degenerate view.
+pub fn contract_slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> f64 {
+    let c = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+    let mut hull = Vec::new();
+    let mut slack = f64::INFINITY;
+    for v in f.cell.corners() {
+        let q: Vec<DVec2> = pts.iter().map(|&p| f.to_pixel(f.project(v, p))).collect();
+        convex_hull(&q, &mut hull);
+        if hull.len() < 3 {
+            return f64::NEG_INFINITY;
+        }
+        for e in 0..hull.len() {
+            let (a, b) = (hull[e], hull[(e + 1) % hull.len()]);
+            let n = DVec2::new(-(b.y - a.y), b.x - a.x);
+            slack = slack.min((n.dot(c - a) - 0.5 * (n.x.abs() + n.y.abs())) / n.length());
+        }
+    }
+    slack
+}
+
 /// 2D convex hull (Andrew's monotone chain), counter-clockwise, collinear points dropped.
 pub fn convex_hull(points: &[DVec2], out: &mut Vec<DVec2>) {
     out.clear();

@@ -1,7 +1,27 @@
-//! Helpers shared by the integration tests: a brute-force ray cast that names the first
-//! object a ray hits, to prove a visibility claim independently of the validator.
+//! Helpers shared by the integration tests: scene objects (closed boxes, quads) for
+//! `Scene::from_objects`, and a brute-force ray cast that names the first object a ray hits,
+//! to prove a visibility claim independently of the validator.
+#![allow(dead_code)] // each test crate uses its own subset
 
 use glam::Vec3;
+use umbrasweep::geom::box_triangles;
+
+/// An object as `Scene::from_objects` takes it: name, triangles, opaque.
+pub type Obj = (String, Vec<[Vec3; 3]>, bool);
+
+/// A closed, outward-facing opaque box.
+pub fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
+    (
+        name.into(),
+        box_triangles(Vec3::from(min), Vec3::from(max)),
+        true,
+    )
+}
+
+/// An opaque quad `a b c d` (two triangles).
+pub fn quad(name: &str, a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Obj {
+    (name.into(), vec![[a, b, c], [a, c, d]], true)
+}
 
 /// The name of the first object hit by the ray from `origin` along `dir` (brute force over
 /// every triangle, Möller–Trumbore in f64 on the f32 vertices).

@@ -249,7 +249,6 @@ pub fn emulate(res: u32, out: &Output) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::cpu::convex_hull;
     use crate::backend::{OccluderSet, PlaneJob};
     use crate::geom::DAabb;
 
@@ -281,27 +280,6 @@ mod tests {
         fn range(&mut self, a: f64, b: f64) -> f64 {
             a + (b - a) * self.f()
         }
-    }
-
-    /// How far (pixels) pixel `(i, j)`'s centre is inside the half-pixel-eroded views of
-    /// `pts`, each view's hull computed on its own (no clipping): the contract's definition.
-    fn view_slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> f64 {
-        let c = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
-        let mut hull = Vec::new();
-        let mut slack = f64::INFINITY;
-        for v in f.cell.corners() {
-            let q: Vec<DVec2> = pts.iter().map(|&p| f.to_pixel(f.project(v, p))).collect();
-            convex_hull(&q, &mut hull);
-            if hull.len() < 3 {
-                return f64::NEG_INFINITY;
-            }
-            for e in 0..hull.len() {
-                let (a, b) = (hull[e], hull[(e + 1) % hull.len()]);
-                let n = DVec2::new(-(b.y - a.y), b.x - a.x);
-                slack = slack.min((n.dot(c - a) - 0.5 * (n.x.abs() + n.y.abs())) / n.length());
-            }
-        }
-        slack
     }
 
     /// Every pixel the emulated shader covers lies inside all 8 views of an occluder of that
@@ -365,7 +343,7 @@ mod tests {
                 for (k, d) in one.iter().enumerate() {
                     if d.is_finite() {
                         let (i, j) = (k as u32 % res, k as u32 / res);
-                        let sl = view_slack(&f, pts, i, j);
+                        let sl = crate::backend::cpu::contract_slack(&f, pts, i, j);
                         assert!(sl >= MARGIN * 0.99, "({i}, {j}) at {res}²: slack {sl}");
                     }
                 }
@@ -377,7 +355,8 @@ mod tests {
                     let (i, j) = (k as u32 % res, k as u32 / res);
                     let near = (0..job.occluders.len()).any(|o| {
                         let pts = job.occluders.get(o);
-                        depth_up(depth_of(pts)) == *c && view_slack(&f, pts, i, j) < 1e-3
+                        depth_up(depth_of(pts)) == *c
+                            && crate::backend::cpu::contract_slack(&f, pts, i, j) < 1e-3
                     });
                     assert!(near, "CPU-only pixel ({i}, {j}) is not a near-tie");
                 }
