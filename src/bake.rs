@@ -4,17 +4,20 @@
 //! BVH and stopping at hidden and at fully visible nodes. Cells run in parallel (rayon).
 
 use crate::backend::{BackendError, DepthMap, PlaneJob, RasterBackend, depth_down};
+use crate::backend::{PlaneFrame, Reprojection};
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
 use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::{
-    Placement, PlaneSettings, Sliceable, cell_jobs, plan_directions, plane_job,
+    Placement, PlaneSettings, Sliceable, Spacing, SweepSettings, cell_jobs, plan_directions,
+    plane_job,
 };
 use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
 use crate::scene::Scene;
 use obvhs::bvh2::Bvh2;
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Everything that shapes a bake.
@@ -39,6 +42,24 @@ pub struct BakeSettings {
     pub occluders: Option<String>,
     /// Use the improved occludee Projection of §4 for boxes in front of a plane. Default true.
     pub improved_projection: bool,
+    /// Occlusion sweep (§5) instead of separate planes: on, off, or chosen per scene
+    /// ([`SweepChoice::Auto`], the default; see [`choose_sweep`]).
+    pub sweep: SweepChoice,
+    /// The sweep's planes per direction (at most), kernel size and spacing.
+    pub sweep_settings: SweepSettings,
+    /// Bake each cell as the union of the PVS of sub-cells no larger than this along any axis
+    /// (exact, and conservative: a point of the cell lies in one of its sub-cells). Default none.
+    pub subcell: Option<f64>,
+}
+
+/// Whether a bake sweeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SweepChoice {
+    /// The sweep for scenes dominated by small occluders ([`choose_sweep`]).
+    #[default]
+    Auto,
+    On,
+    Off,
 }
 
 impl BakeSettings {
@@ -53,6 +74,9 @@ impl BakeSettings {
             alpha_occluders: false,
             occluders: None,
             improved_projection: true,
+            sweep: SweepChoice::Auto,
+            sweep_settings: SweepSettings::default_settings(),
+            subcell: None,
         }
     }
 
@@ -79,6 +103,26 @@ impl BakeSettings {
                 self.planes
             ));
         }
+        let sw = &self.sweep_settings;
+        if sw.planes == 0 || sw.planes > 256 {
+            return Err(format!(
+                "--sweep-planes {}: must be between 1 and 256",
+                sw.planes
+            ));
+        }
+        if !(2..=64).contains(&sw.kernel) {
+            return Err(format!(
+                "--kernel {}: must be between 2 and 64 pixels (the paper uses 5)",
+                sw.kernel
+            ));
+        }
+        if let Some(s) = self.subcell
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(format!(
+                "--subcell {s}: must be a positive size in scene units (e.g. 1)"
+            ));
+        }
         if self.slice_planes > 16 {
             return Err(format!(
                 "--slice-planes {}: must be between 0 and 16",
@@ -88,13 +132,14 @@ impl BakeSettings {
         Ok(())
     }
 
-    fn plane_settings(&self) -> PlaneSettings {
+    fn plane_settings(&self, sweep: bool) -> PlaneSettings {
         PlaneSettings {
             resolution: self.resolution,
             extend: self.extend,
             planes: self.planes,
             slice_planes: self.slice_planes,
             placement: self.placement,
+            sweep: sweep.then_some(self.sweep_settings),
         }
     }
 }
@@ -134,6 +179,9 @@ pub struct BakeResult {
     pub occluder_triangles: usize,
     pub degenerate_triangles: usize,
     pub seconds: f64,
+    /// Whether the bake swept, and why (for the summary).
+    pub sweep: bool,
+    pub sweep_reason: String,
 }
 
 /// The per-scene preparation shared by all cells.
@@ -143,6 +191,52 @@ pub struct Prepared<'a> {
     pub sliceable: Sliceable,
     bvh: Option<Bvh2>,
     settings: BakeSettings,
+    /// Whether cells are baked with the occlusion sweep, and why.
+    pub sweep: bool,
+    pub sweep_reason: String,
+}
+
+/// Small occluders: parts whose largest side is under this many times the median cell's
+/// largest side.
+pub const SMALL_OCCLUDER_CELLS: f64 = 2.0;
+/// The sweep is chosen when small occluders hold at least this share of the occluders' area.
+pub const SMALL_OCCLUDER_SHARE: f64 = 0.5;
+
+/// The rule of [`SweepChoice::Auto`]: sweep when occluder parts (convex polygons and solids)
+/// smaller than [`SMALL_OCCLUDER_CELLS`] × the median cell's largest side hold at least
+/// [`SMALL_OCCLUDER_SHARE`] of the occluders' area (each part weighted by the square of its
+/// largest side). Leaves next to a cell fuse only through the sweep; walls and boxes larger than
+/// the cell hide on their own, and separate planes fitted to them cull more. Returns the choice
+/// and a sentence for the summary.
+pub fn choose_sweep(occ: &Occluders, cells: &[Aabb]) -> (bool, String) {
+    let mut sides: Vec<f64> = cells
+        .iter()
+        .map(|c| (c.max - c.min).max_element() as f64)
+        .collect();
+    if sides.is_empty() || occ.parts.is_empty() {
+        return (false, "no cells or no occluders".into());
+    }
+    sides.sort_by(f64::total_cmp);
+    let cell = sides[sides.len() / 2];
+    let limit = SMALL_OCCLUDER_CELLS * cell;
+    let (mut small, mut total) = (0.0, 0.0);
+    for p in &occ.parts {
+        let e = (p.bounds.max - p.bounds.min).max_element();
+        total += e * e;
+        if e < limit {
+            small += e * e;
+        }
+    }
+    let share = if total > 0.0 { small / total } else { 0.0 };
+    let sweep = share >= SMALL_OCCLUDER_SHARE;
+    (
+        sweep,
+        format!(
+            "{:.0} % of the occluder area is in parts smaller than {limit:.3} ({SMALL_OCCLUDER_CELLS} × the median cell side {cell:.3}); the sweep is chosen from {:.0} %",
+            100.0 * share,
+            100.0 * SMALL_OCCLUDER_SHARE
+        ),
+    )
 }
 
 struct ObjBox(obvhs::aabb::Aabb);
@@ -157,7 +251,12 @@ impl<'a> Prepared<'a> {
     ///
     /// # Errors
     /// Invalid settings or an occluder pattern that is not a valid glob.
-    pub fn new(scene: &'a Scene, settings: &BakeSettings) -> Result<Self, BakeError> {
+    /// [`SweepChoice::Auto`] is decided here with [`choose_sweep`] on `cells`.
+    pub fn new(
+        scene: &'a Scene,
+        settings: &BakeSettings,
+        cells: &[Aabb],
+    ) -> Result<Self, BakeError> {
         settings.check().map_err(BakeError::Settings)?;
         let is_occluder: Vec<bool> = match &settings.occluders {
             None => vec![true; scene.objects.len()],
@@ -200,12 +299,19 @@ impl<'a> Prepared<'a> {
                 &mut t,
             ))
         };
+        let (sweep, sweep_reason) = match settings.sweep {
+            SweepChoice::On => (true, "--sweep".to_string()),
+            SweepChoice::Off => (false, "--no-sweep".to_string()),
+            SweepChoice::Auto => choose_sweep(&occluders, cells),
+        };
         Ok(Prepared {
             scene,
             occluders,
             sliceable,
             bvh,
             settings: settings.clone(),
+            sweep,
+            sweep_reason,
         })
     }
 
@@ -216,7 +322,7 @@ impl<'a> Prepared<'a> {
             self.scene,
             &self.occluders,
             &self.sliceable,
-            &self.settings.plane_settings(),
+            &self.settings.plane_settings(self.sweep),
         )
     }
 
@@ -241,39 +347,23 @@ impl<'a> Prepared<'a> {
     ) -> Result<CellResult, BakeError> {
         let start = Instant::now();
         let n = self.scene.objects.len();
-        let mut hidden = vec![false; n];
-        let mut node_hidden = vec![false; self.bvh.as_ref().map_or(0, |b| b.nodes.len())];
-        let cell64 = cell.to_f64();
-        let ps = self.settings.plane_settings();
-        let plans = plan_directions(&cell64, &self.occluders, &self.sliceable, &ps);
-        let rounds = plans.iter().map(|p| p.distances.len()).max().unwrap_or(0);
+        let subcells = match self.settings.subcell {
+            Some(size) => split_cell(cell, size),
+            None => vec![*cell],
+        };
+        let mut visible = vec![false; n];
         let (mut planes, mut projected) = (0, 0);
-        // Round k renders the k-th plane of every direction (nearest first); occluders of
-        // objects hidden by earlier rounds are left out of later ones.
-        for k in 0..rounds {
-            let jobs: Vec<PlaneJob> = plans
-                .par_iter()
-                .filter(|p| k < p.distances.len())
-                .filter_map(|p| {
-                    plane_job(p, k, self.scene, &self.sliceable, &ps, &|o| {
-                        hidden[o as usize]
-                    })
-                })
-                .collect();
-            if jobs.is_empty() {
-                continue;
+        for (k, sub) in subcells.iter().enumerate() {
+            let known = (k > 0).then_some(visible.as_slice());
+            let (hidden, p, o) = self.subcell(sub, backend, observe, known)?;
+            for (v, h) in visible.iter_mut().zip(hidden) {
+                *v |= !h;
             }
-            let maps = backend.render(&jobs)?;
-            let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
-            for ((job, map), hdm) in jobs.iter().zip(&maps).zip(&hdms) {
-                observe(job, map, hdm);
-                self.traverse(job, hdm, &cell64, &mut hidden, &mut node_hidden);
-            }
-            planes += jobs.len();
-            projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
+            planes += p;
+            projected += o;
         }
         let visible = (0..n as u32)
-            .filter(|&o| !hidden[o as usize] && !self.scene.objects[o as usize].bounds.is_empty())
+            .filter(|&o| visible[o as usize] && !self.scene.objects[o as usize].bounds.is_empty())
             .collect();
         Ok(CellResult {
             visible,
@@ -283,15 +373,125 @@ impl<'a> Prepared<'a> {
         })
     }
 
+    /// Culls from one (sub-)cell: returns which objects are hidden, the planes rendered and the
+    /// occluder Projections sent. Objects in `known_visible` are not tested (their result does
+    /// not matter to the caller) but still occlude.
+    fn subcell(
+        &self,
+        cell: &Aabb,
+        backend: &dyn RasterBackend,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        known_visible: Option<&[bool]>,
+    ) -> Result<(Vec<bool>, usize, usize), BakeError> {
+        let n = self.scene.objects.len();
+        let mut hidden = vec![false; n];
+        let mut node_done = vec![false; self.bvh.as_ref().map_or(0, |b| b.nodes.len())];
+        if let (Some(bvh), Some(known)) = (&self.bvh, known_visible) {
+            mark_done(bvh, known, &mut node_done);
+        }
+        let skip_test =
+            |o: usize, hidden: &[bool]| hidden[o] || known_visible.is_some_and(|k| k[o]);
+        let cell64 = cell.to_f64();
+        let ps = self.settings.plane_settings(self.sweep);
+        let plans = plan_directions(&cell64, &self.occluders, &self.sliceable, &ps);
+        let rounds = plans.iter().map(|p| p.distances.len()).max().unwrap_or(0);
+        let (mut planes, mut projected) = (0, 0);
+        // In a sweep, the last plane rendered per direction (its umbra is carried onward), and
+        // whether the direction is finished (its umbra covers the whole plane: what lies behind
+        // within its frame is hidden on that plane already).
+        let mut finished = vec![false; plans.len()];
+        let mut hist: Vec<Vec<Rendered>> = vec![Vec::new(); plans.len()];
+        let mut prev_hdm: Vec<Option<(PlaneFrame, Hdm)>> = vec![None; plans.len()];
+        // Round k renders the k-th plane of every direction (nearest first); occluders of
+        // objects hidden by earlier rounds are left out of later ones.
+        for k in 0..rounds {
+            let jobs: Vec<(usize, PlaneJob)> = plans
+                .par_iter()
+                .enumerate()
+                .filter(|(d, p)| k < p.distances.len() && !finished[*d])
+                .filter_map(|(d, p)| {
+                    // The rectangle holds what the previous plane's umbra may carry (older
+                    // planes' umbra reaching further out is left out: it would cost
+                    // resolution everywhere for a few pixels at the edge).
+                    let carried = hist[d]
+                        .last()
+                        .and_then(|e| crate::sweep::carried_rect(&e.1, e.3?, p.distance(k)));
+                    let mut job = plane_job(
+                        p,
+                        k,
+                        self.scene,
+                        &self.sliceable,
+                        &ps,
+                        &|o| hidden[o as usize],
+                        carried,
+                        &|b| {
+                            // Occluders the previous plane already proves hidden add nothing.
+                            prev_hdm[d].as_ref().is_some_and(|(f, h)| {
+                                self.test_box(f, h, b, &cell64, 0.0) == Coverage::Hidden
+                            })
+                        },
+                    )?;
+                    if p.is_sweep() && carried.is_some() {
+                        job.reproject = reprojections(&hist[d], &job.frame, p.distance(k));
+                    }
+                    if p.is_sweep()
+                        && job.occluders.is_empty()
+                        && job.slices.is_empty()
+                        && job.reproject.is_empty()
+                    {
+                        return None;
+                    }
+                    Some((d, job))
+                })
+                .collect();
+            if jobs.is_empty() {
+                continue;
+            }
+            let (dirs, jobs): (Vec<usize>, Vec<PlaneJob>) = jobs.into_iter().unzip();
+            let maps = backend.render(&jobs)?;
+            let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
+            for (((job, map), hdm), &d) in jobs.iter().zip(&maps).zip(&hdms).zip(&dirs) {
+                observe(job, map, hdm);
+                let after = plans[d].slab_start(k);
+                self.traverse(
+                    job,
+                    hdm,
+                    &cell64,
+                    after,
+                    &mut hidden,
+                    &mut node_done,
+                    &skip_test,
+                );
+            }
+            planes += jobs.len();
+            projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
+            for (((job, map), d), hdm) in jobs.into_iter().zip(maps).zip(dirs).zip(hdms) {
+                if plans[d].is_sweep() {
+                    prev_hdm[d] = Some((job.frame.clone(), hdm));
+                    finished[d] = job.frame.rect_min == plans[d].frame_min(k)
+                        && job.frame.rect_max == plans[d].frame_max(k)
+                        && map.depth.iter().all(|&x| x <= 0.0);
+                    let m = Arc::new(map);
+                    let bounds = crate::sweep::umbra_bounds(&job.frame, &m);
+                    push_history(&mut hist[d], k, job.frame, m, bounds);
+                }
+            }
+        }
+        Ok((hidden, planes, projected))
+    }
+
     /// Tests the object BVH against one plane, marking hidden objects, and nodes whose whole
     /// subtree is hidden (skipped on the following planes).
+    #[allow(clippy::too_many_arguments)]
     fn traverse(
         &self,
         job: &PlaneJob,
         hdm: &Hdm,
         cell: &DAabb,
+        after: f64,
         hidden: &mut [bool],
         node_hidden: &mut [bool],
+        skip_test: &dyn Fn(usize, &[bool]) -> bool,
     ) {
         let Some(bvh) = &self.bvh else { return };
         let mut stack = vec![0u32];
@@ -304,7 +504,7 @@ impl<'a> Prepared<'a> {
                 min: glam::Vec3::from(node.aabb.min).as_dvec3(),
                 max: glam::Vec3::from(node.aabb.max).as_dvec3(),
             };
-            match self.test_box(job, hdm, &b, cell) {
+            match self.test_box(&job.frame, hdm, &b, cell, after) {
                 Coverage::Hidden => {
                     mark_hidden(bvh, ni, hidden, node_hidden);
                     continue;
@@ -315,16 +515,19 @@ impl<'a> Prepared<'a> {
             if node.is_leaf() {
                 for k in 0..node.prim_count {
                     let o = bvh.primitive_indices[(node.first_index + k) as usize] as usize;
-                    if hidden[o] {
+                    if skip_test(o, hidden) {
                         continue;
                     }
                     let ob = self.scene.objects[o].bounds.to_f64();
-                    if self.test_box(job, hdm, &ob, cell) == Coverage::Hidden {
+                    if self.test_box(&job.frame, hdm, &ob, cell, after) == Coverage::Hidden {
                         hidden[o] = true;
                     }
                 }
                 node_hidden[ni as usize] = (0..node.prim_count).all(|k| {
-                    hidden[bvh.primitive_indices[(node.first_index + k) as usize] as usize]
+                    skip_test(
+                        bvh.primitive_indices[(node.first_index + k) as usize] as usize,
+                        hidden,
+                    )
                 });
             } else {
                 stack.push(node.first_index);
@@ -337,14 +540,24 @@ impl<'a> Prepared<'a> {
     /// box can be hidden on this plane (it lies on the cell's side of the face, its Projection
     /// misses the plane's rectangle, or covers no occluded pixel of it — a child's Projection
     /// lies inside its parent's); `Partial` otherwise, including boxes touching the cell.
-    fn test_box(&self, job: &PlaneJob, hdm: &Hdm, b: &DAabb, cell: &DAabb) -> Coverage {
+    ///
+    /// `after` is the distance beyond the face before which nothing can be hidden on this plane:
+    /// 0, or in a sweep the previous plane — every Depth of a sweep plane is at least the
+    /// previous plane's, and a box entirely in front of it has a smaller Depth everywhere.
+    fn test_box(
+        &self,
+        frame: &PlaneFrame,
+        hdm: &Hdm,
+        b: &DAabb,
+        cell: &DAabb,
+        after: f64,
+    ) -> Coverage {
         if b.is_empty() {
             return Coverage::Empty;
         }
-        let frame = &job.frame;
         let a = frame.axis;
         let far = if frame.positive { b.max[a] } else { b.min[a] };
-        if frame.sign() * (far - frame.face()) <= 0.0 {
+        if frame.sign() * (far - frame.face()) <= after {
             return Coverage::Empty;
         }
         if b.overlaps(cell) {
@@ -384,6 +597,102 @@ impl<'a> Prepared<'a> {
             _ => Coverage::Partial,
         }
     }
+}
+
+/// A rendered sweep plane kept for later reprojections: its index in the sweep, frame, map and
+/// the bounds of its umbra.
+type Rendered = (
+    usize,
+    PlaneFrame,
+    Arc<DepthMap>,
+    Option<(glam::DVec2, glam::DVec2)>,
+);
+
+/// Adds plane `k` to a direction's history, keeping only what [`reprojections`] may use: the
+/// newest plane and, for every level `m ≥ 1`, the newest plane whose index is a multiple of
+/// `2^m` (a skip list, `O(log planes)` maps).
+fn push_history(
+    history: &mut Vec<Rendered>,
+    k: usize,
+    frame: PlaneFrame,
+    map: Arc<DepthMap>,
+    bounds: Option<(glam::DVec2, glam::DVec2)>,
+) {
+    history.push((k, frame, map, bounds));
+    let newest_at = |level: u32, h: &[Rendered]| {
+        h.iter()
+            .rposition(|e| e.0 % (1usize << level) == 0)
+            .unwrap_or(usize::MAX)
+    };
+    let keep: Vec<bool> = (0..history.len())
+        .map(|i| i + 1 == history.len() || (1..usize::BITS).any(|m| newest_at(m, history) == i))
+        .collect();
+    let mut it = keep.into_iter();
+    history.retain(|_| it.next().unwrap_or(false));
+}
+
+/// The reprojections onto a sweep plane (frame `to`, at `distance` beyond the face) from the
+/// planes kept in its direction's history ([`push_history`]): the previous plane, and the
+/// newest planes with indices multiples of 2, 4, 8… — a skip list. The previous plane alone
+/// would carry everything, but each reprojection rounds its windows outward (up to a pixel per
+/// side): umbra from far back that reaches this plane through a few reprojections instead of a
+/// chain of them loses less. On the coarse forest (5 cells, 48 planes, resolution 256) this
+/// took the culled share from 46 % to 54 %.
+fn reprojections(history: &[Rendered], to: &PlaneFrame, distance: f64) -> Vec<Reprojection> {
+    history
+        .iter()
+        .rev()
+        .filter(|e| {
+            e.3.is_some_and(|b| crate::sweep::carried_rect(&e.1, b, distance).is_some())
+        })
+        .map(|e| Reprojection::new(&e.1, to, e.2.clone()))
+        .collect()
+}
+
+/// Marks the BVH nodes whose objects are all in `done` (bottom-up over the tree).
+fn mark_done(bvh: &Bvh2, done: &[bool], node_done: &mut [bool]) {
+    fn visit(bvh: &Bvh2, ni: u32, done: &[bool], node_done: &mut [bool]) -> bool {
+        let n = &bvh.nodes[ni as usize];
+        let all = if n.is_leaf() {
+            (0..n.prim_count)
+                .all(|k| done[bvh.primitive_indices[(n.first_index + k) as usize] as usize])
+        } else {
+            let a = visit(bvh, n.first_index, done, node_done);
+            let b = visit(bvh, n.first_index + 1, done, node_done);
+            a && b
+        };
+        node_done[ni as usize] = all;
+        all
+    }
+    if !bvh.nodes.is_empty() {
+        visit(bvh, 0, done, node_done);
+    }
+}
+
+/// The sub-cells of `cell` no larger than `size` along any axis: a regular split, as few per
+/// axis as fit.
+pub fn split_cell(cell: &Aabb, size: f64) -> Vec<Aabb> {
+    let ext = (cell.max - cell.min).as_dvec3();
+    let n = (ext / size).ceil().max(glam::DVec3::ONE).as_uvec3();
+    let mut out = Vec::with_capacity((n.x * n.y * n.z) as usize);
+    let at = |a: usize, k: u32| {
+        if k == n[a] {
+            cell.max[a]
+        } else {
+            cell.min[a] + (ext[a] * k as f64 / n[a] as f64) as f32
+        }
+    };
+    for x in 0..n.x {
+        for y in 0..n.y {
+            for z in 0..n.z {
+                out.push(Aabb::new(
+                    glam::Vec3::new(at(0, x), at(1, y), at(2, z)),
+                    glam::Vec3::new(at(0, x + 1), at(1, y + 1), at(2, z + 1)),
+                ));
+            }
+        }
+    }
+    out
 }
 
 fn mark_hidden(bvh: &Bvh2, node: u32, hidden: &mut [bool], node_hidden: &mut [bool]) {
@@ -433,7 +742,7 @@ pub fn bake_observed(
     observe: Option<PlaneObserver>,
 ) -> Result<BakeResult, BakeError> {
     let start = Instant::now();
-    let prepared = Prepared::new(scene, settings)?;
+    let prepared = Prepared::new(scene, settings, cells)?;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cells_out: Result<Vec<CellResult>, BakeError> = cells
         .par_iter()
@@ -463,6 +772,8 @@ pub fn bake_observed(
         occluder_triangles: prepared.occluders.stats.triangles,
         degenerate_triangles: scene.degenerate_triangles(),
         seconds: start.elapsed().as_secs_f64(),
+        sweep: prepared.sweep,
+        sweep_reason: prepared.sweep_reason.clone(),
     })
 }
 
@@ -531,6 +842,14 @@ pub fn to_document(
             alpha_occluders: settings.alpha_occluders,
             occluders: settings.occluders.clone(),
             improved_projection: settings.improved_projection,
+            sweep: result.sweep,
+            sweep_planes: settings.sweep_settings.planes,
+            kernel: settings.sweep_settings.kernel,
+            sweep_spacing: match settings.sweep_settings.spacing {
+                Spacing::Geometric => "geometric".into(),
+                Spacing::Kernel => "kernel".into(),
+            },
+            subcell: settings.subcell,
         },
         objects: object_table(scene),
         cells: cells

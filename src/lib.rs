@@ -4,8 +4,8 @@
 //! inside) umbrasweep computes the potentially visible set (PVS) of scene objects, using the
 //! extended projections of Durand et al. (SIGGRAPH 2000).
 //!
-//! Data flows one way: [`scene`] → [`cells`] → per-cell culling ([`project`], [`hdm`], raster
-//! work in [`backend`]) → [`pvs`] → files. [`bake`] ties the stages together.
+//! Data flows one way: [`scene`] → [`cells`] → per-cell culling ([`project`], the occlusion
+//! [`sweep`], [`hdm`], raster work in [`backend`]) → [`pvs`] → files. [`bake`] ties the stages together.
 //!
 //! The `runtime` feature alone (`--no-default-features --features runtime`) builds only
 //! [`geom`] and [`pvs`], the parts an engine needs at run time.
@@ -45,6 +45,8 @@ pub mod inspect;
 pub mod project;
 #[cfg(feature = "bake")]
 pub mod scene;
+#[cfg(feature = "bake")]
+pub mod sweep;
 #[cfg(feature = "bake")]
 pub mod util;
 #[cfg(feature = "bake")]

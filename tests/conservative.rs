@@ -1,6 +1,7 @@
-//! Conservativeness suite: hand-built adversarial scenes, each baked with both backends and
-//! checked against the validate sampler (zero false culls), with the objects the geometry
-//! proves hidden asserted hidden and the objects it proves visible asserted in the PVS (with
+//! Conservativeness suite: hand-built adversarial scenes, each baked with both backends, with
+//! separate planes and with the occlusion sweep, and checked against the validate sampler (zero
+//! false culls), with the objects the geometry
+//! proves hidden asserted hidden (default settings) and the objects it proves visible asserted in the PVS (with
 //! a brute-force witness ray, independent of the sampler).
 //!
 //! Cases: an object seen only through a narrow slit; one seen only from one corner of the cell
@@ -25,7 +26,7 @@ use std::sync::OnceLock;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::backend::gpu::GpuBackend;
 use umbrasweep::backend::{BackendError, RasterBackend};
-use umbrasweep::bake::{BakeSettings, bake};
+use umbrasweep::bake::{BakeSettings, SweepChoice, bake};
 use umbrasweep::geom::{Aabb, box_triangles};
 use umbrasweep::scene::Scene;
 use umbrasweep::validate::{CellSample, SceneRays, sample_cell};
@@ -292,16 +293,23 @@ fn run_placed(build: impl Fn(Xf) -> Case) {
             );
         }
 
-        for backend in backends() {
-            let r = bake(
-                scene,
-                &placed.cells,
-                &BakeSettings::default(),
-                backend,
-                None,
-            )
-            .unwrap_or_else(|e| panic!("{at}: bake on {} failed: {e}", backend.name()));
-            let who = format!("{at} [{}]", backend.name());
+        // The default settings (checked for tightness too), and the occlusion sweep.
+        let sweep = BakeSettings {
+            sweep: SweepChoice::On,
+            ..BakeSettings::default()
+        };
+        let runs = [(BakeSettings::default(), true), (sweep, false)];
+        for (backend, (settings, tight)) in backends()
+            .into_iter()
+            .flat_map(|b| runs.iter().map(move |r| (b, r)))
+        {
+            let r = bake(scene, &placed.cells, settings, backend, None)
+                .unwrap_or_else(|e| panic!("{at}: bake on {} failed: {e}", backend.name()));
+            let who = format!(
+                "{at} [{}{}]",
+                backend.name(),
+                if *tight { "" } else { ", sweep" }
+            );
             for (ci, (cell, sample)) in r.cells.iter().zip(&samples).enumerate() {
                 let pvs = &cell.visible;
                 for (k, &o) in sample.visible.iter().enumerate() {
@@ -339,7 +347,7 @@ fn run_placed(build: impl Fn(Xf) -> Case) {
                         ));
                     }
                 }
-                for &(hc, name) in case.hidden.iter().filter(|h| h.0 == ci) {
+                for &(hc, name) in case.hidden.iter().filter(|h| *tight && h.0 == ci) {
                     if pvs.binary_search(&id(name)).is_ok() {
                         problems.push(format!(
                             "NOT HIDDEN {who}: cell {hc}: {name} is provably hidden but is in \

@@ -38,9 +38,11 @@ fn wall_scene() -> Vec<Obj> {
 
 const RES: u32 = 64;
 
+/// Separate planes (the wall and slice planes these tests look for), not the sweep.
 fn settings() -> BakeSettings {
     BakeSettings {
         resolution: RES,
+        sweep: umbrasweep::bake::SweepChoice::Off,
         ..BakeSettings::default()
     }
 }

@@ -57,6 +57,9 @@ pub fn render_job(job: &PlaneJob) -> DepthMap {
     if !job.slices.is_empty() {
         fill_slices(&mut map, frame, &job.slices);
     }
+    for r in &job.reproject {
+        r.apply(&mut map);
+    }
     map
 }
 
@@ -430,6 +433,7 @@ mod tests {
             frame: f.clone(),
             occluders: occ,
             slices: vec![],
+            reproject: Vec::new(),
         });
         let mut covered = 0;
         let mut brute_only = 0;
@@ -487,6 +491,7 @@ mod tests {
             frame: f,
             occluders: occ,
             slices: vec![],
+            reproject: Vec::new(),
         });
         assert!(
             map.depth[4 * 64 + 62].is_finite(),
@@ -513,6 +518,7 @@ mod tests {
             frame: f.clone(),
             occluders: o,
             slices: vec![],
+            reproject: Vec::new(),
         };
         let split = render_job(&job(two));
         let whole = render_job(&job(one));
@@ -545,6 +551,7 @@ mod tests {
             frame: f.clone(),
             occluders: occ,
             slices: vec![],
+            reproject: Vec::new(),
         });
         assert_eq!(map.depth[8 * 16 + 8], -0.5);
         assert_eq!(map.depth[16 + 1], 2.0);
@@ -571,6 +578,7 @@ mod tests {
             frame: f.clone(),
             occluders: OccluderSet::default(),
             slices: segs,
+            reproject: Vec::new(),
         });
         // Pixel (i, j) spans [i-8, i-7]; the ring spans [-5, 5] minus [-2, 2].
         let at = |x: i32, y: i32| map.depth[((y + 8) * 16 + (x + 8)) as usize];

@@ -24,7 +24,10 @@
 //!    `f32`;
 //! 3. keep per pixel the minimum over occluders (the Depth Map), `+inf` where none covers it;
 //! 4. set to `0.0` (the plane's Depth) every pixel whose square lies entirely inside a slice:
-//!    the region enclosed (even-odd) by the job's closed slice segments.
+//!    the region enclosed (even-odd) by the job's closed slice segments;
+//! 5. for every [`Reprojection`] the job carries, lower every pixel it sets (the separable window
+//!    filter of [`crate::sweep`], on the integer windows it carries) to its Depth. This part is
+//!    exact: both backends give the same pixels.
 //!
 //! The result may differ between backends only on pixels where a view's edge passes within a
 //! rounding error of a pixel corner.
@@ -33,6 +36,7 @@ pub mod cpu;
 pub mod gpu;
 
 use crate::geom::DAabb;
+pub use crate::sweep::Reprojection;
 use glam::{DVec2, DVec3};
 
 /// One projection plane of one cell; see the module docs for the conventions.
@@ -133,6 +137,9 @@ pub struct PlaneJob {
     pub occluders: OccluderSet,
     /// Edges of the closed slice loops, in world `(u, v)` coordinates of the plane.
     pub slices: Vec<[DVec2; 2]>,
+    /// In an occlusion sweep, the umbra of earlier planes carried onto this one
+    /// ([`crate::sweep`]): a pixel any of them sets is set. Empty elsewhere.
+    pub reproject: Vec<Reprojection>,
 }
 
 /// A plane's Depth Map: per pixel the minimum occluder Depth, `+inf` where nothing covers it.

@@ -14,9 +14,9 @@
 use super::preview;
 use crate::backend::cpu::CpuBackend;
 use crate::backend::{DepthMap, PlaneFrame};
-use crate::bake::{self, BakeSettings};
+use crate::bake::{self, BakeSettings, SweepChoice};
 use crate::geom::Aabb;
-use crate::project::planes::Placement;
+use crate::project::planes::{Placement, Spacing, SweepSettings};
 use crate::pvs::PvsDocument;
 use crate::scene::Scene;
 use anyhow::{Context, bail};
@@ -150,6 +150,31 @@ pub fn recorded_settings(doc: &PvsDocument) -> anyhow::Result<BakeSettings> {
         alpha_occluders: s.alpha_occluders,
         occluders: s.occluders.clone(),
         improved_projection: s.improved_projection || s.resolution == 0,
+        sweep: if s.sweep {
+            SweepChoice::On
+        } else {
+            SweepChoice::Off
+        },
+        sweep_settings: SweepSettings {
+            planes: if s.sweep_planes == 0 {
+                d.sweep_settings.planes
+            } else {
+                s.sweep_planes
+            },
+            kernel: if s.kernel == 0 {
+                d.sweep_settings.kernel
+            } else {
+                s.kernel
+            },
+            spacing: match s.sweep_spacing.as_str() {
+                "" | "geometric" => Spacing::Geometric,
+                "kernel" => Spacing::Kernel,
+                other => {
+                    bail!("settings.sweep_spacing {other:?}: expected \"geometric\" or \"kernel\"")
+                }
+            },
+        },
+        subcell: s.subcell,
     };
     settings
         .check()

@@ -39,6 +39,8 @@ pub struct PlaneSettings {
     /// their slices (§3.3) at Depth 0.
     pub slice_planes: u32,
     pub placement: Placement,
+    /// When set, every direction is an occlusion sweep ([`crate::sweep`]) instead.
+    pub sweep: Option<SweepSettings>,
 }
 
 impl PlaneSettings {
@@ -49,7 +51,46 @@ impl PlaneSettings {
             planes: 4,
             slice_planes: 1,
             placement: Placement::Geometric,
+            sweep: None,
         }
+    }
+}
+
+/// How the planes of an occlusion sweep are spaced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Spacing {
+    /// The paper's rule: each step is as long as makes the kernel (the inverse image of the cell
+    /// seen through one pixel of the previous plane) `K` pixels wide on the next,
+    /// `ΔD = D·(K−1)·P / (C·N)` — with the resolution `N`, which the printed formula lacks.
+    Kernel,
+    /// `planes` planes spaced geometrically between the nearest occluders and the far ones.
+    #[default]
+    Geometric,
+}
+
+/// The layout of an occlusion sweep (one per direction).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SweepSettings {
+    /// The most planes per direction (both spacings). Default 48.
+    pub planes: u32,
+    /// Kernel size `K` in pixels for [`Spacing::Kernel`]. Default 5 (the paper's).
+    pub kernel: u32,
+    pub spacing: Spacing,
+}
+
+impl SweepSettings {
+    pub const fn default_settings() -> Self {
+        SweepSettings {
+            planes: 48,
+            kernel: 5,
+            spacing: Spacing::Geometric,
+        }
+    }
+}
+
+impl Default for SweepSettings {
+    fn default() -> Self {
+        Self::default_settings()
     }
 }
 
@@ -117,7 +158,16 @@ pub fn cell_jobs(
     let mut jobs = Vec::new();
     for plan in &plans {
         for k in 0..plan.distances.len() {
-            jobs.extend(plane_job(plan, k, scene, sliceable, settings, &|_| false));
+            jobs.extend(plane_job(
+                plan,
+                k,
+                scene,
+                sliceable,
+                settings,
+                &|_| false,
+                None,
+                &|_| false,
+            ));
         }
     }
     jobs
@@ -137,6 +187,59 @@ pub struct DirectionPlan {
     part_solid: Vec<bool>,
     /// Plane distances beyond the face, ascending.
     pub distances: Vec<f64>,
+    /// The frame's extension factor.
+    extend: f64,
+    /// In a sweep: per plane, the parts (indices into `parts`) overlapping its slab, the space
+    /// between the previous plane (or the face) and this one. Empty otherwise.
+    slabs: Vec<Vec<u32>>,
+}
+
+impl DirectionPlan {
+    /// True when this direction is an occlusion sweep.
+    pub fn is_sweep(&self) -> bool {
+        !self.slabs.is_empty()
+    }
+
+    /// The plane's distance beyond the cell's face.
+    pub fn distance(&self, k: usize) -> f64 {
+        self.distances[k]
+    }
+
+    /// The lower corner of plane `k`'s frame (world `(u, v)`): the 90° frustum from the face
+    /// at the plane's distance, extended; every plane rectangle lies inside its frame.
+    pub fn frame_min(&self, k: usize) -> DVec2 {
+        self.frame(k).0
+    }
+
+    /// The upper corner of plane `k`'s frame.
+    pub fn frame_max(&self, k: usize) -> DVec2 {
+        self.frame(k).1
+    }
+
+    fn frame(&self, k: usize) -> (DVec2, DVec2) {
+        let cell = &self.cell;
+        let (u, v) = ((self.axis + 1) % 3, (self.axis + 2) % 3);
+        let tp = self.distances[k];
+        let half = DVec2::new(
+            0.5 * (cell.max[u] - cell.min[u]) + tp,
+            0.5 * (cell.max[v] - cell.min[v]) + tp,
+        ) * self.extend;
+        let center = DVec2::new(
+            0.5 * (cell.max[u] + cell.min[u]),
+            0.5 * (cell.max[v] + cell.min[v]),
+        );
+        (center - half, center + half)
+    }
+
+    /// In a sweep, the distance where plane `k`'s slab begins (the previous plane; 0 for the
+    /// first); 0 otherwise.
+    pub fn slab_start(&self, k: usize) -> f64 {
+        if self.is_sweep() && k > 0 {
+            self.distances[k - 1]
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Plans the six directions of a cell.
@@ -179,6 +282,35 @@ fn plan_direction(
     let summary = summarize(cell, occ, axis, positive, face, eps);
     if summary.index.is_empty() {
         return None;
+    }
+    if let Some(sweep) = &settings.sweep {
+        let distances = sweep_distances(&summary, sweep, cell, axis, settings);
+        if distances.is_empty() {
+            return None;
+        }
+        let all: Vec<usize> = (0..summary.index.len()).collect();
+        let parts = cut_parts(cell, occ, &summary, &all, axis, positive, face, eps);
+        let slabs = slab_members(&parts, &distances);
+        return Some(DirectionPlan {
+            cell: *cell,
+            axis,
+            positive,
+            face,
+            part_object: parts
+                .index
+                .iter()
+                .map(|&k| occ.parts[k as usize].object)
+                .collect(),
+            part_solid: parts
+                .index
+                .iter()
+                .map(|&k| matches!(occ.parts[k as usize].kind, PartKind::Solid { .. }))
+                .collect(),
+            parts,
+            distances,
+            extend: settings.extend,
+            slabs,
+        });
     }
     let mut distances = plane_distances(
         &summary,
@@ -232,6 +364,8 @@ fn plan_direction(
         part_object,
         part_solid,
         distances,
+        extend: settings.extend,
+        slabs: Vec::new(),
     })
 }
 
@@ -245,6 +379,8 @@ pub fn plane_job(
     sliceable: &Sliceable,
     settings: &PlaneSettings,
     skip: &dyn Fn(u32) -> bool,
+    carried: Option<(DVec2, DVec2)>,
+    hidden_box: &dyn Fn(&DAabb) -> bool,
 ) -> Option<PlaneJob> {
     let cell = &plan.cell;
     let (axis, positive) = (plan.axis, plan.positive);
@@ -256,15 +392,8 @@ pub fn plane_job(
     let tp = plan.distances[k];
     let position = plan.face + s * tp;
     // The frame: the 90° frustum from the face at this distance, extended.
-    let half = DVec2::new(
-        0.5 * (cell.max[u] - cell.min[u]) + tp,
-        0.5 * (cell.max[v] - cell.min[v]) + tp,
-    ) * settings.extend;
-    let center = DVec2::new(
-        0.5 * (cell.max[u] + cell.min[u]),
-        0.5 * (cell.max[v] + cell.min[v]),
-    );
-    let (fmin, fmax) = (center - half, center + half);
+    let (fmin, fmax) = plan.frame(k);
+    let center = 0.5 * (fmin + fmax);
     let probe = PlaneFrame {
         cell: *cell,
         axis,
@@ -304,7 +433,13 @@ pub fn plane_job(
     let dist = |p: DVec3| s * (p[axis] - plan.face);
     // Uncut parts are referenced in place, cut pieces live in `pieces`.
     let mut sources: Vec<(bool, usize)> = Vec::new();
-    for i in 0..parts.set.len() {
+    let candidates: Box<dyn Iterator<Item = usize>> = if plan.is_sweep() {
+        Box::new(plan.slabs[k].iter().map(|&i| i as usize))
+    } else {
+        Box::new(0..parts.set.len())
+    };
+    let start = plan.slab_start(k);
+    for i in candidates {
         if skip(plan.part_object[i])
             || !may_project(parts.near[i], parts.far[i], parts.extent[i], cell_uv, tp)
         {
@@ -315,6 +450,50 @@ pub fn plane_job(
             continue;
         }
         let pts = parts.set.get(i);
+        if plan.is_sweep() && parts.near[i] > start {
+            let (a0, a1) = (plan.face + s * parts.near[i], plan.face + s * parts.far[i]);
+            let mut b = DAabb {
+                min: DVec3::ZERO,
+                max: DVec3::ZERO,
+            };
+            b.min[axis] = a0.min(a1);
+            b.max[axis] = a0.max(a1);
+            b.min[u] = parts.lo[i].x;
+            b.max[u] = parts.hi[i].x;
+            b.min[v] = parts.lo[i].y;
+            b.max[v] = parts.hi[i].y;
+            if hidden_box(&b) {
+                continue;
+            }
+        }
+        if plan.is_sweep() {
+            // In a sweep a plane receives only what lies between it and the previous plane:
+            // what is in front is carried by the reprojection, what is behind goes to later
+            // planes. The pieces lie in front of the plane, so their Projections are umbra.
+            if parts.near[i] >= start && parts.far[i] <= tp {
+                sources.push((false, i));
+                continue;
+            }
+            let solid = plan.part_solid[i];
+            let clip = |pts: &[DVec3], f: &dyn Fn(DVec3) -> f64, out: &mut Vec<DVec3>| {
+                if solid {
+                    clip_solid(pts, f, out);
+                } else {
+                    clip_polygon(pts, f, out);
+                }
+            };
+            buf.clear();
+            clip(pts, &|p| tp - dist(p), &mut buf);
+            if parts.near[i] < start && buf.len() >= 3 {
+                let front = std::mem::take(&mut buf);
+                clip(&front, &|p| dist(p) - start, &mut buf);
+            }
+            if buf.len() >= 3 {
+                sources.push((true, pieces.len()));
+                pieces.push(buf.iter().copied());
+            }
+            continue;
+        }
         if parts.near[i] < tp && tp < parts.far[i] {
             let solid = plan.part_solid[i];
             for side in [1.0, -1.0] {
@@ -373,6 +552,11 @@ pub fn plane_job(
             rmax = rmax.max(p.min(fmax));
         }
     }
+    if let Some((lo, hi)) = carried {
+        // In a sweep the rectangle also holds what the reprojection may carry onto it.
+        rmin = rmin.min(lo.max(fmin));
+        rmax = rmax.max(hi.min(fmax));
+    }
     if !(rmin.x < rmax.x && rmin.y < rmax.y) {
         return None;
     }
@@ -389,13 +573,14 @@ pub fn plane_job(
             set.push(points_of(src).iter().copied());
         }
     }
-    if set.is_empty() && slices.is_empty() {
+    if set.is_empty() && slices.is_empty() && carried.is_none() {
         return None;
     }
     Some(PlaneJob {
         frame,
         occluders: set,
         slices,
+        reproject: Vec::new(),
     })
 }
 
@@ -664,6 +849,77 @@ fn cut_point(a: DVec3, fa: f64, b: DVec3, fb: f64, f: &impl Fn(DVec3) -> f64) ->
         t *= 1.0 - 1e-12 * 16f64.powi(k);
     }
     None
+}
+
+/// The plane distances of a sweep: from the nearest occluders' far side (at least one cell
+/// depth) to the 95th percentile of the far sides, by [`Spacing`], at most `planes` of them.
+fn sweep_distances(
+    parts: &DirParts,
+    sweep: &SweepSettings,
+    cell: &DAabb,
+    axis: usize,
+    settings: &PlaneSettings,
+) -> Vec<f64> {
+    if parts.far.is_empty() || sweep.planes == 0 {
+        return Vec::new();
+    }
+    let mut fars = parts.far.clone();
+    fars.sort_by(f64::total_cmp);
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let depth = cell.max[axis] - cell.min[axis];
+    let cu = cell.max[u] - cell.min[u];
+    let cv = cell.max[v] - cell.min[v];
+    let lo = fars[0].max(depth);
+    let hi = fars[(fars.len() * 95 / 100).min(fars.len() - 1)].max(lo * 1.01);
+    let n = sweep.planes as usize;
+    match sweep.spacing {
+        Spacing::Geometric => (0..n)
+            .map(|k| {
+                if n == 1 {
+                    lo
+                } else {
+                    lo * (hi / lo).powf(k as f64 / (n - 1) as f64)
+                }
+            })
+            .collect(),
+        Spacing::Kernel => {
+            // ΔD = D·(K−1)·P/(C·N): D the distance from the cell's face, P the plane's side
+            // (the frame), C the cell's side, N the resolution; per axis, the smaller step.
+            let k1 = sweep.kernel.max(2) as f64 - 1.0;
+            let res = settings.resolution as f64;
+            let mut out = vec![lo];
+            let mut t = lo;
+            while out.len() < n && t < hi {
+                let step = [cu, cv]
+                    .iter()
+                    .map(|&c| t * k1 * (c + 2.0 * t) * settings.extend / (c.max(1e-9) * res))
+                    .fold(f64::INFINITY, f64::min);
+                t += step.max(1e-6 * t);
+                out.push(t);
+            }
+            out
+        }
+    }
+}
+
+/// Per plane of a sweep, the parts overlapping its slab (between the previous plane, or the
+/// face, and the plane).
+fn slab_members(parts: &DirParts, distances: &[f64]) -> Vec<Vec<u32>> {
+    let mut order: Vec<u32> = (0..parts.near.len() as u32).collect();
+    order.sort_by(|&a, &b| parts.near[a as usize].total_cmp(&parts.near[b as usize]));
+    let mut slabs = vec![Vec::new(); distances.len()];
+    let mut active: Vec<u32> = Vec::new();
+    let mut next = 0;
+    for (k, &tp) in distances.iter().enumerate() {
+        let start = if k == 0 { 0.0 } else { distances[k - 1] };
+        while next < order.len() && parts.near[order[next] as usize] < tp {
+            active.push(order[next]);
+            next += 1;
+        }
+        active.retain(|&i| parts.far[i as usize] > start);
+        slabs[k].extend_from_slice(&active);
+    }
+    slabs
 }
 
 /// Plane distances beyond the face, each just behind an occluder, duplicates removed:

@@ -24,7 +24,7 @@ use std::path::Path;
 /// The first 8 bytes of every `.pvs` file.
 pub const MAGIC: [u8; 8] = *b"UMBRAPVS";
 /// The binary format version this crate writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// Length of the fixed header: magic, version, checksum, payload length.
 pub const HEADER_LEN: usize = 24;
 /// The `parent` value of a key cell (a record holding the full set).
@@ -365,6 +365,12 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
     p.push(s.alpha_occluders as u8);
     put_opt_str(&mut p, s.occluders.as_deref())?;
     p.push(s.improved_projection as u8);
+    p.push(s.sweep as u8);
+    put_u32(&mut p, s.sweep_planes);
+    put_u32(&mut p, s.kernel);
+    put_str(&mut p, &s.sweep_spacing)?;
+    p.push(s.subcell.is_some() as u8);
+    p.extend_from_slice(&s.subcell.unwrap_or(0.0).to_le_bytes());
     match &doc.summary {
         None => p.push(0),
         Some(m) => {

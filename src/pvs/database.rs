@@ -116,7 +116,7 @@ impl fmt::Display for PvsError {
             }
             PvsErrorKind::UnsupportedVersion { found } => write!(
                 f,
-                ".pvs format version {found} is not supported (this build reads version \
+                ".pvs format version {found} is not supported (this build reads versions 1 to \
                  {FORMAT_VERSION})"
             ),
             PvsErrorKind::Truncated { expected, actual } => write!(
@@ -593,7 +593,7 @@ impl PvsDatabase {
         let u32_at =
             |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
         let version = u32_at(8);
-        if version != FORMAT_VERSION {
+        if !(1..=FORMAT_VERSION).contains(&version) {
             return Err(PvsErrorKind::UnsupportedVersion { found: version });
         }
         if bytes.len() < HEADER_LEN {
@@ -613,12 +613,12 @@ impl PvsDatabase {
         if computed != stored {
             return Err(PvsErrorKind::Checksum { stored, computed });
         }
-        let mut db = Self::parse_payload(payload)?;
+        let mut db = Self::parse_payload(payload, version)?;
         db.file_bytes = bytes.len();
         Ok(db)
     }
 
-    fn parse_payload(payload: &[u8]) -> Result<Self, PvsErrorKind> {
+    fn parse_payload(payload: &[u8], version: u32) -> Result<Self, PvsErrorKind> {
         let mut r = Rd { b: payload, pos: 0 };
         let objects = r.u32("the object count")?;
         let ncells = r.u32("the cell count")?;
@@ -636,7 +636,18 @@ impl PvsDatabase {
             alpha_occluders: r.bool("settings.alpha_occluders")?,
             occluders: r.opt_str("settings.occluders")?,
             improved_projection: r.bool("settings.improved_projection")?,
+            ..PvsSettings::default()
         };
+        let mut settings = settings;
+        if version >= 2 {
+            settings.sweep = r.bool("settings.sweep")?;
+            settings.sweep_planes = r.u32("settings.sweep_planes")?;
+            settings.kernel = r.u32("settings.kernel")?;
+            settings.sweep_spacing = r.str("settings.sweep_spacing")?;
+            settings.subcell = r.bool("settings.subcell flag")?.then_some(0.0);
+            let size = r.f64("settings.subcell")?;
+            settings.subcell = settings.subcell.map(|_| size);
+        }
         let summary = if r.bool("the summary flag")? {
             Some(PvsSummary {
                 cells: r.usize_u64("summary.cells")?,

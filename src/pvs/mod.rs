@@ -83,6 +83,16 @@ pub struct PvsSettings {
     pub alpha_occluders: bool,
     pub occluders: Option<String>,
     pub improved_projection: bool,
+    /// Whether the cells were baked with the occlusion sweep (what `--sweep`/`--no-sweep`, or
+    /// the automatic rule, chose).
+    pub sweep: bool,
+    /// The sweep's most planes per direction, kernel size (pixels) and spacing
+    /// (`"geometric"` or `"kernel"`); meaningful when `sweep` is true.
+    pub sweep_planes: u32,
+    pub kernel: u32,
+    pub sweep_spacing: String,
+    /// Sub-cell size when cells were baked as unions of sub-cells.
+    pub subcell: Option<f64>,
 }
 
 pub mod binary;

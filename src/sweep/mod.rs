@@ -1,0 +1,435 @@
+//! The occlusion sweep's reprojection (Durand et al. 2000, §5.1 and appendix B): carrying the
+//! occlusion aggregated on one plane of a sweep onto the next plane behind it, as a binary umbra.
+//!
+//! # The rule
+//!
+//! A pixel of a plane's Depth Map with Depth `≤ 0` is in the umbra of what lies in front of that
+//! plane: every ray from the cell through the whole pixel square is blocked before it reaches the
+//! plane (a Projection of an occluder in front of the plane, a slice, or an earlier
+//! reprojection). Appendix B shows that any subset of an umbra is a conservative occluder, so
+//! those pixels can be projected again onto the next plane.
+//!
+//! For a target pixel `Q` on the next plane, the rays from the cell through `Q` cross the source
+//! plane inside a *window*: with the cell's face at distance 0, its back at `−L`, the source
+//! plane at `s` and the target at `t`, a ray from eye `e` (at depth `−l`, `0 ≤ l ≤ L`) through
+//! `q ∈ Q` meets the source plane at `e + (q − e)·λ` with `λ = (s + l)/(t + l)`. Per axis this is
+//! linear in `e`, in `q` and in `λ`, so the window is the box spanned by the cell's face
+//! rectangle and `Q` at the two extreme `λ` — the bounding box of the cone from the whole cell
+//! (including rays entering through its back) through `Q`. This per-pixel window is tighter than
+//! the paper's "equivalent cell" kernel (the notes measured 27 % against 11 % culled on a forest)
+//! and, unlike a kernel of `K` whole pixels, stays exact when the planes' pixels have different
+//! sizes.
+//!
+//! The target pixel is set when every source pixel the window overlaps is set, the window being
+//! rounded outward to whole pixels; a window leaving the source rectangle sets nothing (what lies
+//! outside is unknown). The window is a product of a column range (depending only on the target
+//! column) and a row range (depending only on the target row), so the test is separable: first,
+//! for every source row and target column, "all set in the column range"; then, for every target
+//! pixel, "all of those set in the row range". Both backends run that same integer filter on the
+//! same windows (computed here, in `f64`), so they give identical maps.
+//!
+//! A reprojected pixel receives the source plane's Depth relative to the target (`s − t < 0`,
+//! rounded up to `f32`): the ray is blocked before the source plane.
+
+use crate::backend::{DepthMap, PlaneFrame, depth_up};
+use std::sync::Arc;
+
+/// A source window `[lo, hi]` (inclusive pixel indices) along one axis, or — when `lo > hi` —
+/// none: the window leaves the source rectangle and the pixel cannot be set.
+pub type Window = [u32; 2];
+
+/// The window of a pixel whose rays leave the source rectangle.
+pub const NO_WINDOW: Window = [u32::MAX, 0];
+
+/// Reprojection of one plane's umbra onto the next plane of the sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Reprojection {
+    /// The source plane's Depth Map (same resolution as the target). Pixels with Depth `≤ 0`
+    /// are the umbra carried forward.
+    pub source: Arc<DepthMap>,
+    /// Per target column `i`: the source columns its window overlaps.
+    pub cols: Vec<Window>,
+    /// Per target row `j`: the source rows its window overlaps.
+    pub rows: Vec<Window>,
+    /// The Depth written into reprojected pixels: the source plane's Depth relative to the
+    /// target plane, rounded up.
+    pub depth: f32,
+}
+
+impl Reprojection {
+    /// The reprojection of `source` (the Depth Map rendered on frame `src`) onto frame `dst`.
+    ///
+    /// # Panics
+    /// If the frames do not belong to the same cell and direction, if `dst` is not strictly
+    /// behind `src`, or if the resolutions differ.
+    pub fn new(src: &PlaneFrame, dst: &PlaneFrame, source: Arc<DepthMap>) -> Reprojection {
+        assert_eq!(
+            src.resolution, dst.resolution,
+            "planes of one sweep share a resolution"
+        );
+        assert_eq!(source.resolution, src.resolution);
+        let (cols, rows) = windows(src, dst);
+        let s = src.sign() * (src.position - src.face());
+        let t = dst.sign() * (dst.position - dst.face());
+        Reprojection {
+            source,
+            cols,
+            rows,
+            depth: depth_up(s - t),
+        }
+    }
+
+    /// Number of source pixels in the umbra (Depth `≤ 0`).
+    pub fn source_umbra(&self) -> usize {
+        self.source.depth.iter().filter(|&&d| d <= 0.0).count()
+    }
+
+    /// Applies the reprojection to `map` (the target's Depth Map): every reprojected pixel
+    /// keeps the minimum of its Depth and [`Reprojection::depth`].
+    pub fn apply(&self, map: &mut DepthMap) {
+        let set = self.mask();
+        for (d, s) in map.depth.iter_mut().zip(set) {
+            if s && self.depth < *d {
+                *d = self.depth;
+            }
+        }
+    }
+
+    /// The reprojected pixels of the target, row-major: the separable filter of the module
+    /// docs. (The GPU backend runs the same filter in two render passes.)
+    pub fn mask(&self) -> Vec<bool> {
+        let res = self.source.resolution as usize;
+        let src = &self.source.depth;
+        // Pass 1: for every source row y and target column i, all set in cols[i] of row y.
+        let mut horizontal = vec![false; res * res];
+        let mut prefix = vec![0u32; res + 1];
+        for y in 0..res {
+            for x in 0..res {
+                prefix[x + 1] =
+                    prefix[x] + u32::from(src[y * res + x] > 0.0 || src[y * res + x].is_nan());
+            }
+            for (i, w) in self.cols.iter().enumerate() {
+                horizontal[y * res + i] = all_set(&prefix, *w, res);
+            }
+        }
+        // Pass 2: for every target pixel, all of pass 1 set in rows[j] of column i.
+        let mut out = vec![false; res * res];
+        let mut column = vec![0u32; res + 1];
+        for i in 0..res {
+            for y in 0..res {
+                column[y + 1] = column[y] + u32::from(!horizontal[y * res + i]);
+            }
+            for (j, w) in self.rows.iter().enumerate() {
+                out[j * res + i] = all_set(&column, *w, res);
+            }
+        }
+        out
+    }
+}
+
+/// True when the window is valid and holds no unset pixel (`prefix` counts unset pixels).
+fn all_set(prefix: &[u32], w: Window, res: usize) -> bool {
+    let [lo, hi] = w;
+    if lo > hi || hi as usize >= res {
+        return false;
+    }
+    prefix[hi as usize + 1] == prefix[lo as usize]
+}
+
+/// The world `(u, v)` bounding box of a plane's umbra pixels (Depth `≤ 0`), or `None` when it
+/// has none.
+pub fn umbra_bounds(src: &PlaneFrame, map: &DepthMap) -> Option<(glam::DVec2, glam::DVec2)> {
+    let res = map.resolution as usize;
+    let (mut i0, mut j0, mut i1, mut j1) = (usize::MAX, usize::MAX, 0, 0);
+    for (j, row) in map.depth.chunks_exact(res).enumerate() {
+        let Some(first) = row.iter().position(|&d| d <= 0.0) else {
+            continue;
+        };
+        let last = row.iter().rposition(|&d| d <= 0.0).unwrap_or(first);
+        i0 = i0.min(first);
+        i1 = i1.max(last);
+        j0 = j0.min(j);
+        j1 = j1.max(j);
+    }
+    if i0 == usize::MAX {
+        return None;
+    }
+    let px = src.pixel_size();
+    Some((
+        src.rect_min + glam::DVec2::new(i0 as f64, j0 as f64) * px,
+        src.rect_min + glam::DVec2::new((i1 + 1) as f64, (j1 + 1) as f64) * px,
+    ))
+}
+
+/// The region of a plane at distance `target` beyond the face (world `(u, v)`) that a
+/// reprojection from `src`, whose umbra lies in `bounds` ([`umbra_bounds`]), can set: the
+/// points whose window lies inside `bounds`. A sweep plane's rectangle must contain it, or
+/// occlusion carried from in front is cut off.
+pub fn carried_rect(
+    src: &PlaneFrame,
+    bounds: (glam::DVec2, glam::DVec2),
+    target: f64,
+) -> Option<(glam::DVec2, glam::DVec2)> {
+    let (b0, b1) = bounds;
+    let cell = &src.cell;
+    let a = src.axis;
+    let (u, v) = src.uv_axes();
+    let s = src.sign() * (src.position - src.face());
+    let depth = cell.max[a] - cell.min[a];
+    let lambdas = [s / target, (s + depth) / (target + depth)];
+    let e0 = glam::DVec2::new(cell.min[u], cell.min[v]);
+    let e1 = glam::DVec2::new(cell.max[u], cell.max[v]);
+    let (mut lo, mut hi) = (glam::DVec2::NEG_INFINITY, glam::DVec2::INFINITY);
+    for l in lambdas {
+        lo = lo.max((b0 - e0 * (1.0 - l)) / l);
+        hi = hi.min((b1 - e1 * (1.0 - l)) / l);
+    }
+    // Grown by a pixel of the source, scaled: rounding never cuts the region.
+    let grow = src.pixel_size() * (target / s);
+    let (lo, hi) = (lo - grow, hi + grow);
+    (lo.x < hi.x && lo.y < hi.y).then_some((lo, hi))
+}
+
+/// The per-column and per-row source windows of every target pixel (see the module docs).
+///
+/// # Panics
+/// If `dst` is not strictly behind `src`, or `src` not strictly beyond the cell's face.
+pub fn windows(src: &PlaneFrame, dst: &PlaneFrame) -> (Vec<Window>, Vec<Window>) {
+    let cell = &src.cell;
+    let a = src.axis;
+    let (u, v) = src.uv_axes();
+    let s = src.sign() * (src.position - src.face());
+    let t = dst.sign() * (dst.position - dst.face());
+    assert!(
+        s > 0.0 && t > s,
+        "reprojection needs 0 < source distance ({s}) < target distance ({t})"
+    );
+    let depth = cell.max[a] - cell.min[a];
+    let lambdas = [s / t, (s + depth) / (t + depth)];
+    let res = dst.resolution as usize;
+    let one_axis = |k: usize, e0: f64, e1: f64| -> Vec<Window> {
+        let (q0, qpx) = (dst.rect_min[k], dst.pixel_size()[k]);
+        let (p0, ppx) = (src.rect_min[k], src.pixel_size()[k]);
+        let scale = e0.abs().max(e1.abs()).max(q0.abs()).max(p0.abs())
+            + (dst.rect_max[k] - dst.rect_min[k]).abs();
+        // Outward rounding: the f64 error of these few operations, in source pixels, plus a
+        // margin.
+        let eps = 1e-6 + 1e-12 * scale / ppx;
+        (0..res)
+            .map(|i| {
+                let (qa, qb) = (q0 + i as f64 * qpx, q0 + (i + 1) as f64 * qpx);
+                let mut lo = f64::INFINITY;
+                let mut hi = f64::NEG_INFINITY;
+                for l in lambdas {
+                    lo = lo.min((1.0 - l) * e0 + l * qa);
+                    hi = hi.max((1.0 - l) * e1 + l * qb);
+                }
+                let (x0, x1) = ((lo - p0) / ppx - eps, (hi - p0) / ppx + eps);
+                if !(x0 >= 0.0 && x1 <= res as f64) {
+                    return NO_WINDOW;
+                }
+                let (i0, i1) = (x0.floor(), x1.ceil() - 1.0);
+                [i0 as u32, (i1.max(i0)) as u32]
+            })
+            .collect()
+    };
+    let cols = one_axis(0, cell.min[u], cell.max[u]);
+    let rows = one_axis(1, cell.min[v], cell.max[v]);
+    (cols, rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::DAabb;
+    use glam::{DVec2, DVec3};
+    use rand::{Rng, SeedableRng};
+
+    fn frame(cell: DAabb, axis: usize, positive: bool, t: f64, lo: DVec2, hi: DVec2) -> PlaneFrame {
+        let face = if positive {
+            cell.max[axis]
+        } else {
+            cell.min[axis]
+        };
+        PlaneFrame {
+            cell,
+            axis,
+            positive,
+            position: face + if positive { t } else { -t },
+            rect_min: lo,
+            rect_max: hi,
+            resolution: 32,
+        }
+    }
+
+    /// Brute force: random masks, random plane pairs (axes, sides, rectangles, distances), and
+    /// for every set target pixel, rays from random points of the cell (corners and faces
+    /// included) through random points of the pixel (its corners included) must cross the
+    /// source plane inside a set source pixel.
+    #[test]
+    fn every_reprojected_pixel_is_blocked_for_rays_from_the_whole_cell() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let mut checked = 0usize;
+        for case in 0..60 {
+            let size = DVec3::new(
+                rng.random_range(0.2..2.0),
+                rng.random_range(0.2..2.0),
+                rng.random_range(0.2..2.0),
+            );
+            let origin = DVec3::new(
+                rng.random_range(-5.0..5.0),
+                rng.random_range(-5.0..5.0),
+                rng.random_range(-5.0..5.0),
+            );
+            let cell = DAabb {
+                min: origin,
+                max: origin + size,
+            };
+            let axis = case % 3;
+            let positive = case % 2 == 0;
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let s = rng.random_range(0.3..4.0);
+            let t = s + rng.random_range(0.05..3.0);
+            let centre = DVec2::new(
+                0.5 * (cell.min[u] + cell.max[u]),
+                0.5 * (cell.min[v] + cell.max[v]),
+            );
+            let rect = |d: f64, jitter: f64| {
+                let half = DVec2::new(0.5 * size[u] + d, 0.5 * size[v] + d) * (1.0 + jitter);
+                (centre - half, centre + half)
+            };
+            let (slo, shi) = rect(s, rng.random_range(0.0..0.6));
+            let (tlo, thi) = rect(t, rng.random_range(0.0..0.6));
+            let src = frame(cell, axis, positive, s, slo, shi);
+            let dst = frame(cell, axis, positive, t, tlo, thi);
+            // A mask of mostly set pixels with random holes, so that some targets are set.
+            let hole = rng.random_range(0.0..0.05);
+            let mut map = DepthMap::new(32);
+            for d in map.depth.iter_mut() {
+                if rng.random_range(0.0..1.0) > hole {
+                    *d = -rng.random_range(0.0..1.0f32);
+                }
+            }
+            let r = Reprojection::new(&src, &dst, Arc::new(map.clone()));
+            let mask = r.mask();
+            let spx = src.pixel_size();
+            let tpx = dst.pixel_size();
+            for j in 0..32 {
+                for i in 0..32 {
+                    if !mask[j * 32 + i] {
+                        continue;
+                    }
+                    checked += 1;
+                    for k in 0..40 {
+                        // Eyes: corners first, then random points of the cell.
+                        let e = if k < 8 {
+                            cell.corners()[k]
+                        } else {
+                            origin + size * DVec3::new(rng.random(), rng.random(), rng.random())
+                        };
+                        let fu = if k % 4 < 2 {
+                            (k % 2) as f64
+                        } else {
+                            rng.random()
+                        };
+                        let fv = if k % 4 < 2 {
+                            ((k / 2) % 2) as f64
+                        } else {
+                            rng.random()
+                        };
+                        let q2 = tlo + DVec2::new((i as f64 + fu) * tpx.x, (j as f64 + fv) * tpx.y);
+                        let mut q = DVec3::ZERO;
+                        q[axis] = dst.position;
+                        q[u] = q2.x;
+                        q[v] = q2.y;
+                        let p = src.project(e, q);
+                        let x = (p - slo) / spx;
+                        assert!(
+                            x.x >= 0.0 && x.y >= 0.0 && x.x <= 32.0 && x.y <= 32.0,
+                            "ray leaves the source rectangle"
+                        );
+                        // The closed pixel squares containing the crossing: one of them set.
+                        let mut any = false;
+                        for xi in [(x.x - 1e-9).floor(), (x.x + 1e-9).floor()] {
+                            for yi in [(x.y - 1e-9).floor(), (x.y + 1e-9).floor()] {
+                                if (0.0..32.0).contains(&xi) && (0.0..32.0).contains(&yi) {
+                                    any |= map.depth[yi as usize * 32 + xi as usize] <= 0.0;
+                                }
+                            }
+                        }
+                        assert!(
+                            any,
+                            "case {case}: target ({i},{j}) set but a ray crosses an unset source pixel at {x}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            checked > 1000,
+            "too few set target pixels to mean anything: {checked}"
+        );
+    }
+
+    /// The separable filter equals the direct definition: all source pixels in the window box.
+    #[test]
+    fn separable_filter_equals_the_window_box_test() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        let cell = DAabb {
+            min: DVec3::ZERO,
+            max: DVec3::ONE,
+        };
+        let src = frame(cell, 2, true, 1.0, DVec2::splat(-1.5), DVec2::splat(2.5));
+        let dst = frame(cell, 2, true, 1.6, DVec2::splat(-2.1), DVec2::splat(3.1));
+        let mut map = DepthMap::new(32);
+        for d in map.depth.iter_mut() {
+            if rng.random_range(0.0..1.0) > 0.03 {
+                *d = 0.0;
+            }
+        }
+        let r = Reprojection::new(&src, &dst, Arc::new(map.clone()));
+        let mask = r.mask();
+        let mut set = 0;
+        for j in 0..32 {
+            for i in 0..32 {
+                let ([c0, c1], [r0, r1]) = (r.cols[i], r.rows[j]);
+                let direct = c0 <= c1
+                    && r0 <= r1
+                    && (r0..=r1)
+                        .all(|y| (c0..=c1).all(|x| map.depth[(y * 32 + x) as usize] <= 0.0));
+                assert_eq!(mask[j * 32 + i], direct, "pixel ({i},{j})");
+                set += usize::from(direct);
+            }
+        }
+        assert!(set > 50 && set < 32 * 32, "{set}");
+        // Applying writes the source plane's Depth relative to the target.
+        let mut out = DepthMap::new(32);
+        r.apply(&mut out);
+        assert_eq!(out.covered(), set);
+        assert!(
+            out.depth
+                .iter()
+                .filter(|d| d.is_finite())
+                .all(|&d| d == depth_up(-0.6))
+        );
+    }
+
+    /// A fully set source reprojects onto the middle of the target but never onto pixels whose
+    /// rays leave the source rectangle.
+    #[test]
+    fn windows_leaving_the_source_set_nothing() {
+        let cell = DAabb {
+            min: DVec3::ZERO,
+            max: DVec3::ONE,
+        };
+        let src = frame(cell, 0, false, 1.0, DVec2::splat(-0.5), DVec2::splat(1.5));
+        let dst = frame(cell, 0, false, 2.0, DVec2::splat(-3.0), DVec2::splat(4.0));
+        let mut map = DepthMap::new(32);
+        map.depth.fill(0.0);
+        let r = Reprojection::new(&src, &dst, Arc::new(map));
+        let mask = r.mask();
+        assert!(mask[16 * 32 + 16]);
+        assert!(!mask[0] && !mask[31 * 32 + 31]);
+        assert_eq!(r.cols[0], NO_WINDOW);
+    }
+}

@@ -1,0 +1,227 @@
+//! The occlusion sweep (issue 5) on analytic scenes: a cloud of small disjoint squares that
+//! hides a target only when several layers fuse (separate planes must fail, the sweep must
+//! succeed, and brute-force rays prove the target hidden), the same cloud with a straight
+//! tunnel (the target must stay visible), sub-cells, and the automatic choice of the sweep.
+
+mod common;
+
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+use std::path::Path;
+use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::bake::{BakeSettings, SweepChoice, bake, split_cell};
+use umbrasweep::geom::Aabb;
+use umbrasweep::scene::Scene;
+
+use common::{Obj, cube, quad};
+
+fn unit_cell() -> Aabb {
+    Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
+}
+
+const TARGET: &str = "target";
+
+/// Pattern pitch, overlap margin and depth step of the staircase cloud.
+const PITCH: f32 = 0.1;
+const GROW: f32 = 0.03;
+const STEP: f32 = 0.15;
+const TILES: i32 = 32;
+const TARGET_Z: f32 = 16.0;
+
+/// A staircase of 32 × 32 small square tiles. Tile `(i, j)` covers the pattern cell
+/// `[−1.6 + 0.1·i, −1.5 + 0.1·i] × […j…]` grown by 0.03 on every side (neighbours overlap by
+/// 0.06) and lies at depth `z = 5 + 0.15·(i + j)`, scaled by `z / 5` so that the tiles line up
+/// seen from the cell's centre. Neighbours are close in depth, so seen from any point of the
+/// cell they still overlap and the cloud is opaque over the target (the rays of the test check
+/// it); but the tiles over the target spread over about 4 units of depth, and a single plane
+/// shrinks the Projections of the tiles that far from it by more than their overlap.
+/// With `tunnel`, the tiles touching the z axis are left out.
+fn cloud(tunnel: bool) -> Vec<Obj> {
+    let mut out = Vec::new();
+    for i in 0..TILES {
+        for j in 0..TILES {
+            let z = 5.0 + STEP * (i + j) as f32;
+            let s = z / 5.0;
+            let x0 = -1.6 + PITCH * i as f32 - GROW;
+            let y0 = -1.6 + PITCH * j as f32 - GROW;
+            let (x1, y1) = (x0 + PITCH + 2.0 * GROW, y0 + PITCH + 2.0 * GROW);
+            if tunnel && x0 < 0.05 && x1 > -0.05 && y0 < 0.05 && y1 > -0.05 {
+                continue;
+            }
+            let p = |x: f32, y: f32| Vec3::new(x * s, y * s, z);
+            out.push(quad(
+                &format!("leaf{i}_{j}"),
+                p(x0, y0),
+                p(x1, y0),
+                p(x1, y1),
+                p(x0, y1),
+            ));
+        }
+    }
+    out.push(cube(
+        TARGET,
+        [-1.0, -1.0, TARGET_Z],
+        [1.0, 1.0, TARGET_Z + 0.5],
+    ));
+    out
+}
+
+fn target_visible(objects: &[Obj], cell: Aabb, settings: &BakeSettings) -> bool {
+    let scene = Scene::from_objects(Path::new("cloud"), objects.to_vec());
+    let r = bake(&scene, &[cell], settings, &CpuBackend::new(), None).unwrap();
+    let t = scene.objects.iter().position(|o| o.name == TARGET).unwrap() as u32;
+    r.cells[0].visible.contains(&t)
+}
+
+fn sweep(on: bool) -> BakeSettings {
+    BakeSettings {
+        sweep: if on {
+            SweepChoice::On
+        } else {
+            SweepChoice::Off
+        },
+        ..BakeSettings::default()
+    }
+}
+
+/// The first object hit by the ray from `a` towards `b`.
+fn hit(objects: &[Obj], a: Vec3, b: Vec3) -> Option<String> {
+    common::first_hit(
+        objects.iter().map(|(n, t, _)| (n.as_str(), t.as_slice())),
+        a,
+        b - a,
+    )
+    .map(str::to_string)
+}
+
+#[test]
+fn a_cloud_hides_only_through_fusion_across_planes() {
+    let objects = cloud(false);
+    let cell = unit_cell();
+    // Ground truth: rays from the cell (corners included) to the target all stop in the cloud.
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+    for k in 0..3000 {
+        let a = if k < 8 {
+            Vec3::new(
+                if k & 1 == 0 { -0.5 } else { 0.5 },
+                if k & 2 == 0 { -0.5 } else { 0.5 },
+                if k & 4 == 0 { -0.5 } else { 0.5 },
+            )
+        } else {
+            Vec3::new(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+            )
+        };
+        let b = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            TARGET_Z,
+        );
+        let h = hit(&objects, a, b).expect("the ray reaches the target at least");
+        assert!(
+            h.starts_with("leaf"),
+            "ray {a} → {b} reaches {h}: the cloud leaks"
+        );
+    }
+    // No single plane holds the fusion; the sweep carries it from layer to layer.
+    assert!(
+        target_visible(&objects, cell, &sweep(false)),
+        "separate planes hid the target: the scene no longer tests fusion across planes"
+    );
+    assert!(
+        !target_visible(&objects, cell, &sweep(true)),
+        "the sweep did not fuse the cloud"
+    );
+}
+
+#[test]
+fn a_tunnel_through_the_cloud_keeps_the_target_visible() {
+    let objects = cloud(true);
+    let seen = hit(&objects, Vec3::ZERO, Vec3::new(0.0, 0.0, TARGET_Z));
+    assert_eq!(seen.as_deref(), Some(TARGET), "the tunnel is not straight");
+    for on in [false, true] {
+        assert!(
+            target_visible(&objects, unit_cell(), &sweep(on)),
+            "sweep {on}: the target seen through the tunnel was culled"
+        );
+    }
+    // Also from a cell the tunnel is seen from one corner only.
+    let corner = Aabb::new(Vec3::new(0.05, 0.05, -1.0), Vec3::new(1.05, 1.05, 0.0));
+    assert_eq!(
+        hit(
+            &objects,
+            Vec3::new(0.05, 0.05, -1.0),
+            Vec3::new(0.05, 0.05, TARGET_Z)
+        )
+        .as_deref(),
+        Some(TARGET)
+    );
+    assert!(target_visible(&objects, corner, &sweep(true)));
+}
+
+#[test]
+fn sub_cells_give_the_union_of_their_pvs() {
+    // A wall with a hole: the target behind is seen through the hole only from the cell's
+    // left half. Sub-cells: each half alone; the union keeps the target.
+    let cell = Aabb::new(Vec3::new(-2.0, -0.5, -0.5), Vec3::new(2.0, 0.5, 0.5));
+    let mut objects = vec![
+        cube("left", [-30.0, -30.0, 5.0], [-1.8, 30.0, 5.2]),
+        cube("right", [-1.4, -30.0, 5.0], [30.0, 30.0, 5.2]),
+        cube(TARGET, [-1.25, -0.2, 15.0], [-0.75, 0.2, 15.5]),
+    ];
+    objects.push(cube("bottom", [-1.8, -30.0, 5.0], [-1.4, -0.3, 5.2]));
+    objects.push(cube("top", [-1.8, 0.3, 5.0], [-1.4, 30.0, 5.2]));
+    let seen = hit(
+        &objects,
+        Vec3::new(-1.9, 0.0, 0.0),
+        Vec3::new(-1.0, 0.0, 15.0),
+    );
+    assert_eq!(seen.as_deref(), Some(TARGET));
+    let with = |subcell: Option<f64>| BakeSettings {
+        subcell,
+        sweep: SweepChoice::Off,
+        ..BakeSettings::default()
+    };
+    assert!(target_visible(&objects, cell, &with(None)));
+    assert!(target_visible(&objects, cell, &with(Some(1.0))));
+    // The right half alone cannot see it.
+    let right = Aabb::new(Vec3::new(0.0, -0.5, -0.5), Vec3::new(2.0, 0.5, 0.5));
+    assert!(!target_visible(&objects, right, &with(None)));
+    // The split itself: as few sub-cells as fit, tiling the cell exactly.
+    let parts = split_cell(&cell, 1.0);
+    assert_eq!(parts.len(), 4);
+    assert_eq!(parts[0].min, cell.min);
+    assert_eq!(parts[3].max, cell.max);
+    let volume: f32 = parts
+        .iter()
+        .map(|p| (p.max - p.min).element_product())
+        .sum();
+    assert!((volume - 4.0).abs() < 1e-5);
+    assert_eq!(split_cell(&cell, 10.0), vec![cell]);
+}
+
+#[test]
+fn the_sweep_is_chosen_for_small_occluders_only() {
+    use umbrasweep::bake::Prepared;
+    let cell = unit_cell();
+    let cloud_scene = Scene::from_objects(Path::new("cloud"), cloud(false));
+    let auto = BakeSettings::default();
+    assert_eq!(auto.sweep, SweepChoice::Auto);
+    let p = Prepared::new(&cloud_scene, &auto, &[cell]).unwrap();
+    assert!(p.sweep, "{}", p.sweep_reason);
+    let walls = Scene::from_objects(
+        Path::new("walls"),
+        vec![
+            cube("wall", [-30.0, -30.0, 5.0], [30.0, 30.0, 5.5]),
+            cube(TARGET, [-1.0, -1.0, 12.0], [1.0, 1.0, 12.5]),
+        ],
+    );
+    let p = Prepared::new(&walls, &auto, &[cell]).unwrap();
+    assert!(!p.sweep, "{}", p.sweep_reason);
+    // Seen from a tiny cell (almost a point) the same squares are large: no sweep.
+    let tiny = Aabb::new(Vec3::splat(-0.01), Vec3::splat(0.01));
+    let p = Prepared::new(&cloud_scene, &auto, &[tiny]).unwrap();
+    assert!(!p.sweep, "{}", p.sweep_reason);
+}
