@@ -10,8 +10,8 @@ use crate::hdm::{Coverage, Hdm};
 use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::{
-    Placement, PlaneSettings, Sliceable, Spacing, SweepSettings, cell_jobs, plan_directions,
-    plane_job,
+    LeaveOut, Placement, PlaneSettings, Sliceable, Spacing, SweepSettings, cell_jobs,
+    plan_directions, plane_job,
 };
 use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
 use crate::scene::Scene;
@@ -194,6 +194,66 @@ pub struct Prepared<'a> {
     /// Whether cells are baked with the occlusion sweep, and why.
     pub sweep: bool,
     pub sweep_reason: String,
+    /// Per object, its pieces in `piece_boxes` (empty for small objects): boxes around parts of
+    /// its triangles, tested when the object's own box is not hidden.
+    pieces: Vec<std::ops::Range<u32>>,
+    piece_boxes: Vec<DAabb>,
+}
+
+/// Objects with at least this many triangles are also tested as pieces.
+pub const PIECE_MIN_TRIANGLES: usize = 16;
+/// Median splits per object for its pieces (at most `2^PIECE_LEVELS` pieces).
+pub const PIECE_LEVELS: u32 = 3;
+
+/// Boxes around pieces of each object's triangles: median splits of the triangles' centres
+/// along the longest axis, [`PIECE_LEVELS`] deep. An object is hidden when all its pieces are,
+/// each possibly on another plane: the union of the pieces holds every triangle, so this is as
+/// conservative as testing the object's box, and much tighter for round or hollow objects (a
+/// tree crown's box has empty corners that low rays see under the other crowns).
+fn object_pieces(scene: &Scene) -> (Vec<std::ops::Range<u32>>, Vec<DAabb>) {
+    let mut ranges = Vec::with_capacity(scene.objects.len());
+    let mut boxes = Vec::new();
+    for o in &scene.objects {
+        let start = boxes.len() as u32;
+        if o.triangles.len() >= PIECE_MIN_TRIANGLES {
+            let mut tris: Vec<(glam::DVec3, DAabb)> = o
+                .triangles
+                .clone()
+                .map(|t| {
+                    let [a, b, c] = scene.triangle(t as usize).map(|p| p.as_dvec3());
+                    let bx = DAabb {
+                        min: a.min(b).min(c),
+                        max: a.max(b).max(c),
+                    };
+                    ((a + b + c) / 3.0, bx)
+                })
+                .collect();
+            split_pieces(&mut tris, PIECE_LEVELS, &mut boxes);
+        }
+        ranges.push(start..boxes.len() as u32);
+    }
+    (ranges, boxes)
+}
+
+fn split_pieces(tris: &mut [(glam::DVec3, DAabb)], levels: u32, out: &mut Vec<DAabb>) {
+    if tris.is_empty() {
+        return;
+    }
+    let mut b = tris[0].1;
+    for t in tris.iter() {
+        b.min = b.min.min(t.1.min);
+        b.max = b.max.max(t.1.max);
+    }
+    if levels == 0 || tris.len() < 4 {
+        out.push(b);
+        return;
+    }
+    let axis = (b.max - b.min).max_position();
+    let mid = tris.len() / 2;
+    tris.select_nth_unstable_by(mid, |x, y| x.0[axis].total_cmp(&y.0[axis]));
+    let (lo, hi) = tris.split_at_mut(mid);
+    split_pieces(lo, levels - 1, out);
+    split_pieces(hi, levels - 1, out);
 }
 
 /// Small occluders: parts whose largest side is under this many times the median cell's
@@ -304,6 +364,7 @@ impl<'a> Prepared<'a> {
             SweepChoice::Off => (false, "--no-sweep".to_string()),
             SweepChoice::Auto => choose_sweep(&occluders, cells),
         };
+        let (pieces, piece_boxes) = object_pieces(scene);
         Ok(Prepared {
             scene,
             occluders,
@@ -312,6 +373,8 @@ impl<'a> Prepared<'a> {
             settings: settings.clone(),
             sweep,
             sweep_reason,
+            pieces,
+            piece_boxes,
         })
     }
 
@@ -402,6 +465,7 @@ impl<'a> Prepared<'a> {
         let mut finished = vec![false; plans.len()];
         let mut hist: Vec<Vec<Rendered>> = vec![Vec::new(); plans.len()];
         let mut prev_hdm: Vec<Option<(PlaneFrame, Hdm)>> = vec![None; plans.len()];
+        let mut piece_hidden = vec![false; self.piece_boxes.len()];
         // Round k renders the k-th plane of every direction (nearest first); occluders of
         // objects hidden by earlier rounds are left out of later ones.
         for k in 0..rounds {
@@ -422,14 +486,16 @@ impl<'a> Prepared<'a> {
                         self.scene,
                         &self.sliceable,
                         &ps,
-                        &|o| hidden[o as usize],
-                        carried,
-                        &|b| {
+                        &LeaveOut {
+                            object: &|o| hidden[o as usize],
                             // Occluders the previous plane already proves hidden add nothing.
-                            prev_hdm[d].as_ref().is_some_and(|(f, h)| {
-                                self.test_box(f, h, b, &cell64, 0.0) == Coverage::Hidden
-                            })
+                            hidden: &|b| {
+                                prev_hdm[d].as_ref().is_some_and(|(f, h)| {
+                                    self.test_box(f, h, b, &cell64, 0.0) == Coverage::Hidden
+                                })
+                            },
                         },
+                        carried,
                     )?;
                     if p.is_sweep() && carried.is_some() {
                         job.reproject = reprojections(&hist[d], &job.frame, p.distance(k));
@@ -460,6 +526,7 @@ impl<'a> Prepared<'a> {
                     after,
                     &mut hidden,
                     &mut node_done,
+                    &mut piece_hidden,
                     &skip_test,
                 );
             }
@@ -491,6 +558,7 @@ impl<'a> Prepared<'a> {
         after: f64,
         hidden: &mut [bool],
         node_hidden: &mut [bool],
+        piece_hidden: &mut [bool],
         skip_test: &dyn Fn(usize, &[bool]) -> bool,
     ) {
         let Some(bvh) = &self.bvh else { return };
@@ -519,8 +587,31 @@ impl<'a> Prepared<'a> {
                         continue;
                     }
                     let ob = self.scene.objects[o].bounds.to_f64();
-                    if self.test_box(&job.frame, hdm, &ob, cell, after) == Coverage::Hidden {
-                        hidden[o] = true;
+                    match self.test_box(&job.frame, hdm, &ob, cell, after) {
+                        Coverage::Hidden => hidden[o] = true,
+                        Coverage::Empty => {}
+                        Coverage::Partial => {
+                            // Pieces of the object may be hidden on different planes.
+                            let r = self.pieces[o].clone();
+                            if r.is_empty() {
+                                continue;
+                            }
+                            let mut all = true;
+                            for pi in r {
+                                let pi = pi as usize;
+                                if !piece_hidden[pi] {
+                                    piece_hidden[pi] = self.test_box(
+                                        &job.frame,
+                                        hdm,
+                                        &self.piece_boxes[pi],
+                                        cell,
+                                        after,
+                                    ) == Coverage::Hidden;
+                                }
+                                all &= piece_hidden[pi];
+                            }
+                            hidden[o] |= all;
+                        }
                     }
                 }
                 node_hidden[ni as usize] = (0..node.prim_count).all(|k| {

@@ -1,6 +1,7 @@
 //! Tests of the wgpu backend: shader validation with naga, and GPU Depth Maps against the CPU
 //! reference on analytic jobs (random triangles, quads and boxes on every axis and side,
-//! resolutions 16–256, slice rings), plus the adapter handling rule: without an adapter a test
+//! resolutions 16–256, slice rings, occlusion-sweep reprojections, which must match
+//! bit for bit), plus the adapter handling rule: without an adapter a test
 //! prints why and passes, unless the environment variable `CI` is set, where it fails.
 //!
 //! Timings come from the CLI: `umbrasweep bake … --backend gpu` against `--backend cpu`.
@@ -12,11 +13,12 @@ use glam::{DVec2, DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use std::path::Path;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 use umbrasweep::backend::cpu::{self, CpuBackend};
 use umbrasweep::backend::gpu::{self, GpuBackend};
 use umbrasweep::backend::{
-    BackendError, DepthMap, OccluderSet, PlaneFrame, PlaneJob, RasterBackend, depth_up,
+    BackendError, DepthMap, OccluderSet, PlaneFrame, PlaneJob, RasterBackend, Reprojection,
+    depth_up,
 };
 use umbrasweep::bake::{BakeSettings, bake};
 use umbrasweep::generate::{self, CityOptions};
@@ -350,6 +352,7 @@ fn random_jobs(seed: u64, shape: Shape, count: usize, resolutions: &[u32]) -> Ve
                     frame: f,
                     occluders: occ,
                     slices: vec![],
+                    reproject: Vec::new(),
                 });
             }
         }
@@ -414,11 +417,13 @@ fn halves_do_not_add_up_and_minimum_depth_wins() {
             frame: f.clone(),
             occluders: two,
             slices: vec![],
+            reproject: Vec::new(),
         },
         PlaneJob {
             frame: f.clone(),
             occluders: stack,
             slices: vec![],
+            reproject: Vec::new(),
         },
     ];
     let maps = b.render(&jobs).unwrap();
@@ -454,6 +459,7 @@ fn slices_match_the_cpu_exactly() {
             frame: f,
             occluders: occ,
             slices,
+            reproject: Vec::new(),
         });
     }
     let gpu_maps = b.render(&jobs).unwrap();
@@ -486,11 +492,13 @@ fn empty_planes_and_repeated_calls() {
             frame: f.clone(),
             occluders: OccluderSet::default(),
             slices: vec![],
+            reproject: Vec::new(),
         },
         PlaneJob {
             frame: f.clone(),
             occluders: behind,
             slices: vec![],
+            reproject: Vec::new(),
         },
     ];
     for _ in 0..3 {
@@ -510,6 +518,502 @@ fn many_large_planes_are_split_into_submissions() {
     let jobs = random_jobs(5, Shape::Quad, 10, &[2048, 1024]);
     let d = run_and_compare(b, &jobs);
     assert!(d.cpu_only * 100 <= d.covered.max(1), "{d:?}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Occlusion-sweep reprojection
+
+/// Two planes of one sweep: the cell, direction and resolution shared, the source at distance
+/// `s` beyond the face and the target at `t > s`, each rectangle covering the cell's cone.
+fn sweep_pair(
+    rng: &mut Pcg64,
+    res: u32,
+    axis: usize,
+    positive: bool,
+    s: f64,
+    t: f64,
+) -> (PlaneFrame, PlaneFrame) {
+    let planes = sweep_planes(rng, res, axis, positive, &[s, t]);
+    (planes[0].clone(), planes[1].clone())
+}
+
+/// Planes of one sweep at the given distances beyond the face: the cell, direction and
+/// resolution shared, each rectangle covering the cell's cone (scaled at random).
+fn sweep_planes(
+    rng: &mut Pcg64,
+    res: u32,
+    axis: usize,
+    positive: bool,
+    distances: &[f64],
+) -> Vec<PlaneFrame> {
+    let lo = DVec3::new(
+        rng.random_range(-1.0..0.0),
+        rng.random_range(-1.0..0.0),
+        rng.random_range(-1.0..0.0),
+    );
+    let size = DVec3::new(
+        rng.random_range(0.2..2.0),
+        rng.random_range(0.2..2.0),
+        rng.random_range(0.2..2.0),
+    );
+    let cell = DAabb {
+        min: lo,
+        max: lo + size,
+    };
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let centre = DVec2::new(
+        0.5 * (cell.min[u] + cell.max[u]),
+        0.5 * (cell.min[v] + cell.max[v]),
+    );
+    let face = if positive {
+        cell.max[axis]
+    } else {
+        cell.min[axis]
+    };
+    let mut plane = |d: f64| {
+        let half = DVec2::new(0.5 * size[u] + d, 0.5 * size[v] + d) * rng.random_range(1.0..1.5);
+        PlaneFrame {
+            cell,
+            axis,
+            positive,
+            position: face + if positive { d } else { -d },
+            rect_min: centre - half,
+            rect_max: centre + half,
+            resolution: res,
+        }
+    };
+    distances.iter().map(|&d| plane(d)).collect()
+}
+
+/// The reprojections onto `dst` from `sources` (frames of the same sweep in front of it), each
+/// with a random source Depth Map.
+fn random_reprojections(
+    rng: &mut Pcg64,
+    sources: &[PlaneFrame],
+    dst: &PlaneFrame,
+) -> Vec<Reprojection> {
+    sources
+        .iter()
+        .map(|src| Reprojection::new(src, dst, Arc::new(random_source(rng, dst.resolution))))
+        .collect()
+}
+
+/// `job` with only its first reprojection: what the GPU backend once computed, wrongly.
+fn first_only(job: &PlaneJob) -> PlaneJob {
+    PlaneJob {
+        reproject: job.reproject.iter().take(1).cloned().collect(),
+        ..job.clone()
+    }
+}
+
+/// A source Depth Map: unset background (`+inf`), a few rectangular blobs of umbra, and holes
+/// in them. Umbra and holes use every kind of value the umbra test must classify exactly:
+/// `±0`, `-inf` and negative denormals are in the umbra; `+inf`, positive denormals and NaNs
+/// of either sign are not.
+fn random_source(rng: &mut Pcg64, res: u32) -> DepthMap {
+    let n = res as usize;
+    let mut map = DepthMap::new(res);
+    let umbra = |rng: &mut Pcg64| match rng.random_range(0..5) {
+        0 => -0.0,
+        1 => 0.0,
+        2 => f32::NEG_INFINITY,
+        3 => -1e-40,
+        _ => -rng.random_range(0.0..3.0f32),
+    };
+    let hole = |rng: &mut Pcg64| match rng.random_range(0..5) {
+        0 => f32::INFINITY,
+        1 => 1e-40,
+        2 => f32::NAN,
+        3 => -f32::NAN,
+        _ => rng.random_range(1e-6..3.0f32),
+    };
+    for _ in 0..rng.random_range(1..4) {
+        let (w, h) = (rng.random_range(n / 4..=n), rng.random_range(n / 4..=n));
+        let (x0, y0) = (rng.random_range(0..=n - w), rng.random_range(0..=n - h));
+        for y in y0..y0 + h {
+            for x in x0..x0 + w {
+                map.depth[y * n + x] = umbra(rng);
+            }
+        }
+    }
+    let holes = rng.random_range(0..=n / 4);
+    for _ in 0..holes {
+        let k = rng.random_range(0..n * n);
+        map.depth[k] = hole(rng);
+    }
+    map
+}
+
+/// A cell's worth of sweep jobs per resolution: per job 1–6 reprojections from random planes
+/// of the sweep in front of the target (a skip list's worth), random sources, one job in three
+/// without occluders, some with slices.
+fn reprojection_jobs(seed: u64, resolutions: &[u32]) -> Vec<PlaneJob> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut jobs = Vec::new();
+    for &res in resolutions {
+        for axis in 0..3 {
+            for positive in [true, false] {
+                // Source distances, nearest to the target first (the bake's order).
+                let count = 1 + jobs.len() % 6;
+                let mut distances = vec![rng.random_range(0.3..6.0)];
+                for _ in 0..count {
+                    let last = distances[distances.len() - 1];
+                    distances.push(last + rng.random_range(0.05..2.0));
+                }
+                distances.reverse();
+                let mut planes = sweep_planes(&mut rng, res, axis, positive, &distances);
+                let dst = planes.remove(0);
+                let reproject = random_reprojections(&mut rng, &planes, &dst);
+                let mut occ = OccluderSet::default();
+                if jobs.len() % 3 != 0 {
+                    for _ in 0..20 {
+                        let shape = [Shape::Triangle, Shape::Quad, Shape::Box][jobs.len() % 3];
+                        occ.push(random_occluder(&mut rng, &dst, shape));
+                    }
+                }
+                let slices = if jobs.len() % 4 == 1 {
+                    let c = 0.5 * (dst.rect_min + dst.rect_max);
+                    square(c.x, c.y, 0.2 * (dst.rect_max.x - dst.rect_min.x), 0.4)
+                } else {
+                    vec![]
+                };
+                jobs.push(PlaneJob {
+                    reproject,
+                    frame: dst,
+                    occluders: occ,
+                    slices,
+                });
+            }
+        }
+    }
+    jobs
+}
+
+/// Maps equal bit for bit (so `-0.0` differs from `0.0`, and NaN must match NaN).
+fn assert_bits_equal(g: &DepthMap, c: &DepthMap, what: &str) {
+    assert_eq!(g.resolution, c.resolution);
+    let res = g.resolution as usize;
+    for (k, (a, b)) in g.depth.iter().zip(&c.depth).enumerate() {
+        assert_eq!(
+            a.to_bits(),
+            b.to_bits(),
+            "{what}: pixel ({}, {}) at {res}²: GPU {a}, CPU {b}",
+            k % res,
+            k / res
+        );
+    }
+}
+
+/// The reprojections' separable window filter gives bit-identical Depth Maps on both backends,
+/// with every reprojection of a job applied (a pixel any of them sets holds the least of their
+/// Depths). Every job is rendered twice in one call: bare (reprojections and slices only —
+/// exact, so the whole map must be identical) and with its occluders (every reprojected pixel
+/// holds at most its reprojection's Depth on both; other differences are the projection's
+/// near-ties, checked by [`compare`]). The jobs are such that applying only the first
+/// reprojection of each gives a different map.
+#[test]
+fn reprojection_matches_the_cpu_exactly() {
+    let Some(b) = backend() else { return };
+    let full = reprojection_jobs(31, &[16, 32, 64, 128, 256]);
+    let bare: Vec<PlaneJob> = full
+        .iter()
+        .map(|j| PlaneJob {
+            occluders: OccluderSet::default(),
+            ..j.clone()
+        })
+        .collect();
+    let jobs: Vec<PlaneJob> = full.iter().chain(&bare).cloned().collect();
+    let gpu_maps = b.render(&jobs).expect("GPU render");
+    let stats = b.last_stats();
+    let (mut set, mut unset, mut with_occluders, mut beyond_first) = (0usize, 0, 0, 0);
+    for (k, (job, g)) in jobs.iter().zip(&gpu_maps).enumerate() {
+        let c = cpu::render_job(job);
+        let masks: Vec<Vec<bool>> = job.reproject.iter().map(|r| r.mask()).collect();
+        if job.occluders.is_empty() {
+            assert_bits_equal(g, &c, &format!("job {k}"));
+            if k >= full.len() {
+                let any = |p: usize| masks.iter().any(|m| m[p]);
+                set += (0..g.depth.len()).filter(|&p| any(p)).count();
+                unset += (0..g.depth.len()).filter(|&p| !any(p)).count();
+                let first = cpu::render_job(&first_only(job));
+                beyond_first += c
+                    .depth
+                    .iter()
+                    .zip(&first.depth)
+                    .filter(|(a, b)| a.to_bits() != b.to_bits())
+                    .count();
+            }
+        } else {
+            with_occluders += 1;
+            for (r, mask) in job.reproject.iter().zip(&masks) {
+                for (p, &m) in mask.iter().enumerate() {
+                    if m {
+                        assert!(
+                            g.depth[p] <= r.depth && c.depth[p] <= r.depth,
+                            "job {k}, pixel {p}"
+                        );
+                    }
+                }
+            }
+            compare(job, g, &c);
+        }
+    }
+    let reprojections: usize = jobs.iter().map(|j| j.reproject.len()).sum();
+    eprintln!(
+        "reprojection: {reprojections} reprojections in {} jobs ({} on the GPU), {set} pixels \
+         set, {unset} not, {beyond_first} set beyond the first reprojection's, \
+         {with_occluders} jobs with occluders",
+        jobs.len(),
+        stats.reprojections
+    );
+    assert!(set > 10_000 && unset > 10_000, "{set} set, {unset} not");
+    assert!(with_occluders >= 10);
+    assert!(reprojections >= 3 * jobs.len(), "{reprojections}");
+    assert!(stats.reprojections * 10 >= reprojections * 9, "{stats:?}");
+    // Applying only the first reprojection would fail the comparison above.
+    assert!(beyond_first > 1000, "{beyond_first}");
+}
+
+/// A job with a reprojection and no occluders is rendered on the GPU (one pass, one draw); one
+/// with neither, or whose reprojection can set nothing (no umbra in the source), skips the GPU
+/// and is still right. A job with several reprojections runs one draw for each that can set a
+/// pixel (not for one without umbra, nor for one whose umbra no window fits in), and its pixels
+/// hold the least Depth of the reprojections that set them.
+#[test]
+fn a_reprojection_without_occluders_is_rendered() {
+    if backend().is_none() {
+        return;
+    }
+    // A backend of its own, so that no other test's call lands in `last_stats`.
+    let b = GpuBackend::new().expect("a second device");
+    let mut rng = Pcg64::seed_from_u64(41);
+    let planes = sweep_planes(&mut rng, 64, 1, true, &[1.0, 1.2, 1.5]);
+    let (far, near, dst) = (&planes[0], &planes[1], &planes[2]);
+    let filled = |d: f32| {
+        let mut m = DepthMap::new(64);
+        m.depth.fill(d);
+        Arc::new(m)
+    };
+    let only = PlaneJob {
+        frame: dst.clone(),
+        occluders: OccluderSet::default(),
+        slices: vec![],
+        reproject: vec![Reprojection::new(far, dst, filled(-0.25))],
+    };
+    let nothing = PlaneJob {
+        reproject: Vec::new(),
+        ..only.clone()
+    };
+    let no_umbra = PlaneJob {
+        reproject: vec![Reprojection::new(far, dst, Arc::new(DepthMap::new(64)))],
+        ..only.clone()
+    };
+    // One umbra pixel: smaller than every window, so it sets nothing either.
+    let mut dot = DepthMap::new(64);
+    dot.depth[32 * 64 + 32] = 0.0;
+    let dot = Reprojection::new(near, dst, Arc::new(dot));
+    assert!(!dot.mask().contains(&true));
+    // The far source in the umbra on its left half only.
+    let mut half = DepthMap::new(64);
+    for row in half.depth.chunks_exact_mut(64) {
+        row[..32].fill(0.0);
+    }
+    let half = Arc::new(half);
+    let several = PlaneJob {
+        reproject: vec![
+            Reprojection::new(near, dst, filled(-1.0)),
+            Reprojection::new(near, dst, Arc::new(DepthMap::new(64))),
+            dot,
+            Reprojection::new(far, dst, half),
+        ],
+        ..only.clone()
+    };
+    let maps = b
+        .render(&[only.clone(), nothing, no_umbra, several.clone()])
+        .unwrap();
+    let stats = b.last_stats();
+    assert_eq!(
+        (
+            stats.gpu_planes,
+            stats.reprojections,
+            stats.passes,
+            stats.draws
+        ),
+        (2, 3, 2, 3),
+        "{stats:?}"
+    );
+    let expected = cpu::render_job(&only);
+    assert!(expected.covered() > 64 * 64 / 4, "{}", expected.covered());
+    assert_bits_equal(&maps[0], &expected, "reprojection only");
+    assert_eq!(maps[1], DepthMap::new(64));
+    assert_eq!(maps[2], DepthMap::new(64));
+    let expected = cpu::render_job(&several);
+    assert_bits_equal(&maps[3], &expected, "several reprojections");
+    // Both Depths occur: the far source's where it reaches (its Depth is the least), the near
+    // one's where only it does.
+    let (d_near, d_far) = (several.reproject[0].depth, several.reproject[3].depth);
+    assert!(d_far < d_near, "{d_far} {d_near}");
+    let count = |d: f32| expected.depth.iter().filter(|&&x| x == d).count();
+    assert!(
+        count(d_far) > 64 * 4 && count(d_near) > 64 * 4,
+        "{} {}",
+        count(d_far),
+        count(d_near)
+    );
+    assert_eq!(count(d_far) + count(d_near), expected.covered());
+    assert!(stats.bytes_uploaded >= 3 * 64 * 64 * 4, "{stats:?}");
+}
+
+/// Windows reaching past the plane (which [`Reprojection::new`] never makes, but the type
+/// allows) set nothing on either backend, and the ones inside still work.
+#[test]
+fn windows_past_the_plane_set_nothing() {
+    let Some(b) = backend() else { return };
+    let mut rng = Pcg64::seed_from_u64(47);
+    let (src, dst) = sweep_pair(&mut rng, 32, 2, false, 1.0, 1.2);
+    let mut full = DepthMap::new(32);
+    full.depth.fill(-1.0);
+    let mut r = Reprojection::new(&src, &dst, Arc::new(full));
+    r.cols[3] = [30, 32];
+    r.cols[4] = [7, u32::MAX];
+    r.cols[5] = [u32::MAX, u32::MAX];
+    r.rows[6] = [0, 40];
+    let job = PlaneJob {
+        frame: dst,
+        occluders: OccluderSet::default(),
+        slices: vec![],
+        reproject: vec![r],
+    };
+    let g = &b.render(std::slice::from_ref(&job)).unwrap()[0];
+    let c = cpu::render_job(&job);
+    assert_bits_equal(g, &c, "windows past the plane");
+    assert!(c.covered() > 32 * 32 / 4, "{}", c.covered());
+    assert!((0..32).all(|j| c.depth[j * 32 + 4].is_infinite()));
+    assert!((0..32).all(|i| c.depth[6 * 32 + i].is_infinite()));
+}
+
+/// What reprojections cost on this adapter: 6 planes at 256² (a cell's directions), with 60
+/// occluders each, with 0, 1, 2, 4 and 7 reprojections (sources 0.25 apart in front of the
+/// target, as a skip list gives), with 1 and 7 alone, and 7 alone with sources entirely in the
+/// umbra (the filter's worst case: no early exit, no scissor). Prints the GPU section's time
+/// (best of 10) from `RenderStats`, and the cost of one more reprojection per plane.
+#[test]
+fn reprojection_cost_at_256() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a second device");
+    let mut rng = Pcg64::seed_from_u64(43);
+    const MOST: usize = 7;
+    let mut with = Vec::new();
+    for axis in 0..3 {
+        for positive in [true, false] {
+            let mut distances = vec![3.0];
+            distances.extend((0..MOST).map(|k| 2.0 - 0.25 * k as f64));
+            let mut planes = sweep_planes(&mut rng, 256, axis, positive, &distances);
+            let dst = planes.remove(0);
+            let mut occ = OccluderSet::default();
+            for _ in 0..60 {
+                occ.push(random_occluder(&mut rng, &dst, Shape::Quad));
+            }
+            with.push(PlaneJob {
+                reproject: random_reprojections(&mut rng, &planes, &dst),
+                frame: dst,
+                occluders: occ,
+                slices: vec![],
+            });
+        }
+    }
+    let keep = |jobs: &[PlaneJob], n: usize| -> Vec<PlaneJob> {
+        jobs.iter()
+            .map(|j| PlaneJob {
+                reproject: j.reproject[..n].to_vec(),
+                ..j.clone()
+            })
+            .collect()
+    };
+    let alone: Vec<PlaneJob> = with
+        .iter()
+        .map(|j| PlaneJob {
+            occluders: OccluderSet::default(),
+            ..j.clone()
+        })
+        .collect();
+    let mut all = DepthMap::new(256);
+    all.depth.fill(-1.0);
+    let all = Arc::new(all);
+    let worst: Vec<PlaneJob> = alone
+        .iter()
+        .map(|j| {
+            let mut j = j.clone();
+            for r in &mut j.reproject {
+                r.source = all.clone();
+            }
+            j
+        })
+        .collect();
+    let widths: Vec<u32> = with
+        .iter()
+        .flat_map(|j| &j.reproject)
+        .flat_map(|r| r.cols.iter().chain(&r.rows))
+        .filter(|w| w[0] <= w[1])
+        .map(|w| w[1] - w[0] + 1)
+        .collect();
+    let mean_width = widths.iter().sum::<u32>() as f64 / widths.len().max(1) as f64;
+    let mut ms = std::collections::HashMap::new();
+    for (name, n, jobs) in [
+        ("with 0", 0, keep(&with, 0)),
+        ("with 1", 1, keep(&with, 1)),
+        ("with 2", 2, keep(&with, 2)),
+        ("with 4", 4, keep(&with, 4)),
+        ("with 7", 7, keep(&with, MOST)),
+        ("alone 1", 1, keep(&alone, 1)),
+        ("alone 7", 7, keep(&alone, MOST)),
+        ("alone 1, all umbra", 1, keep(&worst, 1)),
+        ("alone 7, all umbra", 7, keep(&worst, MOST)),
+    ] {
+        b.render(&jobs).unwrap(); // warm-up: pools and pipelines
+        let mut best: Option<gpu::RenderStats> = None;
+        for _ in 0..10 {
+            b.render(&jobs).unwrap();
+            let s = b.last_stats();
+            if best.as_ref().is_none_or(|x| s.gpu < x.gpu) {
+                best = Some(s);
+            }
+        }
+        let s = best.unwrap();
+        eprintln!(
+            "6 planes at 256², {n} reprojections each, {name}: GPU section {:.2} ms (setup \
+             {:.2} ms), {} passes, {} draws, {} reprojections, {} KB uploaded",
+            s.gpu.as_secs_f64() * 1e3,
+            s.setup.as_secs_f64() * 1e3,
+            s.passes,
+            s.draws,
+            s.reprojections,
+            s.bytes_uploaded / 1024
+        );
+        // Reprojections that cannot set a pixel are dropped.
+        assert!(
+            s.reprojections <= 6 * n && s.reprojections * 8 >= 6 * n * 7,
+            "{name}: {s:?}"
+        );
+        // One pass per plane; one draw per plane with occluders and one per reprojection.
+        let occluder_draws = if name.starts_with("with") { 6 } else { 0 };
+        assert_eq!(
+            (s.passes, s.draws),
+            (6, occluder_draws + s.reprojections),
+            "{name}: {s:?}"
+        );
+        ms.insert(name, s.gpu.as_secs_f64() * 1e3);
+    }
+    let per = |a: &str, b: &str, extra: usize| (ms[b] - ms[a]) / (6 * extra) as f64;
+    eprintln!(
+        "mean window {mean_width:.1} px; GPU time per extra reprojection of a 256² plane: \
+         {:.3} ms with occluders, {:.3} ms alone, {:.3} ms alone with all umbra",
+        per("with 1", "with 7", MOST - 1),
+        per("alone 1", "alone 7", MOST - 1),
+        per("alone 1, all umbra", "alone 7, all umbra", MOST - 1),
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -551,6 +1055,7 @@ fn degenerate_clipped_edges_do_not_uncover_a_triangle() {
         frame: f,
         occluders: occ,
         slices: vec![],
+        reproject: Vec::new(),
     };
     let map = cpu::render_job(&job);
     assert!(
@@ -638,6 +1143,46 @@ fn bake_pvs_is_identical_on_a_small_city() {
         ..BakeSettings::default()
     };
     assert!(same_pvs(&scene, &city.cells, &coarse).is_some_and(|h| h > 0));
+}
+
+/// A whole bake with the occlusion sweep on a small forest, on a backend of its own: planes
+/// carry several reprojections (the skip list), and the PVS is the same as the CPU's.
+#[test]
+fn bake_pvs_is_identical_with_the_sweep() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a second device");
+    let forest = generate::forest(&generate::ForestOptions::default()).unwrap();
+    let scene = forest.to_scene("forest");
+    let cells = &forest.cells[..forest.cells.len().min(2)];
+    let settings = BakeSettings {
+        resolution: 128,
+        sweep: umbrasweep::bake::SweepChoice::On,
+        ..BakeSettings::default()
+    };
+    let c = bake(&scene, cells, &settings, &CpuBackend::new(), None).unwrap();
+    let g = bake(&scene, cells, &settings, &b, None).unwrap();
+    let stats = b.total_stats();
+    eprintln!("sweep bake of a forest: {stats:?}");
+    assert!(
+        2 * stats.reprojections > 3 * stats.gpu_planes,
+        "several reprojections per plane: {stats:?}"
+    );
+    let hidden: usize = c
+        .cells
+        .iter()
+        .map(|c| scene.objects.len() - c.visible.len())
+        .sum();
+    eprintln!(
+        "{hidden} hidden (cell, object) pairs of {}",
+        scene.objects.len()
+    );
+    assert!(hidden > 0);
+    for (k, (cc, gc)) in c.cells.iter().zip(&g.cells).enumerate() {
+        assert_eq!(cc.visible, gc.visible, "cell {k}");
+        assert_eq!(cc.planes, gc.planes, "cell {k}");
+    }
 }
 
 #[test]

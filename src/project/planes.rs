@@ -164,9 +164,8 @@ pub fn cell_jobs(
                 scene,
                 sliceable,
                 settings,
-                &|_| false,
+                &LeaveOut::NOTHING,
                 None,
-                &|_| false,
             ));
         }
     }
@@ -279,7 +278,7 @@ fn plan_direction(
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     // Plane distances from the parts' bounds alone, then cut only the parts that may project
     // onto one of the planes.
-    let summary = summarize(cell, occ, axis, positive, face, eps);
+    let summary = summarize(cell, occ, axis, positive, face, eps, settings.extend);
     if summary.index.is_empty() {
         return None;
     }
@@ -369,6 +368,22 @@ fn plan_direction(
     })
 }
 
+/// Occluders a plane job leaves out (leaving an occluder out is always conservative).
+pub struct LeaveOut<'a> {
+    /// Objects already proven hidden: they add no occlusion.
+    pub object: &'a dyn Fn(u32) -> bool,
+    /// In a sweep, parts whose bounds the previous plane proves hidden.
+    pub hidden: &'a dyn Fn(&DAabb) -> bool,
+}
+
+impl LeaveOut<'_> {
+    /// Leaves nothing out.
+    pub const NOTHING: LeaveOut<'static> = LeaveOut {
+        object: &|_| false,
+        hidden: &|_| false,
+    };
+}
+
 /// The job of plane `k` of a direction, leaving out occluders (and slices) of objects for
 /// which `skip` is true — objects already proven hidden add no occlusion, and leaving an
 /// occluder out is always conservative. `None` when nothing projects onto the plane.
@@ -378,10 +393,10 @@ pub fn plane_job(
     scene: &Scene,
     sliceable: &Sliceable,
     settings: &PlaneSettings,
-    skip: &dyn Fn(u32) -> bool,
+    leave_out: &LeaveOut,
     carried: Option<(DVec2, DVec2)>,
-    hidden_box: &dyn Fn(&DAabb) -> bool,
 ) -> Option<PlaneJob> {
+    let (skip, hidden_box) = (leave_out.object, leave_out.hidden);
     let cell = &plan.cell;
     let (axis, positive) = (plan.axis, plan.positive);
     let s = if positive { 1.0 } else { -1.0 };
@@ -635,10 +650,19 @@ fn summarize(
     positive: bool,
     face: f64,
     eps: f64,
+    extend: f64,
 ) -> DirParts {
     let s = if positive { 1.0 } else { -1.0 };
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let mut out = DirParts::default();
+    let centre = DVec2::new(
+        0.5 * (cell.min[u] + cell.max[u]),
+        0.5 * (cell.min[v] + cell.max[v]),
+    );
+    let half = DVec2::new(
+        0.5 * (cell.max[u] - cell.min[u]),
+        0.5 * (cell.max[v] - cell.min[v]),
+    );
     for (k, part) in occ.parts.iter().enumerate() {
         let b = &part.bounds;
         let (near, far) = if positive {
@@ -648,6 +672,21 @@ fn summarize(
         };
         let far_t = s * (far - face);
         if far_t <= eps {
+            continue;
+        }
+        // `plane_job` skips parts whose view from the cell's centre (depth `e` behind the face)
+        // misses the plane's frame `centre ± (half + tp)·extend`. Seen from there, that frame
+        // covers `(half + tp)·extend·(t + e)/(tp + e)` at distance t, at most
+        // `extend·(t + e)·max(1, half/e)` over all tp: a part outside that at its far side
+        // (where it is widest) reaches no frame. Slack for rounding.
+        let e = 0.5 * (cell.max[axis] - cell.min[axis]);
+        let widen = DVec2::new((half.x / e).max(1.0), (half.y / e).max(1.0));
+        let reach = widen * (far_t + e) * extend * (1.0 + 1e-9) + DVec2::splat(eps);
+        if b.max[u] < centre.x - reach.x
+            || b.min[u] > centre.x + reach.x
+            || b.max[v] < centre.y - reach.y
+            || b.min[v] > centre.y + reach.y
+        {
             continue;
         }
         // A solid the cell may be inside hides nothing for sure from there.

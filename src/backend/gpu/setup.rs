@@ -311,6 +311,7 @@ mod tests {
                 frame: f.clone(),
                 occluders: occ,
                 slices: vec![],
+                reproject: Vec::new(),
             };
             let reference = cpu::render_job(&job);
             let ps = PlaneSetup::new(&f);
