@@ -10,7 +10,7 @@ use crate::hdm::{Coverage, Hdm};
 use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::{
-    LeaveOut, Placement, PlaneSettings, Sliceable, Spacing, SweepSettings, cell_jobs,
+    LeaveOut, Placement, PlaneSettings, Sliceable, Spacing, SweepInputs, SweepSettings, cell_jobs,
     plan_directions, plane_job,
 };
 use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
@@ -198,12 +198,18 @@ pub struct Prepared<'a> {
     /// its triangles, tested when the object's own box is not hidden.
     pieces: Vec<std::ops::Range<u32>>,
     piece_boxes: Vec<DAabb>,
+    /// Per object, its occluder parts (indices into `occluders.parts`).
+    object_parts: Vec<Vec<u32>>,
 }
+
+/// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
+/// `SWEEP_TEST_REACH · t` (the last plane tests all).
+pub const SWEEP_TEST_REACH: f64 = 8.0;
 
 /// Objects with at least this many triangles are also tested as pieces.
 pub const PIECE_MIN_TRIANGLES: usize = 16;
 /// Median splits per object for its pieces (at most `2^PIECE_LEVELS` pieces).
-pub const PIECE_LEVELS: u32 = 3;
+pub const PIECE_LEVELS: u32 = 4;
 
 /// Boxes around pieces of each object's triangles: median splits of the triangles' centres
 /// along the longest axis, [`PIECE_LEVELS`] deep. An object is hidden when all its pieces are,
@@ -365,6 +371,10 @@ impl<'a> Prepared<'a> {
             SweepChoice::Auto => choose_sweep(&occluders, cells),
         };
         let (pieces, piece_boxes) = object_pieces(scene);
+        let mut object_parts = vec![Vec::new(); scene.objects.len()];
+        for (i, p) in occluders.parts.iter().enumerate() {
+            object_parts[p.object as usize].push(i as u32);
+        }
         Ok(Prepared {
             scene,
             occluders,
@@ -375,6 +385,7 @@ impl<'a> Prepared<'a> {
             sweep_reason,
             pieces,
             piece_boxes,
+            object_parts,
         })
     }
 
@@ -480,22 +491,30 @@ impl<'a> Prepared<'a> {
                     let carried = hist[d]
                         .last()
                         .and_then(|e| crate::sweep::carried_rect(&e.1, e.3?, p.distance(k)));
+                    let leave_out = LeaveOut {
+                        object: &|o| hidden[o as usize],
+                        // Occluders the previous plane already proves hidden add nothing.
+                        hidden: &|b| {
+                            prev_hdm[d].as_ref().is_some_and(|(f, h)| {
+                                self.test_box(f, h, b, &cell64, (0.0, f64::INFINITY))
+                                    == Coverage::Hidden
+                            })
+                        },
+                    };
+                    let slab = p
+                        .is_sweep()
+                        .then(|| self.gather_slab(p, k, &leave_out, &hidden, &node_done));
                     let mut job = plane_job(
                         p,
                         k,
                         self.scene,
                         &self.sliceable,
                         &ps,
-                        &LeaveOut {
-                            object: &|o| hidden[o as usize],
-                            // Occluders the previous plane already proves hidden add nothing.
-                            hidden: &|b| {
-                                prev_hdm[d].as_ref().is_some_and(|(f, h)| {
-                                    self.test_box(f, h, b, &cell64, 0.0) == Coverage::Hidden
-                                })
-                            },
+                        &leave_out,
+                        SweepInputs {
+                            carried,
+                            slab: slab.as_ref(),
                         },
-                        carried,
                     )?;
                     if p.is_sweep() && carried.is_some() {
                         job.reproject = reprojections(&hist[d], &job.frame, p.distance(k));
@@ -518,7 +537,17 @@ impl<'a> Prepared<'a> {
             let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
             for (((job, map), hdm), &d) in jobs.iter().zip(&maps).zip(&hdms).zip(&dirs) {
                 observe(job, map, hdm);
-                let after = plans[d].slab_start(k);
+                // In a sweep, boxes far behind this plane wait for later planes (the last plane
+                // tests everything): the umbra is rarely finished this far in front of them,
+                // and testing every box on every plane is most of a forest's bake time.
+                let after = if plans[d].is_sweep() && k + 1 < plans[d].distances.len() {
+                    (
+                        plans[d].slab_start(k),
+                        SWEEP_TEST_REACH * plans[d].distance(k),
+                    )
+                } else {
+                    (plans[d].slab_start(k), f64::INFINITY)
+                };
                 self.traverse(
                     job,
                     hdm,
@@ -547,6 +576,55 @@ impl<'a> Prepared<'a> {
         Ok((hidden, planes, projected))
     }
 
+    /// The occluder parts of sweep plane `k`'s slab: a walk of the object hierarchy that
+    /// descends only into nodes overlapping the slab and its frustum and not proven hidden by
+    /// the previous plane (their objects' occluders would add nothing), then the parts of the
+    /// objects reached ([`crate::project::planes::gather_slab`] filters and cuts them).
+    fn gather_slab(
+        &self,
+        plan: &crate::project::planes::DirectionPlan,
+        k: usize,
+        leave_out: &LeaveOut,
+        hidden: &[bool],
+        node_hidden: &[bool],
+    ) -> crate::project::planes::SlabParts {
+        let mut parts: Vec<u32> = Vec::new();
+        if let Some(bvh) = &self.bvh {
+            let start = plan.slab_start(k);
+            let mut stack = vec![0u32];
+            while let Some(ni) = stack.pop() {
+                let node = &bvh.nodes[ni as usize];
+                let b = DAabb {
+                    min: glam::Vec3::from(node.aabb.min).as_dvec3(),
+                    max: glam::Vec3::from(node.aabb.max).as_dvec3(),
+                };
+                // (Object bounds hold their parts: merged polygons are built within objects'
+                // triangles or attributed to one of them, and a part left out only loosens.)
+                if node_hidden[ni as usize] && self.settings.subcell.is_none() {
+                    continue;
+                }
+                if !plan.slab_may_hold(k, &b) {
+                    continue;
+                }
+                if plan.distances_of(&b).0 > start && (leave_out.hidden)(&b) {
+                    continue;
+                }
+                if node.is_leaf() {
+                    for j in 0..node.prim_count {
+                        let o = bvh.primitive_indices[(node.first_index + j) as usize] as usize;
+                        if !hidden[o] {
+                            parts.extend(self.object_parts[o].clone());
+                        }
+                    }
+                } else {
+                    stack.push(node.first_index);
+                    stack.push(node.first_index + 1);
+                }
+            }
+        }
+        crate::project::planes::gather_slab(plan, k, &self.occluders, parts, leave_out)
+    }
+
     /// Tests the object BVH against one plane, marking hidden objects, and nodes whose whole
     /// subtree is hidden (skipped on the following planes).
     #[allow(clippy::too_many_arguments)]
@@ -555,7 +633,7 @@ impl<'a> Prepared<'a> {
         job: &PlaneJob,
         hdm: &Hdm,
         cell: &DAabb,
-        after: f64,
+        after: (f64, f64),
         hidden: &mut [bool],
         node_hidden: &mut [bool],
         piece_hidden: &mut [bool],
@@ -632,23 +710,29 @@ impl<'a> Prepared<'a> {
     /// misses the plane's rectangle, or covers no occluded pixel of it — a child's Projection
     /// lies inside its parent's); `Partial` otherwise, including boxes touching the cell.
     ///
-    /// `after` is the distance beyond the face before which nothing can be hidden on this plane:
-    /// 0, or in a sweep the previous plane — every Depth of a sweep plane is at least the
+    /// `range.0` is the distance beyond the face before which nothing can be hidden on this
+    /// plane: 0, or in a sweep the previous plane — every Depth of a sweep plane is at least the
     /// previous plane's, and a box entirely in front of it has a smaller Depth everywhere.
+    /// Boxes starting beyond `range.1` are not tested (`Empty`, which is never a cull).
     fn test_box(
         &self,
         frame: &PlaneFrame,
         hdm: &Hdm,
         b: &DAabb,
         cell: &DAabb,
-        after: f64,
+        range: (f64, f64),
     ) -> Coverage {
         if b.is_empty() {
             return Coverage::Empty;
         }
         let a = frame.axis;
-        let far = if frame.positive { b.max[a] } else { b.min[a] };
-        if frame.sign() * (far - frame.face()) <= after {
+        let (near, far) = if frame.positive {
+            (b.min[a], b.max[a])
+        } else {
+            (b.max[a], b.min[a])
+        };
+        let sg = frame.sign();
+        if sg * (far - frame.face()) <= range.0 || sg * (near - frame.face()) > range.1 {
             return Coverage::Empty;
         }
         if b.overlaps(cell) {

@@ -74,7 +74,7 @@ impl Aabb {
 }
 
 /// An axis-aligned box in double precision, used by the culling geometry.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct DAabb {
     pub min: DVec3,
     pub max: DVec3,

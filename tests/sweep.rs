@@ -73,14 +73,23 @@ fn target_visible(objects: &[Obj], cell: Aabb, settings: &BakeSettings) -> bool 
     r.cells[0].visible.contains(&t)
 }
 
+/// Separate planes, or the sweep with planes dense enough for the cloud: its tiles overlap by
+/// 0.06 and a slab `d` thick at distance ~5 shrinks the Projections of the tiles in it by about
+/// `0.5·d/5` per side, so slabs must stay well under 0.3 thick (64 geometric planes between one
+/// cell depth and 16 units are 0.2 apart at 5; the default 24 are 0.6 apart and do not fuse it).
 fn sweep(on: bool) -> BakeSettings {
+    let d = BakeSettings::default();
     BakeSettings {
         sweep: if on {
             SweepChoice::On
         } else {
             SweepChoice::Off
         },
-        ..BakeSettings::default()
+        sweep_settings: umbrasweep::project::planes::SweepSettings {
+            planes: 64,
+            ..d.sweep_settings
+        },
+        ..d
     }
 }
 

@@ -13,11 +13,16 @@
 //! sampled visible set of a cell is computed once and compared with each backend's PVS.
 //! Progress goes to stderr, the table to stdout, the rows to `--json` if asked. Benchmarks are
 //! measurements, not tests: nothing here asserts a timing.
+//!
+//! `--foliage` runs the foliage study instead ([`foliage`]); it shares this module's
+//! validation ([`sample`], [`score`]) and table layout ([`markdown_table`]).
+
+pub mod foliage;
 
 use crate::backend::RasterBackend;
 use crate::backend::cpu::CpuBackend;
 use crate::backend::gpu::GpuBackend;
-use crate::bake::{BakeSettings, bake, median};
+use crate::bake::{BakeResult, BakeSettings, bake, median};
 use crate::cells::free_cells;
 use crate::generate::{
     BoxfieldOptions, CityOptions, ForestOptions, TreeModel, boxfield, city, forest,
@@ -50,22 +55,24 @@ pub enum BenchBackend {
 #[command(after_help = "Examples:
   umbrasweep bench --quick
   umbrasweep bench --backend cpu --json bench.json
-  umbrasweep bench --quick --scenes city,boxfield --cells 2 --rays 10000")]
+  umbrasweep bench --quick --scenes city,boxfield --cells 2 --rays 10000
+  umbrasweep bench --foliage --json foliage.json
+  umbrasweep bench --foliage --foliage-studies coarse,params --cells 1 --rays 2000")]
 pub struct BenchArgs {
     /// A small version that runs in a few minutes: 10 cells per scene, 3 on the GPU, a forest
     /// of 300 trees and 6 model trees.
     #[arg(long)]
     pub quick: bool,
-    /// Cells per scene (default 50, 10 with --quick).
+    /// Cells per scene (default 50, 10 with --quick or --foliage).
     #[arg(long, value_name = "N")]
     pub cells: Option<usize>,
     /// Cells per scene on the GPU backend, the first of the CPU's (default 10, 3 with
     /// --quick: software rasterisers such as lavapipe are slow).
     #[arg(long, value_name = "N")]
     pub gpu_cells: Option<usize>,
-    /// Validation rays per cell.
-    #[arg(long, value_name = "N", default_value_t = 1_000_000)]
-    pub rays: u64,
+    /// Validation rays per cell (default 1,000,000; 200,000 with --foliage).
+    #[arg(long, value_name = "N")]
+    pub rays: Option<u64>,
     /// Seed of the generated scenes, of the free-space cells and of the validation rays.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -82,6 +89,42 @@ pub struct BenchArgs {
     /// Also write the rows as JSON to this file.
     #[arg(long, value_name = "OUT.json")]
     pub json: Option<PathBuf>,
+    /// Run the foliage study instead of the scene table: forests baked with and without the
+    /// sweep, with sub-cells and with other sweep settings, one table per study (on the CPU
+    /// backend unless --backend gpu; see docs/bench.md).
+    #[arg(long, conflicts_with_all = ["quick", "gpu_cells", "scenes"])]
+    pub foliage: bool,
+    /// Only these foliage studies (comma-separated): coarse, fine, params, paper, jacaranda.
+    #[arg(long, value_name = "LIST", value_delimiter = ',', requires = "foliage")]
+    pub foliage_studies: Option<Vec<String>>,
+    /// Cells baked by the fine forest's sub-cell variants (spread over its --cells).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = foliage::DEFAULT_SUBCELL_CELLS,
+        requires = "foliage"
+    )]
+    pub foliage_subcell_cells: usize,
+    /// Cells of the paper's forest (7,750 trees, 7.8 M triangles).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = foliage::DEFAULT_PAPER_CELLS,
+        requires = "foliage"
+    )]
+    pub foliage_paper_cells: usize,
+    /// Jacaranda trees in the jacaranda study (55 k triangles each; gen's coarse 1,500
+    /// would make 82 M triangles).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = foliage::DEFAULT_MODEL_TREES,
+        requires = "foliage"
+    )]
+    pub foliage_model_trees: u32,
+    /// Tests only: trees of every procedural foliage forest (instead of 1,500 and 7,750).
+    #[arg(long, value_name = "N", hide = true, requires = "foliage")]
+    pub foliage_trees: Option<u32>,
 }
 
 /// One row of the table: one scene baked by one backend.
@@ -173,15 +216,11 @@ impl Plan {
         let q = args.quick;
         let cells = args.cells.unwrap_or(if q { 10 } else { 50 });
         let gpu_cells = args.gpu_cells.unwrap_or(if q { 3 } else { 10 }).min(cells);
-        let rays = args.rays;
+        let rays = args.rays.unwrap_or(1_000_000);
         if cells == 0 || rays == 0 {
             anyhow::bail!("--cells and --rays must be at least 1");
         }
-        let shared = match &args.shared {
-            Some(d) if d.is_dir() => Some(d.clone()),
-            Some(d) => anyhow::bail!("--shared {}: not a directory", d.display()),
-            None => Some(PathBuf::from("../shared/scenes")).filter(|d| d.is_dir()),
-        };
+        let shared = shared_folder(args)?;
         if let Some(list) = &args.scenes
             && let Some(bad) = list.iter().find(|s| !SCENES.contains(&s.as_str()))
         {
@@ -199,6 +238,46 @@ impl Plan {
     }
 }
 
+/// The shared scene folder: `--shared DIR` (an error when it is not a folder), else
+/// `../shared/scenes` when it exists.
+///
+/// # Errors
+/// `--shared` naming something that is not a folder.
+fn shared_folder(args: &BenchArgs) -> anyhow::Result<Option<PathBuf>> {
+    Ok(match &args.shared {
+        Some(d) if d.is_dir() => Some(d.clone()),
+        Some(d) => anyhow::bail!("--shared {}: not a directory", d.display()),
+        None => Some(PathBuf::from("../shared/scenes")).filter(|d| d.is_dir()),
+    })
+}
+
+/// The file `rel` of the shared scene folder `shared`; `Err(reason)` (naming `name`) when
+/// there is no folder or no such file.
+fn shared_file(shared: Option<&Path>, name: &str, rel: &str) -> Result<PathBuf, String> {
+    match shared {
+        None => Err(format!(
+            "{name}: skipped, no shared scene folder (../shared/scenes or --shared DIR)"
+        )),
+        Some(d) => {
+            let p = d.join(rel);
+            if p.is_file() {
+                Ok(p)
+            } else {
+                Err(format!("{name}: skipped, {} is missing", p.display()))
+            }
+        }
+    }
+}
+
+/// The message of a caught panic.
+fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_default()
+}
+
 /// Builds scene `name`; `Ok(Err(reason))` when it needs the shared folder or a file in it
 /// that is absent.
 fn build(name: &str, args: &BenchArgs, plan: &Plan) -> anyhow::Result<Result<BenchScene, String>> {
@@ -209,21 +288,7 @@ fn build(name: &str, args: &BenchArgs, plan: &Plan) -> anyhow::Result<Result<Ben
         scene: g.to_scene(name),
         cells: g.cells,
     };
-    let shared_file = |rel: &str| -> Result<PathBuf, String> {
-        match &plan.shared {
-            None => Err(format!(
-                "{name}: skipped, no shared scene folder (../shared/scenes or --shared DIR)"
-            )),
-            Some(d) => {
-                let p = d.join(rel);
-                if p.is_file() {
-                    Ok(p)
-                } else {
-                    Err(format!("{name}: skipped, {} is missing", p.display()))
-                }
-            }
-        }
-    };
+    let shared_file = |rel: &str| shared_file(plan.shared.as_deref(), name, rel);
     let load = |p: &Path| crate::scene::load(p).with_context(|| format!("{}", p.display()));
     let free = |scene: &Scene, size: Vec3, height: f32| {
         let bounds: Vec<Aabb> = scene.objects.iter().map(|o| o.bounds).collect();
@@ -375,11 +440,7 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
         match run {
             Ok(r) => rows.extend(r?),
             Err(panic) => {
-                let msg = panic
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| panic.downcast_ref::<String>().cloned())
-                    .unwrap_or_default();
+                let msg = panic_message(&*panic);
                 let why = format!(
                     "{}: FAILED, the bake or validation panicked: {msg}",
                     bs.name
@@ -423,7 +484,7 @@ fn bench_scene(
     let mut out = Vec::new();
     let index = SceneRays::new(scene);
     // Sampled visible set and its time, per cell, shared by the backends.
-    let mut samples: Vec<Option<(CellSample, f64)>> = vec![None; bs.cells.len()];
+    let mut samples: Vec<Option<Sampled>> = vec![None; bs.cells.len()];
     for &(backend, max_cells) in backends {
         let cells = &bs.cells[..max_cells.min(bs.cells.len())];
         let t = Instant::now();
@@ -441,73 +502,144 @@ fn bench_scene(
             t.elapsed().as_secs_f64(),
             plan.rays
         );
-        let mut reports = Vec::new();
-        for (i, (cell, r)) in cells.iter().zip(&result.cells).enumerate() {
-            let (sample, _) = samples[i].get_or_insert_with(|| {
-                let t = Instant::now();
-                let s = sample_cell(&index, scene, *cell, plan.rays, seed, i as u64, false);
-                (s, t.elapsed().as_secs_f64() * 1e3)
-            });
-            let pvs = PvsCell {
-                min: cell.min.to_array(),
-                max: cell.max.to_array(),
-                visible: r.visible.clone(),
-                ms: r.ms,
-            };
-            reports.push(cell_report(scene, &pvs, sample));
-        }
-        let nc = cells.len() as f64;
-        let ratios: Vec<f64> = reports.iter().filter_map(|r| r.pvs_over_vs).collect();
-        let false_culls = reports.iter().map(|r| r.false_culls.len()).sum();
-        for (i, r) in reports.iter().enumerate() {
-            for f in &r.false_culls {
-                eprintln!(
-                    "bench: FALSE CULL {} [{}] cell {i} {:?}–{:?}: object {} {:?}, ray \
-                     origin {:?} direction {:?}",
-                    bs.name,
-                    backend.name(),
-                    r.min,
-                    r.max,
-                    f.object,
-                    f.name,
-                    f.origin,
-                    f.direction
-                );
+        for (i, cell) in cells.iter().enumerate() {
+            if samples[i].is_none() {
+                samples[i] = Some(sample(&index, scene, *cell, plan.rays, seed, i));
             }
         }
-        let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
-        let vms: Vec<f64> = samples[..cells.len()]
-            .iter()
-            .flatten()
-            .map(|s| s.1)
-            .collect();
-        out.push(BenchRow {
-            scene: bs.name.clone(),
-            triangles: scene.triangles.len(),
-            objects: scene.objects.len(),
-            cells: cells.len(),
-            backend: backend.name().into(),
-            adapter: backend.adapter(),
-            median_ms_per_cell: median(&ms),
-            validate_ms_per_cell: median(&vms),
-            objects_culled_percent: reports
-                .iter()
-                .map(|r| r.objects_culled_percent)
-                .sum::<f64>()
-                / nc,
-            triangles_culled_percent: reports
-                .iter()
-                .map(|r| r.triangles_culled_percent)
-                .sum::<f64>()
-                / nc,
-            pvs_over_vs: (!ratios.is_empty())
-                .then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
-            false_culls,
-            planes_per_cell: result.cells.iter().map(|c| c.planes as f64).sum::<f64>() / nc,
-            rays_per_cell: plan.rays,
-        });
+        let truth: Vec<&Sampled> = samples[..cells.len()].iter().flatten().collect();
+        let ids: Vec<usize> = (0..cells.len()).collect();
+        out.push(score(
+            &bs.name, scene, cells, &ids, &result, &truth, plan.rays,
+        ));
     }
     Ok(out)
+}
+
+/// A cell's ray-sampled visible set and the milliseconds sampling took.
+pub(crate) type Sampled = (CellSample, f64);
+
+/// Samples the visible set of `cell`, the scene's cell number `cell_index`, with `rays` rays
+/// (the sampler of `umbrasweep validate`, alpha-tested triangles not blocking): the same
+/// seed and index give the same rays, so every bake of that cell is checked against the same
+/// ground truth.
+pub(crate) fn sample(
+    index: &SceneRays,
+    scene: &Scene,
+    cell: Aabb,
+    rays: u64,
+    seed: u64,
+    cell_index: usize,
+) -> Sampled {
+    let t = Instant::now();
+    let s = sample_cell(index, scene, cell, rays, seed, cell_index as u64, false);
+    (s, t.elapsed().as_secs_f64() * 1e3)
+}
+
+/// Scores one bake of `cells` (scene cell numbers `ids`) against their sampled visible sets
+/// `truth`: every false cull is printed on stderr with its witness ray, and the row holds the
+/// means over the cells.
+pub(crate) fn score(
+    name: &str,
+    scene: &Scene,
+    cells: &[Aabb],
+    ids: &[usize],
+    result: &BakeResult,
+    truth: &[&Sampled],
+    rays: u64,
+) -> BenchRow {
+    assert!(cells.len() == result.cells.len() && cells.len() == truth.len());
+    let mut reports = Vec::new();
+    for (cell, (r, sample)) in cells.iter().zip(result.cells.iter().zip(truth)) {
+        let pvs = PvsCell {
+            min: cell.min.to_array(),
+            max: cell.max.to_array(),
+            visible: r.visible.clone(),
+            ms: r.ms,
+        };
+        reports.push(cell_report(scene, &pvs, &sample.0));
+    }
+    let nc = cells.len() as f64;
+    let ratios: Vec<f64> = reports.iter().filter_map(|r| r.pvs_over_vs).collect();
+    let false_culls = reports.iter().map(|r| r.false_culls.len()).sum();
+    for (&i, r) in ids.iter().zip(&reports) {
+        for f in &r.false_culls {
+            eprintln!(
+                "bench: FALSE CULL {name} [{}] cell {i} {:?}–{:?}: object {} {:?}, ray \
+                 origin {:?} direction {:?}",
+                result.backend, r.min, r.max, f.object, f.name, f.origin, f.direction
+            );
+        }
+    }
+    let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
+    let vms: Vec<f64> = truth.iter().map(|s| s.1).collect();
+    BenchRow {
+        scene: name.into(),
+        triangles: scene.triangles.len(),
+        objects: scene.objects.len(),
+        cells: cells.len(),
+        backend: result.backend.clone(),
+        adapter: result.adapter.clone(),
+        median_ms_per_cell: median(&ms),
+        validate_ms_per_cell: median(&vms),
+        objects_culled_percent: reports
+            .iter()
+            .map(|r| r.objects_culled_percent)
+            .sum::<f64>()
+            / nc,
+        triangles_culled_percent: reports
+            .iter()
+            .map(|r| r.triangles_culled_percent)
+            .sum::<f64>()
+            / nc,
+        pvs_over_vs: (!ratios.is_empty()).then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
+        false_culls,
+        planes_per_cell: result.cells.iter().map(|c| c.planes as f64).sum::<f64>() / nc,
+        rays_per_cell: rays,
+    }
+}
+
+/// Appends a Markdown table: the header, the alignment row (`left[k]`: column `k` is
+/// left-aligned, else right-aligned), then the rows, every column padded to its widest cell.
+pub(crate) fn markdown_table(
+    out: &mut String,
+    header: &[&str],
+    rows: &[Vec<String>],
+    left: &[bool],
+) {
+    let mut width: Vec<usize> = header.iter().map(|c| c.chars().count()).collect();
+    for row in rows {
+        for (w, c) in width.iter_mut().zip(row) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let line = |out: &mut String, row: &[String]| {
+        out.push('|');
+        for (k, (c, w)) in row.iter().zip(&width).enumerate() {
+            let pad = w - c.chars().count();
+            if left[k] {
+                let _ = write!(out, " {c}{} |", " ".repeat(pad));
+            } else {
+                let _ = write!(out, " {}{c} |", " ".repeat(pad));
+            }
+        }
+        out.push('\n');
+    };
+    let header: Vec<String> = header.iter().map(|c| c.to_string()).collect();
+    line(out, &header);
+    out.push('|');
+    for (k, w) in width.iter().enumerate() {
+        let dashes = "-".repeat(*w);
+        if left[k] {
+            let _ = write!(out, " {dashes} |");
+        } else {
+            let _ = write!(out, " {}: |", &dashes[1..]);
+        }
+    }
+    out.push('\n');
+    for row in rows {
+        line(out, row);
+    }
 }
 
 /// The columns of the table, in order.
@@ -553,11 +685,11 @@ impl Bench {
             self.seconds
         );
         out.push('\n');
-        let cells: Vec<[String; 12]> = self
+        let cells: Vec<Vec<String>> = self
             .rows
             .iter()
             .map(|r| {
-                [
+                vec![
                     r.scene.clone(),
                     r.triangles.to_string(),
                     r.objects.to_string(),
@@ -573,39 +705,8 @@ impl Bench {
                 ]
             })
             .collect();
-        let mut width: Vec<usize> = COLUMNS.iter().map(|c| c.chars().count()).collect();
-        for row in &cells {
-            for (w, c) in width.iter_mut().zip(row) {
-                *w = (*w).max(c.chars().count());
-            }
-        }
-        let line = |out: &mut String, row: &[String]| {
-            out.push('|');
-            for (k, (c, w)) in row.iter().zip(&width).enumerate() {
-                let pad = w - c.chars().count();
-                if k == 0 || k == 4 {
-                    let _ = write!(out, " {c}{} |", " ".repeat(pad));
-                } else {
-                    let _ = write!(out, " {}{c} |", " ".repeat(pad));
-                }
-            }
-            out.push('\n');
-        };
-        let header: Vec<String> = COLUMNS.iter().map(|c| c.to_string()).collect();
-        line(&mut out, &header);
-        out.push('|');
-        for (k, w) in width.iter().enumerate() {
-            let dashes = "-".repeat(*w);
-            if k == 0 || k == 4 {
-                let _ = write!(out, " {dashes} |");
-            } else {
-                let _ = write!(out, " {}: |", &dashes[1..]);
-            }
-        }
-        out.push('\n');
-        for row in &cells {
-            line(&mut out, row);
-        }
+        let left: Vec<bool> = (0..COLUMNS.len()).map(|k| k == 0 || k == 4).collect();
+        markdown_table(&mut out, &COLUMNS, &cells, &left);
         let mut adapters: Vec<&str> = self
             .rows
             .iter()
@@ -628,6 +729,9 @@ impl Bench {
 /// # Errors
 /// See [`collect`]; or a `--json` file that cannot be written.
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    if args.foliage {
+        return foliage::run(args);
+    }
     let bench = collect(args)?;
     print!("{}", bench.table());
     let false_culls: usize = bench.rows.iter().map(|r| r.false_culls).sum();

@@ -54,6 +54,8 @@ pub struct Occluders {
     pub points: Vec<DVec3>,
     pub parts: Vec<OccluderPart>,
     pub stats: OccluderStats,
+    /// Bounds of all parts (empty — min > max — without parts).
+    pub bounds: DAabb,
 }
 
 /// Counts for the summary.
@@ -166,6 +168,14 @@ pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Oc
             poly.deviation,
             poly.inradius,
         );
+    }
+    out.bounds = DAabb {
+        min: DVec3::INFINITY,
+        max: DVec3::NEG_INFINITY,
+    };
+    for p in &out.parts {
+        out.bounds.min = out.bounds.min.min(p.bounds.min);
+        out.bounds.max = out.bounds.max.max(p.bounds.max);
     }
     out
 }

@@ -71,7 +71,7 @@ pub enum Spacing {
 /// The layout of an occlusion sweep (one per direction).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SweepSettings {
-    /// The most planes per direction (both spacings). Default 48.
+    /// The most planes per direction (both spacings). Default 24.
     pub planes: u32,
     /// Kernel size `K` in pixels for [`Spacing::Kernel`]. Default 5 (the paper's).
     pub kernel: u32,
@@ -81,7 +81,7 @@ pub struct SweepSettings {
 impl SweepSettings {
     pub const fn default_settings() -> Self {
         SweepSettings {
-            planes: 48,
+            planes: 24,
             kernel: 5,
             spacing: Spacing::Geometric,
         }
@@ -165,7 +165,7 @@ pub fn cell_jobs(
                 sliceable,
                 settings,
                 &LeaveOut::NOTHING,
-                None,
+                SweepInputs::default(),
             ));
         }
     }
@@ -188,15 +188,58 @@ pub struct DirectionPlan {
     pub distances: Vec<f64>,
     /// The frame's extension factor.
     extend: f64,
-    /// In a sweep: per plane, the parts (indices into `parts`) overlapping its slab, the space
-    /// between the previous plane (or the face) and this one. Empty otherwise.
-    slabs: Vec<Vec<u32>>,
+    /// True for an occlusion sweep: each plane receives the parts between it and the previous
+    /// plane, gathered by [`gather_slab`].
+    sweep: bool,
+    /// Distance tolerance at the face.
+    eps: f64,
 }
 
 impl DirectionPlan {
     /// True when this direction is an occlusion sweep.
     pub fn is_sweep(&self) -> bool {
-        !self.slabs.is_empty()
+        self.sweep
+    }
+
+    /// The cell's face the direction looks out of, and the direction's axis and side.
+    pub fn axis(&self) -> (usize, bool) {
+        (self.axis, self.positive)
+    }
+
+    /// Distances `(near, far)` beyond the face of a box, along the direction.
+    pub fn distances_of(&self, b: &DAabb) -> (f64, f64) {
+        let a = self.axis;
+        if self.positive {
+            (b.min[a] - self.face, b.max[a] - self.face)
+        } else {
+            (self.face - b.max[a], self.face - b.min[a])
+        }
+    }
+
+    /// True when a box at distances `near..far` may hold parts of plane `k`'s slab that reach
+    /// its frame (see `summarize` for the frustum bound).
+    pub fn slab_may_hold(&self, k: usize, b: &DAabb) -> bool {
+        let (near, far) = self.distances_of(b);
+        if far <= self.slab_start(k).max(self.eps) || near >= self.distances[k] {
+            return false;
+        }
+        let cell = &self.cell;
+        let (u, v) = ((self.axis + 1) % 3, (self.axis + 2) % 3);
+        let centre = DVec2::new(
+            0.5 * (cell.min[u] + cell.max[u]),
+            0.5 * (cell.min[v] + cell.max[v]),
+        );
+        let half = DVec2::new(
+            0.5 * (cell.max[u] - cell.min[u]),
+            0.5 * (cell.max[v] - cell.min[v]),
+        );
+        let e = 0.5 * (cell.max[self.axis] - cell.min[self.axis]);
+        let widen = DVec2::new((half.x / e).max(1.0), (half.y / e).max(1.0));
+        let reach = widen * (far + e) * self.extend * (1.0 + 1e-9) + DVec2::splat(self.eps);
+        !(b.max[u] < centre.x - reach.x
+            || b.min[u] > centre.x + reach.x
+            || b.max[v] < centre.y - reach.y
+            || b.min[v] > centre.y + reach.y)
     }
 
     /// The plane's distance beyond the cell's face.
@@ -278,38 +321,36 @@ fn plan_direction(
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     // Plane distances from the parts' bounds alone, then cut only the parts that may project
     // onto one of the planes.
-    let summary = summarize(cell, occ, axis, positive, face, eps, settings.extend);
-    if summary.index.is_empty() {
-        return None;
-    }
     if let Some(sweep) = &settings.sweep {
-        let distances = sweep_distances(&summary, sweep, cell, axis, settings);
-        if distances.is_empty() {
+        // The sweep gathers each slab's parts when it renders it (`gather_slab`): nothing is
+        // summarised or copied here. Its planes run from one cell depth to the far side of
+        // the occluders' bounds.
+        let far = if positive {
+            occ.bounds.max[axis] - face
+        } else {
+            face - occ.bounds.min[axis]
+        };
+        if occ.parts.is_empty() || far <= eps {
             return None;
         }
-        let all: Vec<usize> = (0..summary.index.len()).collect();
-        let parts = cut_parts(cell, occ, &summary, &all, axis, positive, face, eps);
-        let slabs = slab_members(&parts, &distances);
+        let distances = sweep_distances(depth_len, far, sweep, cell, axis, settings);
         return Some(DirectionPlan {
             cell: *cell,
             axis,
             positive,
             face,
-            part_object: parts
-                .index
-                .iter()
-                .map(|&k| occ.parts[k as usize].object)
-                .collect(),
-            part_solid: parts
-                .index
-                .iter()
-                .map(|&k| matches!(occ.parts[k as usize].kind, PartKind::Solid { .. }))
-                .collect(),
-            parts,
+            parts: DirParts::default(),
+            part_object: Vec::new(),
+            part_solid: Vec::new(),
             distances,
             extend: settings.extend,
-            slabs,
+            sweep: true,
+            eps,
         });
+    }
+    let summary = summarize(cell, occ, axis, positive, face, eps, settings.extend);
+    if summary.index.is_empty() {
+        return None;
     }
     let mut distances = plane_distances(
         &summary,
@@ -364,8 +405,19 @@ fn plan_direction(
         part_solid,
         distances,
         extend: settings.extend,
-        slabs: Vec::new(),
+        sweep: false,
+        eps,
     })
+}
+
+/// What a sweep plane's job takes beyond a separate plane's (both `None` for those).
+#[derive(Clone, Copy, Default)]
+pub struct SweepInputs<'a> {
+    /// The region the reprojections may set ([`crate::sweep::carried_rect`]): the plane's
+    /// rectangle holds it.
+    pub carried: Option<(DVec2, DVec2)>,
+    /// The slab's parts ([`gather_slab`]), which replace the direction's.
+    pub slab: Option<&'a SlabParts>,
 }
 
 /// Occluders a plane job leaves out (leaving an occluder out is always conservative).
@@ -394,14 +446,18 @@ pub fn plane_job(
     sliceable: &Sliceable,
     settings: &PlaneSettings,
     leave_out: &LeaveOut,
-    carried: Option<(DVec2, DVec2)>,
+    sweep: SweepInputs,
 ) -> Option<PlaneJob> {
-    let (skip, hidden_box) = (leave_out.object, leave_out.hidden);
+    let SweepInputs { carried, slab } = sweep;
+    let skip = leave_out.object;
     let cell = &plan.cell;
     let (axis, positive) = (plan.axis, plan.positive);
     let s = if positive { 1.0 } else { -1.0 };
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let parts = &plan.parts;
+    let (parts, part_object, part_solid) = match slab {
+        Some(sp) => (&sp.parts, &sp.object, &sp.solid),
+        None => (&plan.parts, &plan.part_object, &plan.part_solid),
+    };
     let corners = cell.corners();
     let cell_uv = DVec2::new(cell.max[u] - cell.min[u], cell.max[v] - cell.min[v]);
     let tp = plan.distances[k];
@@ -448,14 +504,9 @@ pub fn plane_job(
     let dist = |p: DVec3| s * (p[axis] - plan.face);
     // Uncut parts are referenced in place, cut pieces live in `pieces`.
     let mut sources: Vec<(bool, usize)> = Vec::new();
-    let candidates: Box<dyn Iterator<Item = usize>> = if plan.is_sweep() {
-        Box::new(plan.slabs[k].iter().map(|&i| i as usize))
-    } else {
-        Box::new(0..parts.set.len())
-    };
     let start = plan.slab_start(k);
-    for i in candidates {
-        if skip(plan.part_object[i])
+    for i in 0..parts.set.len() {
+        if skip(part_object[i])
             || !may_project(parts.near[i], parts.far[i], parts.extent[i], cell_uv, tp)
         {
             continue;
@@ -465,22 +516,6 @@ pub fn plane_job(
             continue;
         }
         let pts = parts.set.get(i);
-        if plan.is_sweep() && parts.near[i] > start {
-            let (a0, a1) = (plan.face + s * parts.near[i], plan.face + s * parts.far[i]);
-            let mut b = DAabb {
-                min: DVec3::ZERO,
-                max: DVec3::ZERO,
-            };
-            b.min[axis] = a0.min(a1);
-            b.max[axis] = a0.max(a1);
-            b.min[u] = parts.lo[i].x;
-            b.max[u] = parts.hi[i].x;
-            b.min[v] = parts.lo[i].y;
-            b.max[v] = parts.hi[i].y;
-            if hidden_box(&b) {
-                continue;
-            }
-        }
         if plan.is_sweep() {
             // In a sweep a plane receives only what lies between it and the previous plane:
             // what is in front is carried by the reprojection, what is behind goes to later
@@ -489,7 +524,7 @@ pub fn plane_job(
                 sources.push((false, i));
                 continue;
             }
-            let solid = plan.part_solid[i];
+            let solid = part_solid[i];
             let clip = |pts: &[DVec3], f: &dyn Fn(DVec3) -> f64, out: &mut Vec<DVec3>| {
                 if solid {
                     clip_solid(pts, f, out);
@@ -510,7 +545,7 @@ pub fn plane_job(
             continue;
         }
         if parts.near[i] < tp && tp < parts.far[i] {
-            let solid = plan.part_solid[i];
+            let solid = part_solid[i];
             for side in [1.0, -1.0] {
                 buf.clear();
                 let f = |p: DVec3| side * (tp - dist(p));
@@ -893,24 +928,19 @@ fn cut_point(a: DVec3, fa: f64, b: DVec3, fb: f64, f: &impl Fn(DVec3) -> f64) ->
 /// The plane distances of a sweep: from the nearest occluders' far side (at least one cell
 /// depth) to the 95th percentile of the far sides, by [`Spacing`], at most `planes` of them.
 fn sweep_distances(
-    parts: &DirParts,
+    depth: f64,
+    far: f64,
     sweep: &SweepSettings,
     cell: &DAabb,
     axis: usize,
     settings: &PlaneSettings,
 ) -> Vec<f64> {
-    if parts.far.is_empty() || sweep.planes == 0 {
-        return Vec::new();
-    }
-    let mut fars = parts.far.clone();
-    fars.sort_by(f64::total_cmp);
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let depth = cell.max[axis] - cell.min[axis];
     let cu = cell.max[u] - cell.min[u];
     let cv = cell.max[v] - cell.min[v];
-    let lo = fars[0].max(depth);
-    let hi = fars[(fars.len() * 95 / 100).min(fars.len() - 1)].max(lo * 1.01);
-    let n = sweep.planes as usize;
+    let lo = depth.max(1e-9);
+    let hi = far.max(lo * 1.01);
+    let n = sweep.planes.max(1) as usize;
     match sweep.spacing {
         Spacing::Geometric => (0..n)
             .map(|k| {
@@ -941,24 +971,93 @@ fn sweep_distances(
     }
 }
 
-/// Per plane of a sweep, the parts overlapping its slab (between the previous plane, or the
-/// face, and the plane).
-fn slab_members(parts: &DirParts, distances: &[f64]) -> Vec<Vec<u32>> {
-    let mut order: Vec<u32> = (0..parts.near.len() as u32).collect();
-    order.sort_by(|&a, &b| parts.near[a as usize].total_cmp(&parts.near[b as usize]));
-    let mut slabs = vec![Vec::new(); distances.len()];
-    let mut active: Vec<u32> = Vec::new();
-    let mut next = 0;
-    for (k, &tp) in distances.iter().enumerate() {
-        let start = if k == 0 { 0.0 } else { distances[k - 1] };
-        while next < order.len() && parts.near[order[next] as usize] < tp {
-            active.push(order[next]);
-            next += 1;
-        }
-        active.retain(|&i| parts.far[i as usize] > start);
-        slabs[k].extend_from_slice(&active);
+/// The parts of one sweep slab, cut at the face where they cross it and shrunk where bent (as
+/// `cut_parts` does for separate planes), with their objects and kinds.
+#[derive(Default)]
+pub struct SlabParts {
+    parts: DirParts,
+    object: Vec<u32>,
+    solid: Vec<bool>,
+}
+
+impl SlabParts {
+    pub fn len(&self) -> usize {
+        self.object.len()
     }
-    slabs
+
+    pub fn is_empty(&self) -> bool {
+        self.object.is_empty()
+    }
+}
+
+/// Gathers the parts `candidates` (indices into `occ.parts`) that overlap plane `k`'s slab and
+/// may reach its frame, leaving out what `leave_out` says: the sweep's per-plane replacement of
+/// `summarize` + `cut_parts`, fed by a walk of the object hierarchy.
+pub fn gather_slab(
+    plan: &DirectionPlan,
+    k: usize,
+    occ: &Occluders,
+    candidates: impl IntoIterator<Item = u32>,
+    leave_out: &LeaveOut,
+) -> SlabParts {
+    let cell = &plan.cell;
+    let (axis, positive) = (plan.axis, plan.positive);
+    let s = if positive { 1.0 } else { -1.0 };
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let eps = plan.eps;
+    let start = plan.slab_start(k);
+    let corners = cell.corners();
+    let dist = |p: DVec3| s * (p[axis] - plan.face);
+    let mut out = SlabParts::default();
+    let mut buf: Vec<DVec3> = Vec::new();
+    for pi in candidates {
+        let part = &occ.parts[pi as usize];
+        let b = &part.bounds;
+        if (leave_out.object)(part.object) || !plan.slab_may_hold(k, b) {
+            continue;
+        }
+        if let PartKind::Solid { hull } = part.kind
+            && hull.overlaps(cell)
+        {
+            continue;
+        }
+        let (near, far) = plan.distances_of(b);
+        if near > start && (leave_out.hidden)(b) {
+            continue;
+        }
+        let pts = occ.part_points(pi as usize);
+        buf.clear();
+        if near > eps {
+            buf.extend_from_slice(pts);
+        } else {
+            match part.kind {
+                PartKind::Polygon { .. } => clip_polygon(pts, |p| dist(p) - eps, &mut buf),
+                PartKind::Solid { .. } => clip_solid(pts, |p| dist(p) - eps, &mut buf),
+            }
+            if buf.len() < 3 {
+                continue;
+            }
+        }
+        if let PartKind::Polygon { normal } = part.kind
+            && part.deviation > 0.0
+            && !shrink_bent_polygon(&mut buf, normal, part.deviation, part.inradius, &corners)
+        {
+            continue;
+        }
+        let p = &mut out.parts;
+        p.index.push(pi);
+        p.far.push(far);
+        p.near.push(near.max(eps));
+        p.extent
+            .push(DVec2::new(b.max[u] - b.min[u], b.max[v] - b.min[v]));
+        p.lo.push(DVec2::new(b.min[u], b.min[v]));
+        p.hi.push(DVec2::new(b.max[u], b.max[v]));
+        p.weight.push(0.0);
+        p.set.push(buf.iter().copied());
+        out.object.push(part.object);
+        out.solid.push(matches!(part.kind, PartKind::Solid { .. }));
+    }
+    out
 }
 
 /// Plane distances beyond the face, each just behind an occluder, duplicates removed:

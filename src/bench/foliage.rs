@@ -1,0 +1,903 @@
+//! `umbrasweep bench --foliage`: the foliage study (issue 5). This module owns the studies —
+//! which forest, which cells and which bake settings make each row — running them on one
+//! backend (the CPU unless `--backend gpu`), the peak memory of each bake, and the study's
+//! tables and `--json` document. Validation and the table layout are shared with the scene
+//! bench ([`super::sample`], [`super::score`], [`super::markdown_table`]).
+//!
+//! The studies, in the order they run and print (each a list of rows, a row being one
+//! variant of the bake settings on one forest; all forests generated in memory from `--seed`
+//! except the jacaranda's model, read from the shared scene folder):
+//!
+//! * `coarse`: [`ForestOptions::coarse`] (1,500 trees, leaves ~1.5 across, path cells
+//!   1×1×1), `--sweep` and `--no-sweep`.
+//! * `fine`: [`ForestOptions::fine`] (leaves ~0.5 across) with 4×2×4 cells (and an 8-unit
+//!   path, the least round width such cells fit in, as `gen forest --path-width` would need),
+//!   `--sweep`, `--sweep --subcell 2|1|0.5` (on `--foliage-subcell-cells` of the cells, spread
+//!   evenly) and `--no-sweep`.
+//! * `params`: the coarse forest with the sweep, one row per single change from the default
+//!   settings: kernel spacing with K = 3, 5, 9 (at most 256 planes, so K decides), 12, 24, 48,
+//!   96 geometric sweep planes, resolution 128, 512, 1024, extend 1.0, 1.2, 2.0.
+//! * `paper`: [`ForestOptions::paper`] (7,750 trees, 7.8 M triangles), `--sweep`, on
+//!   `--foliage-paper-cells` cells.
+//! * `jacaranda`: `foliage/jacaranda_tree.glb` instanced by [`forest_of_models`] as
+//!   `gen forest --preset coarse --tree-model` does (the coarse options, the spacing from the
+//!   model's footprint) but with `--foliage-model-trees` trees, `--sweep` and `--no-sweep`.
+//!
+//! Every cell of a forest is sampled once (the same rays as the scene bench: seed, cell
+//! number) before its first bake, and every row baking it is checked against that sample.
+//! Peak memory is the process's resident high-water mark (`VmHWM` of `/proc/self/status`)
+//! read after each bake, reset (`/proc/self/clear_refs`) just before it: the scene held in
+//! memory plus what the bake needs.
+
+use super::{
+    BenchArgs, BenchBackend, BenchRow, Sampled, markdown_table, panic_message, sample, score,
+    shared_file, shared_folder,
+};
+use crate::backend::RasterBackend;
+use crate::backend::cpu::CpuBackend;
+use crate::backend::gpu::GpuBackend;
+use crate::bake::{BakeSettings, SweepChoice, bake};
+use crate::generate::{ForestOptions, TreeModel, forest, forest_of_models};
+use crate::geom::Aabb;
+use crate::project::planes::{Placement, Spacing};
+use crate::scene::Scene;
+use crate::validate::SceneRays;
+use anyhow::Context as _;
+use glam::Vec3;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::time::Instant;
+
+/// The studies, in the order they run and print.
+pub const STUDIES: [&str; 5] = ["coarse", "fine", "params", "paper", "jacaranda"];
+/// Cells per forest unless `--cells`.
+pub const DEFAULT_CELLS: usize = 10;
+/// Validation rays per cell unless `--rays` (fewer than the scene bench's 1,000,000: the
+/// forests have up to 8 M triangles and every row is validated).
+pub const DEFAULT_RAYS: u64 = 200_000;
+/// Cells of the sub-cell variants unless `--foliage-subcell-cells`.
+pub const DEFAULT_SUBCELL_CELLS: usize = 3;
+/// Cells of the paper's forest unless `--foliage-paper-cells`.
+pub const DEFAULT_PAPER_CELLS: usize = 5;
+/// Jacaranda trees unless `--foliage-model-trees`: 150 × 55 k ≈ 8.2 M triangles, about the
+/// paper's forest (gen's coarse 1,500 would make 82 M).
+pub const DEFAULT_MODEL_TREES: u32 = 150;
+/// The jacaranda model in the shared scene folder.
+pub const JACARANDA: &str = "foliage/jacaranda_tree.glb";
+
+/// Cells of the fine study.
+const FINE_CELL: Vec3 = Vec3::new(4.0, 2.0, 4.0);
+/// Path width of the fine study: 4×2×4 cells need at least 2 × (half their diagonal, 2.83,
+/// plus the 1-unit clearance) = 7.66 (the coarse preset's 4 is for 1×1×1 cells).
+const FINE_PATH_WIDTH: f32 = 8.0;
+
+/// The forests the studies bake.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Forest {
+    Coarse,
+    Fine,
+    Paper,
+    Jacaranda,
+}
+
+impl Forest {
+    fn of(study: &str) -> Forest {
+        match study {
+            "fine" => Forest::Fine,
+            "paper" => Forest::Paper,
+            "jacaranda" => Forest::Jacaranda,
+            _ => Forest::Coarse,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Forest::Coarse => "coarse_forest",
+            Forest::Fine => "fine_forest",
+            Forest::Paper => "paper_forest",
+            Forest::Jacaranda => "jacaranda_forest",
+        }
+    }
+}
+
+/// One row of a study before it runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    /// The `umbrasweep bake` flags giving these settings (e.g. `--sweep --subcell 2`).
+    pub label: String,
+    /// The bake settings.
+    pub settings: BakeSettings,
+    /// Bake only this many of the forest's cells, spread evenly (the sub-cell variants).
+    pub max_cells: Option<usize>,
+}
+
+fn variant(label: impl Into<String>, settings: BakeSettings) -> Variant {
+    Variant {
+        label: label.into(),
+        settings,
+        max_cells: None,
+    }
+}
+
+/// The default settings with the sweep on (`On`) or off (`Off`).
+fn swept(sweep: SweepChoice) -> BakeSettings {
+    BakeSettings {
+        sweep,
+        ..BakeSettings::default()
+    }
+}
+
+/// The rows of `study` (one of [`STUDIES`]); the sub-cell variants bake `subcell_cells` cells.
+pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
+    let on = || swept(SweepChoice::On);
+    let off = || swept(SweepChoice::Off);
+    match study {
+        "coarse" | "jacaranda" => vec![variant("--sweep", on()), variant("--no-sweep", off())],
+        "fine" => {
+            let mut v = vec![variant("--sweep", on())];
+            for s in [2.0, 1.0, 0.5] {
+                v.push(Variant {
+                    label: format!("--sweep --subcell {s}"),
+                    settings: BakeSettings {
+                        subcell: Some(s),
+                        ..on()
+                    },
+                    max_cells: Some(subcell_cells),
+                });
+            }
+            v.push(variant("--no-sweep", off()));
+            v
+        }
+        "params" => {
+            let mut v = Vec::new();
+            let mut s = on();
+            for k in [3, 5, 9] {
+                s.sweep_settings.spacing = Spacing::Kernel;
+                s.sweep_settings.kernel = k;
+                s.sweep_settings.planes = 256;
+                v.push(variant(
+                    format!("--sweep --sweep-spacing kernel --kernel {k} --sweep-planes 256"),
+                    s.clone(),
+                ));
+            }
+            for n in [12, 24, 48, 96] {
+                let mut s = on();
+                s.sweep_settings.planes = n;
+                v.push(variant(format!("--sweep --sweep-planes {n}"), s));
+            }
+            for r in [128, 512, 1024] {
+                v.push(variant(
+                    format!("--sweep --resolution {r}"),
+                    BakeSettings {
+                        resolution: r,
+                        ..on()
+                    },
+                ));
+            }
+            for e in [1.0, 1.2, 2.0] {
+                v.push(variant(
+                    format!("--sweep --extend {e:.1}"),
+                    BakeSettings { extend: e, ..on() },
+                ));
+            }
+            v
+        }
+        "paper" => vec![variant("--sweep", on())],
+        _ => Vec::new(),
+    }
+}
+
+/// The settings of a row, as the `--json` document records them.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FoliageSettings {
+    /// Depth Map resolution.
+    pub resolution: u32,
+    /// Plane extension factor.
+    pub extend: f64,
+    /// The occlusion sweep (every variant sets it on or off).
+    pub sweep: bool,
+    /// The sweep's most planes per direction.
+    pub sweep_planes: u32,
+    /// `geometric` or `kernel`.
+    pub sweep_spacing: String,
+    /// Kernel size K (used by `kernel` spacing).
+    pub kernel: u32,
+    /// Separate planes per direction without the sweep.
+    pub planes: u32,
+    /// Slice planes per direction without the sweep.
+    pub slice_planes: u32,
+    /// `geometric` or `quantile` (separate planes).
+    pub placement: String,
+    /// Sub-cell size, if any.
+    pub subcell: Option<f64>,
+}
+
+impl FoliageSettings {
+    fn of(s: &BakeSettings) -> Self {
+        FoliageSettings {
+            resolution: s.resolution,
+            extend: s.extend,
+            sweep: s.sweep == SweepChoice::On,
+            sweep_planes: s.sweep_settings.planes,
+            sweep_spacing: spacing_name(s.sweep_settings.spacing).into(),
+            kernel: s.sweep_settings.kernel,
+            planes: s.planes,
+            slice_planes: s.slice_planes,
+            placement: match s.placement {
+                Placement::Geometric => "geometric",
+                Placement::Quantile => "quantile",
+            }
+            .into(),
+            subcell: s.subcell,
+        }
+    }
+
+    /// The table's short form: what the bake used (e.g. `sweep ≤24 geometric, res 256,
+    /// extend 1.5`).
+    pub fn describe(&self) -> String {
+        let mut out = if self.sweep {
+            match self.sweep_spacing.as_str() {
+                "kernel" => format!("sweep ≤{} kernel K={}", self.sweep_planes, self.kernel),
+                sp => format!("sweep ≤{} {sp}", self.sweep_planes),
+            }
+        } else {
+            format!(
+                "{}+{} planes {}",
+                self.planes, self.slice_planes, self.placement
+            )
+        };
+        let _ = write!(out, ", res {}, extend {:.1}", self.resolution, self.extend);
+        if let Some(s) = self.subcell {
+            let _ = write!(out, ", subcell {s}");
+        }
+        out
+    }
+}
+
+fn spacing_name(s: Spacing) -> &'static str {
+    match s {
+        Spacing::Kernel => "kernel",
+        Spacing::Geometric => "geometric",
+    }
+}
+
+/// One row of the foliage study: a [`BenchRow`] (its fields flattened into the JSON row)
+/// with the study, the variant and the bake's peak memory.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FoliageRow {
+    /// The study (`coarse`, `fine`, `params`, `paper`, `jacaranda`).
+    pub study: String,
+    /// The `umbrasweep bake` flags of the variant (e.g. `--sweep --subcell 2`).
+    pub variant: String,
+    /// The settings the bake used.
+    pub settings: FoliageSettings,
+    /// Scene, sizes, cells, times, culling, false culls, planes (see [`BenchRow`]).
+    #[serde(flatten)]
+    pub row: BenchRow,
+    /// The process's peak resident memory during the bake, MiB (`VmHWM`, reset before the
+    /// bake); `None` where `/proc/self/status` is unavailable.
+    pub peak_mib: Option<f64>,
+}
+
+/// One study's heading: what its forest is.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StudyScene {
+    /// The study.
+    pub study: String,
+    /// The forest and its cells, in words.
+    pub scene: String,
+}
+
+/// A whole `--foliage` run: the `--json` document.
+#[derive(Clone, Debug, Serialize)]
+pub struct FoliageBench {
+    /// `"umbrasweep-bench-foliage"`.
+    pub format: String,
+    /// The studies run, in order.
+    pub studies: Vec<String>,
+    /// `cpu` or `gpu`.
+    pub backend: String,
+    /// The GPU adapter, if any.
+    pub adapter: Option<String>,
+    /// Validation rays per cell.
+    pub rays_per_cell: u64,
+    /// Cells per forest (fewer when a path has fewer).
+    pub cells: usize,
+    /// Cells of the sub-cell variants.
+    pub subcell_cells: usize,
+    /// Cells of the paper's forest.
+    pub paper_cells: usize,
+    /// Trees of the jacaranda forest.
+    pub model_trees: u32,
+    /// The test-only tree count of the procedural forests, if given.
+    pub trees_override: Option<u32>,
+    /// Seed of forests and rays.
+    pub seed: u64,
+    /// Worker threads (rayon).
+    pub threads: usize,
+    /// Each study's forest, in words.
+    pub scenes: Vec<StudyScene>,
+    /// One row per study and variant.
+    pub rows: Vec<FoliageRow>,
+    /// Studies or rows skipped or failed, and why; notes on the peak memory.
+    pub skipped: Vec<String>,
+    /// Wall-clock time of the whole run, seconds.
+    pub seconds: f64,
+}
+
+/// Settings after defaults.
+struct Plan {
+    studies: Vec<&'static str>,
+    cells: usize,
+    rays: u64,
+    subcell_cells: usize,
+    paper_cells: usize,
+    model_trees: u32,
+}
+
+impl Plan {
+    fn new(args: &BenchArgs) -> anyhow::Result<Plan> {
+        let studies = match &args.foliage_studies {
+            None => STUDIES.to_vec(),
+            Some(list) => {
+                if let Some(bad) = list.iter().find(|s| !STUDIES.contains(&s.as_str())) {
+                    anyhow::bail!(
+                        "--foliage-studies {bad}: unknown study (one of {})",
+                        STUDIES.join(", ")
+                    );
+                }
+                STUDIES
+                    .into_iter()
+                    .filter(|s| list.iter().any(|l| l == s))
+                    .collect()
+            }
+        };
+        let plan = Plan {
+            studies,
+            cells: args.cells.unwrap_or(DEFAULT_CELLS),
+            rays: args.rays.unwrap_or(DEFAULT_RAYS),
+            subcell_cells: args.foliage_subcell_cells,
+            paper_cells: args.foliage_paper_cells,
+            model_trees: args.foliage_model_trees,
+        };
+        let counts = [
+            ("--cells", plan.cells as u64),
+            ("--rays", plan.rays),
+            ("--foliage-subcell-cells", plan.subcell_cells as u64),
+            ("--foliage-paper-cells", plan.paper_cells as u64),
+            ("--foliage-model-trees", plan.model_trees as u64),
+            ("--foliage-trees", args.foliage_trees.unwrap_or(1) as u64),
+        ];
+        if let Some((flag, _)) = counts.iter().find(|c| c.1 == 0) {
+            anyhow::bail!("{flag} must be at least 1");
+        }
+        Ok(plan)
+    }
+}
+
+/// A forest ready to bake, with the sampled visible sets of its cells (filled on demand).
+struct ForestScene {
+    which: Forest,
+    scene: Scene,
+    cells: Vec<Aabb>,
+    truth: Vec<Option<Sampled>>,
+    about: String,
+}
+
+/// Generates forest `which`; `Ok(Err(reason))` when it needs a shared file that is absent.
+fn build(
+    which: Forest,
+    args: &BenchArgs,
+    plan: &Plan,
+) -> anyhow::Result<Result<ForestScene, String>> {
+    let trees = |n: u32| args.foliage_trees.unwrap_or(n);
+    let seed = args.seed;
+    let cells = Some(plan.cells);
+    let (g, about) = match which {
+        Forest::Coarse | Forest::Fine | Forest::Paper => {
+            let base = match which {
+                Forest::Coarse => ForestOptions::coarse(),
+                Forest::Fine => ForestOptions {
+                    cell_size: FINE_CELL,
+                    path_width: FINE_PATH_WIDTH,
+                    ..ForestOptions::fine()
+                },
+                _ => ForestOptions::paper(),
+            };
+            let o = ForestOptions {
+                seed,
+                trees: trees(base.trees),
+                max_cells: if which == Forest::Paper {
+                    Some(plan.paper_cells)
+                } else {
+                    cells
+                },
+                ..base
+            };
+            let preset = match which {
+                Forest::Coarse => "coarse",
+                Forest::Fine => "fine",
+                _ => "paper",
+            };
+            let c = o.cell_size;
+            let about = format!(
+                "`ForestOptions::{preset}()`: {} trees × {} leaves {}–{} across; cells {}×{}×{} on \
+                 the path{}",
+                o.trees,
+                o.leaves,
+                o.leaf_size[0],
+                o.leaf_size[1],
+                c.x,
+                c.y,
+                c.z,
+                if o.path_width != ForestOptions::coarse().path_width {
+                    format!(" (path width {})", o.path_width)
+                } else {
+                    String::new()
+                }
+            );
+            (forest(&o)?, about)
+        }
+        Forest::Jacaranda => {
+            let shared = shared_folder(args)?;
+            let path = match shared_file(shared.as_deref(), "jacaranda", JACARANDA) {
+                Ok(p) => p,
+                Err(why) => return Ok(Err(why)),
+            };
+            let model = TreeModel::from_scene(
+                &crate::scene::load(&path).with_context(|| format!("{}", path.display()))?,
+            );
+            // `gen forest --preset coarse --tree-model FILE --trees N`.
+            let o = ForestOptions {
+                seed,
+                trees: plan.model_trees,
+                area_per_tree: None,
+                max_cells: cells,
+                ..ForestOptions::coarse()
+            };
+            let about = format!(
+                "{} instances of `{JACARANDA}` ({} triangles each, scale 1 ± {}), as `gen forest \
+                 --preset coarse --tree-model` places them (spacing from the model's footprint); \
+                 cells 1×1×1 on the path",
+                o.trees,
+                model.triangles.len(),
+                o.scale_jitter
+            );
+            (forest_of_models(&o, &model)?, about)
+        }
+    };
+    let scene = g.to_scene(which.name());
+    let n = g.cells.len();
+    Ok(Ok(ForestScene {
+        which,
+        scene,
+        cells: g.cells,
+        truth: vec![None; n],
+        about,
+    }))
+}
+
+/// The indices of `n` of `len` items spread evenly (all of them when `n >= len`), as the
+/// generators keep cells.
+fn spread(len: usize, n: Option<usize>) -> Vec<usize> {
+    match n {
+        Some(n) if n < len => (0..n).map(|i| (2 * i + 1) * len / (2 * n)).collect(),
+        _ => (0..len).collect(),
+    }
+}
+
+/// Resets the process's resident high-water mark to the current resident size (Linux);
+/// false where that is not possible.
+fn reset_peak() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// The process's resident high-water mark (`VmHWM`), MiB.
+fn peak_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line
+        .trim_start_matches("VmHWM:")
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kib / 1024.0)
+}
+
+/// Runs the foliage study and returns its rows (progress on stderr). A row whose bake fails
+/// or panics is reported in `skipped` and the study goes on.
+///
+/// # Errors
+/// Bad options, `--backend gpu` without an adapter, a forest that cannot be generated, or a
+/// jacaranda model that exists but cannot be loaded.
+pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
+    let start = Instant::now();
+    let plan = Plan::new(args)?;
+    let cpu;
+    let gpu;
+    let backend: &dyn RasterBackend = if args.backend == BenchBackend::Gpu {
+        gpu = GpuBackend::new().context("--backend gpu")?;
+        &gpu
+    } else {
+        cpu = CpuBackend::new();
+        &cpu
+    };
+    let mut skipped = Vec::new();
+    let mut rows = Vec::new();
+    let mut scenes = Vec::new();
+    let mut peak_reset = true;
+    let mut forests: Vec<ForestScene> = Vec::new();
+    for (k, &study) in plan.studies.iter().enumerate() {
+        let which = Forest::of(study);
+        // Keep only the forests a study still to come uses (the coarse one for `params`),
+        // so that one forest's memory does not add to the next one's peak.
+        forests.retain(|f| plan.studies[k..].iter().any(|s| Forest::of(s) == f.which));
+        if !forests.iter().any(|f| f.which == which) {
+            let t = Instant::now();
+            eprintln!("bench: foliage {study}: generating {}", which.name());
+            match build(which, args, &plan)? {
+                Ok(f) => {
+                    eprintln!(
+                        "bench: foliage {study}: {}: {} triangles, {} objects, {} cells ({:.1} s)",
+                        which.name(),
+                        f.scene.triangles.len(),
+                        f.scene.objects.len(),
+                        f.cells.len(),
+                        t.elapsed().as_secs_f64()
+                    );
+                    forests.push(f);
+                }
+                Err(why) => {
+                    eprintln!("bench: {why}");
+                    skipped.push(why);
+                    continue;
+                }
+            }
+        }
+        let f = forests
+            .iter_mut()
+            .find(|f| f.which == which)
+            .expect("built");
+        scenes.push(StudyScene {
+            study: study.into(),
+            scene: f.about.clone(),
+        });
+        if f.cells.is_empty() {
+            let why = format!("{study}: skipped, no cell on the path of {}", which.name());
+            eprintln!("bench: {why}");
+            skipped.push(why);
+            continue;
+        }
+        let list = variants(study, plan.subcell_cells);
+        // Sample every cell a row bakes before the first bake, so that the ray index is not
+        // held during the bakes (their peak memory).
+        let mut ids: Vec<usize> = list
+            .iter()
+            .flat_map(|v| spread(f.cells.len(), v.max_cells))
+            .filter(|&i| f.truth[i].is_none())
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        if !ids.is_empty() {
+            let t = Instant::now();
+            eprintln!(
+                "bench: foliage {study}: sampling {} cells with {} rays each",
+                ids.len(),
+                plan.rays
+            );
+            let index = SceneRays::new(&f.scene);
+            for i in ids {
+                f.truth[i] = Some(sample(
+                    &index, &f.scene, f.cells[i], plan.rays, args.seed, i,
+                ));
+            }
+            eprintln!(
+                "bench: foliage {study}: sampled in {:.1} s",
+                t.elapsed().as_secs_f64()
+            );
+        }
+        for v in &list {
+            let t = Instant::now();
+            let ids = spread(f.cells.len(), v.max_cells);
+            let cells: Vec<Aabb> = ids.iter().map(|&i| f.cells[i]).collect();
+            let truth: Vec<&Sampled> = ids
+                .iter()
+                .map(|&i| f.truth[i].as_ref().expect("sampled"))
+                .collect();
+            peak_reset &= reset_peak();
+            let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                let result = bake(&f.scene, &cells, &v.settings, backend, None);
+                let peak = peak_mib();
+                result.map(|r| {
+                    let row = score(which.name(), &f.scene, &cells, &ids, &r, &truth, plan.rays);
+                    (row, peak)
+                })
+            }));
+            let (row, peak) = match run {
+                Ok(Ok(r)) => r,
+                Ok(Err(e)) => {
+                    let why = format!("{study} [{}]: FAILED, {e}", v.label);
+                    eprintln!("bench: {why}");
+                    skipped.push(why);
+                    continue;
+                }
+                Err(panic) => {
+                    let why = format!(
+                        "{study} [{}]: FAILED, the bake or validation panicked: {}",
+                        v.label,
+                        panic_message(&*panic)
+                    );
+                    eprintln!("bench: {why}");
+                    skipped.push(why);
+                    continue;
+                }
+            };
+            eprintln!(
+                "bench: foliage {study} [{}]: {} cells, median {:.1} ms/cell, {:.1} % culled, \
+                 PVS/VS {}, {} false culls, {:.1} planes/cell, peak {} ({:.1} s)",
+                v.label,
+                row.cells,
+                row.median_ms_per_cell,
+                row.objects_culled_percent,
+                row.pvs_over_vs.map_or("–".into(), |x| format!("{x:.2}")),
+                row.false_culls,
+                row.planes_per_cell,
+                peak.map_or("n/a".into(), |p| format!("{p:.0} MiB")),
+                t.elapsed().as_secs_f64()
+            );
+            rows.push(FoliageRow {
+                study: study.into(),
+                variant: v.label.clone(),
+                settings: FoliageSettings::of(&v.settings),
+                row,
+                peak_mib: peak,
+            });
+        }
+    }
+    if !peak_reset && rows.iter().any(|r| r.peak_mib.is_some()) {
+        skipped.push(
+            "peak MiB: /proc/self/clear_refs could not reset the high-water mark, so each peak \
+             is the run's peak up to that bake"
+                .into(),
+        );
+    }
+    Ok(FoliageBench {
+        format: "umbrasweep-bench-foliage".into(),
+        studies: plan.studies.iter().map(|s| s.to_string()).collect(),
+        backend: backend.name().into(),
+        adapter: backend.adapter(),
+        rays_per_cell: plan.rays,
+        cells: plan.cells,
+        subcell_cells: plan.subcell_cells,
+        paper_cells: plan.paper_cells,
+        model_trees: plan.model_trees,
+        trees_override: args.foliage_trees,
+        seed: args.seed,
+        threads: rayon::current_num_threads(),
+        scenes,
+        rows,
+        skipped,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The columns of each study's table, in order.
+pub const COLUMNS: [&str; 12] = [
+    "scene",
+    "variant",
+    "triangles",
+    "objects",
+    "cells",
+    "median ms/cell",
+    "% culled",
+    "PVS/VS",
+    "false culls",
+    "planes/cell",
+    "peak MiB",
+    "settings",
+];
+
+impl FoliageBench {
+    /// A header line, then per study a `### study` heading, its forest in words and a
+    /// Markdown table (one row per variant), then the adapter and anything skipped.
+    pub fn tables(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "umbrasweep bench --foliage: {} backend, {} cells per forest (sub-cell variants {}, \
+             paper {}), {} validation rays per cell, seed {}, {} threads, {:.0} s{}",
+            self.backend,
+            self.cells,
+            self.subcell_cells,
+            self.paper_cells,
+            self.rays_per_cell,
+            self.seed,
+            self.threads,
+            self.seconds,
+            match self.trees_override {
+                Some(n) => format!(", TEST forests of {n} trees"),
+                None => String::new(),
+            }
+        );
+        let left: Vec<bool> = (0..COLUMNS.len())
+            .map(|k| k <= 1 || k == COLUMNS.len() - 1)
+            .collect();
+        for study in &self.studies {
+            let _ = writeln!(out, "\n### {study}\n");
+            let Some(about) = self.scenes.iter().find(|s| &s.study == study) else {
+                let _ = writeln!(out, "skipped (see below)");
+                continue;
+            };
+            let _ = writeln!(out, "{}\n", about.scene);
+            let cells: Vec<Vec<String>> = self
+                .rows
+                .iter()
+                .filter(|r| &r.study == study)
+                .map(|r| {
+                    let b = &r.row;
+                    vec![
+                        b.scene.clone(),
+                        r.variant.clone(),
+                        b.triangles.to_string(),
+                        b.objects.to_string(),
+                        b.cells.to_string(),
+                        format!("{:.1}", b.median_ms_per_cell),
+                        format!("{:.1}", b.objects_culled_percent),
+                        b.pvs_over_vs.map_or("–".into(), |v| format!("{v:.2}")),
+                        b.false_culls.to_string(),
+                        format!("{:.1}", b.planes_per_cell),
+                        r.peak_mib.map_or("n/a".into(), |p| format!("{p:.0}")),
+                        r.settings.describe(),
+                    ]
+                })
+                .collect();
+            markdown_table(&mut out, &COLUMNS, &cells, &left);
+        }
+        out.push('\n');
+        if let Some(a) = &self.adapter {
+            let _ = writeln!(out, "gpu adapter: {a}");
+        }
+        for s in &self.skipped {
+            let _ = writeln!(out, "{s}");
+        }
+        out
+    }
+}
+
+/// Runs `umbrasweep bench --foliage`: progress on stderr, the tables on stdout, `--json` if
+/// asked.
+///
+/// # Errors
+/// See [`collect`]; or a `--json` file that cannot be written.
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let bench = collect(args)?;
+    print!("{}", bench.tables());
+    let false_culls: usize = bench.rows.iter().map(|r| r.row.false_culls).sum();
+    if false_culls > 0 {
+        eprintln!("bench: {false_culls} FALSE CULLS (see above): the PVS is not conservative");
+    }
+    if let Some(path) = &args.json {
+        let bytes = serde_json::to_vec_pretty(&bench)?;
+        crate::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: BenchArgs,
+    }
+
+    #[test]
+    fn every_study_has_its_variants() {
+        let labels = |s| -> Vec<String> { variants(s, 3).into_iter().map(|v| v.label).collect() };
+        assert_eq!(labels("coarse"), ["--sweep", "--no-sweep"]);
+        assert_eq!(labels("jacaranda"), ["--sweep", "--no-sweep"]);
+        assert_eq!(labels("paper"), ["--sweep"]);
+        assert_eq!(
+            labels("fine"),
+            [
+                "--sweep",
+                "--sweep --subcell 2",
+                "--sweep --subcell 1",
+                "--sweep --subcell 0.5",
+                "--no-sweep"
+            ]
+        );
+        let params = variants("params", 3);
+        assert_eq!(params.len(), 3 + 4 + 3 + 3);
+        let default = swept(SweepChoice::On);
+        for v in &params {
+            // One change from the default sweep (the kernel rows: spacing, K and the cap).
+            let s = &v.settings;
+            let changed = [
+                s.resolution != default.resolution,
+                s.extend != default.extend,
+                s.sweep_settings != default.sweep_settings,
+            ];
+            assert!(changed.iter().filter(|&&c| c).count() <= 1, "{}", v.label);
+            assert!(s.check().is_ok(), "{}", v.label);
+            assert_eq!(s.sweep, SweepChoice::On);
+        }
+        assert_eq!(
+            params[0].label,
+            "--sweep --sweep-spacing kernel --kernel 3 --sweep-planes 256"
+        );
+        assert_eq!(params[0].settings.sweep_settings.spacing, Spacing::Kernel);
+        assert_eq!(params[0].settings.sweep_settings.planes, 256);
+        assert_eq!(params[12].label, "--sweep --extend 2.0");
+        let fine = variants("fine", 3);
+        assert_eq!(fine[3].settings.subcell, Some(0.5));
+        assert_eq!(fine[3].max_cells, Some(3));
+        assert_eq!(fine[4].settings.sweep, SweepChoice::Off);
+        assert_eq!(
+            FoliageSettings::of(&params[0].settings).describe(),
+            "sweep ≤256 kernel K=3, res 256, extend 1.5"
+        );
+        assert_eq!(
+            FoliageSettings::of(&fine[1].settings).describe(),
+            format!(
+                "sweep ≤{} geometric, res 256, extend 1.5, subcell 2",
+                default.sweep_settings.planes
+            )
+        );
+        assert_eq!(
+            FoliageSettings::of(&fine[4].settings).describe(),
+            "4+1 planes geometric, res 256, extend 1.5"
+        );
+    }
+
+    #[test]
+    fn spread_keeps_first_to_last_evenly() {
+        assert_eq!(spread(10, Some(3)), [1, 5, 8]);
+        assert_eq!(spread(2, Some(3)), [0, 1]);
+        assert_eq!(spread(4, None), [0, 1, 2, 3]);
+    }
+
+    #[test]
+    fn the_fine_forest_has_room_for_its_cells() {
+        let g = forest(&ForestOptions {
+            trees: 12,
+            leaves: 8,
+            cell_size: FINE_CELL,
+            path_width: FINE_PATH_WIDTH,
+            ..ForestOptions::fine()
+        })
+        .unwrap();
+        assert!(!g.cells.is_empty());
+        for c in &g.cells {
+            assert!(
+                (c.max - c.min - FINE_CELL).abs().max_element() < 1e-3,
+                "{c:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn peak_memory_reads_the_high_water_mark() {
+        if std::path::Path::new("/proc/self/status").is_file() {
+            let p = peak_mib().unwrap();
+            assert!(p > 1.0, "{p}");
+        }
+    }
+
+    #[test]
+    fn bad_foliage_options_are_refused() {
+        let cli = Cli::parse_from(["bench", "--foliage", "--foliage-studies", "moon"]);
+        let err = collect(&cli.args).unwrap_err().to_string();
+        assert!(err.contains("moon"), "{err}");
+        let cli = Cli::parse_from(["bench", "--foliage", "--foliage-paper-cells", "0"]);
+        let err = collect(&cli.args).unwrap_err().to_string();
+        assert!(err.contains("--foliage-paper-cells"), "{err}");
+        assert!(Cli::try_parse_from(["bench", "--foliage", "--quick"]).is_err());
+        assert!(Cli::try_parse_from(["bench", "--foliage-studies", "coarse"]).is_err());
+    }
+}

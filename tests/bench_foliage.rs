@@ -1,0 +1,105 @@
+//! `umbrasweep bench --foliage` on tiny forests (the hidden `--foliage-trees` override): the
+//! studies come out with their labels, their tables, and no false cull. (The fine study's
+//! sub-cell rows take minutes even on tiny forests — a 4×2×4 cell in sub-cells of 0.5 is 256
+//! bakes — so its labels are checked by the unit tests in `bench::foliage` instead.)
+
+use clap::Parser;
+use umbrasweep::bench::BenchArgs;
+use umbrasweep::bench::foliage::{COLUMNS, FoliageBench, collect};
+
+#[derive(Parser)]
+struct Cli {
+    #[command(flatten)]
+    args: BenchArgs,
+}
+
+fn run(studies: &str) -> FoliageBench {
+    let cli = Cli::parse_from([
+        "bench",
+        "--foliage",
+        "--foliage-studies",
+        studies,
+        "--foliage-trees",
+        "3",
+        "--foliage-model-trees",
+        "1",
+        "--foliage-paper-cells",
+        "2",
+        "--foliage-subcell-cells",
+        "1",
+        "--cells",
+        "1",
+        "--rays",
+        "2000",
+        "--backend",
+        "cpu",
+    ]);
+    collect(&cli.args).unwrap()
+}
+
+fn labels(bench: &FoliageBench, study: &str) -> Vec<String> {
+    bench
+        .rows
+        .iter()
+        .filter(|r| r.study == study)
+        .map(|r| r.variant.clone())
+        .collect()
+}
+
+#[test]
+fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
+    let bench = run("paper,coarse,jacaranda");
+    // Canonical order, whatever the order asked.
+    assert_eq!(bench.studies, ["coarse", "paper", "jacaranda"]);
+    assert_eq!(labels(&bench, "coarse"), ["--sweep", "--no-sweep"]);
+    assert_eq!(labels(&bench, "paper"), ["--sweep"]);
+    let jacaranda = labels(&bench, "jacaranda");
+    if jacaranda.is_empty() {
+        assert!(
+            bench
+                .skipped
+                .iter()
+                .any(|s| s.starts_with("jacaranda: skipped")),
+            "{:?}",
+            bench.skipped
+        );
+    } else {
+        assert_eq!(jacaranda, ["--sweep", "--no-sweep"]);
+    }
+    for r in &bench.rows {
+        assert_eq!(r.row.false_culls, 0, "{} {}", r.study, r.variant);
+        assert_eq!(r.row.backend, "cpu");
+        assert_eq!(r.settings.sweep, r.variant == "--sweep");
+    }
+    let paper = bench.rows.iter().find(|r| r.study == "paper").unwrap();
+    assert_eq!(paper.row.scene, "paper_forest");
+    assert_eq!(paper.row.cells, 2);
+    if std::path::Path::new("/proc/self/status").is_file() {
+        assert!(paper.peak_mib.is_some_and(|p| p > 1.0));
+    }
+    let coarse = bench.rows.iter().find(|r| r.study == "coarse").unwrap();
+    assert_eq!(coarse.row.cells, 1);
+    assert_eq!(coarse.row.objects, 1 + 3 * 5);
+
+    let tables = bench.tables();
+    assert!(tables.contains("### coarse") && tables.contains("### paper"));
+    let header = tables.lines().find(|l| l.starts_with("| scene")).unwrap();
+    let cols: Vec<&str> = header
+        .split('|')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .collect();
+    assert_eq!(cols, COLUMNS);
+    assert_eq!(
+        tables
+            .lines()
+            .filter(|l| l.starts_with("| coarse_forest | --no-sweep"))
+            .count(),
+        1
+    );
+    let json = serde_json::to_value(&bench).unwrap();
+    let row = &json["rows"][0];
+    assert_eq!(row["variant"], "--sweep");
+    assert_eq!(row["scene"], "coarse_forest");
+    assert!(row.get("peak_mib").is_some() && row.get("false_culls").is_some());
+}
