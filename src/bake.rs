@@ -1,7 +1,10 @@
 //! Bake orchestration: prepares a scene once (occluder parts, sliceable objects, a BVH over
-//! object bounds), then for every cell builds its projection planes, has the backend rasterise
-//! them, builds each plane's Hierarchical Depth Map and tests the occludees, walking the object
-//! BVH and stopping at hidden and at fully visible nodes. Cells run in parallel (rayon).
+//! object bounds, occludee pieces), then for every cell — or every sub-cell of it with
+//! `subcell` — builds its projection planes, has the backend rasterise them, builds each
+//! plane's Hierarchical Depth Map and tests the occludees, walking the object BVH and stopping
+//! at hidden and at fully visible nodes. With the occlusion sweep ([`SweepChoice`]) each
+//! direction's planes are rendered front to back, each carrying the umbra of the planes before
+//! it ([`crate::sweep`]). Cells run in parallel (rayon).
 
 use crate::backend::{BackendError, DepthMap, PlaneJob, RasterBackend, depth_down};
 use crate::backend::{PlaneFrame, Reprojection};

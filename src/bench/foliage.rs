@@ -21,7 +21,8 @@
 //!   `--foliage-paper-cells` cells.
 //! * `jacaranda`: `foliage/jacaranda_tree.glb` instanced by [`forest_of_models`] as
 //!   `gen forest --preset coarse --tree-model` does (the coarse options, the spacing from the
-//!   model's footprint) but with `--foliage-model-trees` trees, `--sweep` and `--no-sweep`.
+//!   model's footprint, each tree split into 8 objects with `--model-split 8`) but with
+//!   `--foliage-model-trees` trees, `--sweep` and `--no-sweep`.
 //!
 //! Every cell of a forest is sampled once (the same rays as the scene bench: seed, cell
 //! number) before its first bake, and every row baking it is checked against that sample.
@@ -62,6 +63,9 @@ pub const DEFAULT_PAPER_CELLS: usize = 5;
 /// Jacaranda trees unless `--foliage-model-trees`: 150 × 55 k ≈ 8.2 M triangles, about the
 /// paper's forest (gen's coarse 1,500 would make 82 M).
 pub const DEFAULT_MODEL_TREES: u32 = 150;
+/// Objects per jacaranda tree (`--model-split`): angular sectors around its trunk.
+pub const JACARANDA_SPLIT: u32 = 8;
+
 /// The jacaranda model in the shared scene folder.
 pub const JACARANDA: &str = "foliage/jacaranda_tree.glb";
 
@@ -447,21 +451,27 @@ fn build(
             let model = TreeModel::from_scene(
                 &crate::scene::load(&path).with_context(|| format!("{}", path.display()))?,
             );
-            // `gen forest --preset coarse --tree-model FILE --trees N`.
+            // `gen forest --preset coarse --tree-model FILE --trees N --model-split 8`: one
+            // object per tree would leave nothing to cull (every tree is seen from every cell),
+            // so each tree is 8 objects, like the procedural crowns' sectors.
             let o = ForestOptions {
                 seed,
                 trees: plan.model_trees,
                 area_per_tree: None,
                 max_cells: cells,
+                model_split: JACARANDA_SPLIT,
                 ..ForestOptions::coarse()
             };
             let about = format!(
-                "{} instances of `{JACARANDA}` ({} triangles each, scale 1 ± {}), as `gen forest \
-                 --preset coarse --tree-model` places them (spacing from the model's footprint); \
-                 cells 1×1×1 on the path",
+                "{} instances of `{JACARANDA}` ({} triangles each, scale 1 ± {}, each split into \
+                 {} objects around its trunk), as `gen forest --preset coarse --tree-model \
+                 --model-split {}` places them (spacing from the model's footprint); cells 1×1×1 \
+                 on the path",
                 o.trees,
                 model.triangles.len(),
-                o.scale_jitter
+                o.scale_jitter,
+                o.model_split,
+                o.model_split
             );
             (forest_of_models(&o, &model)?, about)
         }

@@ -60,6 +60,10 @@ pub struct ForestOptions {
     pub model_height: Option<f32>,
     /// Tree models: each instance is scaled by `1 ± scale_jitter`.
     pub scale_jitter: f32,
+    /// Tree models: each instance is split into this many objects, angular sectors around its
+    /// trunk (by triangle centre), like the procedural crowns' `crown_split`. 1 keeps a tree
+    /// one object.
+    pub model_split: u32,
 }
 
 impl ForestOptions {
@@ -90,6 +94,7 @@ impl ForestOptions {
             max_cells: None,
             model_height: None,
             scale_jitter: 0.2,
+            model_split: 1,
         }
     }
 
@@ -577,28 +582,64 @@ pub fn forest_of_models(o: &ForestOptions, model: &TreeModel) -> Result<Generate
         Vec2::splat(-0.5 * extent - margin),
         Vec2::splat(0.5 * extent + margin),
     ));
+    // Per sector: the model triangles in it, and the model vertices they use (remapped).
+    let split = o.model_split.max(1) as usize;
+    let mut sectors: Vec<(Vec<u32>, Vec<[u32; 4]>, Vec<bool>)> = vec![Default::default(); split];
+    {
+        let mut remap: Vec<Vec<u32>> = vec![vec![u32::MAX; model.vertices.len()]; split];
+        for (t, tri) in model.triangles.iter().enumerate() {
+            let c = tri
+                .iter()
+                .map(|&i| model.vertices[i as usize])
+                .sum::<Vec3>()
+                / 3.0;
+            let angle = c.z.atan2(c.x).rem_euclid(TAU);
+            let k = ((angle / TAU * split as f32) as usize).min(split - 1);
+            let (verts, faces, opaque) = &mut sectors[k];
+            let f = tri.map(|i| {
+                let r = &mut remap[k][i as usize];
+                if *r == u32::MAX {
+                    *r = verts.len() as u32;
+                    verts.push(i);
+                }
+                *r
+            });
+            faces.push([f[0], f[1], f[2], super::NO_VERTEX]);
+            opaque.push(model.opaque[t]);
+        }
+    }
     let trees: Vec<GenObject> = positions
         .par_iter()
         .enumerate()
-        .map(|(i, &p)| {
+        .flat_map_iter(|(i, &p)| {
             let mut rng = rng_for(o.seed, 2, i as u64);
             let yaw = uniform(&mut rng, 0.0, TAU);
             let scale = uniform(&mut rng, s_min, s_max);
             let (sin, cos) = yaw.sin_cos();
-            let mut t = GenObject::new(format!("tree{i}"));
-            t.vertices.reserve(model.vertices.len());
-            for v in &model.vertices {
+            let place = move |v: Vec3| {
                 let rotated = Vec3::new(cos * v.x + sin * v.z, v.y, -sin * v.x + cos * v.z);
-                t.vertex(Vec3::new(p.x, 0.0, p.y) + rotated * scale);
-            }
-            t.faces.extend(
-                model
-                    .triangles
-                    .iter()
-                    .map(|&[a, b, c]| [a, b, c, super::NO_VERTEX]),
-            );
-            t.opaque.extend_from_slice(&model.opaque);
-            t
+                Vec3::new(p.x, 0.0, p.y) + rotated * scale
+            };
+            let sectors = &sectors;
+            (0..split).filter_map(move |k| {
+                let (verts, faces, opaque) = &sectors[k];
+                if faces.is_empty() {
+                    return None;
+                }
+                let name = if split == 1 {
+                    format!("tree{i}")
+                } else {
+                    format!("tree{i}_part{k}")
+                };
+                let mut t = GenObject::new(name);
+                t.vertices.reserve(verts.len());
+                for &v in verts {
+                    t.vertex(place(model.vertices[v as usize]));
+                }
+                t.faces.extend_from_slice(faces);
+                t.opaque.extend_from_slice(opaque);
+                Some(t)
+            })
         })
         .collect();
     objects.extend(trees);
@@ -699,5 +740,69 @@ mod tests {
         assert!(g.has_translucent());
         let s = g.to_scene("m");
         assert_eq!(s.opaque.iter().filter(|&&x| !x).count(), 5);
+    }
+
+    #[test]
+    fn model_split_makes_sectors_around_the_trunk() {
+        // Four triangles, one per quadrant around the trunk axis, one of them translucent.
+        let mut vertices = Vec::new();
+        let mut triangles = Vec::new();
+        for (k, (x, z)) in [(1.0, 0.2), (-0.2, 1.0), (-1.0, -0.2), (0.2, -1.0)]
+            .iter()
+            .enumerate()
+        {
+            let b = vertices.len() as u32;
+            vertices.extend([
+                Vec3::new(*x, 1.0, *z),
+                Vec3::new(*x * 1.1, 1.5, *z * 1.1),
+                Vec3::new(*x, 2.0 + k as f32, *z),
+            ]);
+            triangles.push([b, b + 1, b + 2]);
+        }
+        let model = TreeModel {
+            vertices,
+            triangles,
+            opaque: vec![true, false, true, true],
+        };
+        let o = ForestOptions {
+            trees: 3,
+            model_split: 4,
+            ..ForestOptions::coarse()
+        };
+        let g = forest_of_models(&o, &model).unwrap();
+        // The ground, then four one-triangle sectors per tree, in order.
+        assert_eq!(g.objects.len(), 1 + 3 * 4);
+        assert_eq!(g.objects[1].name, "tree0_part0");
+        assert_eq!(g.objects[4].name, "tree0_part3");
+        for t in 0..3 {
+            let parts = &g.objects[1 + 4 * t..5 + 4 * t];
+            assert!(
+                parts
+                    .iter()
+                    .all(|p| p.faces.len() == 1 && p.vertices.len() == 3)
+            );
+            assert_eq!(
+                parts.iter().map(|p| p.opaque[0]).collect::<Vec<_>>(),
+                [true, false, true, true]
+            );
+        }
+        // Split or not, the same triangles in the same places.
+        let whole = forest_of_models(
+            &ForestOptions {
+                model_split: 1,
+                ..o
+            },
+            &model,
+        )
+        .unwrap();
+        let tris = |g: &Generated| {
+            let s = g.to_scene("m");
+            let mut v: Vec<[[u32; 3]; 3]> = (0..s.triangles.len())
+                .map(|t| s.triangle(t).map(|p| p.to_array().map(f32::to_bits)))
+                .collect();
+            v.sort();
+            v
+        };
+        assert_eq!(tris(&g), tris(&whole));
     }
 }

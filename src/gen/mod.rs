@@ -434,6 +434,10 @@ pub struct ForestArgs {
     /// Split each crown into N objects (angular sectors around the trunk) (default 4).
     #[arg(long, value_name = "N")]
     pub crown_split: Option<u32>,
+    /// With --tree-model: split each tree into N objects, angular sectors around its trunk
+    /// (default 1: one object per tree).
+    #[arg(long, value_name = "N", requires = "tree_model")]
+    pub model_split: Option<u32>,
     /// Trunk radius (default 0.15).
     #[arg(long)]
     pub trunk_radius: Option<f32>,
@@ -617,6 +621,12 @@ impl ForestArgs {
         set(&mut o.crown_split, self.crown_split);
         set(&mut o.trunk_radius, self.trunk_radius);
         set(&mut o.trunk_sides, self.trunk_sides);
+        if let Some(n) = self.model_split {
+            if !(1..=64).contains(&n) {
+                bail!("--model-split {n}: must be between 1 and 64");
+            }
+            o.model_split = n;
+        }
         if self.tree_model.is_some() {
             // The model's footprint gives the spacing unless a flag sets it.
             o.area_per_tree = None;

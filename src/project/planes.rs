@@ -9,6 +9,11 @@
 //! on Munich (50 street cells, 4 planes) this culls 88 % of the objects against 47 % for
 //! weighted quantiles of the occluders' distances. Further planes cut through the middle of the
 //! largest nearby closed occluders to receive their slices.
+//!
+//! In an occlusion sweep ([`SweepSettings`]) the planes of a direction are spaced from one cell
+//! depth to the far side of the occluders, and each receives only its slab's parts
+//! ([`gather_slab`]), cut at the slab's two planes, on a rectangle that also holds what the
+//! reprojection of earlier planes may set.
 
 use super::occluders::{Occluders, PartKind};
 use super::slice::slice_object;
