@@ -536,8 +536,12 @@ fn tree(o: &ForestOptions, index: usize, at: Vec2) -> Vec<GenObject> {
     out
 }
 
-/// Generates a forest of instances of `model`: `ground`, then one object `treeI` per tree
-/// (random yaw, scale `1 ± scale_jitter` times `model_height / model height` or 1), keeping
+/// One sector of a model tree: the model vertices it uses, its faces (indices into those) and
+/// their opacity.
+type Sector = (Vec<u32>, Vec<[u32; 4]>, Vec<bool>);
+
+/// Generates a forest of instances of `model`: `ground`, then one object `treeI` per tree —
+/// or `model_split` objects `treeI_partK`, angular sectors around the trunk — (random yaw, scale `1 ± scale_jitter` times `model_height / model height` or 1), keeping
 /// each triangle's opacity; cells along the path, clear of the opaque model geometry below
 /// eye level.
 ///
@@ -584,7 +588,7 @@ pub fn forest_of_models(o: &ForestOptions, model: &TreeModel) -> Result<Generate
     ));
     // Per sector: the model triangles in it, and the model vertices they use (remapped).
     let split = o.model_split.max(1) as usize;
-    let mut sectors: Vec<(Vec<u32>, Vec<[u32; 4]>, Vec<bool>)> = vec![Default::default(); split];
+    let mut sectors: Vec<Sector> = vec![Default::default(); split];
     {
         let mut remap: Vec<Vec<u32>> = vec![vec![u32::MAX; model.vertices.len()]; split];
         for (t, tri) in model.triangles.iter().enumerate() {
