@@ -771,22 +771,7 @@ fn cut_parts(
         let k = summary.index[i] as usize;
         let part = &occ.parts[k];
         let pts = occ.part_points(k);
-        buf.clear();
-        if summary.near[i] > eps {
-            buf.extend_from_slice(pts);
-        } else {
-            match part.kind {
-                PartKind::Polygon { .. } => clip_polygon(pts, |p| dist(p) - eps, &mut buf),
-                PartKind::Solid { .. } => clip_solid(pts, |p| dist(p) - eps, &mut buf),
-            }
-            if buf.len() < 3 {
-                continue;
-            }
-        }
-        if let PartKind::Polygon { normal } = part.kind
-            && part.deviation > 0.0
-            && !shrink_bent_polygon(&mut buf, normal, part.deviation, part.inradius, &corners)
-        {
+        if !beyond_face(part, pts, summary.near[i], &dist, eps, &corners, &mut buf) {
             continue;
         }
         out.index.push(k as u32);
@@ -799,6 +784,38 @@ fn cut_parts(
         out.set.push(buf.iter().copied());
     }
     out
+}
+
+/// The points of `part` (`pts`, nearest at distance `near` beyond the face) as projected from
+/// this cell, into `buf`: cut at `face + eps` where the part reaches the face, and shrunk in its
+/// plane when it is a slightly bent polygon. False when nothing is left.
+fn beyond_face(
+    part: &super::occluders::OccluderPart,
+    pts: &[DVec3],
+    near: f64,
+    dist: &dyn Fn(DVec3) -> f64,
+    eps: f64,
+    corners: &[DVec3; 8],
+    buf: &mut Vec<DVec3>,
+) -> bool {
+    buf.clear();
+    if near > eps {
+        buf.extend_from_slice(pts);
+    } else {
+        match part.kind {
+            PartKind::Polygon { .. } => clip_polygon(pts, |p| dist(p) - eps, buf),
+            PartKind::Solid { .. } => clip_solid(pts, |p| dist(p) - eps, buf),
+        }
+        if buf.len() < 3 {
+            return false;
+        }
+    }
+    match part.kind {
+        PartKind::Polygon { normal } if part.deviation > 0.0 => {
+            shrink_bent_polygon(buf, normal, part.deviation, part.inradius, corners)
+        }
+        _ => true,
+    }
 }
 
 /// Shrinks a slightly non-planar merged polygon in its plane so that every ray from the cell
@@ -1030,23 +1047,15 @@ pub fn gather_slab(
         if near > start && (leave_out.hidden)(b) {
             continue;
         }
-        let pts = occ.part_points(pi as usize);
-        buf.clear();
-        if near > eps {
-            buf.extend_from_slice(pts);
-        } else {
-            match part.kind {
-                PartKind::Polygon { .. } => clip_polygon(pts, |p| dist(p) - eps, &mut buf),
-                PartKind::Solid { .. } => clip_solid(pts, |p| dist(p) - eps, &mut buf),
-            }
-            if buf.len() < 3 {
-                continue;
-            }
-        }
-        if let PartKind::Polygon { normal } = part.kind
-            && part.deviation > 0.0
-            && !shrink_bent_polygon(&mut buf, normal, part.deviation, part.inradius, &corners)
-        {
+        if !beyond_face(
+            part,
+            occ.part_points(pi as usize),
+            near,
+            &dist,
+            eps,
+            &corners,
+            &mut buf,
+        ) {
             continue;
         }
         let p = &mut out.parts;
