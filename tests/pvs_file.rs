@@ -517,3 +517,47 @@ fn bake_writes_pvs_and_inspect_reads_it() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("truncated"));
 }
+
+#[test]
+fn version_2_keeps_the_sweep_settings_and_version_1_files_still_read() {
+    let mut doc = city().clone();
+    doc.settings.sweep = true;
+    doc.settings.sweep_planes = 24;
+    doc.settings.kernel = 5;
+    doc.settings.sweep_spacing = "geometric".into();
+    doc.settings.subcell = Some(2.0);
+    let v2 = binary::encode(&doc).unwrap();
+    assert_eq!(&v2[8..12], &2u32.to_le_bytes());
+    let back = PvsDatabase::from_bytes(&v2).unwrap().to_document();
+    assert_eq!(json(&back), json(&doc));
+
+    // The same file as version 1 wrote it: without the sweep fields.
+    let mut ext = vec![1u8];
+    ext.extend(24u32.to_le_bytes());
+    ext.extend(5u32.to_le_bytes());
+    ext.extend(9u32.to_le_bytes());
+    ext.extend(b"geometric");
+    ext.push(1);
+    ext.extend(2.0f64.to_le_bytes());
+    let payload = &v2[HEADER_LEN..];
+    let at = payload
+        .windows(ext.len())
+        .position(|w| w == ext.as_slice())
+        .expect("the version 2 settings in the payload");
+    let mut p1 = payload[..at].to_vec();
+    p1.extend_from_slice(&payload[at + ext.len()..]);
+    let mut v1 = v2[..8].to_vec();
+    v1.extend(1u32.to_le_bytes());
+    v1.extend(crc32(&p1).to_le_bytes());
+    v1.extend((p1.len() as u64).to_le_bytes());
+    v1.extend(p1);
+    let old = PvsDatabase::from_bytes(&v1).unwrap().to_document();
+    assert!(!old.settings.sweep && old.settings.subcell.is_none());
+    let mut expected = doc.clone();
+    expected.settings.sweep = false;
+    expected.settings.sweep_planes = 0;
+    expected.settings.kernel = 0;
+    expected.settings.sweep_spacing = String::new();
+    expected.settings.subcell = None;
+    assert_eq!(json(&old), json(&expected));
+}
