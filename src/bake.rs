@@ -540,10 +540,12 @@ impl<'a> Prepared<'a> {
             let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
             for (((job, map), hdm), &d) in jobs.iter().zip(&maps).zip(&hdms).zip(&dirs) {
                 observe(job, map, hdm);
-                // In a sweep, boxes far behind this plane wait for later planes (the last plane
-                // tests everything): the umbra is rarely finished this far in front of them,
-                // and testing every box on every plane is most of a forest's bake time.
-                let after = if plans[d].is_sweep() && k + 1 < plans[d].distances.len() {
+                // In a sweep, boxes far behind this plane wait for later planes (the last plane,
+                // or one whose umbra covers its whole frame and so ends the direction, tests
+                // everything): the umbra is rarely finished this far in front of them, and
+                // testing every box on every plane is most of a forest's bake time.
+                let last = k + 1 == plans[d].distances.len() || ends_sweep(&plans[d], k, job, map);
+                let after = if plans[d].is_sweep() && !last {
                     (
                         plans[d].slab_start(k),
                         SWEEP_TEST_REACH * plans[d].distance(k),
@@ -567,9 +569,7 @@ impl<'a> Prepared<'a> {
             for (((job, map), d), hdm) in jobs.into_iter().zip(maps).zip(dirs).zip(hdms) {
                 if plans[d].is_sweep() {
                     prev_hdm[d] = Some((job.frame.clone(), hdm));
-                    finished[d] = job.frame.rect_min == plans[d].frame_min(k)
-                        && job.frame.rect_max == plans[d].frame_max(k)
-                        && map.depth.iter().all(|&x| x <= 0.0);
+                    finished[d] = ends_sweep(&plans[d], k, &job, &map);
                     let m = Arc::new(map);
                     let bounds = crate::sweep::umbra_bounds(&job.frame, &m);
                     push_history(&mut hist[d], k, job.frame, m, bounds);
@@ -775,6 +775,20 @@ impl<'a> Prepared<'a> {
             _ => Coverage::Partial,
         }
     }
+}
+
+/// True when sweep plane `k`'s umbra covers its whole frame: what lies behind it in the
+/// frame is hidden on it, and the direction needs no further plane.
+fn ends_sweep(
+    plan: &crate::project::planes::DirectionPlan,
+    k: usize,
+    job: &PlaneJob,
+    map: &DepthMap,
+) -> bool {
+    plan.is_sweep()
+        && job.frame.rect_min == plan.frame_min(k)
+        && job.frame.rect_max == plan.frame_max(k)
+        && map.depth.iter().all(|&x| x <= 0.0)
 }
 
 /// A rendered sweep plane kept for later reprojections: its index in the sweep, frame, map and

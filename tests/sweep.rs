@@ -234,3 +234,32 @@ fn the_sweep_is_chosen_for_small_occluders_only() {
     let p = Prepared::new(&cloud_scene, &auto, &[tiny]).unwrap();
     assert!(!p.sweep, "{}", p.sweep_reason);
 }
+
+#[test]
+fn a_wall_filling_the_frame_ends_the_sweep_and_hides_what_is_far_behind() {
+    // Far beyond the distance up to which a sweep plane tests boxes before the last plane
+    // (8 plane distances): the plane whose umbra fills its frame must test everything.
+    let objects = vec![
+        cube("wall", [-200.0, -200.0, 5.0], [200.0, 200.0, 5.5]),
+        cube(TARGET, [-1.0, -1.0, 150.0], [1.0, 1.0, 151.0]),
+    ];
+    assert!(!target_visible(&objects, unit_cell(), &sweep(true)));
+    // And what is in front of the wall stays visible.
+    let mut front = objects.clone();
+    front.push(cube("near", [-0.5, -0.5, 3.0], [0.5, 0.5, 3.5]));
+    let scene = Scene::from_objects(Path::new("wall"), front);
+    let r = bake(
+        &scene,
+        &[unit_cell()],
+        &sweep(true),
+        &CpuBackend::new(),
+        None,
+    )
+    .unwrap();
+    let names: Vec<&str> = r.cells[0]
+        .visible
+        .iter()
+        .map(|&o| scene.objects[o as usize].name.as_str())
+        .collect();
+    assert_eq!(names, ["wall", "near"]);
+}
