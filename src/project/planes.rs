@@ -228,23 +228,7 @@ impl DirectionPlan {
         if far <= self.slab_start(k).max(self.eps) || near >= self.distances[k] {
             return false;
         }
-        let cell = &self.cell;
-        let (u, v) = ((self.axis + 1) % 3, (self.axis + 2) % 3);
-        let centre = DVec2::new(
-            0.5 * (cell.min[u] + cell.max[u]),
-            0.5 * (cell.min[v] + cell.max[v]),
-        );
-        let half = DVec2::new(
-            0.5 * (cell.max[u] - cell.min[u]),
-            0.5 * (cell.max[v] - cell.min[v]),
-        );
-        let e = 0.5 * (cell.max[self.axis] - cell.min[self.axis]);
-        let widen = DVec2::new((half.x / e).max(1.0), (half.y / e).max(1.0));
-        let reach = widen * (far + e) * self.extend * (1.0 + 1e-9) + DVec2::splat(self.eps);
-        !(b.max[u] < centre.x - reach.x
-            || b.min[u] > centre.x + reach.x
-            || b.max[v] < centre.y - reach.y
-            || b.min[v] > centre.y + reach.y)
+        in_frustum(&self.cell, self.axis, self.extend, self.eps, b, far)
     }
 
     /// The plane's distance beyond the cell's face.
@@ -682,6 +666,32 @@ pub fn projection_bounds(
     Some((lo, hi))
 }
 
+/// False when a box whose far side lies `far` beyond the face cannot reach any plane's frame.
+///
+/// `plane_job` skips parts whose view from the cell's centre (depth `e` behind the face) misses
+/// the plane's frame `centre ± (half + tp)·extend`. Seen from there, that frame covers
+/// `(half + tp)·extend·(t + e)/(tp + e)` at distance t, at most `extend·(t + e)·max(1, half/e)`
+/// over all tp: a box outside that at its far side (where it is widest) reaches no frame.
+/// Slack for rounding.
+fn in_frustum(cell: &DAabb, axis: usize, extend: f64, eps: f64, b: &DAabb, far: f64) -> bool {
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let centre = DVec2::new(
+        0.5 * (cell.min[u] + cell.max[u]),
+        0.5 * (cell.min[v] + cell.max[v]),
+    );
+    let half = DVec2::new(
+        0.5 * (cell.max[u] - cell.min[u]),
+        0.5 * (cell.max[v] - cell.min[v]),
+    );
+    let e = 0.5 * (cell.max[axis] - cell.min[axis]);
+    let widen = DVec2::new((half.x / e).max(1.0), (half.y / e).max(1.0));
+    let reach = widen * (far + e) * extend * (1.0 + 1e-9) + DVec2::splat(eps);
+    !(b.max[u] < centre.x - reach.x
+        || b.min[u] > centre.x + reach.x
+        || b.max[v] < centre.y - reach.y
+        || b.min[v] > centre.y + reach.y)
+}
+
 /// The parts reaching beyond the face, from their bounds only (no points copied).
 fn summarize(
     cell: &DAabb,
@@ -695,14 +705,6 @@ fn summarize(
     let s = if positive { 1.0 } else { -1.0 };
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let mut out = DirParts::default();
-    let centre = DVec2::new(
-        0.5 * (cell.min[u] + cell.max[u]),
-        0.5 * (cell.min[v] + cell.max[v]),
-    );
-    let half = DVec2::new(
-        0.5 * (cell.max[u] - cell.min[u]),
-        0.5 * (cell.max[v] - cell.min[v]),
-    );
     for (k, part) in occ.parts.iter().enumerate() {
         let b = &part.bounds;
         let (near, far) = if positive {
@@ -714,19 +716,7 @@ fn summarize(
         if far_t <= eps {
             continue;
         }
-        // `plane_job` skips parts whose view from the cell's centre (depth `e` behind the face)
-        // misses the plane's frame `centre ± (half + tp)·extend`. Seen from there, that frame
-        // covers `(half + tp)·extend·(t + e)/(tp + e)` at distance t, at most
-        // `extend·(t + e)·max(1, half/e)` over all tp: a part outside that at its far side
-        // (where it is widest) reaches no frame. Slack for rounding.
-        let e = 0.5 * (cell.max[axis] - cell.min[axis]);
-        let widen = DVec2::new((half.x / e).max(1.0), (half.y / e).max(1.0));
-        let reach = widen * (far_t + e) * extend * (1.0 + 1e-9) + DVec2::splat(eps);
-        if b.max[u] < centre.x - reach.x
-            || b.min[u] > centre.x + reach.x
-            || b.max[v] < centre.y - reach.y
-            || b.min[v] > centre.y + reach.y
-        {
+        if !in_frustum(cell, axis, extend, eps, b, far_t) {
             continue;
         }
         // A solid the cell may be inside hides nothing for sure from there.
