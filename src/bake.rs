@@ -13,7 +13,7 @@ use crate::hdm::{Coverage, Hdm};
 use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::{
-    LeaveOut, Placement, PlaneSettings, Sliceable, Spacing, SweepInputs, SweepSettings, cell_jobs,
+    LeaveOut, Placement, PlaneSettings, Sliceable, Spacing, SweepInputs, SweepSettings,
     plan_directions, plane_job,
 };
 use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
@@ -392,17 +392,6 @@ impl<'a> Prepared<'a> {
         })
     }
 
-    /// The plane jobs of one cell (exposed for inspection and tests).
-    pub fn jobs(&self, cell: &Aabb) -> Vec<PlaneJob> {
-        cell_jobs(
-            &cell.to_f64(),
-            self.scene,
-            &self.occluders,
-            &self.sliceable,
-            &self.settings.plane_settings(self.sweep),
-        )
-    }
-
     /// Bakes one cell.
     ///
     /// # Errors
@@ -538,13 +527,18 @@ impl<'a> Prepared<'a> {
             let (dirs, jobs): (Vec<usize>, Vec<PlaneJob>) = jobs.into_iter().unzip();
             let maps = backend.render(&jobs)?;
             let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
-            for (((job, map), hdm), &d) in jobs.iter().zip(&maps).zip(&hdms).zip(&dirs) {
+            let ends: Vec<bool> = (jobs.iter().zip(&maps).zip(&dirs))
+                .map(|((job, map), &d)| ends_sweep(&plans[d], k, job, map))
+                .collect();
+            for ((((job, map), hdm), &d), &end) in
+                jobs.iter().zip(&maps).zip(&hdms).zip(&dirs).zip(&ends)
+            {
                 observe(job, map, hdm);
                 // In a sweep, boxes far behind this plane wait for later planes (the last plane,
                 // or one whose umbra covers its whole frame and so ends the direction, tests
                 // everything): the umbra is rarely finished this far in front of them, and
                 // testing every box on every plane is most of a forest's bake time.
-                let last = k + 1 == plans[d].distances.len() || ends_sweep(&plans[d], k, job, map);
+                let last = k + 1 == plans[d].distances.len() || end;
                 let after = if plans[d].is_sweep() && !last {
                     (
                         plans[d].slab_start(k),
@@ -566,10 +560,12 @@ impl<'a> Prepared<'a> {
             }
             planes += jobs.len();
             projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
-            for (((job, map), d), hdm) in jobs.into_iter().zip(maps).zip(dirs).zip(hdms) {
+            for ((((job, map), d), hdm), end) in
+                jobs.into_iter().zip(maps).zip(dirs).zip(hdms).zip(ends)
+            {
                 if plans[d].is_sweep() {
                     prev_hdm[d] = Some((job.frame.clone(), hdm));
-                    finished[d] = ends_sweep(&plans[d], k, &job, &map);
+                    finished[d] = end;
                     let m = Arc::new(map);
                     let bounds = crate::sweep::umbra_bounds(&job.frame, &m);
                     push_history(&mut hist[d], k, job.frame, m, bounds);

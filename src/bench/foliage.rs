@@ -783,16 +783,8 @@ impl FoliageBench {
 /// See [`collect`]; or a `--json` file that cannot be written.
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let bench = collect(args)?;
-    print!("{}", bench.tables());
-    let false_culls: usize = bench.rows.iter().map(|r| r.row.false_culls).sum();
-    if false_culls > 0 {
-        eprintln!("bench: {false_culls} FALSE CULLS (see above): the PVS is not conservative");
-    }
-    if let Some(path) = &args.json {
-        let bytes = serde_json::to_vec_pretty(&bench)?;
-        crate::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
-    }
-    Ok(())
+    let false_culls = bench.rows.iter().map(|r| r.row.false_culls).sum();
+    super::report(&bench.tables(), false_culls, &bench, args.json.as_deref())
 }
 
 #[cfg(test)]

@@ -733,13 +733,23 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         return foliage::run(args);
     }
     let bench = collect(args)?;
-    print!("{}", bench.table());
-    let false_culls: usize = bench.rows.iter().map(|r| r.false_culls).sum();
+    let false_culls = bench.rows.iter().map(|r| r.false_culls).sum();
+    report(&bench.table(), false_culls, &bench, args.json.as_deref())
+}
+
+/// Prints a bench's tables, warns about false culls, and writes `--json` if asked.
+pub(crate) fn report(
+    tables: &str,
+    false_culls: usize,
+    doc: &impl Serialize,
+    json: Option<&Path>,
+) -> anyhow::Result<()> {
+    print!("{tables}");
     if false_culls > 0 {
         eprintln!("bench: {false_culls} FALSE CULLS (see above): the PVS is not conservative");
     }
-    if let Some(path) = &args.json {
-        let bytes = serde_json::to_vec_pretty(&bench)?;
+    if let Some(path) = json {
+        let bytes = serde_json::to_vec_pretty(doc)?;
         crate::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
     }
     Ok(())

@@ -150,33 +150,6 @@ struct DirParts {
     hi: Vec<DVec2>,
 }
 
-/// Builds all plane jobs of one cell: up to `planes + slice_planes` per direction, skipping
-/// planes that no occluder reaches.
-pub fn cell_jobs(
-    cell: &DAabb,
-    scene: &Scene,
-    occ: &Occluders,
-    sliceable: &Sliceable,
-    settings: &PlaneSettings,
-) -> Vec<PlaneJob> {
-    let plans = plan_directions(cell, occ, sliceable, settings);
-    let mut jobs = Vec::new();
-    for plan in &plans {
-        for k in 0..plan.distances.len() {
-            jobs.extend(plane_job(
-                plan,
-                k,
-                scene,
-                sliceable,
-                settings,
-                &LeaveOut::NOTHING,
-                SweepInputs::default(),
-            ));
-        }
-    }
-    jobs
-}
-
 /// One direction of one cell: its occluder parts cut at the face and its plane distances
 /// (nearest first).
 pub struct DirectionPlan {
@@ -417,14 +390,6 @@ pub struct LeaveOut<'a> {
     pub hidden: &'a dyn Fn(&DAabb) -> bool,
 }
 
-impl LeaveOut<'_> {
-    /// Leaves nothing out.
-    pub const NOTHING: LeaveOut<'static> = LeaveOut {
-        object: &|_| false,
-        hidden: &|_| false,
-    };
-}
-
 /// The job of plane `k` of a direction, leaving out occluders (and slices) of objects for
 /// which `skip` is true — objects already proven hidden add no occlusion, and leaving an
 /// occluder out is always conservative. `None` when nothing projects onto the plane.
@@ -514,18 +479,11 @@ pub fn plane_job(
                 continue;
             }
             let solid = part_solid[i];
-            let clip = |pts: &[DVec3], f: &dyn Fn(DVec3) -> f64, out: &mut Vec<DVec3>| {
-                if solid {
-                    clip_solid(pts, f, out);
-                } else {
-                    clip_polygon(pts, f, out);
-                }
-            };
             buf.clear();
-            clip(pts, &|p| tp - dist(p), &mut buf);
+            clip_part(solid, pts, |p| tp - dist(p), &mut buf);
             if parts.near[i] < start && buf.len() >= 3 {
                 let front = std::mem::take(&mut buf);
-                clip(&front, &|p| dist(p) - start, &mut buf);
+                clip_part(solid, &front, |p| dist(p) - start, &mut buf);
             }
             if buf.len() >= 3 {
                 sources.push((true, pieces.len()));
@@ -537,12 +495,7 @@ pub fn plane_job(
             let solid = part_solid[i];
             for side in [1.0, -1.0] {
                 buf.clear();
-                let f = |p: DVec3| side * (tp - dist(p));
-                if solid {
-                    clip_solid(pts, f, &mut buf);
-                } else {
-                    clip_polygon(pts, f, &mut buf);
-                }
+                clip_part(solid, pts, |p| side * (tp - dist(p)), &mut buf);
                 if buf.len() >= 3 {
                     sources.push((true, pieces.len()));
                     pieces.push(buf.iter().copied());
@@ -792,10 +745,8 @@ fn beyond_face(
     if near > eps {
         buf.extend_from_slice(pts);
     } else {
-        match part.kind {
-            PartKind::Polygon { .. } => clip_polygon(pts, |p| dist(p) - eps, buf),
-            PartKind::Solid { .. } => clip_solid(pts, |p| dist(p) - eps, buf),
-        }
+        let solid = matches!(part.kind, PartKind::Solid { .. });
+        clip_part(solid, pts, |p| dist(p) - eps, buf);
         if buf.len() < 3 {
             return false;
         }
@@ -835,6 +786,15 @@ fn shrink_bent_polygon(
         *p = c + (*p - c) * f;
     }
     true
+}
+
+/// The part of a convex solid (`solid`) or convex polygon where `f ≥ 0`.
+fn clip_part(solid: bool, pts: &[DVec3], f: impl Fn(DVec3) -> f64, out: &mut Vec<DVec3>) {
+    if solid {
+        clip_solid(pts, f, out);
+    } else {
+        clip_polygon(pts, f, out);
+    }
 }
 
 /// Sutherland–Hodgman: the part of a convex polygon where `f ≥ 0`.

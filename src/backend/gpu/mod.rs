@@ -457,14 +457,7 @@ impl GpuBackend {
                 module: &module,
                 entry_point: Some("fs_main"),
                 compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::R32Float,
-                    blend: Some(wgpu::BlendState {
-                        color: blend,
-                        alpha: blend,
-                    }),
-                    write_mask: wgpu::ColorWrites::RED,
-                })],
+                targets: &[Some(depth_min_target(blend))],
             }),
             multiview_mask: None,
             cache: None,
@@ -1087,6 +1080,19 @@ impl GpuBackend {
     }
 }
 
+/// The colour target of every pass into a Depth Map: `R32Float`, red only, blended with
+/// `blend` (the `Min` operation).
+fn depth_min_target(blend: wgpu::BlendComponent) -> wgpu::ColorTargetState {
+    wgpu::ColorTargetState {
+        format: wgpu::TextureFormat::R32Float,
+        blend: Some(wgpu::BlendState {
+            color: blend,
+            alpha: blend,
+        }),
+        write_mask: wgpu::ColorWrites::RED,
+    }
+}
+
 /// The reprojections' pipeline (a fullscreen triangle into the `R32Float` Depth Map with
 /// `blend`) and its bind group layout: the windows (storage) and the summed-area table.
 fn reproject_pipeline(
@@ -1148,14 +1154,7 @@ fn reproject_pipeline(
             module: &module,
             entry_point: Some("fs_reproject"),
             compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: wgpu::TextureFormat::R32Float,
-                blend: Some(wgpu::BlendState {
-                    color: blend,
-                    alpha: blend,
-                }),
-                write_mask: wgpu::ColorWrites::RED,
-            })],
+            targets: &[Some(depth_min_target(blend))],
         }),
         multiview_mask: None,
         cache: None,
