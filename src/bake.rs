@@ -612,7 +612,7 @@ impl<'a> Prepared<'a> {
                     for j in 0..node.prim_count {
                         let o = bvh.primitive_indices[(node.first_index + j) as usize] as usize;
                         if !hidden[o] {
-                            parts.extend(self.object_parts[o].clone());
+                            parts.extend_from_slice(&self.object_parts[o]);
                         }
                     }
                 } else {
@@ -686,6 +686,13 @@ impl<'a> Prepared<'a> {
                                     ) == Coverage::Hidden;
                                 }
                                 all &= piece_hidden[pi];
+                                if !all {
+                                    // A piece left visible here: the object stays visible on
+                                    // this plane, and its other pieces are tried on later
+                                    // planes (testing them all here culled 0.2 points more
+                                    // of the forests' objects for a fifth more bake time).
+                                    break;
+                                }
                             }
                             hidden[o] |= all;
                         }
