@@ -206,8 +206,10 @@ pub struct Prepared<'a> {
 }
 
 /// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
-/// `SWEEP_TEST_REACH · t` (the last plane tests all).
-pub const SWEEP_TEST_REACH: f64 = 8.0;
+/// `SWEEP_TEST_REACH · t` (the last plane tests all). Measured on 5 path cells: reach 4, 8,
+/// 16 and unbounded culled 67.0, 71.1, 72.0 and 72.1 % of the paper-size forest, with 16 as
+/// fast as 8 and unbounded a fifth slower; the coarse forest gained 0.4 points from 8 to 16.
+pub const SWEEP_TEST_REACH: f64 = 16.0;
 
 /// Objects with at least this many triangles are also tested as pieces.
 pub const PIECE_MIN_TRIANGLES: usize = 16;

@@ -238,7 +238,7 @@ fn the_sweep_is_chosen_for_small_occluders_only() {
 #[test]
 fn a_wall_filling_the_frame_ends_the_sweep_and_hides_what_is_far_behind() {
     // Far beyond the distance up to which a sweep plane tests boxes before the last plane
-    // (8 plane distances): the plane whose umbra fills its frame must test everything.
+    // (16 plane distances): the plane whose umbra fills its frame must test everything.
     let objects = vec![
         cube("wall", [-200.0, -200.0, 5.0], [200.0, 200.0, 5.5]),
         cube(TARGET, [-1.0, -1.0, 150.0], [1.0, 1.0, 151.0]),
