@@ -6,12 +6,6 @@ use std::process::ExitCode;
 mod cli_bake;
 mod cli_inspect;
 
-/// mimalloc keeps freed pages for reuse: a sweep allocates and frees hundreds of 256 KiB+
-/// Depth Maps, pyramids and summed-area tables per cell, which the system allocator hands back
-/// to the kernel (mmap/munmap) each time — a tenth of a forest bake went to zeroing fresh pages.
-#[global_allocator]
-static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 #[derive(Parser, Debug)]
 #[command(
     name = "umbrasweep",
