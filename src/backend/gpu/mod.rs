@@ -633,9 +633,16 @@ impl GpuBackend {
         Ok(())
     }
 
-    fn new_target(&self, res: u32) -> Target {
+    /// A `res`² single-channel 2D texture and its view, labelled `name res²`.
+    fn square_texture(
+        &self,
+        name: &str,
+        res: u32,
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> (wgpu::Texture, wgpu::TextureView) {
         let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(&format!("depth map {res}²")),
+            label: Some(&format!("{name} {res}²")),
             size: wgpu::Extent3d {
                 width: res,
                 height: res,
@@ -644,14 +651,24 @@ impl GpuBackend {
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::R32Float,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            format,
+            usage,
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor {
-            label: Some(&format!("depth map {res}² view")),
+            label: Some(&format!("{name} {res}² view")),
             ..Default::default()
         });
+        (texture, view)
+    }
+
+    fn new_target(&self, res: u32) -> Target {
+        let (texture, view) = self.square_texture(
+            "depth map",
+            res,
+            wgpu::TextureFormat::R32Float,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
         let padded_row = (res * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(&format!("depth map {res}² read-back")),
@@ -668,24 +685,12 @@ impl GpuBackend {
     }
 
     fn new_sweep_table(&self, res: u32) -> SweepTable {
-        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(&format!("reprojection table {res}²")),
-            size: wgpu::Extent3d {
-                width: res,
-                height: res,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::R32Uint,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&wgpu::TextureViewDescriptor {
-            label: Some(&format!("reprojection table {res}² view")),
-            ..Default::default()
-        });
+        let (texture, view) = self.square_texture(
+            "reprojection table",
+            res,
+            wgpu::TextureFormat::R32Uint,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        );
         SweepTable { texture, view }
     }
 
