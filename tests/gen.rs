@@ -290,6 +290,50 @@ fn bushy_forest_leaves_reach_eye_level_but_trunks_stay_off_the_path() {
     }
 }
 
+/// Fraction of each tree's leaves whose centre lies in the lowest quarter of that tree's
+/// leaf-centre heights, over all trees.
+fn low_leaf_fraction(g: &Generated, trees: usize) -> f64 {
+    let (mut low, mut all) = (0usize, 0usize);
+    for t in 0..trees {
+        let mut ys: Vec<f32> = Vec::new();
+        for obj in g
+            .objects
+            .iter()
+            .filter(|x| x.name.starts_with(&format!("tree{t}_crown")))
+        {
+            ys.extend(
+                obj.triangles()
+                    .map(|(p, _)| (p[0].y + p[1].y + p[2].y) / 3.0),
+            );
+        }
+        let lo = ys.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = ys.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        low += ys.iter().filter(|&&y| y < lo + 0.25 * (hi - lo)).count();
+        all += ys.len();
+    }
+    low as f64 / all as f64
+}
+
+#[test]
+fn cylinder_crowns_keep_their_width_down_to_the_base_and_ellipsoids_do_not() {
+    use umbrasweep::generate::CrownShape;
+    let o = |shape| ForestOptions {
+        trees: 10,
+        leaves: 1000,
+        crown_shape: shape,
+        ..small_forest()
+    };
+    assert_eq!(ForestOptions::coarse().crown_shape, CrownShape::Cylinder);
+    // Uniform in a cylinder, a quarter of the leaves are in the lowest quarter of its height;
+    // in an ellipsoid, 5/32 (the cap below -1/2 of a unit ball). Both a little less here: the
+    // leaves' centroids scatter a little beyond the range of their centres.
+    let cylinder = low_leaf_fraction(&forest(&o(CrownShape::Cylinder)).unwrap(), 10);
+    let ellipsoid = low_leaf_fraction(&forest(&o(CrownShape::Ellipsoid)).unwrap(), 10);
+    assert!((0.19..0.27).contains(&cylinder), "cylinder {cylinder}");
+    assert!((0.10..0.17).contains(&ellipsoid), "ellipsoid {ellipsoid}");
+    assert!(cylinder > 1.3 * ellipsoid, "{cylinder} vs {ellipsoid}");
+}
+
 #[test]
 fn coarse_and_fine_recipes_match_their_description() {
     let c = ForestOptions::coarse();

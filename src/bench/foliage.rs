@@ -10,6 +10,10 @@
 //!
 //! * `coarse`: [`ForestOptions::coarse`] (1,500 trees, leaves ~1.5 across, path cells
 //!   1×1×1), `--sweep` and `--no-sweep`.
+//! * `ellipsoid`: the coarse forest with ellipsoid crowns (`gen forest --preset coarse
+//!   --crown-shape ellipsoid`, the coarse recipe before session 4), `--sweep` and
+//!   `--no-sweep`: its crowns leave an open band below eye level, so rays see about twice as
+//!   many objects.
 //! * `fine`: [`ForestOptions::fine`] (leaves ~0.5 across) with 4×2×4 cells (and an 8-unit
 //!   path, the least round width such cells fit in, as `gen forest --path-width` would need),
 //!   `--sweep`, `--sweep --subcell 2|1|0.5` (on `--foliage-subcell-cells` of the cells, spread
@@ -38,7 +42,7 @@ use crate::backend::RasterBackend;
 use crate::backend::cpu::CpuBackend;
 use crate::backend::gpu::GpuBackend;
 use crate::bake::{BakeSettings, SweepChoice, bake};
-use crate::generate::{ForestOptions, TreeModel, forest, forest_of_models};
+use crate::generate::{CrownShape, ForestOptions, TreeModel, forest, forest_of_models};
 use crate::geom::Aabb;
 use crate::project::planes::{Placement, Spacing};
 use crate::scene::Scene;
@@ -50,7 +54,14 @@ use std::fmt::Write as _;
 use std::time::Instant;
 
 /// The studies, in the order they run and print.
-pub const STUDIES: [&str; 5] = ["coarse", "fine", "params", "paper", "jacaranda"];
+pub const STUDIES: [&str; 6] = [
+    "coarse",
+    "ellipsoid",
+    "fine",
+    "params",
+    "paper",
+    "jacaranda",
+];
 /// Cells per forest unless `--cells`.
 pub const DEFAULT_CELLS: usize = 10;
 /// Validation rays per cell unless `--rays` (fewer than the scene bench's 1,000,000: the
@@ -79,6 +90,7 @@ const FINE_PATH_WIDTH: f32 = 8.0;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Forest {
     Coarse,
+    CoarseEllipsoid,
     Fine,
     Paper,
     Jacaranda,
@@ -87,6 +99,7 @@ enum Forest {
 impl Forest {
     fn of(study: &str) -> Forest {
         match study {
+            "ellipsoid" => Forest::CoarseEllipsoid,
             "fine" => Forest::Fine,
             "paper" => Forest::Paper,
             "jacaranda" => Forest::Jacaranda,
@@ -97,6 +110,7 @@ impl Forest {
     fn name(self) -> &'static str {
         match self {
             Forest::Coarse => "coarse_forest",
+            Forest::CoarseEllipsoid => "coarse_forest_ellipsoid",
             Forest::Fine => "fine_forest",
             Forest::Paper => "paper_forest",
             Forest::Jacaranda => "jacaranda_forest",
@@ -136,7 +150,9 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
     let on = || swept(SweepChoice::On);
     let off = || swept(SweepChoice::Off);
     match study {
-        "coarse" | "jacaranda" => vec![variant("--sweep", on()), variant("--no-sweep", off())],
+        "coarse" | "ellipsoid" | "jacaranda" => {
+            vec![variant("--sweep", on()), variant("--no-sweep", off())]
+        }
         "fine" => {
             let mut v = vec![variant("--sweep", on())];
             for s in [2.0, 1.0, 0.5] {
@@ -398,9 +414,13 @@ fn build(
     let seed = args.seed;
     let cells = Some(plan.cells);
     let (g, about) = match which {
-        Forest::Coarse | Forest::Fine | Forest::Paper => {
+        Forest::Coarse | Forest::CoarseEllipsoid | Forest::Fine | Forest::Paper => {
             let base = match which {
                 Forest::Coarse => ForestOptions::coarse(),
+                Forest::CoarseEllipsoid => ForestOptions {
+                    crown_shape: CrownShape::Ellipsoid,
+                    ..ForestOptions::coarse()
+                },
                 Forest::Fine => ForestOptions {
                     cell_size: FINE_CELL,
                     path_width: FINE_PATH_WIDTH,
@@ -419,18 +439,22 @@ fn build(
                 ..base
             };
             let preset = match which {
-                Forest::Coarse => "coarse",
+                Forest::Coarse | Forest::CoarseEllipsoid => "coarse",
                 Forest::Fine => "fine",
                 _ => "paper",
             };
             let c = o.cell_size;
             let about = format!(
-                "`ForestOptions::{preset}()`: {} trees × {} leaves {}–{} across; cells {}×{}×{} on \
-                 the path{}",
+                "`ForestOptions::{preset}()`: {} trees × {} leaves {}–{} across in {} crowns; cells \
+                 {}×{}×{} on the path{}",
                 o.trees,
                 o.leaves,
                 o.leaf_size[0],
                 o.leaf_size[1],
+                match o.crown_shape {
+                    CrownShape::Cylinder => "cylinder",
+                    CrownShape::Ellipsoid => "ellipsoid",
+                },
                 c.x,
                 c.y,
                 c.z,
@@ -802,6 +826,7 @@ mod tests {
     fn every_study_has_its_variants() {
         let labels = |s| -> Vec<String> { variants(s, 3).into_iter().map(|v| v.label).collect() };
         assert_eq!(labels("coarse"), ["--sweep", "--no-sweep"]);
+        assert_eq!(labels("ellipsoid"), ["--sweep", "--no-sweep"]);
         assert_eq!(labels("jacaranda"), ["--sweep", "--no-sweep"]);
         assert_eq!(labels("paper"), ["--sweep"]);
         assert_eq!(

@@ -94,7 +94,7 @@ pub struct BenchArgs {
     /// backend unless --backend gpu; see docs/bench.md).
     #[arg(long, conflicts_with_all = ["quick", "gpu_cells", "scenes"])]
     pub foliage: bool,
-    /// Only these foliage studies (comma-separated): coarse, fine, params, paper, jacaranda.
+    /// Only these foliage studies (comma-separated): coarse, ellipsoid, fine, params, paper, jacaranda.
     #[arg(long, value_name = "LIST", value_delimiter = ',', requires = "foliage")]
     pub foliage_studies: Option<Vec<String>>,
     /// Cells baked by the fine forest's sub-cell variants (spread over its --cells).

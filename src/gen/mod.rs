@@ -22,7 +22,8 @@
 //! trunk, each with `leaves / N` leaves, ±1). Leaves are separate triangles (or planar quads
 //! with `--leaf-quads`) in uniformly random orientations; a leaf's size is its diameter (the
 //! longest distance between two of its corners), uniform in `--leaf-size MIN,MAX`
-//! (`--leaf-size S` means `0.8·S,1.2·S`). Crowns are ellipsoids of radius `--crown-radius`
+//! (`--leaf-size S` means `0.8·S,1.2·S`). Crowns are vertical cylinders (`--crown-shape
+//! cylinder`, the default) or ellipsoids (`--crown-shape ellipsoid`) of radius `--crown-radius`
 //! and vertical extent `--crown-height` starting at height `--crown-base`; every leaf lies
 //! inside that box (radius and height shrink by up to `size_jitter`, 10 %, per tree). The
 //! forest is a square of side `--extent`, or of `--area-per-tree` m² per tree (default 17);
@@ -102,7 +103,7 @@ mod write;
 
 pub use boxfield::{BoxfieldOptions, boxfield};
 pub use city::{CityOptions, city};
-pub use forest::{ForestOptions, TreeModel, forest, forest_of_models};
+pub use forest::{CrownShape, ForestOptions, TreeModel, forest, forest_of_models};
 pub use write::{mtl_path, write_obj};
 
 use crate::geom::Aabb;
@@ -402,6 +403,15 @@ pub enum ForestPreset {
     Demo,
 }
 
+/// `--crown-shape`: see [`CrownShape`].
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum CrownShapeArg {
+    /// Round at the top and bottom: an open band below eye level between the trunks.
+    Ellipsoid,
+    /// A vertical cylinder: the canopy reaches down to --crown-base at full width.
+    Cylinder,
+}
+
 /// Options of `umbrasweep gen forest` (unset values come from --preset or the defaults).
 #[derive(clap::Args, Debug, Clone)]
 pub struct ForestArgs {
@@ -431,6 +441,9 @@ pub struct ForestArgs {
     /// Horizontal radius of the crowns (default 2.2).
     #[arg(long)]
     pub crown_radius: Option<f32>,
+    /// Volume the leaves of a crown fill (default cylinder).
+    #[arg(long, value_enum)]
+    pub crown_shape: Option<CrownShapeArg>,
     /// Split each crown into N objects (angular sectors around the trunk) (default 4).
     #[arg(long, value_name = "N")]
     pub crown_split: Option<u32>,
@@ -592,6 +605,7 @@ impl ForestArgs {
                 ("--crown-height", self.crown_height.is_some()),
                 ("--crown-base", self.crown_base.is_some()),
                 ("--crown-radius", self.crown_radius.is_some()),
+                ("--crown-shape", self.crown_shape.is_some()),
                 ("--crown-split", self.crown_split.is_some()),
                 ("--trunk-radius", self.trunk_radius.is_some()),
                 ("--trunk-sides", self.trunk_sides.is_some()),
@@ -618,6 +632,12 @@ impl ForestArgs {
         set(&mut o.crown_height, self.crown_height);
         set(&mut o.crown_base, self.crown_base);
         set(&mut o.crown_radius, self.crown_radius);
+        if let Some(shape) = self.crown_shape {
+            o.crown_shape = match shape {
+                CrownShapeArg::Ellipsoid => CrownShape::Ellipsoid,
+                CrownShapeArg::Cylinder => CrownShape::Cylinder,
+            };
+        }
         set(&mut o.crown_split, self.crown_split);
         set(&mut o.trunk_radius, self.trunk_radius);
         set(&mut o.trunk_sides, self.trunk_sides);
