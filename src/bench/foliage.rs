@@ -11,7 +11,7 @@
 //! * `coarse`: [`ForestOptions::coarse`] (1,500 trees, leaves ~1.5 across, path cells
 //!   1×1×1), `--sweep` and `--no-sweep`.
 //! * `ellipsoid`: the coarse forest with ellipsoid crowns (`gen forest --preset coarse
-//!   --crown-shape ellipsoid`, the coarse recipe before session 4), `--sweep` and
+//!   --crown-shape ellipsoid`, the presets' crowns until November 2026), `--sweep` and
 //!   `--no-sweep`: its crowns leave an open band below eye level, so rays see about twice as
 //!   many objects.
 //! * `fine`: [`ForestOptions::fine`] (leaves ~0.5 across) with 4×2×4 cells (and an 8-unit

@@ -68,15 +68,16 @@ pub struct ForestOptions {
     pub model_split: u32,
 }
 
-/// The volume a procedural crown's leaves fill (of radius `crown_radius`, height `crown_height`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// The volume a procedural crown's leaves fill (of radius `crown_radius`, height
+/// `crown_height`); `gen forest --crown-shape`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum CrownShape {
+    /// A vertical cylinder: the canopy reaches down to --crown-base at its full width.
+    #[default]
+    Cylinder,
     /// An ellipsoid: round at the top and bottom, so the crowns leave an open band below eye
     /// level between the trunks.
-    #[default]
     Ellipsoid,
-    /// A vertical cylinder: the canopy reaches down to `crown_base` at its full width.
-    Cylinder,
 }
 
 impl ForestOptions {

@@ -403,15 +403,6 @@ pub enum ForestPreset {
     Demo,
 }
 
-/// `--crown-shape`: see [`CrownShape`].
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum CrownShapeArg {
-    /// Round at the top and bottom: an open band below eye level between the trunks.
-    Ellipsoid,
-    /// A vertical cylinder: the canopy reaches down to --crown-base at full width.
-    Cylinder,
-}
-
 /// Options of `umbrasweep gen forest` (unset values come from --preset or the defaults).
 #[derive(clap::Args, Debug, Clone)]
 pub struct ForestArgs {
@@ -443,7 +434,7 @@ pub struct ForestArgs {
     pub crown_radius: Option<f32>,
     /// Volume the leaves of a crown fill (default cylinder).
     #[arg(long, value_enum)]
-    pub crown_shape: Option<CrownShapeArg>,
+    pub crown_shape: Option<CrownShape>,
     /// Split each crown into N objects (angular sectors around the trunk) (default 4).
     #[arg(long, value_name = "N")]
     pub crown_split: Option<u32>,
@@ -632,12 +623,7 @@ impl ForestArgs {
         set(&mut o.crown_height, self.crown_height);
         set(&mut o.crown_base, self.crown_base);
         set(&mut o.crown_radius, self.crown_radius);
-        if let Some(shape) = self.crown_shape {
-            o.crown_shape = match shape {
-                CrownShapeArg::Ellipsoid => CrownShape::Ellipsoid,
-                CrownShapeArg::Cylinder => CrownShape::Cylinder,
-            };
-        }
+        set(&mut o.crown_shape, self.crown_shape);
         set(&mut o.crown_split, self.crown_split);
         set(&mut o.trunk_radius, self.trunk_radius);
         set(&mut o.trunk_sides, self.trunk_sides);
