@@ -18,6 +18,7 @@ use crate::project::planes::{
 };
 use crate::pvs::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
 use crate::scene::Scene;
+use crate::sweep::OpenSides;
 use obvhs::bvh2::Bvh2;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -203,6 +204,9 @@ pub struct Prepared<'a> {
     piece_boxes: Vec<DAabb>,
     /// Per object, its occluder parts (indices into `occluders.parts`).
     object_parts: Vec<Vec<u32>>,
+    /// A box holding every object: planes' rectangles stop where no ray toward it passes
+    /// ([`crate::project::planes::DirectionPlan::relevant_rect`]).
+    bounds: DAabb,
 }
 
 /// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
@@ -380,7 +384,14 @@ impl<'a> Prepared<'a> {
         for (i, p) in occluders.parts.iter().enumerate() {
             object_parts[p.object as usize].push(i as u32);
         }
+        let bounds = scene
+            .objects
+            .iter()
+            .filter(|o| !o.bounds.is_empty())
+            .fold(Aabb::EMPTY, |b, o| b.union(&o.bounds))
+            .to_f64();
         Ok(Prepared {
+            bounds,
             scene,
             occluders,
             sliceable,
@@ -474,7 +485,7 @@ impl<'a> Prepared<'a> {
         // Round k renders the k-th plane of every direction (nearest first); occluders of
         // objects hidden by earlier rounds are left out of later ones.
         for k in 0..rounds {
-            let jobs: Vec<(usize, PlaneJob)> = plans
+            let jobs: Vec<(usize, (PlaneJob, OpenSides, Rect))> = plans
                 .par_iter()
                 .enumerate()
                 .filter(|(d, p)| k < p.distances.len() && !finished[*d])
@@ -482,9 +493,10 @@ impl<'a> Prepared<'a> {
                     // The rectangle holds what the previous plane's umbra may carry (older
                     // planes' umbra reaching further out is left out: it would cost
                     // resolution everywhere for a few pixels at the edge).
+                    let relevant = p.relevant_rect(k, &self.bounds)?;
                     let carried = hist[d]
                         .last()
-                        .and_then(|e| crate::sweep::carried_rect(&e.1, e.3?, p.distance(k)));
+                        .and_then(|e| crate::sweep::carried_rect(&e.1, e.3?, e.4, p.distance(k)));
                     let leave_out = LeaveOut {
                         object: &|o| hidden[o as usize],
                         // Occluders the previous plane already proves hidden add nothing.
@@ -507,12 +519,20 @@ impl<'a> Prepared<'a> {
                         &leave_out,
                         SweepInputs {
                             carried,
+                            relevant: Some(relevant),
                             slab: slab.as_ref(),
                         },
                     )?;
                     if p.is_sweep() && carried.is_some() {
                         job.reproject = reprojections(&hist[d], &job.frame, p.distance(k));
                     }
+                    let (f, (r0, r1)) = (&job.frame, relevant);
+                    let open = [
+                        f.rect_min.x == r0.x,
+                        f.rect_min.y == r0.y,
+                        f.rect_max.x == r1.x,
+                        f.rect_max.y == r1.y,
+                    ];
                     if p.is_sweep()
                         && job.occluders.is_empty()
                         && job.slices.is_empty()
@@ -520,17 +540,20 @@ impl<'a> Prepared<'a> {
                     {
                         return None;
                     }
-                    Some((d, job))
+                    Some((d, (job, open, relevant)))
                 })
                 .collect();
             if jobs.is_empty() {
                 continue;
             }
-            let (dirs, jobs): (Vec<usize>, Vec<PlaneJob>) = jobs.into_iter().unzip();
+            let (dirs, jobs): (Vec<usize>, Vec<(PlaneJob, OpenSides, Rect)>) =
+                jobs.into_iter().unzip();
+            let (jobs, extra): (Vec<PlaneJob>, Vec<(OpenSides, Rect)>) =
+                jobs.into_iter().map(|(j, o, r)| (j, (o, r))).unzip();
             let maps = backend.render(&jobs)?;
             let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
-            let ends: Vec<bool> = (jobs.iter().zip(&maps).zip(&dirs))
-                .map(|((job, map), &d)| ends_sweep(&plans[d], k, job, map))
+            let ends: Vec<bool> = (jobs.iter().zip(&maps).zip(&dirs).zip(&extra))
+                .map(|(((job, map), &d), e)| ends_sweep(&plans[d], k, job, map, e.1))
                 .collect();
             for ((((job, map), hdm), &d), &end) in
                 jobs.iter().zip(&maps).zip(&hdms).zip(&dirs).zip(&ends)
@@ -562,15 +585,20 @@ impl<'a> Prepared<'a> {
             }
             planes += jobs.len();
             projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
-            for ((((job, map), d), hdm), end) in
-                jobs.into_iter().zip(maps).zip(dirs).zip(hdms).zip(ends)
+            for (((((job, map), d), hdm), end), (open, _)) in jobs
+                .into_iter()
+                .zip(maps)
+                .zip(dirs)
+                .zip(hdms)
+                .zip(ends)
+                .zip(extra)
             {
                 if plans[d].is_sweep() {
                     prev_hdm[d] = Some((job.frame.clone(), hdm));
                     finished[d] = end;
                     let m = Arc::new(map);
                     let bounds = crate::sweep::umbra_bounds(&job.frame, &m);
-                    push_history(&mut hist[d], k, job.frame, m, bounds);
+                    push_history(&mut hist[d], (k, job.frame, m, bounds, open));
                 }
             }
         }
@@ -789,33 +817,27 @@ fn ends_sweep(
     k: usize,
     job: &PlaneJob,
     map: &DepthMap,
+    relevant: Rect,
 ) -> bool {
+    // The frame cut to the relevant region, computed as `plane_job` cuts the rectangle.
     plan.is_sweep()
-        && job.frame.rect_min == plan.frame_min(k)
-        && job.frame.rect_max == plan.frame_max(k)
+        && job.frame.rect_min == plan.frame_min(k).max(relevant.0)
+        && job.frame.rect_max == plan.frame_max(k).min(relevant.1)
         && map.depth.iter().all(|&x| x <= 0.0)
 }
 
-/// A rendered sweep plane kept for later reprojections: its index in the sweep, frame, map and
-/// the bounds of its umbra.
-type Rendered = (
-    usize,
-    PlaneFrame,
-    Arc<DepthMap>,
-    Option<(glam::DVec2, glam::DVec2)>,
-);
+/// A rectangle on a plane, world `(u, v)`: lower and upper corners.
+type Rect = (glam::DVec2, glam::DVec2);
+
+/// A rendered sweep plane kept for later reprojections: its index in the sweep, frame, map,
+/// the bounds of its umbra and its rectangle's open sides.
+type Rendered = (usize, PlaneFrame, Arc<DepthMap>, Option<Rect>, OpenSides);
 
 /// Adds plane `k` to a direction's history, keeping only what [`reprojections`] may use: the
 /// newest plane and, for every level `m ≥ 1`, the newest plane whose index is a multiple of
 /// `2^m` (a skip list, `O(log planes)` maps).
-fn push_history(
-    history: &mut Vec<Rendered>,
-    k: usize,
-    frame: PlaneFrame,
-    map: Arc<DepthMap>,
-    bounds: Option<(glam::DVec2, glam::DVec2)>,
-) {
-    history.push((k, frame, map, bounds));
+fn push_history(history: &mut Vec<Rendered>, plane: Rendered) {
+    history.push(plane);
     let newest_at = |level: u32, h: &[Rendered]| {
         h.iter()
             .rposition(|e| e.0 % (1usize << level) == 0)
@@ -840,9 +862,9 @@ fn reprojections(history: &[Rendered], to: &PlaneFrame, distance: f64) -> Vec<Re
         .iter()
         .rev()
         .filter(|e| {
-            e.3.is_some_and(|b| crate::sweep::carried_rect(&e.1, b, distance).is_some())
+            e.3.is_some_and(|b| crate::sweep::carried_rect(&e.1, b, e.4, distance).is_some())
         })
-        .map(|e| Reprojection::new(&e.1, to, e.2.clone()))
+        .map(|e| Reprojection::with_open_sides(&e.1, to, e.2.clone(), e.4))
         .collect()
 }
 

@@ -235,6 +235,50 @@ impl DirectionPlan {
         (center - half, center + half)
     }
 
+    /// The region of plane `k` (world `(u, v)`) that matters for what lies beyond its slab:
+    /// the standard rectangle ([`crate::project::occludee::standard_rect`]) of `bounds` — a
+    /// box holding every object — cut to the part beyond the slab's start, grown by a rounding
+    /// margin. Every line from the cell through a point of that part crosses the plane inside
+    /// it, so a ray crossing the plane outside it meets no object beyond the slab's start: the
+    /// plane's rectangle can stop there (finer pixels where the scene is flat, as a forest's
+    /// canopy is), and a reprojection from this plane may treat what lies outside it as
+    /// occluded ([`crate::sweep::OpenSides`]). `None` when nothing lies beyond the slab's start.
+    pub fn relevant_rect(&self, k: usize, bounds: &DAabb) -> Option<(DVec2, DVec2)> {
+        let (a, s) = (self.axis, if self.positive { 1.0 } else { -1.0 });
+        let start = self.face + s * self.slab_start(k).max(self.eps);
+        let mut b = *bounds;
+        if self.positive {
+            b.min[a] = b.min[a].max(start);
+        } else {
+            b.max[a] = b.max[a].min(start);
+        }
+        if b.is_empty() || b.min[a] >= b.max[a] {
+            return None;
+        }
+        let frame = PlaneFrame {
+            cell: self.cell,
+            axis: a,
+            positive: self.positive,
+            position: self.face + s * self.distances[k],
+            rect_min: DVec2::ZERO,
+            rect_max: DVec2::ONE,
+            resolution: 1,
+        };
+        let (lo, hi) = crate::project::occludee::standard_rect(&frame, &b);
+        // Rounding: a relative margin far above the few f64 operations' error.
+        let (u, v) = ((a + 1) % 3, (a + 2) % 3);
+        let scale = [u, v]
+            .iter()
+            .map(|&x| bounds.min[x].abs().max(bounds.max[x].abs()))
+            .fold(
+                self.distances[k] + (self.cell.max - self.cell.min).max_element(),
+                f64::max,
+            );
+        let m = DVec2::splat(1e-9 * scale);
+        (lo.x.is_finite() && hi.x.is_finite() && lo.y.is_finite() && hi.y.is_finite())
+            .then_some((lo - m, hi + m))
+    }
+
     /// In a sweep, the distance where plane `k`'s slab begins (the previous plane; 0 for the
     /// first); 0 otherwise.
     pub fn slab_start(&self, k: usize) -> f64 {
@@ -378,6 +422,9 @@ pub struct SweepInputs<'a> {
     /// The region the reprojections may set ([`crate::sweep::carried_rect`]): the plane's
     /// rectangle holds it.
     pub carried: Option<(DVec2, DVec2)>,
+    /// The region that matters for what lies beyond the slab ([`DirectionPlan::relevant_rect`]):
+    /// the plane's rectangle stops there.
+    pub relevant: Option<(DVec2, DVec2)>,
     /// The slab's parts ([`gather_slab`]), which replace the direction's.
     pub slab: Option<&'a SlabParts>,
 }
@@ -402,7 +449,11 @@ pub fn plane_job(
     leave_out: &LeaveOut,
     sweep: SweepInputs,
 ) -> Option<PlaneJob> {
-    let SweepInputs { carried, slab } = sweep;
+    let SweepInputs {
+        carried,
+        relevant,
+        slab,
+    } = sweep;
     let skip = leave_out.object;
     let cell = &plan.cell;
     let (axis, positive) = (plan.axis, plan.positive);
@@ -548,6 +599,11 @@ pub fn plane_job(
         // In a sweep the rectangle also holds what the reprojection may carry onto it.
         rmin = rmin.min(lo.max(fmin));
         rmax = rmax.max(hi.min(fmax));
+    }
+    if let Some((lo, hi)) = relevant {
+        // Nothing beyond the slab is seen outside this region: no need for pixels there.
+        rmin = rmin.max(lo);
+        rmax = rmax.min(hi);
     }
     if !(rmin.x < rmax.x && rmin.y < rmax.y) {
         return None;
@@ -1109,6 +1165,105 @@ mod tests {
         let minx = out.iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
         assert_eq!(minx, 0.5);
         assert!(out.len() >= 8);
+    }
+
+    /// Every segment from a point of the cell to a point of the bounds beyond a plane's slab
+    /// start crosses the plane (or its line does) inside the relevant rectangle, for every
+    /// direction; and a plane beyond everything has none.
+    #[test]
+    fn relevant_rect_holds_every_line_from_the_cell_to_what_lies_beyond_the_slab() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        let cell = DAabb {
+            min: DVec3::new(0.0, 1.2, 0.0),
+            max: DVec3::new(1.0, 2.2, 1.0),
+        };
+        let bounds = DAabb {
+            min: DVec3::new(-40.0, 0.0, -30.0),
+            max: DVec3::new(50.0, 4.8, 35.0),
+        };
+        let mut checked = 0;
+        for axis in 0..3 {
+            for positive in [true, false] {
+                let face = if positive {
+                    cell.max[axis]
+                } else {
+                    cell.min[axis]
+                };
+                let plan = DirectionPlan {
+                    cell,
+                    axis,
+                    positive,
+                    face,
+                    parts: DirParts::default(),
+                    part_object: Vec::new(),
+                    part_solid: Vec::new(),
+                    distances: vec![0.5, 2.0, 7.0, 20.0, 100.0],
+                    extend: 1.5,
+                    sweep: true,
+                    eps: 1e-9,
+                };
+                let sg = if positive { 1.0 } else { -1.0 };
+                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                for k in 0..plan.distances.len() {
+                    let start = face + sg * plan.slab_start(k);
+                    let beyond = |p: DVec3| sg * (p[axis] - start) > 0.0;
+                    let Some((lo, hi)) = plan.relevant_rect(k, &bounds) else {
+                        // Nothing of the bounds lies beyond the slab's start.
+                        let far = if positive {
+                            bounds.max[axis]
+                        } else {
+                            bounds.min[axis]
+                        };
+                        assert!(
+                            sg * (far - start) <= 0.0,
+                            "axis {axis} {positive} plane {k}"
+                        );
+                        continue;
+                    };
+                    // Beyond the first slab (which starts at the face, where lines from the
+                    // cell spread without bound) the rectangle is bounded.
+                    if k > 0 {
+                        assert!(hi.x - lo.x < 1e4 && hi.y - lo.y < 1e4, "{lo} {hi}");
+                    }
+                    let position = face + sg * plan.distances[k];
+                    for _ in 0..2000 {
+                        let e = cell.min
+                            + (cell.max - cell.min) * DVec3::from(rng.random::<[f64; 3]>());
+                        let p = bounds.min
+                            + (bounds.max - bounds.min) * DVec3::from(rng.random::<[f64; 3]>());
+                        if !beyond(p) {
+                            continue;
+                        }
+                        let t = (position - e[axis]) / (p[axis] - e[axis]);
+                        let q = e + (p - e) * t;
+                        let q = DVec2::new(q[u], q[v]);
+                        assert!(
+                            q.x >= lo.x && q.y >= lo.y && q.x <= hi.x && q.y <= hi.y,
+                            "axis {axis} {positive} plane {k}: {q} outside {lo}..{hi}"
+                        );
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked > 15_000, "{checked}");
+        // Upward (y+), plane 3's slab starts at 5.2, above the scene's top (4.8).
+        let up = DirectionPlan {
+            cell,
+            axis: 1,
+            positive: true,
+            face: 2.2,
+            parts: DirParts::default(),
+            part_object: Vec::new(),
+            part_solid: Vec::new(),
+            distances: vec![1.0, 2.0, 3.0, 4.0],
+            extend: 1.5,
+            sweep: true,
+            eps: 1e-9,
+        };
+        assert!(up.relevant_rect(2, &bounds).is_some());
+        assert!(up.relevant_rect(3, &bounds).is_none());
     }
 
     #[test]

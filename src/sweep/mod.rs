@@ -22,7 +22,12 @@
 //!
 //! The target pixel is set when every source pixel the window overlaps is set, the window being
 //! rounded outward to whole pixels; a window leaving the source rectangle sets nothing (what lies
-//! outside is unknown). The window is a product of a column range (depending only on the target
+//! outside is unknown) — except past an *open* side ([`OpenSides`]): a side where the rectangle
+//! stops because no ray from the cell crossing the plane beyond it meets any object behind the
+//! plane. There the window is cut at the side. So a set pixel means: every ray from the cell
+//! through it is blocked before the source plane, or meets no object beyond it; either way no
+//! object behind the plane is seen through it, which is all the occludee test and the next
+//! reprojection ask. The window is a product of a column range (depending only on the target
 //! column) and a row range (depending only on the target row), so the test is separable: first,
 //! for every source row and target column, "all set in the column range"; then, for every target
 //! pixel, "all of those set in the row range". Both backends run that same integer filter on the
@@ -40,6 +45,17 @@ pub type Window = [u32; 2];
 
 /// The window of a pixel whose rays leave the source rectangle.
 pub const NO_WINDOW: Window = [u32::MAX, 0];
+
+/// Sides of a source plane's rectangle beyond which nothing matters, in the order
+/// `[u min, v min, u max, v max]`: a side is open when no ray from the cell crossing the plane
+/// beyond it meets any object behind the plane
+/// ([`crate::project::planes::DirectionPlan::relevant_rect`]). A window reaching past an open
+/// side is cut at it: the rays through the part outside meet nothing, so they need no
+/// occluder. A window reaching past a closed side sets nothing.
+pub type OpenSides = [bool; 4];
+
+/// No open side: every window must lie inside the source rectangle.
+pub const CLOSED: OpenSides = [false; 4];
 
 /// Reprojection of one plane's umbra onto the next plane of the sweep.
 #[derive(Clone, Debug, PartialEq)]
@@ -63,12 +79,26 @@ impl Reprojection {
     /// If the frames do not belong to the same cell and direction, if `dst` is not strictly
     /// behind `src`, or if the resolutions differ.
     pub fn new(src: &PlaneFrame, dst: &PlaneFrame, source: Arc<DepthMap>) -> Reprojection {
+        Reprojection::with_open_sides(src, dst, source, CLOSED)
+    }
+
+    /// [`Reprojection::new`] from a source plane whose rectangle has `open` sides
+    /// ([`OpenSides`]): windows reaching past them are cut at them.
+    ///
+    /// # Panics
+    /// As [`Reprojection::new`].
+    pub fn with_open_sides(
+        src: &PlaneFrame,
+        dst: &PlaneFrame,
+        source: Arc<DepthMap>,
+        open: OpenSides,
+    ) -> Reprojection {
         assert_eq!(
             src.resolution, dst.resolution,
             "planes of one sweep share a resolution"
         );
         assert_eq!(source.resolution, src.resolution);
-        let (cols, rows) = windows(src, dst);
+        let (cols, rows) = windows(src, dst, open);
         let s = src.sign() * (src.position - src.face());
         let t = dst.sign() * (dst.position - dst.face());
         Reprojection {
@@ -168,9 +198,20 @@ pub fn umbra_bounds(src: &PlaneFrame, map: &DepthMap) -> Option<(glam::DVec2, gl
 pub fn carried_rect(
     src: &PlaneFrame,
     bounds: (glam::DVec2, glam::DVec2),
+    open: OpenSides,
     target: f64,
 ) -> Option<(glam::DVec2, glam::DVec2)> {
-    let (b0, b1) = bounds;
+    let (mut b0, mut b1) = bounds;
+    // Umbra reaching an open side reaches past it: what lies beyond needs no occluder.
+    let half = 0.5 * src.pixel_size();
+    for k in 0..2 {
+        if open[k] && b0[k] <= src.rect_min[k] + half[k] {
+            b0[k] = f64::NEG_INFINITY;
+        }
+        if open[2 + k] && b1[k] >= src.rect_max[k] - half[k] {
+            b1[k] = f64::INFINITY;
+        }
+    }
     let cell = &src.cell;
     let a = src.axis;
     let (u, v) = src.uv_axes();
@@ -194,7 +235,7 @@ pub fn carried_rect(
 ///
 /// # Panics
 /// If `dst` is not strictly behind `src`, or `src` not strictly beyond the cell's face.
-pub fn windows(src: &PlaneFrame, dst: &PlaneFrame) -> (Vec<Window>, Vec<Window>) {
+pub fn windows(src: &PlaneFrame, dst: &PlaneFrame, open: OpenSides) -> (Vec<Window>, Vec<Window>) {
     let cell = &src.cell;
     let a = src.axis;
     let (u, v) = src.uv_axes();
@@ -207,7 +248,9 @@ pub fn windows(src: &PlaneFrame, dst: &PlaneFrame) -> (Vec<Window>, Vec<Window>)
     let depth = cell.max[a] - cell.min[a];
     let lambdas = [s / t, (s + depth) / (t + depth)];
     let res = dst.resolution as usize;
+    let last = res as f64 - 1.0;
     let one_axis = |k: usize, e0: f64, e1: f64| -> Vec<Window> {
+        let (open_lo, open_hi) = (open[k], open[2 + k]);
         let (q0, qpx) = (dst.rect_min[k], dst.pixel_size()[k]);
         let (p0, ppx) = (src.rect_min[k], src.pixel_size()[k]);
         let scale = e0.abs().max(e1.abs()).max(q0.abs()).max(p0.abs())
@@ -225,11 +268,14 @@ pub fn windows(src: &PlaneFrame, dst: &PlaneFrame) -> (Vec<Window>, Vec<Window>)
                     hi = hi.max((1.0 - l) * e1 + l * qb);
                 }
                 let (x0, x1) = ((lo - p0) / ppx - eps, (hi - p0) / ppx + eps);
-                if !(x0 >= 0.0 && x1 <= res as f64) {
+                if !((x0 >= 0.0 || open_lo) && (x1 <= res as f64 || open_hi)) || x0.is_nan() {
                     return NO_WINDOW;
                 }
-                let (i0, i1) = (x0.floor(), x1.ceil() - 1.0);
-                [i0 as u32, (i1.max(i0)) as u32]
+                // Cut at open sides. A window wholly past one keeps its edge pixel (the exact
+                // answer, "nothing to test", would set the pixel: this is stricter).
+                let i0 = x0.max(0.0).floor().min(last);
+                let i1 = (x1.min(res as f64).ceil() - 1.0).clamp(i0, last);
+                [i0 as u32, i1 as u32]
             })
             .collect()
     };
@@ -262,14 +308,16 @@ mod tests {
         }
     }
 
-    /// Brute force: random masks, random plane pairs (axes, sides, rectangles, distances), and
-    /// for every set target pixel, rays from random points of the cell (corners and faces
-    /// included) through random points of the pixel (its corners included) must cross the
-    /// source plane inside a set source pixel.
+    /// Brute force: random masks, random plane pairs (axes, sides, rectangles, distances,
+    /// open sides), and for every set target pixel, rays from random points of the cell
+    /// (corners and faces included) through random points of the pixel (its corners included)
+    /// must cross the source plane inside a set source pixel, or past an open side of its
+    /// rectangle.
     #[test]
     fn every_reprojected_pixel_is_blocked_for_rays_from_the_whole_cell() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
         let mut checked = 0usize;
+        let mut crossed_open = 0usize;
         for case in 0..60 {
             let size = DVec3::new(
                 rng.random_range(0.2..2.0),
@@ -298,7 +346,15 @@ mod tests {
                 let half = DVec2::new(0.5 * size[u] + d, 0.5 * size[v] + d) * (1.0 + jitter);
                 (centre - half, centre + half)
             };
-            let (slo, shi) = rect(s, rng.random_range(0.0..0.6));
+            // Every third case has open sides and a source rectangle narrower than the view, so
+            // that many windows reach past it.
+            let open: OpenSides = if case % 3 == 1 {
+                std::array::from_fn(|_| rng.random_bool(0.5))
+            } else {
+                CLOSED
+            };
+            let shrink = if case % 3 == 1 { 0.6 } else { 1.0 };
+            let (slo, shi) = rect(s * shrink, rng.random_range(0.0..0.6));
             let (tlo, thi) = rect(t, rng.random_range(0.0..0.6));
             let src = frame(cell, axis, positive, s, slo, shi);
             let dst = frame(cell, axis, positive, t, tlo, thi);
@@ -310,7 +366,7 @@ mod tests {
                     *d = -rng.random_range(0.0..1.0f32);
                 }
             }
-            let r = Reprojection::new(&src, &dst, Arc::new(map.clone()));
+            let r = Reprojection::with_open_sides(&src, &dst, Arc::new(map.clone()), open);
             let mask = r.mask();
             let spx = src.pixel_size();
             let tpx = dst.pixel_size();
@@ -344,10 +400,15 @@ mod tests {
                         q[v] = q2.y;
                         let p = src.project(e, q);
                         let x = (p - slo) / spx;
-                        assert!(
-                            x.x >= 0.0 && x.y >= 0.0 && x.x <= 32.0 && x.y <= 32.0,
-                            "ray leaves the source rectangle"
-                        );
+                        let past = [x.x < 0.0, x.y < 0.0, x.x > 32.0, x.y > 32.0];
+                        if past.iter().any(|&b| b) {
+                            assert!(
+                                (0..4).all(|k| !past[k] || open[k]),
+                                "case {case}: ray leaves the source rectangle by a closed side"
+                            );
+                            crossed_open += 1;
+                            continue;
+                        }
                         // The closed pixel squares containing the crossing: one of them set.
                         let mut any = false;
                         for xi in [(x.x - 1e-9).floor(), (x.x + 1e-9).floor()] {
@@ -368,6 +429,10 @@ mod tests {
         assert!(
             checked > 1000,
             "too few set target pixels to mean anything: {checked}"
+        );
+        assert!(
+            crossed_open > 100,
+            "too few rays past open sides to mean anything: {crossed_open}"
         );
     }
 
