@@ -11,11 +11,10 @@
 // Depth, and the R32Float target keeps the minimum (blend operation Min).
 
 struct Params {
-    // 2 / resolution: pixel coordinates to NDC (exact for a power-of-two resolution).
-    ndc_scale: f32,
+    // (2 / width, 2 / height): pixel coordinates to NDC (exact for powers of two).
+    ndc_scale: vec2<f32>,
     _pad0: f32,
     _pad1: f32,
-    _pad2: f32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;

@@ -11,17 +11,21 @@
 // may discard cost ~1.4 ms more per 256² plane). Everything is integer: set pixels are
 // exactly the CPU's.
 //
-// A window [lo, hi] with lo > hi or hi >= resolution sets nothing.
+// A column window [lo, hi] with lo > hi or hi >= the source's width (a row window: height)
+// sets nothing. The source and the target may differ in size.
 
 struct Reproject {
     // The Depth written into reprojected pixels.
     depth: f32,
-    // Pixels per side (the table's and the target's size).
-    resolution: u32,
+    // The target's columns: where the row windows start in `windows`.
+    width: u32,
     // +inf (WGSL has no infinite literal): what the other pixels receive.
     none: f32,
+    // The source's (and the table's) columns and rows.
+    source_width: u32,
+    source_height: u32,
     _pad: u32,
-    // cols[0 .. resolution], then rows[0 .. resolution]: inclusive [lo, hi].
+    // cols[0 .. width], then rows[0 .. the target's height]: inclusive [lo, hi].
     windows: array<vec2<u32>>,
 }
 
@@ -37,9 +41,9 @@ fn vs_fullscreen(@builtin(vertex_index) k: u32) -> @builtin(position) vec4<f32> 
     return vec4<f32>(x, y, 0.0, 1.0);
 }
 
-// True when the window holds at least one pixel and lies inside the plane.
-fn valid(w: vec2<u32>) -> bool {
-    return w.x <= w.y && w.y < reproject.resolution;
+// True when the window holds at least one pixel and lies inside the source's `n` pixels.
+fn valid(w: vec2<u32>, n: u32) -> bool {
+    return w.x <= w.y && w.y < n;
 }
 
 // The count over [0, x) × [0, y): 0 on the table's lower edges.
@@ -53,11 +57,11 @@ fn count(x: u32, y: u32) -> u32 {
 @fragment
 fn fs_reproject(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {
     let c = reproject.windows[u32(p.x)];
-    let r = reproject.windows[reproject.resolution + u32(p.y)];
-    if (!valid(c) || !valid(r)) {
+    let r = reproject.windows[reproject.width + u32(p.y)];
+    if (!valid(c, reproject.source_width) || !valid(r, reproject.source_height)) {
         return vec4<f32>(reproject.none, 0.0, 0.0, 0.0);
     }
-    // Integer arithmetic wraps, and the true count (at most resolution²) fits: exact.
+    // Integer arithmetic wraps, and the true count (at most the source's pixels) fits: exact.
     let outside = count(c.y + 1u, r.y + 1u) + count(c.x, r.x)
         - count(c.x, r.y + 1u) - count(c.y + 1u, r.x);
     if (outside != 0u) {

@@ -27,8 +27,13 @@ use std::time::Instant;
 /// Everything that shapes a bake.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BakeSettings {
-    /// Depth Map resolution per side (a power of two). Default 256.
+    /// Depth Map resolution per side (a power of two): each plane's map has `resolution²`
+    /// pixels. Default 256.
     pub resolution: u32,
+    /// How much wider than tall, or taller than wide, a plane's Depth Map may be (a power of
+    /// two): each map follows its rectangle's shape, keeping `resolution²` pixels
+    /// ([`crate::backend::map_size`]); 1 keeps every map square. Default 8.
+    pub max_stretch: u32,
     /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
     /// Default 1.5 (the paper's).
     pub extend: f64,
@@ -71,6 +76,7 @@ impl BakeSettings {
     pub const fn default_settings() -> Self {
         BakeSettings {
             resolution: 256,
+            max_stretch: 8,
             extend: 1.5,
             planes: 4,
             slice_planes: 1,
@@ -93,6 +99,12 @@ impl BakeSettings {
             return Err(format!(
                 "--resolution {}: must be a power of two between 4 and 8192 (e.g. 256)",
                 self.resolution
+            ));
+        }
+        if !self.max_stretch.is_power_of_two() || self.max_stretch > 64 {
+            return Err(format!(
+                "--max-stretch {}: must be a power of two between 1 (square maps) and 64",
+                self.max_stretch
             ));
         }
         if !(self.extend.is_finite() && self.extend >= 1.0) {
@@ -139,6 +151,7 @@ impl BakeSettings {
     fn plane_settings(&self, sweep: bool) -> PlaneSettings {
         PlaneSettings {
             resolution: self.resolution,
+            max_stretch: self.max_stretch,
             extend: self.extend,
             planes: self.planes,
             slice_planes: self.slice_planes,
@@ -1054,6 +1067,7 @@ pub fn to_document(
         settings: PvsSettings {
             backend: result.backend.clone(),
             resolution: settings.resolution,
+            max_stretch: settings.max_stretch,
             extend: settings.extend,
             planes: settings.planes,
             slice_planes: settings.slice_planes,

@@ -131,9 +131,9 @@ fn device_loss_is_an_error_not_a_hang() {
 fn oversized_planes_are_refused() {
     let Some(b) = backend() else { return };
     let mut jobs = random_jobs(22, Shape::Triangle, 1, &[16]);
-    jobs[0].frame.resolution = 1 << 20;
+    jobs[0].frame.width = 1 << 20;
     match b.render(&jobs[..1]) {
-        Err(BackendError::Device(msg)) => assert!(msg.contains("resolution"), "{msg}"),
+        Err(BackendError::Device(msg)) => assert!(msg.contains("size"), "{msg}"),
         other => panic!("expected an error, got {other:?}"),
     }
 }
@@ -153,7 +153,8 @@ fn frame(res: u32, axis: usize, positive: bool, cell_half: f64) -> PlaneFrame {
         position: s * (cell_half + 10.0),
         rect_min: DVec2::new(-9.0, -9.0),
         rect_max: DVec2::new(9.0, 9.0),
-        resolution: res,
+        width: res,
+        height: res,
     }
 }
 
@@ -285,9 +286,9 @@ impl std::ops::AddAssign for Diff {
 /// would be less conservative than the contract, and the test fails.
 fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> Diff {
     let f = &job.frame;
-    let res = f.resolution;
-    assert_eq!(gpu.resolution, res);
-    assert_eq!(gpu.depth.len(), (res * res) as usize);
+    let (res, rows) = (f.width, f.height);
+    assert_eq!((gpu.width, gpu.height), (res, rows));
+    assert_eq!(gpu.depth.len(), (res * rows) as usize);
     let mut diff = Diff {
         covered: cpu_map.covered(),
         ..Diff::default()
@@ -308,18 +309,18 @@ fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> Diff {
             let legit = occluders_at(g).any(|pts| cpu::contract_slack(f, pts, i, j) >= cpu::MARGIN);
             assert!(
                 legit,
-                "GPU covers ({i}, {j}) at {res}² with Depth {g} (CPU: {c}) but no occluder of \
+                "GPU covers ({i}, {j}) at {res}×{rows} with Depth {g} (CPU: {c}) but no occluder of \
                  that Depth covers it (axis {}, positive {})",
                 f.axis, f.positive
             );
         } else if c < g {
             diff.cpu_only += 1;
             // The GPU's extra shrink: the CPU's margin plus 2⁻²¹·(extent + 1) px of f32 error.
-            let band = 1e-3 + res as f64 / (1u64 << 20) as f64;
+            let band = 1e-3 + res.max(rows) as f64 / (1u64 << 20) as f64;
             let near = occluders_at(c).any(|pts| cpu::contract_slack(f, pts, i, j) < band);
             assert!(
                 near,
-                "CPU-only pixel ({i}, {j}) at {res}² is not on an edge"
+                "CPU-only pixel ({i}, {j}) at {res}×{rows} is not on an edge"
             );
         }
     }
@@ -366,6 +367,29 @@ fn check_shape(shape: Shape, seed: u64) {
     assert_eq!(jobs.len(), 30, "a cell's worth of planes in one call");
     let d = run_and_compare(b, &jobs);
     eprintln!("{shape:?}: {d:?}");
+    assert!(d.covered > 10_000, "the scenes cover something ({d:?})");
+    assert!(
+        d.cpu_only * 100 <= d.covered,
+        "too many near-tie pixels: {d:?}"
+    );
+}
+
+/// Maps stretched to 8× wider than tall and 8× taller than wide (a bake's planes beside a cell
+/// in a forest): the GPU's projection still matches the CPU's.
+#[test]
+fn stretched_maps_match_the_cpu() {
+    let Some(b) = backend() else { return };
+    let mut jobs = random_jobs(5, Shape::Quad, 60, &[64, 128]);
+    for (k, j) in jobs.iter_mut().enumerate() {
+        let res = j.frame.width;
+        (j.frame.width, j.frame.height) = if k % 2 == 0 {
+            (res * 8, res / 8)
+        } else {
+            (res / 8, res * 8)
+        };
+    }
+    let d = run_and_compare(b, &jobs);
+    eprintln!("stretched: {d:?}");
     assert!(d.covered > 10_000, "the scenes cover something ({d:?})");
     assert!(
         d.cpu_only * 100 <= d.covered,
@@ -570,7 +594,7 @@ fn sweep_planes(
     } else {
         cell.min[axis]
     };
-    let mut plane = |d: f64| {
+    let plane = |d: f64, rng: &mut Pcg64| {
         let half = DVec2::new(0.5 * size[u] + d, 0.5 * size[v] + d) * rng.random_range(1.0..1.5);
         PlaneFrame {
             cell,
@@ -579,10 +603,25 @@ fn sweep_planes(
             position: face + if positive { d } else { -d },
             rect_min: centre - half,
             rect_max: centre + half,
-            resolution: res,
+            width: res,
+            height: res,
         }
     };
-    distances.iter().map(|&d| plane(d)).collect()
+    distances.iter().map(|&d| plane(d, rng)).collect()
+}
+
+/// Each map square or stretched at random with the same pixel budget, up to 4× per side (as a
+/// bake stretches maps to their rectangles), so that sources and targets differ in size.
+fn stretch_at_random(rng: &mut Pcg64, planes: &mut [PlaneFrame]) {
+    for f in planes {
+        let res = f.width;
+        let k = rng.random_range(0..=2u32.min(res.trailing_zeros() - 1));
+        (f.width, f.height) = if rng.random_bool(0.5) {
+            (res << k, res >> k)
+        } else {
+            (res >> k, res << k)
+        };
+    }
 }
 
 /// The reprojections onto `dst` from `sources` (frames of the same sweep in front of it), each
@@ -594,7 +633,7 @@ fn random_reprojections(
 ) -> Vec<Reprojection> {
     sources
         .iter()
-        .map(|src| Reprojection::new(src, dst, Arc::new(random_source(rng, dst.resolution))))
+        .map(|src| Reprojection::new(src, dst, Arc::new(random_source(rng, src))))
         .collect()
 }
 
@@ -610,9 +649,9 @@ fn first_only(job: &PlaneJob) -> PlaneJob {
 /// in them. Umbra and holes use every kind of value the umbra test must classify exactly:
 /// `±0`, `-inf` and negative denormals are in the umbra; `+inf`, positive denormals and NaNs
 /// of either sign are not.
-fn random_source(rng: &mut Pcg64, res: u32) -> DepthMap {
-    let n = res as usize;
-    let mut map = DepthMap::new(res);
+fn random_source(rng: &mut Pcg64, frame: &PlaneFrame) -> DepthMap {
+    let (n, m) = (frame.width as usize, frame.height as usize);
+    let mut map = DepthMap::for_frame(frame);
     let umbra = |rng: &mut Pcg64| match rng.random_range(0..5) {
         0 => -0.0,
         1 => 0.0,
@@ -628,24 +667,25 @@ fn random_source(rng: &mut Pcg64, res: u32) -> DepthMap {
         _ => rng.random_range(1e-6..3.0f32),
     };
     for _ in 0..rng.random_range(1..4) {
-        let (w, h) = (rng.random_range(n / 4..=n), rng.random_range(n / 4..=n));
-        let (x0, y0) = (rng.random_range(0..=n - w), rng.random_range(0..=n - h));
+        let (w, h) = (rng.random_range(n / 4..=n), rng.random_range(m / 4..=m));
+        let (x0, y0) = (rng.random_range(0..=n - w), rng.random_range(0..=m - h));
         for y in y0..y0 + h {
             for x in x0..x0 + w {
                 map.depth[y * n + x] = umbra(rng);
             }
         }
     }
-    let holes = rng.random_range(0..=n / 4);
+    let holes = rng.random_range(0..=n.max(m) / 4);
     for _ in 0..holes {
-        let k = rng.random_range(0..n * n);
+        let k = rng.random_range(0..n * m);
         map.depth[k] = hole(rng);
     }
     map
 }
 
 /// A cell's worth of sweep jobs per resolution: per job 1–6 reprojections from random planes
-/// of the sweep in front of the target (a skip list's worth), random sources, one job in three
+/// of the sweep in front of the target (a skip list's worth; maps stretched at random, so that
+/// sources and targets differ in size), random sources, one job in three
 /// without occluders, some with slices.
 fn reprojection_jobs(seed: u64, resolutions: &[u32]) -> Vec<PlaneJob> {
     let mut rng = Pcg64::seed_from_u64(seed);
@@ -662,6 +702,7 @@ fn reprojection_jobs(seed: u64, resolutions: &[u32]) -> Vec<PlaneJob> {
                 }
                 distances.reverse();
                 let mut planes = sweep_planes(&mut rng, res, axis, positive, &distances);
+                stretch_at_random(&mut rng, &mut planes);
                 let dst = planes.remove(0);
                 let reproject = random_reprojections(&mut rng, &planes, &dst);
                 let mut occ = OccluderSet::default();
@@ -691,13 +732,14 @@ fn reprojection_jobs(seed: u64, resolutions: &[u32]) -> Vec<PlaneJob> {
 
 /// Maps equal bit for bit (so `-0.0` differs from `0.0`, and NaN must match NaN).
 fn assert_bits_equal(g: &DepthMap, c: &DepthMap, what: &str) {
-    assert_eq!(g.resolution, c.resolution);
-    let res = g.resolution as usize;
+    assert_eq!((g.width, g.height), (c.width, c.height));
+    let res = g.width as usize;
     for (k, (a, b)) in g.depth.iter().zip(&c.depth).enumerate() {
         assert_eq!(
             a.to_bits(),
             b.to_bits(),
-            "{what}: pixel ({}, {}) at {res}²: GPU {a}, CPU {b}",
+            "{what}: pixel ({}, {}) at {res}×{}: GPU {a}, CPU {b}",
+            g.height,
             k % res,
             k / res
         );
@@ -1037,7 +1079,8 @@ fn degenerate_clipped_edges_do_not_uncover_a_triangle() {
         position: -10.0,
         rect_min: DVec2::new(-8.0, -8.0),
         rect_max: DVec2::new(8.0, 8.0),
-        resolution: 64,
+        width: 64,
+        height: 64,
     };
     let tri = [
         DVec3::new(-2.628855960945415, 8.110144680784256, -5.438125008171043),

@@ -110,9 +110,16 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
     };
     let seen = bake_with_dumps(&opts);
     assert!(!seen.is_empty());
-    let levels = RES.trailing_zeros() as usize;
     let mut checked_wall = 0;
+    let mut stretched = 0;
     for (k, job, map, hdm) in &seen {
+        // Maps are stretched to their rectangles with RES² pixels (the wall scene's planes are
+        // not all square).
+        let (w, h) = (map.width as usize, map.height as usize);
+        assert_eq!(w * h, (RES * RES) as usize);
+        stretched += usize::from(w != h);
+        let levels = w.max(h).trailing_zeros() as usize;
+        assert_eq!(hdm.max.len(), levels + 1);
         let stem = file_stem(0, *k, job);
         assert!(
             stem.starts_with(&format!("cell0000_plane{k:02}_")),
@@ -138,7 +145,7 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
         assert_eq!(layer_names, expected);
         // The plane layer: depth and mask.
         let base = &image.layer_data[0];
-        assert_eq!(base.size, Vec2(RES as usize, RES as usize));
+        assert_eq!(base.size, Vec2(w, h));
         let chans: Vec<String> = base
             .channel_data
             .list
@@ -148,7 +155,7 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
         assert_eq!(chans, ["depth", "mask"]);
         let depth = f32_samples(&base.channel_data.list[0]);
         let mask = f32_samples(&base.channel_data.list[1]);
-        assert_eq!(depth.len(), (RES * RES) as usize);
+        assert_eq!(depth.len(), w * h);
         for (i, (a, b)) in depth.iter().zip(&map.depth).enumerate() {
             assert_eq!(a.to_bits(), b.to_bits(), "{stem}: pixel {i}");
             assert_eq!(mask[i], if b.is_finite() { 1.0 } else { 0.0 });
@@ -160,12 +167,12 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
             } else {
                 (&hdm.min, li - levels)
             };
-            let side = (RES >> l) as usize;
-            assert_eq!(layer.size, Vec2(side, side), "{stem} layer {li}");
+            let (lw, lh) = ((w >> l).max(1), (h >> l).max(1));
+            assert_eq!(layer.size, Vec2(lw, lh), "{stem} layer {li}");
             assert_eq!(layer.channel_data.list.len(), 1);
             assert_eq!(layer.channel_data.list[0].name.to_string(), "depth");
             let v = f32_samples(&layer.channel_data.list[0]);
-            assert_eq!(v.len(), side * side);
+            assert_eq!(v.len(), lw * lh);
             assert!(
                 v.iter()
                     .zip(&kind[l])
@@ -192,8 +199,14 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
             v => panic!("planePosition: {v:?}"),
         }
         match other.get(&Text::from("resolution")) {
-            Some(AttributeValue::I32(r)) => assert_eq!(*r, RES as i32),
+            Some(AttributeValue::I32(r)) => assert_eq!(*r as usize, w.max(h)),
             v => panic!("resolution: {v:?}"),
+        }
+        for (key, n) in [("width", w), ("height", h)] {
+            match other.get(&Text::from(key)) {
+                Some(AttributeValue::I32(r)) => assert_eq!(*r as usize, n),
+                v => panic!("{key}: {v:?}"),
+            }
         }
         match other.get(&Text::from("cellMin")) {
             Some(AttributeValue::FloatVec3(v)) => assert_eq!(*v, (-0.5, -0.5, -0.5)),
@@ -219,11 +232,10 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
             } else {
                 0.0
             };
-            let r = RES as usize;
             let p = f.to_pixel(glam::DVec2::ZERO);
             let (i, j) = (p.x.floor() as usize, p.y.floor() as usize);
-            assert!((depth[j * r + i] - wall).abs() <= 1e-5, "{stem}: centre");
-            assert_eq!(mask[j * r + i], 1.0);
+            assert!((depth[j * w + i] - wall).abs() <= 1e-5, "{stem}: centre");
+            assert_eq!(mask[j * w + i], 1.0);
             assert_eq!(
                 depth.iter().filter(|d| d.is_finite()).count(),
                 map.covered()
@@ -236,11 +248,11 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
             );
             let (lo, hi) = (f.rect_min, f.rect_max);
             assert!(lo.x < -1.5 && lo.y < -1.5 && hi.x > 1.5 && hi.y > 1.5);
-            for c in [0, r - 1, r * (r - 1), r * r - 1] {
+            for c in [0, w - 1, w * (h - 1), w * h - 1] {
                 assert_eq!(depth[c], f32::INFINITY, "{stem}: corner {c}");
                 assert_eq!(mask[c], 0.0);
             }
-            let nonempty = map.covered() > r * r / 2;
+            let nonempty = map.covered() > w * h / 2;
             assert!(nonempty, "{stem}: the wall covers most of the plane");
             checked_wall += 1;
         }
@@ -249,6 +261,7 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
         checked_wall, 2,
         "the slice plane and the plane behind the wall"
     );
+    assert!(stretched > 0, "some plane's map is stretched");
 }
 
 #[test]
@@ -268,7 +281,12 @@ fn png_previews_have_the_map_sizes_and_a_legend() {
             let img = image::open(&p)
                 .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
                 .to_rgb8();
-            assert_eq!(img.dimensions(), (RES, RES), "{}", p.display());
+            let size = if what == "hdm" {
+                (map.width, map.height.max(2))
+            } else {
+                (map.width, map.height)
+            };
+            assert_eq!(img.dimensions(), size, "{}", p.display());
             if what == "mask" {
                 let white = img.pixels().filter(|p| p.0 == [255, 255, 255]).count();
                 assert_eq!(white, map.covered());

@@ -263,3 +263,89 @@ fn a_wall_filling_the_frame_ends_the_sweep_and_hides_what_is_far_behind() {
         .collect();
     assert_eq!(names, ["wall", "near"]);
 }
+
+/// A flat layer of leaves around the cell (a forest's band of crowns, 3 units tall and 120
+/// wide): the planes beside the cell are cut to the layer's height, and their Depth Maps are
+/// stretched to the rectangles' shape — wide and short, pixels within 2× of square in world
+/// units, `resolution²` of them — unless `max_stretch` is 1, which keeps every map square.
+#[test]
+fn flat_layers_get_wide_maps_with_about_square_pixels() {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+    let mut objects = Vec::new();
+    for k in 0..3000 {
+        let (x, z) = (rng.random_range(-60.0..60.0), rng.random_range(-60.0..60.0));
+        if f32::hypot(x, z) < 3.0 {
+            continue;
+        }
+        let y = rng.random_range(-1.0..1.5f32);
+        let p = |dx: f32, dy: f32| Vec3::new(x + dx, y + dy, z);
+        objects.push(quad(
+            &format!("leaf{k}"),
+            p(-0.4, -0.4),
+            p(0.4, -0.4),
+            p(0.4, 0.4),
+            p(-0.4, 0.4),
+        ));
+    }
+    let scene = Scene::from_objects(Path::new("layer"), objects);
+    for max_stretch in [8, 1] {
+        let frames = std::sync::Mutex::new(Vec::new());
+        let observe = |_: usize,
+                       _: usize,
+                       job: &umbrasweep::backend::PlaneJob,
+                       map: &umbrasweep::backend::DepthMap,
+                       _: &umbrasweep::hdm::Hdm| {
+            assert_eq!((map.width, map.height), (job.frame.width, job.frame.height));
+            frames.lock().unwrap().push(job.frame.clone());
+        };
+        let settings = BakeSettings {
+            max_stretch,
+            ..sweep(true)
+        };
+        umbrasweep::bake::bake_observed(
+            &scene,
+            &[unit_cell()],
+            &settings,
+            &CpuBackend::new(),
+            None,
+            Some(&observe),
+        )
+        .unwrap();
+        let frames = frames.into_inner().unwrap();
+        let res = settings.resolution as usize;
+        // Planes beside the cell (normal x or z) 10 to 40 units away, well inside the layer:
+        // the rectangle stops at the layer's height (lines from the cell to it, cut at the
+        // slab's start).
+        let beside: Vec<_> = frames
+            .iter()
+            .filter(|f| f.axis != 1 && (10.0..40.0).contains(&(f.position - f.face()).abs()))
+            .collect();
+        assert!(beside.len() > 20, "{}", beside.len());
+        for f in &frames {
+            assert_eq!(f.pixels(), res * res, "the pixel budget");
+        }
+        let mut stretched = 0;
+        for f in beside {
+            let extent = f.rect_max - f.rect_min;
+            // The layer's height is v for z planes, u for x planes.
+            let (tall, wide) = if f.axis == 2 {
+                (extent.y, extent.x)
+            } else {
+                (extent.x, extent.y)
+            };
+            assert!(
+                tall < 12.0 && wide > 4.0 * tall,
+                "max stretch {max_stretch}: {f:?}"
+            );
+            let px = f.pixel_size();
+            if max_stretch == 1 {
+                assert_eq!(f.width, f.height);
+            } else {
+                let aspect = px.x / px.y;
+                assert!((0.5..=2.0).contains(&aspect), "pixels {px} of {f:?}");
+                stretched += usize::from(f.width.max(f.height) >= 4 * res as u32);
+            }
+        }
+        assert!(max_stretch == 1 || stretched > 10, "{stretched}");
+    }
+}

@@ -41,7 +41,7 @@ impl RasterBackend for CpuBackend {
 /// Rasterises one plane: all occluder Projections, then the slices.
 pub fn render_job(job: &PlaneJob) -> DepthMap {
     let frame = &job.frame;
-    let mut map = DepthMap::new(frame.resolution);
+    let mut map = DepthMap::for_frame(frame);
     let corners = frame.cell.corners();
     let mut scratch = Scratch::default();
     for k in 0..job.occluders.len() {
@@ -113,8 +113,8 @@ pub fn projection_polygon(
             return false;
         }
     }
-    let r = frame.resolution as f64;
-    if hi.x <= 0.0 || hi.y <= 0.0 || lo.x >= r || lo.y >= r {
+    let r = DVec2::new(frame.width as f64, frame.height as f64);
+    if hi.x <= 0.0 || hi.y <= 0.0 || lo.x >= r.x || lo.y >= r.y {
         return false;
     }
     let n = pts.len();
@@ -233,14 +233,14 @@ pub(crate) fn clip_half_plane(poly: &[DVec2], a: DVec2, b: DVec2, out: &mut Vec<
 /// Writes `depth` (minimum) into every pixel whose whole square lies inside the convex,
 /// counter-clockwise polygon `poly` (pixel coordinates).
 pub fn fill_convex(map: &mut DepthMap, poly: &[DVec2], depth: f32) {
-    let res = map.resolution as i64;
+    let (w, h) = (map.width as i64, map.height as i64);
     let (mut ymin, mut ymax) = (f64::INFINITY, f64::NEG_INFINITY);
     for p in poly {
         ymin = ymin.min(p.y);
         ymax = ymax.max(p.y);
     }
     let j0 = (ymin.ceil() as i64).max(0);
-    let j1 = ((ymax.floor() as i64) - 1).min(res - 1);
+    let j1 = ((ymax.floor() as i64) - 1).min(h - 1);
     let n = poly.len();
     for j in j0..=j1 {
         let cy = j as f64 + 0.5;
@@ -267,8 +267,8 @@ pub fn fill_convex(map: &mut DepthMap, poly: &[DVec2], depth: f32) {
             continue;
         }
         let i0 = ((lo - 0.5).ceil() as i64).max(0);
-        let i1 = ((hi - 0.5).floor() as i64).min(res - 1);
-        let row = (j * res) as usize;
+        let i1 = ((hi - 0.5).floor() as i64).min(w - 1);
+        let row = (j * w) as usize;
         for i in i0..=i1 {
             let d = &mut map.depth[row + i as usize];
             if depth < *d {
@@ -281,14 +281,14 @@ pub fn fill_convex(map: &mut DepthMap, poly: &[DVec2], depth: f32) {
 /// Sets to 0 every pixel whose square lies entirely inside the region enclosed (even-odd) by
 /// the slice segments (world `(u, v)` coordinates).
 pub fn fill_slices(map: &mut DepthMap, frame: &PlaneFrame, segments: &[[DVec2; 2]]) {
-    let res = map.resolution as usize;
-    let resf = res as f64;
+    let (w, h) = (map.width as usize, map.height as usize);
+    let (wf, hf) = (w as f64, h as f64);
     let segs: Vec<[DVec2; 2]> = segments
         .iter()
         .map(|s| [frame.to_pixel(s[0]), frame.to_pixel(s[1])])
         .collect();
     // Crossings of each row's centre line, bucketed per row.
-    let mut crossings: Vec<Vec<f64>> = vec![Vec::new(); res];
+    let mut crossings: Vec<Vec<f64>> = vec![Vec::new(); h];
     for s in &segs {
         let (p, q) = (s[0], s[1]);
         if p.y == q.y {
@@ -301,7 +301,7 @@ pub fn fill_slices(map: &mut DepthMap, frame: &PlaneFrame, segments: &[[DVec2; 2
         if j1f < 0.0 {
             continue;
         }
-        let j1 = (j1f as usize).min(res - 1);
+        let j1 = (j1f as usize).min(h - 1);
         for (j, row) in crossings.iter_mut().enumerate().take(j1 + 1).skip(j0) {
             let cy = j as f64 + 0.5;
             if cy < y0 || cy >= y1 {
@@ -310,7 +310,7 @@ pub fn fill_slices(map: &mut DepthMap, frame: &PlaneFrame, segments: &[[DVec2; 2
             row.push(p.x + (cy - p.y) * (q.x - p.x) / (q.y - p.y));
         }
     }
-    let mut inside = vec![false; res * res];
+    let mut inside = vec![false; w * h];
     for (j, row) in crossings.iter_mut().enumerate() {
         if row.len() < 2 {
             continue;
@@ -322,9 +322,9 @@ pub fn fill_slices(map: &mut DepthMap, frame: &PlaneFrame, segments: &[[DVec2; 2
             if i1f < 0.0 {
                 continue;
             }
-            let i1 = (i1f as usize).min(res - 1);
+            let i1 = (i1f as usize).min(w - 1);
             for i in i0..=i1 {
-                inside[j * res + i] = true;
+                inside[j * w + i] = true;
             }
         }
     }
@@ -334,11 +334,11 @@ pub fn fill_slices(map: &mut DepthMap, frame: &PlaneFrame, segments: &[[DVec2; 2
         let (p, q) = (s[0], s[1]);
         let ylo = p.y.min(q.y) - m;
         let yhi = p.y.max(q.y) + m;
-        if yhi < 0.0 || ylo > resf {
+        if yhi < 0.0 || ylo > hf {
             continue;
         }
         let j0 = ylo.floor().max(0.0) as usize;
-        let j1 = (yhi.floor().min(resf - 1.0)) as usize;
+        let j1 = (yhi.floor().min(hf - 1.0)) as usize;
         for j in j0..=j1 {
             // The segment's x-range within the band [j - m, j + 1 + m].
             let (b0, b1) = (j as f64 - m, j as f64 + 1.0 + m);
@@ -352,13 +352,13 @@ pub fn fill_slices(map: &mut DepthMap, frame: &PlaneFrame, segments: &[[DVec2; 2
                 (xa.min(xb), xa.max(xb))
             };
             let (x0, x1) = (x0 - m, x1 + m);
-            if x1 < 0.0 || x0 > resf {
+            if x1 < 0.0 || x0 > wf {
                 continue;
             }
             let i0 = x0.floor().max(0.0) as usize;
-            let i1 = (x1.floor().min(resf - 1.0)) as usize;
+            let i1 = (x1.floor().min(wf - 1.0)) as usize;
             for i in i0..=i1 {
-                inside[j * res + i] = false;
+                inside[j * w + i] = false;
             }
         }
     }
@@ -386,7 +386,8 @@ mod tests {
             position: 10.0,
             rect_min: DVec2::new(-8.0, -8.0),
             rect_max: DVec2::new(8.0, 8.0),
-            resolution: res,
+            width: res,
+            height: res,
         }
     }
 
@@ -479,7 +480,8 @@ mod tests {
             position: -10.0,
             rect_min: DVec2::new(-8.0, -8.0),
             rect_max: DVec2::new(8.0, 8.0),
-            resolution: 64,
+            width: 64,
+            height: 64,
         };
         let mut occ = OccluderSet::default();
         occ.push([

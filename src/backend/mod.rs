@@ -53,8 +53,37 @@ pub struct PlaneFrame {
     /// The rectangle on the plane, in world `(u, v)` coordinates.
     pub rect_min: DVec2,
     pub rect_max: DVec2,
-    /// Pixels per side (a power of two).
-    pub resolution: u32,
+    /// Pixels along `u` (columns) and along `v` (rows), powers of two. Not necessarily equal:
+    /// a bake gives a long, flat rectangle (a forest's band of crowns) a wide, short map, so
+    /// that its pixels are about square in world units ([`map_size`]).
+    pub width: u32,
+    pub height: u32,
+}
+
+/// The Depth Map size `(width, height)` for a rectangle of world size `extent` with the pixel
+/// budget of a `resolution × resolution` map: powers of two with `width · height =
+/// resolution²`, the width `resolution · 2^k` with the `k` whose pixels are closest to square,
+/// `|2^k| ≤ max_stretch` (`max_stretch` 1: square maps).
+///
+/// # Panics
+/// If `resolution` or `max_stretch` is not a power of two.
+pub fn map_size(resolution: u32, extent: DVec2, max_stretch: u32) -> (u32, u32) {
+    assert!(resolution.is_power_of_two() && max_stretch.is_power_of_two());
+    let ratio = extent.x / extent.y;
+    let lim = max_stretch
+        .trailing_zeros()
+        .min(resolution.trailing_zeros()) as i32;
+    // Square pixels: width / height = ratio, so 4^k = ratio.
+    let k = if ratio.is_finite() && ratio > 0.0 {
+        ((ratio.log2() / 2.0).round() as i32).clamp(-lim, lim)
+    } else {
+        0
+    };
+    if k >= 0 {
+        (resolution << k, resolution >> k)
+    } else {
+        (resolution >> -k, resolution << -k)
+    }
 }
 
 impl PlaneFrame {
@@ -84,7 +113,12 @@ impl PlaneFrame {
 
     /// Pixel size in world units `(pw, ph)`.
     pub fn pixel_size(&self) -> DVec2 {
-        (self.rect_max - self.rect_min) / self.resolution as f64
+        (self.rect_max - self.rect_min) / DVec2::new(self.width as f64, self.height as f64)
+    }
+
+    /// Pixels in the map: `width · height`.
+    pub fn pixels(&self) -> usize {
+        self.width as usize * self.height as usize
     }
 
     /// World `(u, v)` → continuous pixel coordinates (pixel `(i, j)` spans `[i, i+1] × [j, j+1]`).
@@ -145,16 +179,32 @@ pub struct PlaneJob {
 /// A plane's Depth Map: per pixel the minimum occluder Depth, `+inf` where nothing covers it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DepthMap {
-    pub resolution: u32,
+    /// Columns (along the plane's `u`).
+    pub width: u32,
+    /// Rows (along `v`).
+    pub height: u32,
+    /// Row-major: pixel `(i, j)` is `depth[j · width + i]`.
     pub depth: Vec<f32>,
 }
 
 impl DepthMap {
+    /// A square map of `resolution²` uncovered pixels.
     pub fn new(resolution: u32) -> Self {
+        DepthMap::sized(resolution, resolution)
+    }
+
+    /// A `width × height` map of uncovered pixels.
+    pub fn sized(width: u32, height: u32) -> Self {
         DepthMap {
-            resolution,
-            depth: vec![f32::INFINITY; (resolution * resolution) as usize],
+            width,
+            height,
+            depth: vec![f32::INFINITY; width as usize * height as usize],
         }
+    }
+
+    /// The map of a frame's size.
+    pub fn for_frame(frame: &PlaneFrame) -> Self {
+        DepthMap::sized(frame.width, frame.height)
     }
 
     pub fn covered(&self) -> usize {
@@ -202,4 +252,36 @@ pub fn depth_up(d: f64) -> f32 {
 pub fn depth_down(d: f64) -> f32 {
     let f = d as f32;
     if (f as f64) > d { f.next_down() } else { f }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn map_size_keeps_the_budget_and_makes_pixels_about_square() {
+        for res in [16u32, 256, 1024] {
+            for stretch in [1u32, 2, 8, 64] {
+                for ratio in [1.0, 1.9, 3.0, 17.0, 40.0, 1000.0, 0.3, 0.01] {
+                    let (w, h) = map_size(res, DVec2::new(ratio * 3.0, 3.0), stretch);
+                    assert_eq!(w as u64 * h as u64, res as u64 * res as u64);
+                    assert!(w.is_power_of_two() && h.is_power_of_two());
+                    let limit = stretch.min(res) as f64;
+                    let k = (w as f64 / res as f64).log2();
+                    assert!(k.abs() <= limit.log2(), "{res} {stretch} {ratio}: {w}×{h}");
+                    // Pixels within 2× of square unless the stretch limit binds.
+                    let aspect = ratio * h as f64 / w as f64;
+                    let binds = k.abs() == limit.log2();
+                    assert!(
+                        binds || (0.5..=2.0).contains(&aspect),
+                        "{res} {stretch} {ratio}: {w}×{h}, pixel aspect {aspect}"
+                    );
+                }
+            }
+        }
+        assert_eq!(map_size(256, DVec2::new(85.0, 6.0), 8), (1024, 64));
+        assert_eq!(map_size(256, DVec2::new(6.0, 400.0), 8), (32, 2048));
+        assert_eq!(map_size(256, DVec2::new(85.0, 6.0), 1), (256, 256));
+        assert_eq!(map_size(256, DVec2::new(0.0, 0.0), 8), (256, 256));
+    }
 }

@@ -200,6 +200,15 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
                     BakeSettings { extend: e, ..on() },
                 ));
             }
+            for m in [1, 2] {
+                v.push(variant(
+                    format!("--sweep --max-stretch {m}"),
+                    BakeSettings {
+                        max_stretch: m,
+                        ..on()
+                    },
+                ));
+            }
             v
         }
         "paper" => vec![variant("--sweep", on())],
@@ -212,6 +221,8 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
 pub struct FoliageSettings {
     /// Depth Map resolution.
     pub resolution: u32,
+    /// How far a Depth Map may be stretched to its rectangle (1: square maps).
+    pub max_stretch: u32,
     /// Plane extension factor.
     pub extend: f64,
     /// The occlusion sweep (every variant sets it on or off).
@@ -236,6 +247,7 @@ impl FoliageSettings {
     fn of(s: &BakeSettings) -> Self {
         FoliageSettings {
             resolution: s.resolution,
+            max_stretch: s.max_stretch,
             extend: s.extend,
             sweep: s.sweep == SweepChoice::On,
             sweep_planes: s.sweep_settings.planes,
@@ -267,6 +279,9 @@ impl FoliageSettings {
             )
         };
         let _ = write!(out, ", res {}, extend {:.1}", self.resolution, self.extend);
+        if self.max_stretch != BakeSettings::default_settings().max_stretch {
+            let _ = write!(out, ", stretch ≤{}", self.max_stretch);
+        }
         if let Some(s) = self.subcell {
             let _ = write!(out, ", subcell {s}");
         }
@@ -840,13 +855,14 @@ mod tests {
             ]
         );
         let params = variants("params", 3);
-        assert_eq!(params.len(), 3 + 4 + 3 + 3);
+        assert_eq!(params.len(), 3 + 4 + 3 + 3 + 2);
         let default = swept(SweepChoice::On);
         for v in &params {
             // One change from the default sweep (the kernel rows: spacing, K and the cap).
             let s = &v.settings;
             let changed = [
                 s.resolution != default.resolution,
+                s.max_stretch != default.max_stretch,
                 s.extend != default.extend,
                 s.sweep_settings != default.sweep_settings,
             ];
@@ -861,6 +877,14 @@ mod tests {
         assert_eq!(params[0].settings.sweep_settings.spacing, Spacing::Kernel);
         assert_eq!(params[0].settings.sweep_settings.planes, 256);
         assert_eq!(params[12].label, "--sweep --extend 2.0");
+        assert_eq!(params[13].settings.max_stretch, 1);
+        assert_eq!(
+            FoliageSettings::of(&params[13].settings).describe(),
+            format!(
+                "sweep ≤{} geometric, res 256, extend 1.5, stretch ≤1",
+                default.sweep_settings.planes
+            )
+        );
         let fine = variants("fine", 3);
         assert_eq!(fine[3].settings.subcell, Some(0.5));
         assert_eq!(fine[3].max_cells, Some(3));

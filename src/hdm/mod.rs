@@ -10,11 +10,14 @@
 
 use crate::backend::DepthMap;
 
-/// Max and min pyramids of one Depth Map (resolution a power of two).
+/// Max and min pyramids of one Depth Map (width and height powers of two).
 #[derive(Clone, Debug)]
 pub struct Hdm {
-    pub resolution: u32,
-    /// `max[k]` has `(resolution >> k)²` texels; `max[0]` is the Depth Map.
+    pub width: u32,
+    pub height: u32,
+    /// `max[k]` has [`Hdm::level_size`]`(k)` texels, row-major; `max[0]` is the Depth Map. A
+    /// map wider than tall keeps halving its width after its height has reached 1 texel (and
+    /// the other way round): texel `(i >> k, j >> k)` of level `k` always holds pixel `(i, j)`.
     pub max: Vec<Vec<f32>>,
     pub min: Vec<Vec<f32>>,
 }
@@ -34,43 +37,55 @@ impl Hdm {
     /// Builds the pyramids.
     ///
     /// # Panics
-    /// If the resolution is not a power of two or the map's size does not match it.
+    /// If the width or height is not a power of two or the map's size does not match them.
     pub fn build(map: &DepthMap) -> Hdm {
-        let res = map.resolution;
-        assert!(res.is_power_of_two(), "resolution must be a power of two");
-        assert_eq!(map.depth.len(), (res * res) as usize);
+        let (w, h) = (map.width, map.height);
+        assert!(
+            w.is_power_of_two() && h.is_power_of_two(),
+            "map sizes must be powers of two"
+        );
+        assert_eq!(map.depth.len(), w as usize * h as usize);
         let mut max = vec![map.depth.clone()];
         let mut min = vec![map.depth.clone()];
-        let mut r = res as usize;
-        while r > 1 {
-            let h = r / 2;
+        let (mut pw, mut ph) = (w as usize, h as usize);
+        while pw > 1 || ph > 1 {
+            let (nw, nh) = ((pw / 2).max(1), (ph / 2).max(1));
             let (pmax, pmin) = (max.last().unwrap(), min.last().unwrap());
-            let mut nmax = vec![0.0f32; h * h];
-            let mut nmin = vec![0.0f32; h * h];
-            for y in 0..h {
-                let r0 = 2 * y * r;
-                let r1 = r0 + r;
-                for x in 0..h {
-                    let (a, b, c, d) = (r0 + 2 * x, r0 + 2 * x + 1, r1 + 2 * x, r1 + 2 * x + 1);
-                    nmax[y * h + x] = pmax[a].max(pmax[b]).max(pmax[c].max(pmax[d]));
-                    nmin[y * h + x] = pmin[a].min(pmin[b]).min(pmin[c].min(pmin[d]));
+            let mut nmax = vec![0.0f32; nw * nh];
+            let mut nmin = vec![0.0f32; nw * nh];
+            // Children of texel (x, y): columns 2x, 2x+1 and rows 2y, 2y+1 that exist.
+            let (dx, dy) = (usize::from(pw > 1), usize::from(ph > 1));
+            for y in 0..nh {
+                let r0 = 2 * y * pw;
+                let r1 = (2 * y + dy) * pw;
+                for x in 0..nw {
+                    let (a, b) = (r0 + 2 * x, r0 + 2 * x + dx);
+                    let (c, d) = (r1 + 2 * x, r1 + 2 * x + dx);
+                    nmax[y * nw + x] = pmax[a].max(pmax[b]).max(pmax[c].max(pmax[d]));
+                    nmin[y * nw + x] = pmin[a].min(pmin[b]).min(pmin[c].min(pmin[d]));
                 }
             }
             max.push(nmax);
             min.push(nmin);
-            r = h;
+            (pw, ph) = (nw, nh);
         }
         Hdm {
-            resolution: res,
+            width: w,
+            height: h,
             max,
             min,
         }
     }
 
+    /// The texels `(columns, rows)` of level `k`.
+    pub fn level_size(&self, k: usize) -> (u32, u32) {
+        ((self.width >> k).max(1), (self.height >> k).max(1))
+    }
+
     /// Tests the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the map) against an
     /// occludee Depth `depth`.
     pub fn test(&self, i0: u32, j0: u32, i1: u32, j1: u32, depth: f32) -> Coverage {
-        debug_assert!(i0 <= i1 && j0 <= j1 && i1 < self.resolution && j1 < self.resolution);
+        debug_assert!(i0 <= i1 && j0 <= j1 && i1 < self.width && j1 < self.height);
         let mut level = 0usize;
         // The finest level where the rectangle spans at most 2×2 texels.
         while level + 1 < self.max.len()
@@ -78,7 +93,7 @@ impl Hdm {
         {
             level += 1;
         }
-        let r = self.resolution >> level;
+        let r = self.level_size(level).0;
         let mut any_covered = false;
         for ty in (j0 >> level)..=(j1 >> level) {
             for tx in (i0 >> level)..=(i1 >> level) {
@@ -114,7 +129,7 @@ impl Hdm {
         j1: u32,
         depth: f32,
     ) -> bool {
-        let r = self.resolution >> level;
+        let r = self.level_size(level).0;
         let idx = (ty * r + tx) as usize;
         if self.max[level][idx] < depth {
             return true;
@@ -150,7 +165,7 @@ mod tests {
     use super::*;
 
     fn brute(map: &DepthMap, i0: u32, j0: u32, i1: u32, j1: u32, d: f32) -> Coverage {
-        let r = map.resolution;
+        let r = map.width;
         let px: Vec<f32> = (j0..=j1)
             .flat_map(|j| (i0..=i1).map(move |i| map.depth[(j * r + i) as usize]))
             .collect();
@@ -163,18 +178,16 @@ mod tests {
         }
     }
 
-    #[test]
-    fn pyramid_test_matches_brute_force() {
-        // A deterministic pseudo-random map with holes and varied Depths.
-        let res = 32u32;
-        let mut map = DepthMap::new(res);
+    /// A deterministic pseudo-random map with holes and varied Depths.
+    fn random_map(w: u32, h: u32) -> DepthMap {
+        let mut map = DepthMap::sized(w, h);
         let mut x = 12345u64;
         for (k, d) in map.depth.iter_mut().enumerate() {
             x = x
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             let r = (x >> 33) as u32 % 100;
-            let block = (k as u32 % res) / 8 + (k as u32 / res) / 8;
+            let block = (k as u32 % w) / 8 + (k as u32 / w) / 8;
             *d = if block.is_multiple_of(3) && r < 97 {
                 (r % 10) as f32
             } else if r < 30 {
@@ -183,28 +196,39 @@ mod tests {
                 (r % 7) as f32
             };
         }
-        let hdm = Hdm::build(&map);
+        map
+    }
+
+    /// Square and stretched maps (wider than tall and the other way round): the pyramid's
+    /// answer equals the brute-force one.
+    #[test]
+    fn pyramid_test_matches_brute_force() {
         let mut checked = 0;
-        for i0 in (0..res).step_by(3) {
-            for j0 in (0..res).step_by(5) {
-                for w in [0u32, 1, 2, 5, 9, 17] {
-                    let (i1, j1) = ((i0 + w).min(res - 1), (j0 + w / 2).min(res - 1));
-                    for d in [0.5f32, 5.0, 9.5, 100.0] {
-                        let got = hdm.test(i0, j0, i1, j1, d);
-                        let want = brute(&map, i0, j0, i1, j1, d);
-                        let ctx = format!("rect ({i0},{j0})-({i1},{j1}) depth {d}");
-                        // Hidden is exact; Empty may be reported as Partial (coarse texels
-                        // straddle the rectangle) but never the other way round.
-                        assert_eq!(got == Coverage::Hidden, want == Coverage::Hidden, "{ctx}");
-                        if got == Coverage::Empty {
-                            assert_eq!(want, Coverage::Empty, "{ctx}");
+        for (w, h) in [(32u32, 32u32), (128, 8), (4, 64), (16, 1)] {
+            let map = random_map(w, h);
+            let hdm = Hdm::build(&map);
+            assert_eq!(hdm.level_size(hdm.max.len() - 1), (1, 1));
+            for i0 in (0..w).step_by(3) {
+                for j0 in (0..h).step_by(5) {
+                    for s in [0u32, 1, 2, 5, 9, 17, 70] {
+                        let (i1, j1) = ((i0 + s).min(w - 1), (j0 + s / 2).min(h - 1));
+                        for d in [0.5f32, 5.0, 9.5, 100.0] {
+                            let got = hdm.test(i0, j0, i1, j1, d);
+                            let want = brute(&map, i0, j0, i1, j1, d);
+                            let ctx = format!("{w}×{h}: rect ({i0},{j0})-({i1},{j1}) depth {d}");
+                            // Hidden is exact; Empty may be reported as Partial (coarse texels
+                            // straddle the rectangle) but never the other way round.
+                            assert_eq!(got == Coverage::Hidden, want == Coverage::Hidden, "{ctx}");
+                            if got == Coverage::Empty {
+                                assert_eq!(want, Coverage::Empty, "{ctx}");
+                            }
+                            checked += 1;
                         }
-                        checked += 1;
                     }
                 }
             }
         }
-        assert!(checked > 1000);
+        assert!(checked > 3000, "{checked}");
     }
 
     #[test]

@@ -1,11 +1,12 @@
 //! One plane as a multi-part OpenEXR file (written with the `exr` crate).
 //!
 //! Parts (layers), each with 32-bit float channels, ZIP compressed, scan lines:
-//! - `plane`: `resolution²` pixels, channels `depth` (the Depth Map; `+inf` where nothing
-//!   projects) and `mask` (1 where covered, i.e. the Depth is finite, else 0);
-//! - `hdm_max_K` and `hdm_min_K` for `K = 1 … log2(resolution)`: `(resolution >> K)²` texels,
-//!   channel `depth`, the maximum and minimum pyramids of the Hierarchical Depth Map (level 0
-//!   is the Depth Map itself and is not repeated).
+//! - `plane`: `width × height` pixels (the plane's map, square or stretched to its
+//!   rectangle's shape), channels `depth` (the Depth Map; `+inf` where nothing projects) and
+//!   `mask` (1 where covered, i.e. the Depth is finite, else 0);
+//! - `hdm_max_K` and `hdm_min_K` for `K = 1 … log2(max(width, height))`: `max(1, width >> K)
+//!   × max(1, height >> K)` texels, channel `depth`, the maximum and minimum pyramids of the
+//!   Hierarchical Depth Map (level 0 is the Depth Map itself and is not repeated).
 //!
 //! Pixel `(i, j)` of the Depth Map (column `i` along the plane's `u` axis, row `j` along `v`)
 //! is EXR pixel `x = i, y = j`: `v` grows downward in image viewers.
@@ -14,7 +15,8 @@
 //! exactly, the GPU tests each pixel against the views' edges).
 //!
 //! Every part's header carries the plane's frame as custom attributes: `cellIndex`,
-//! `planeIndex`, `resolution`, `occluders`, `sliceEdges`, `coveredPixels` (int); `cellMin`,
+//! `planeIndex`, `resolution` (the longer side), `width`, `height`, `occluders`, `sliceEdges`,
+//! `coveredPixels` (int); `cellMin`,
 //! `cellMax` (v3f); `planeAxis` (`x`/`y`/`z`), `planeSide` (`+`/`-`), `uvAxes` (e.g. `yz`),
 //! `depthDefinition` (string); `planePosition`, `planeDistance` (double: the plane's coordinate
 //! and its distance from the cell's face); `rectMin`, `rectMax`, `pixelSize` (v2f, world
@@ -39,12 +41,13 @@ pub fn encode(
     map: &DepthMap,
     hdm: &Hdm,
 ) -> std::result::Result<Vec<u8>, String> {
-    let res = map.resolution as usize;
-    if map.depth.len() != res * res || hdm.resolution != map.resolution {
+    let (w, h) = (map.width as usize, map.height as usize);
+    if map.depth.len() != w * h || (hdm.width, hdm.height) != (map.width, map.height) {
         return Err(format!(
-            "inconsistent maps: {} Depth values and an HDM of {}² for a resolution of {res}",
+            "inconsistent maps: {} Depth values and an HDM of {} × {} for a map of {w} × {h}",
             map.depth.len(),
-            hdm.resolution
+            hdm.width,
+            hdm.height
         ));
     }
     let f = &job.frame;
@@ -57,7 +60,9 @@ pub fn encode(
     let i32_of = |n: usize| AttributeValue::I32(i32::try_from(n).unwrap_or(i32::MAX));
     put("cellIndex", i32_of(cell));
     put("planeIndex", i32_of(plane));
-    put("resolution", i32_of(res));
+    put("resolution", i32_of(w.max(h)));
+    put("width", i32_of(w));
+    put("height", i32_of(h));
     put("occluders", i32_of(job.occluders.len()));
     put("sliceEdges", i32_of(job.slices.len()));
     put("coveredPixels", i32_of(map.covered()));
@@ -92,7 +97,7 @@ pub fn encode(
     put("rectMax", v2(f.rect_max));
     put("pixelSize", v2(f.pixel_size()));
 
-    let layer = |name: &str, size: usize, channels: Vec<(&str, Vec<f32>)>| {
+    let layer = |name: &str, size: (usize, usize), channels: Vec<(&str, Vec<f32>)>| {
         let list: Vec<AnyChannel<FlatSamples>> = channels
             .into_iter()
             .map(|(n, s)| AnyChannel::new(n, FlatSamples::F32(s)))
@@ -101,7 +106,7 @@ pub fn encode(
         la.software_name = Some(Text::from("umbrasweep"));
         la.other = attrs.clone();
         Layer::new(
-            Vec2(size, size),
+            Vec2(size.0, size.1),
             la,
             Encoding::SMALL_LOSSLESS,
             AnyChannels::sort(list.into()),
@@ -114,20 +119,23 @@ pub fn encode(
         .collect();
     let mut layers = vec![layer(
         PLANE_LAYER,
-        res,
+        (w, h),
         vec![("depth", map.depth.clone()), ("mask", mask)],
     )];
     for (kind, levels) in [("max", &hdm.max), ("min", &hdm.min)] {
         for (k, level) in levels.iter().enumerate().skip(1) {
             layers.push(layer(
                 &format!("hdm_{kind}_{k}"),
-                res >> k,
+                {
+                    let (lw, lh) = hdm.level_size(k);
+                    (lw as usize, lh as usize)
+                },
                 vec![("depth", level.clone())],
             ));
         }
     }
     let image = Image::from_layers(
-        ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(res, res))),
+        ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(w, h))),
         layers,
     );
     let mut out = Cursor::new(Vec::new());

@@ -8,10 +8,11 @@
 //!   approximation of *viridis*, reversed (near = yellow). Uncovered pixels (`+inf`) are a
 //!   grey checkerboard of 4-pixel squares.
 //! - **Mask**: white where covered, black where not.
-//! - **HDM**: one image `resolution` wide and `resolution` tall holding the maximum pyramid's
-//!   levels 1, 2, … left to right in the top half (level `k` at `x = resolution − 2·(resolution
-//!   >> k)`, `y = 0`, native size) and the minimum pyramid the same way in the bottom half
-//!   (`y = resolution / 2`); the rest is black. Colours as for Depth.
+//! - **HDM**: one image the map's size (`width × height`, at least 2 tall) holding the maximum
+//!   pyramid's levels 1, 2, … left to right in the top half (level `k` at `x = width −
+//!   2·(width >> k)`, `y = 0`, native size) and the minimum pyramid the same way in the bottom
+//!   half (`y = height / 2`); the rest is black. Levels of a stretched map after its short
+//!   side has reached one texel are left out. Colours as for Depth.
 //!
 //! Pixel `(i, j)` of a map is image pixel `x = i, y = j` (the plane's `v` grows downward).
 
@@ -75,20 +76,20 @@ pub fn plane_distance(frame: &PlaneFrame) -> f64 {
 
 /// The Depth Map as colours (see the module docs).
 pub fn depth_image(map: &DepthMap, dist: f64) -> RgbImage {
-    level_image(&map.depth, map.resolution, dist)
-}
-
-fn level_image(level: &[f32], res: u32, dist: f64) -> RgbImage {
-    RgbImage::from_fn(res, res, |x, y| {
-        image::Rgb(depth_colour(level[(y * res + x) as usize], dist, x, y))
+    RgbImage::from_fn(map.width, map.height, |x, y| {
+        image::Rgb(depth_colour(
+            map.depth[(y * map.width + x) as usize],
+            dist,
+            x,
+            y,
+        ))
     })
 }
 
 /// The binary mask: white where covered, black elsewhere.
 pub fn mask_image(map: &DepthMap) -> RgbImage {
-    let res = map.resolution;
-    RgbImage::from_fn(res, res, |x, y| {
-        if map.depth[(y * res + x) as usize].is_finite() {
+    RgbImage::from_fn(map.width, map.height, |x, y| {
+        if map.depth[(y * map.width + x) as usize].is_finite() {
             image::Rgb([255, 255, 255])
         } else {
             image::Rgb([0, 0, 0])
@@ -98,15 +99,20 @@ pub fn mask_image(map: &DepthMap) -> RgbImage {
 
 /// The HDM mosaic: maximum levels on top, minimum levels below (see the module docs).
 pub fn hdm_image(hdm: &Hdm, dist: f64) -> RgbImage {
-    let res = hdm.resolution;
-    let mut img = RgbImage::new(res, res.max(2));
-    for (row, levels) in [(0, &hdm.max), (res / 2, &hdm.min)] {
+    let (w, h) = (hdm.width, hdm.height);
+    let mut img = RgbImage::new(w, h.max(2));
+    for (row, levels) in [(0, &hdm.max), (h.max(2) / 2, &hdm.min)] {
+        // The levels that still halve both sides (a stretched map's later levels, one texel
+        // thin, are left out).
         for (k, level) in levels.iter().enumerate().skip(1) {
-            let r = res >> k;
-            let x0 = res - 2 * r;
-            for y in 0..r {
-                for x in 0..r {
-                    let c = depth_colour(level[(y * r + x) as usize], dist, x, y);
+            if (w >> k) == 0 || (h >> k) == 0 {
+                break;
+            }
+            let (lw, lh) = (w >> k, h >> k);
+            let x0 = w - 2 * lw;
+            for y in 0..lh {
+                for x in 0..lw {
+                    let c = depth_colour(level[(y * lw + x) as usize], dist, x, y);
                     img.put_pixel(x0 + x, row + y, image::Rgb(c));
                 }
             }

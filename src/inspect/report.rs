@@ -135,6 +135,7 @@ pub fn recorded_settings(doc: &PvsDocument) -> anyhow::Result<BakeSettings> {
         } else {
             s.resolution
         },
+        max_stretch: s.max_stretch.max(1),
         extend: if s.extend == 0.0 { d.extend } else { s.extend },
         planes: if s.planes == 0 { d.planes } else { s.planes },
         slice_planes: if s.resolution == 0 {
@@ -483,7 +484,7 @@ fn page(
             writeln!(
                 h,
                 "<figure><img alt=\"Depth\" src=\"{}\"><img alt=\"mask\" src=\"{}\">\
-                 <figcaption>plane {} · {}{} at {:.3} (D = {:.3}) · {}² px of {:.3} × {:.3} · \
+                 <figcaption>plane {} · {}{} at {:.3} (D = {:.3}) · {} × {} px of {:.3} × {:.3} · \
                  {} [{:.2}, {:.2}] × {} [{:.2}, {:.2}] · {} occluders · {:.1} % covered\
                  </figcaption></figure>",
                 data_uri(&p.depth_png),
@@ -493,7 +494,8 @@ fn page(
                 if f.positive { "+" } else { "−" },
                 f.position,
                 (f.position - f.face()).abs(),
-                f.resolution,
+                f.width,
+                f.height,
                 px.x,
                 px.y,
                 names[u],
@@ -503,7 +505,7 @@ fn page(
                 f.rect_min.y,
                 f.rect_max.y,
                 p.occluders,
-                100.0 * p.covered as f64 / (f.resolution as f64 * f.resolution as f64).max(1.0)
+                100.0 * p.covered as f64 / (f.pixels() as f64).max(1.0)
             )?;
         }
         h.push_str("</div>\n");

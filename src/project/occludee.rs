@@ -123,17 +123,16 @@ pub fn improved_rect(frame: &PlaneFrame, b: &DAabb) -> (DVec2, DVec2) {
 pub fn pixel_rect(frame: &PlaneFrame, lo: DVec2, hi: DVec2) -> Option<[u32; 4]> {
     let pl = frame.to_pixel(lo);
     let ph = frame.to_pixel(hi);
-    let r = frame.resolution as f64;
-    if !(pl.x >= 0.0 && pl.y >= 0.0 && ph.x <= r && ph.y <= r) {
+    let (w, h) = (frame.width, frame.height);
+    if !(pl.x >= 0.0 && pl.y >= 0.0 && ph.x <= w as f64 && ph.y <= h as f64) {
         return None;
     }
-    // A rectangle touching the far edge (pixel coordinate == resolution) touches the last
+    // A rectangle touching the far edge (pixel coordinate == width or height) touches the last
     // pixel: clamp both ends into the map.
-    let last = frame.resolution - 1;
-    let i0 = (pl.x.floor() as u32).min(last);
-    let j0 = (pl.y.floor() as u32).min(last);
-    let i1 = (ph.x.floor() as u32).min(last);
-    let j1 = (ph.y.floor() as u32).min(last);
+    let i0 = (pl.x.floor() as u32).min(w - 1);
+    let j0 = (pl.y.floor() as u32).min(h - 1);
+    let i1 = (ph.x.floor() as u32).min(w - 1);
+    let j1 = (ph.y.floor() as u32).min(h - 1);
     Some([i0, j0, i1.max(i0), j1.max(j0)])
 }
 
@@ -153,7 +152,8 @@ mod tests {
             position,
             rect_min: DVec2::splat(-50.0),
             rect_max: DVec2::splat(50.0),
-            resolution: 64,
+            width: 64,
+            height: 64,
         }
     }
 

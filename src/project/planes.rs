@@ -35,7 +35,12 @@ pub enum Placement {
 /// How planes are laid out; see [`crate::bake::BakeSettings`] for the user-facing knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlaneSettings {
+    /// A plane's Depth Map has `resolution²` pixels.
     pub resolution: u32,
+    /// How much wider than tall (or taller than wide) a Depth Map may be, a power of two:
+    /// each plane's map follows its rectangle's shape ([`crate::backend::map_size`]); 1 keeps
+    /// every map square.
+    pub max_stretch: u32,
     /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
     pub extend: f64,
     /// Planes per direction placed just behind occluders.
@@ -52,6 +57,7 @@ impl PlaneSettings {
     pub const fn default_settings() -> Self {
         PlaneSettings {
             resolution: 256,
+            max_stretch: 8,
             extend: 1.5,
             planes: 4,
             slice_planes: 1,
@@ -262,7 +268,8 @@ impl DirectionPlan {
             position: self.face + s * self.distances[k],
             rect_min: DVec2::ZERO,
             rect_max: DVec2::ONE,
-            resolution: 1,
+            width: 1,
+            height: 1,
         };
         let (lo, hi) = crate::project::occludee::standard_rect(&frame, &b);
         // Rounding: a relative margin far above the few f64 operations' error.
@@ -477,7 +484,8 @@ pub fn plane_job(
         position,
         rect_min: fmin,
         rect_max: fmax,
-        resolution: settings.resolution,
+        width: settings.resolution,
+        height: settings.resolution,
     };
     // A Projection lies inside the view from the cell's centre, and that inside the view of
     // the part's bounds: parts whose bounds' view misses the frame are skipped unprojected.
@@ -608,9 +616,13 @@ pub fn plane_job(
     if !(rmin.x < rmax.x && rmin.y < rmax.y) {
         return None;
     }
+    let (width, height) =
+        crate::backend::map_size(settings.resolution, rmax - rmin, settings.max_stretch);
     let frame = PlaneFrame {
         rect_min: rmin,
         rect_max: rmax,
+        width,
+        height,
         ..probe
     };
     let px = frame.pixel_size();

@@ -24,7 +24,7 @@ use std::path::Path;
 /// The first 8 bytes of every `.pvs` file.
 pub const MAGIC: [u8; 8] = *b"UMBRAPVS";
 /// The binary format version this crate writes and reads.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// Length of the fixed header: magic, version, checksum, payload length.
 pub const HEADER_LEN: usize = 24;
 /// The `parent` value of a key cell (a record holding the full set).
@@ -371,6 +371,7 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
     put_str(&mut p, &s.sweep_spacing)?;
     p.push(s.subcell.is_some() as u8);
     p.extend_from_slice(&s.subcell.unwrap_or(0.0).to_le_bytes());
+    put_u32(&mut p, s.max_stretch);
     match &doc.summary {
         None => p.push(0),
         Some(m) => {

@@ -648,6 +648,9 @@ impl PvsDatabase {
             let size = r.f64("settings.subcell")?;
             settings.subcell = settings.subcell.map(|_| size);
         }
+        if version >= 3 {
+            settings.max_stretch = r.u32("settings.max_stretch")?;
+        }
         let summary = if r.bool("the summary flag")? {
             Some(PvsSummary {
                 cells: r.usize_u64("summary.cells")?,

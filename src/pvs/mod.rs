@@ -76,6 +76,9 @@ pub struct PvsSummary {
 pub struct PvsSettings {
     pub backend: String,
     pub resolution: u32,
+    /// [`crate::bake::BakeSettings::max_stretch`]; 0 in documents written before Depth Maps
+    /// could be stretched (their maps were square, as with 1).
+    pub max_stretch: u32,
     pub extend: f64,
     pub planes: u32,
     pub slice_planes: u32,

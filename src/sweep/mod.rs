@@ -60,10 +60,11 @@ pub const CLOSED: OpenSides = [false; 4];
 /// Reprojection of one plane's umbra onto the next plane of the sweep.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Reprojection {
-    /// The source plane's Depth Map (same resolution as the target). Pixels with Depth `≤ 0`
-    /// are the umbra carried forward.
+    /// The source plane's Depth Map (its size may differ from the target's). Pixels with
+    /// Depth `≤ 0` are the umbra carried forward.
     pub source: Arc<DepthMap>,
-    /// Per target column `i`: the source columns its window overlaps.
+    /// Per target column `i` (one entry per column of the target): the source columns its
+    /// window overlaps.
     pub cols: Vec<Window>,
     /// Per target row `j`: the source rows its window overlaps.
     pub rows: Vec<Window>,
@@ -77,7 +78,7 @@ impl Reprojection {
     ///
     /// # Panics
     /// If the frames do not belong to the same cell and direction, if `dst` is not strictly
-    /// behind `src`, or if the resolutions differ.
+    /// behind `src`, or if `source` is not of `src`'s size.
     pub fn new(src: &PlaneFrame, dst: &PlaneFrame, source: Arc<DepthMap>) -> Reprojection {
         Reprojection::with_open_sides(src, dst, source, CLOSED)
     }
@@ -94,10 +95,10 @@ impl Reprojection {
         open: OpenSides,
     ) -> Reprojection {
         assert_eq!(
-            src.resolution, dst.resolution,
-            "planes of one sweep share a resolution"
+            (source.width, source.height),
+            (src.width, src.height),
+            "the source map is the source frame's"
         );
-        assert_eq!(source.resolution, src.resolution);
         let (cols, rows) = windows(src, dst, open);
         let s = src.sign() * (src.position - src.face());
         let t = dst.sign() * (dst.position - dst.face());
@@ -128,29 +129,30 @@ impl Reprojection {
     /// The reprojected pixels of the target, row-major: the separable filter of the module
     /// docs. (The GPU backend runs the same filter in two render passes.)
     pub fn mask(&self) -> Vec<bool> {
-        let res = self.source.resolution as usize;
+        let (sw, sh) = (self.source.width as usize, self.source.height as usize);
+        let (tw, th) = (self.cols.len(), self.rows.len());
         let src = &self.source.depth;
         // Pass 1: for every source row y and target column i, all set in cols[i] of row y.
-        let mut horizontal = vec![false; res * res];
-        let mut prefix = vec![0u32; res + 1];
-        for y in 0..res {
-            for x in 0..res {
-                prefix[x + 1] =
-                    prefix[x] + u32::from(src[y * res + x] > 0.0 || src[y * res + x].is_nan());
+        let mut horizontal = vec![false; sh * tw];
+        let mut prefix = vec![0u32; sw + 1];
+        for y in 0..sh {
+            for x in 0..sw {
+                let d = src[y * sw + x];
+                prefix[x + 1] = prefix[x] + u32::from(d > 0.0 || d.is_nan());
             }
             for (i, w) in self.cols.iter().enumerate() {
-                horizontal[y * res + i] = all_set(&prefix, *w, res);
+                horizontal[y * tw + i] = all_set(&prefix, *w, sw);
             }
         }
         // Pass 2: for every target pixel, all of pass 1 set in rows[j] of column i.
-        let mut out = vec![false; res * res];
-        let mut column = vec![0u32; res + 1];
-        for i in 0..res {
-            for y in 0..res {
-                column[y + 1] = column[y] + u32::from(!horizontal[y * res + i]);
+        let mut out = vec![false; tw * th];
+        let mut column = vec![0u32; sh + 1];
+        for i in 0..tw {
+            for y in 0..sh {
+                column[y + 1] = column[y] + u32::from(!horizontal[y * tw + i]);
             }
             for (j, w) in self.rows.iter().enumerate() {
-                out[j * res + i] = all_set(&column, *w, res);
+                out[j * tw + i] = all_set(&column, *w, sh);
             }
         }
         out
@@ -169,9 +171,8 @@ fn all_set(prefix: &[u32], w: Window, res: usize) -> bool {
 /// The world `(u, v)` bounding box of a plane's umbra pixels (Depth `≤ 0`), or `None` when it
 /// has none.
 pub fn umbra_bounds(src: &PlaneFrame, map: &DepthMap) -> Option<(glam::DVec2, glam::DVec2)> {
-    let res = map.resolution as usize;
     let (mut i0, mut j0, mut i1, mut j1) = (usize::MAX, usize::MAX, 0, 0);
-    for (j, row) in map.depth.chunks_exact(res).enumerate() {
+    for (j, row) in map.depth.chunks_exact(map.width as usize).enumerate() {
         let Some(first) = row.iter().position(|&d| d <= 0.0) else {
             continue;
         };
@@ -247,10 +248,11 @@ pub fn windows(src: &PlaneFrame, dst: &PlaneFrame, open: OpenSides) -> (Vec<Wind
     );
     let depth = cell.max[a] - cell.min[a];
     let lambdas = [s / t, (s + depth) / (t + depth)];
-    let res = dst.resolution as usize;
-    let last = res as f64 - 1.0;
     let one_axis = |k: usize, e0: f64, e1: f64| -> Vec<Window> {
         let (open_lo, open_hi) = (open[k], open[2 + k]);
+        let n_dst = [dst.width, dst.height][k] as usize;
+        let n_src = [src.width, src.height][k] as f64;
+        let last = n_src - 1.0;
         let (q0, qpx) = (dst.rect_min[k], dst.pixel_size()[k]);
         let (p0, ppx) = (src.rect_min[k], src.pixel_size()[k]);
         let scale = e0.abs().max(e1.abs()).max(q0.abs()).max(p0.abs())
@@ -258,7 +260,7 @@ pub fn windows(src: &PlaneFrame, dst: &PlaneFrame, open: OpenSides) -> (Vec<Wind
         // Outward rounding: the f64 error of these few operations, in source pixels, plus a
         // margin.
         let eps = 1e-6 + 1e-12 * scale / ppx;
-        (0..res)
+        (0..n_dst)
             .map(|i| {
                 let (qa, qb) = (q0 + i as f64 * qpx, q0 + (i + 1) as f64 * qpx);
                 let mut lo = f64::INFINITY;
@@ -268,13 +270,13 @@ pub fn windows(src: &PlaneFrame, dst: &PlaneFrame, open: OpenSides) -> (Vec<Wind
                     hi = hi.max((1.0 - l) * e1 + l * qb);
                 }
                 let (x0, x1) = ((lo - p0) / ppx - eps, (hi - p0) / ppx + eps);
-                if !((x0 >= 0.0 || open_lo) && (x1 <= res as f64 || open_hi)) || x0.is_nan() {
+                if !((x0 >= 0.0 || open_lo) && (x1 <= n_src || open_hi)) || x0.is_nan() {
                     return NO_WINDOW;
                 }
                 // Cut at open sides. A window wholly past one keeps its edge pixel (the exact
                 // answer, "nothing to test", would set the pixel: this is stricter).
                 let i0 = x0.max(0.0).floor().min(last);
-                let i1 = (x1.min(res as f64).ceil() - 1.0).clamp(i0, last);
+                let i1 = (x1.min(n_src).ceil() - 1.0).clamp(i0, last);
                 [i0 as u32, i1 as u32]
             })
             .collect()
@@ -304,7 +306,8 @@ mod tests {
             position: face + if positive { t } else { -t },
             rect_min: lo,
             rect_max: hi,
-            resolution: 32,
+            width: 32,
+            height: 32,
         }
     }
 
@@ -356,11 +359,19 @@ mod tests {
             let shrink = if case % 3 == 1 { 0.6 } else { 1.0 };
             let (slo, shi) = rect(s * shrink, rng.random_range(0.0..0.6));
             let (tlo, thi) = rect(t, rng.random_range(0.0..0.6));
-            let src = frame(cell, axis, positive, s, slo, shi);
-            let dst = frame(cell, axis, positive, t, tlo, thi);
+            // Maps of different shapes on the two planes (a sweep's planes may differ).
+            let shapes = [(32u32, 32u32), (64, 16), (16, 64), (128, 8)];
+            let mut sized = |mut f: PlaneFrame| {
+                (f.width, f.height) = shapes[rng.random_range(0..shapes.len())];
+                f
+            };
+            let src = sized(frame(cell, axis, positive, s, slo, shi));
+            let dst = sized(frame(cell, axis, positive, t, tlo, thi));
+            let (sw, sh) = (src.width as usize, src.height as usize);
+            let (tw, th) = (dst.width as usize, dst.height as usize);
             // A mask of mostly set pixels with random holes, so that some targets are set.
             let hole = rng.random_range(0.0..0.05);
-            let mut map = DepthMap::new(32);
+            let mut map = DepthMap::for_frame(&src);
             for d in map.depth.iter_mut() {
                 if rng.random_range(0.0..1.0) > hole {
                     *d = -rng.random_range(0.0..1.0f32);
@@ -370,9 +381,9 @@ mod tests {
             let mask = r.mask();
             let spx = src.pixel_size();
             let tpx = dst.pixel_size();
-            for j in 0..32 {
-                for i in 0..32 {
-                    if !mask[j * 32 + i] {
+            for j in 0..th {
+                for i in 0..tw {
+                    if !mask[j * tw + i] {
                         continue;
                     }
                     checked += 1;
@@ -400,7 +411,7 @@ mod tests {
                         q[v] = q2.y;
                         let p = src.project(e, q);
                         let x = (p - slo) / spx;
-                        let past = [x.x < 0.0, x.y < 0.0, x.x > 32.0, x.y > 32.0];
+                        let past = [x.x < 0.0, x.y < 0.0, x.x > sw as f64, x.y > sh as f64];
                         if past.iter().any(|&b| b) {
                             assert!(
                                 (0..4).all(|k| !past[k] || open[k]),
@@ -413,8 +424,9 @@ mod tests {
                         let mut any = false;
                         for xi in [(x.x - 1e-9).floor(), (x.x + 1e-9).floor()] {
                             for yi in [(x.y - 1e-9).floor(), (x.y + 1e-9).floor()] {
-                                if (0.0..32.0).contains(&xi) && (0.0..32.0).contains(&yi) {
-                                    any |= map.depth[yi as usize * 32 + xi as usize] <= 0.0;
+                                if (0.0..sw as f64).contains(&xi) && (0.0..sh as f64).contains(&yi)
+                                {
+                                    any |= map.depth[yi as usize * sw + xi as usize] <= 0.0;
                                 }
                             }
                         }

@@ -233,9 +233,11 @@ struct Pool {
     uniforms: Option<wgpu::Buffer>,
     /// Reprojection windows of every reprojection of a submission.
     windows: Option<wgpu::Buffer>,
-    targets: HashMap<u32, Vec<Target>>,
-    /// Reprojections' summed-area tables, one per reprojection of a submission.
-    tables: HashMap<u32, Vec<SweepTable>>,
+    /// Per map size `(width, height)`.
+    targets: HashMap<(u32, u32), Vec<Target>>,
+    /// Reprojections' summed-area tables, one per reprojection of a submission, per source
+    /// size.
+    tables: HashMap<(u32, u32), Vec<SweepTable>>,
 }
 
 /// One plane's render target and its read-back buffer.
@@ -268,9 +270,12 @@ struct Prepared {
 /// One reprojection of a job, prepared for the GPU (see [`sweep_setup`]).
 #[derive(Clone, Debug, PartialEq)]
 struct SweepSetup {
-    /// The storage data: `[depth bits, resolution]`, `[+inf bits, 0]`, then the column
-    /// windows, then the row windows (`shaders/reproject.wgsl`).
+    /// The storage data: `[depth bits, target width]`, `[+inf bits, source width]`,
+    /// `[source height, 0]`, then the column windows, then the row windows
+    /// (`shaders/reproject.wgsl`).
     words: Vec<[u32; 2]>,
+    /// The source's (and the table's) `(width, height)`.
+    source_size: (u32, u32),
     /// The source's summed-area table of pixels outside the umbra, row-major: entry `(x, y)`
     /// counts the source pixels in `[0, x] × [0, y]` whose Depth is not `≤ 0`.
     table: Vec<u32>,
@@ -633,19 +638,19 @@ impl GpuBackend {
         Ok(())
     }
 
-    /// A `res`² single-channel 2D texture and its view, labelled `name res²`.
-    fn square_texture(
+    /// A `width × height` single-channel 2D texture and its view, labelled `name w×h`.
+    fn map_texture(
         &self,
         name: &str,
-        res: u32,
+        (width, height): (u32, u32),
         format: wgpu::TextureFormat,
         usage: wgpu::TextureUsages,
     ) -> (wgpu::Texture, wgpu::TextureView) {
         let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(&format!("{name} {res}²")),
+            label: Some(&format!("{name} {width}×{height}")),
             size: wgpu::Extent3d {
-                width: res,
-                height: res,
+                width,
+                height,
                 depth_or_array_layers: 1,
             },
             mip_level_count: 1,
@@ -656,23 +661,23 @@ impl GpuBackend {
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor {
-            label: Some(&format!("{name} {res}² view")),
+            label: Some(&format!("{name} {width}×{height} view")),
             ..Default::default()
         });
         (texture, view)
     }
 
-    fn new_target(&self, res: u32) -> Target {
-        let (texture, view) = self.square_texture(
+    fn new_target(&self, (w, h): (u32, u32)) -> Target {
+        let (texture, view) = self.map_texture(
             "depth map",
-            res,
+            (w, h),
             wgpu::TextureFormat::R32Float,
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         );
-        let padded_row = (res * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let padded_row = (w * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(&format!("depth map {res}² read-back")),
-            size: padded_row as u64 * res as u64,
+            label: Some(&format!("depth map {w}×{h} read-back")),
+            size: padded_row as u64 * h as u64,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -684,10 +689,10 @@ impl GpuBackend {
         }
     }
 
-    fn new_sweep_table(&self, res: u32) -> SweepTable {
-        let (texture, view) = self.square_texture(
+    fn new_sweep_table(&self, size: (u32, u32)) -> SweepTable {
+        let (texture, view) = self.map_texture(
             "reprojection table",
-            res,
+            size,
             wgpu::TextureFormat::R32Uint,
             wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         );
@@ -797,9 +802,10 @@ impl GpuBackend {
                         .write_buffer(buf, off, bytemuck::cast_slice(sw.words.as_slice()));
                 }
             }
-            let scale = 2.0f32 / jobs[j].frame.resolution as f32;
+            let f = &jobs[j].frame;
             let o = w * UNIFORM_STRIDE as usize;
-            uniforms[o..o + 4].copy_from_slice(&scale.to_le_bytes());
+            uniforms[o..o + 4].copy_from_slice(&(2.0f32 / f.width as f32).to_le_bytes());
+            uniforms[o + 4..o + 8].copy_from_slice(&(2.0f32 / f.height as f32).to_le_bytes());
         }
         self.queue.write_buffer(uni_buf, 0, &uniforms);
         stats.submissions += 1;
@@ -817,34 +823,35 @@ impl GpuBackend {
             stats.triangles += p.out.vertices.len() / 3;
             stats.edges += p.out.data.len() - p.occluders;
             stats.bytes_uploaded += p.out.data.len() as u64 * 16;
-            let r = jobs[j].frame.resolution as u64;
-            stats.bytes_read_back += (r * 4).next_multiple_of(256) * r;
+            let f = &jobs[j].frame;
+            stats.bytes_read_back += (f.width as u64 * 4).next_multiple_of(256) * f.height as u64;
         }
 
-        // Targets from the pool, per resolution.
-        let mut taken: HashMap<u32, usize> = HashMap::new();
+        // Targets from the pool, per map size.
+        let mut taken: HashMap<(u32, u32), usize> = HashMap::new();
         let mut slots = Vec::with_capacity(todo.len());
         for &j in todo {
-            let res = jobs[j].frame.resolution;
-            let k = taken.entry(res).or_default();
-            let list = pool.targets.entry(res).or_default();
+            let size = (jobs[j].frame.width, jobs[j].frame.height);
+            let k = taken.entry(size).or_default();
+            let list = pool.targets.entry(size).or_default();
             if list.len() <= *k {
-                list.push(self.new_target(res));
+                list.push(self.new_target(size));
             }
-            slots.push((res, *k));
+            slots.push((size, *k));
             *k += 1;
         }
-        // Reprojection tables from the pool, per resolution, one per reprojection; uploaded.
-        let mut taken: HashMap<u32, usize> = HashMap::new();
-        let mut table_slots: Vec<Vec<usize>> = Vec::with_capacity(todo.len());
+        // Reprojection tables from the pool, per source size, one per reprojection; uploaded.
+        let mut taken: HashMap<(u32, u32), usize> = HashMap::new();
+        let mut table_slots: Vec<Vec<((u32, u32), usize)>> = Vec::with_capacity(todo.len());
         for &j in todo {
-            let res = jobs[j].frame.resolution;
-            let k = taken.entry(res).or_default();
-            let list = pool.tables.entry(res).or_default();
             let mut mine = Vec::with_capacity(prepared[j].sweeps.len());
             for sw in &prepared[j].sweeps {
+                let size = sw.source_size;
+                let (res, rows) = size;
+                let k = taken.entry(size).or_default();
+                let list = pool.tables.entry(size).or_default();
                 if list.len() <= *k {
-                    list.push(self.new_sweep_table(res));
+                    list.push(self.new_sweep_table(size));
                 }
                 self.queue.write_texture(
                     wgpu::TexelCopyTextureInfo {
@@ -857,15 +864,15 @@ impl GpuBackend {
                     wgpu::TexelCopyBufferLayout {
                         offset: 0,
                         bytes_per_row: Some(res * 4),
-                        rows_per_image: Some(res),
+                        rows_per_image: Some(rows),
                     },
                     wgpu::Extent3d {
                         width: res,
-                        height: res,
+                        height: rows,
                         depth_or_array_layers: 1,
                     },
                 );
-                mine.push(*k);
+                mine.push((size, *k));
                 *k += 1;
             }
             table_slots.push(mine);
@@ -873,13 +880,12 @@ impl GpuBackend {
         // The reprojections' bind groups: windows and table.
         let mut reproject_groups: Vec<Vec<wgpu::BindGroup>> = Vec::with_capacity(todo.len());
         for (w, &j) in todo.iter().enumerate() {
-            let res = jobs[j].frame.resolution;
             let groups = prepared[j]
                 .sweeps
                 .iter()
                 .zip(&table_slots[w])
                 .zip(&windows_offsets[w])
-                .map(|((sw, &k), &off)| {
+                .map(|((sw, &(size, k)), &off)| {
                     let Some(buf) = win_buf else {
                         unreachable!("the windows buffer exists when a plane reprojects");
                     };
@@ -898,7 +904,7 @@ impl GpuBackend {
                             wgpu::BindGroupEntry {
                                 binding: 1,
                                 resource: wgpu::BindingResource::TextureView(
-                                    &pool.tables[&res][k].view,
+                                    &pool.tables[&size][k].view,
                                 ),
                             },
                         ],
@@ -916,8 +922,8 @@ impl GpuBackend {
         // Encode every plane: one pass, one draw per chunk and one per reprojection, one copy.
         for (w, &j) in todo.iter().enumerate() {
             let p = &prepared[j];
-            let (res, k) = slots[w];
-            let target = &pool.targets[&res][k];
+            let (size, k) = slots[w];
+            let target = &pool.targets[&size][k];
             let bind_groups: Vec<wgpu::BindGroup> = p
                 .chunks
                 .iter()
@@ -1001,21 +1007,21 @@ impl GpuBackend {
                     layout: wgpu::TexelCopyBufferLayout {
                         offset: 0,
                         bytes_per_row: Some(target.padded_row),
-                        rows_per_image: Some(res),
+                        rows_per_image: Some(size.1),
                     },
                 },
                 wgpu::Extent3d {
-                    width: res,
-                    height: res,
+                    width: size.0,
+                    height: size.1,
                     depth_or_array_layers: 1,
                 },
             );
         }
         let submission = self.queue.submit([encoder.finish()]);
         let (tx, rx) = mpsc::channel::<(usize, Result<(), wgpu::BufferAsyncError>)>();
-        for (w, &(res, k)) in slots.iter().enumerate() {
+        for (w, &(size, k)) in slots.iter().enumerate() {
             let tx = tx.clone();
-            pool.targets[&res][k]
+            pool.targets[&size][k]
                 .staging
                 .map_async(wgpu::MapMode::Read, .., move |r| {
                     let _ = tx.send((w, r));
@@ -1058,18 +1064,19 @@ impl GpuBackend {
 
         // Read back, merge the slice masks.
         for (w, &j) in todo.iter().enumerate() {
-            let (res, k) = slots[w];
-            let target = &pool.targets[&res][k];
+            let ((width, height), k) = slots[w];
+            let target = &pool.targets[&(width, height)][k];
             let mut map = DepthMap {
-                resolution: res,
-                depth: Vec::with_capacity((res * res) as usize),
+                width,
+                height,
+                depth: Vec::with_capacity(width as usize * height as usize),
             };
             {
                 let view = target
                     .staging
                     .get_mapped_range(..)
                     .map_err(|e| BackendError::Device(format!("read-back mapping: {e}")))?;
-                let row_bytes = res as usize * 4;
+                let row_bytes = width as usize * 4;
                 for row in view.chunks(target.padded_row as usize) {
                     map.depth
                         .extend_from_slice(bytemuck::cast_slice::<u8, f32>(&row[..row_bytes]));
@@ -1117,8 +1124,8 @@ fn reproject_pipeline(
                 ty: wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Storage { read_only: true },
                     has_dynamic_offset: false,
-                    // The header and one window.
-                    min_binding_size: NonZeroU64::new(24),
+                    // The header (six words) and one window.
+                    min_binding_size: NonZeroU64::new(32),
                 },
                 count: None,
             },
@@ -1176,14 +1183,14 @@ fn reproject_pipeline(
 /// scissored to the bounding box of those pixels, and outside it a draw would write `+inf`
 /// anyway. No umbra, or no such pixel: `None`.
 fn sweep_setup(r: &Reprojection) -> Option<SweepSetup> {
-    let res = r.source.resolution;
-    let n = res as usize;
-    // Windows first: O(resolution), and a reprojection without any skips the table.
-    let any_valid = |w: &[Window]| w.iter().any(|&[a, b]| a <= b && b < res);
-    if !any_valid(&r.cols) || !any_valid(&r.rows) {
+    let (sw, sh) = (r.source.width, r.source.height);
+    let (n, m) = (sw as usize, sh as usize);
+    // Windows first: O(width + height), and a reprojection without any skips the table.
+    let any_valid = |w: &[Window], len: u32| w.iter().any(|&[a, b]| a <= b && b < len);
+    if !any_valid(&r.cols, sw) || !any_valid(&r.rows, sh) {
         return None;
     }
-    let mut table = vec![0u32; n * n];
+    let mut table = vec![0u32; n * m];
     for (y, src) in r.source.depth.chunks_exact(n).enumerate() {
         let (done, rest) = table.split_at_mut(y * n);
         let row = &mut rest[..n];
@@ -1200,35 +1207,38 @@ fn sweep_setup(r: &Reprojection) -> Option<SweepSetup> {
             }
         }
     }
-    let last = &table[(n - 1) * n..];
-    if last[n - 1] as usize == n * n {
+    let last = &table[(m - 1) * n..];
+    if last[n - 1] as usize == n * m {
         return None;
     }
     // The umbra's bounding box [x0, x1] × [y0, y1]: the columns and rows not entirely outside.
     let column = |x: usize| last[x] - if x > 0 { last[x - 1] } else { 0 };
     let row = |y: usize| table[y * n + n - 1] - if y > 0 { table[y * n - 1] } else { 0 };
-    let bounds = |full: &dyn Fn(usize) -> u32| {
-        let lo = (0..n).position(|k| full(k) < res)?;
-        let hi = (0..n).rposition(|k| full(k) < res)?;
+    let bounds = |full: &dyn Fn(usize) -> u32, count: usize, len: u32| {
+        let lo = (0..count).position(|k| full(k) < len)?;
+        let hi = (0..count).rposition(|k| full(k) < len)?;
         Some((lo as u32, hi as u32))
     };
-    let ((x0, x1), (y0, y1)) = (bounds(&column)?, bounds(&row)?);
+    // A column holds `sh` pixels, a row `sw`.
+    let ((x0, x1), (y0, y1)) = (bounds(&column, n, sh)?, bounds(&row, m, sw)?);
     // The range of indices whose window lies inside [lo, hi].
     let inside = |windows: &[Window], lo: u32, hi: u32| {
-        let ok = |&[a, b]: &Window| a <= b && b < res && a >= lo && b <= hi;
+        let ok = |&[a, b]: &Window| a <= b && a >= lo && b <= hi;
         let first = windows.iter().position(ok)? as u32;
         let last = windows.iter().rposition(ok)? as u32;
         Some((first, last))
     };
     let (i0, i1) = inside(&r.cols, x0, x1)?;
     let (j0, j1) = inside(&r.rows, y0, y1)?;
-    let mut words = Vec::with_capacity(2 + 2 * n);
-    words.push([r.depth.to_bits(), res]);
-    words.push([f32::INFINITY.to_bits(), 0]);
+    let mut words = Vec::with_capacity(3 + r.cols.len() + r.rows.len());
+    words.push([r.depth.to_bits(), r.cols.len() as u32]);
+    words.push([f32::INFINITY.to_bits(), sw]);
+    words.push([sh, 0]);
     words.extend_from_slice(&r.cols);
     words.extend_from_slice(&r.rows);
     Some(SweepSetup {
         words,
+        source_size: (sw, sh),
         table,
         scissor: [i0, j0, i1 - i0 + 1, j1 - j0 + 1],
     })
@@ -1239,7 +1249,7 @@ fn slice_mask(job: &PlaneJob) -> Option<DepthMap> {
     if job.slices.is_empty() {
         return None;
     }
-    let mut mask = DepthMap::new(job.frame.resolution);
+    let mut mask = DepthMap::for_frame(&job.frame);
     cpu::fill_slices(&mut mask, &job.frame, &job.slices);
     Some(mask)
 }
@@ -1305,27 +1315,27 @@ impl RasterBackend for GpuBackend {
 
     fn render(&self, jobs: &[PlaneJob]) -> Result<Vec<DepthMap>, BackendError> {
         self.check_failure()?;
+        // Records pack pixel origins into 16 bits each.
+        let max = self.max_texture.min(1 << 15);
+        let fits = |w: u32, h: u32| (1..=max).contains(&w) && (1..=max).contains(&h);
         for job in jobs {
-            let r = job.frame.resolution;
-            // Records pack pixel origins into 16 bits each.
-            let max = self.max_texture.min(1 << 15);
-            if r == 0 || r > max {
+            let (w, h) = (job.frame.width, job.frame.height);
+            if !fits(w, h) {
                 return Err(BackendError::Device(format!(
-                    "plane resolution {r} is outside 1..={max} supported by {}",
+                    "plane size {w} × {h} is outside 1..={max} per side supported by {}",
                     self.adapter_name
                 )));
             }
             for rp in &job.reproject {
-                let n = r as usize;
-                if rp.source.resolution != r
-                    || rp.source.depth.len() != n * n
-                    || rp.cols.len() != n
-                    || rp.rows.len() != n
+                let (sw, sh) = (rp.source.width, rp.source.height);
+                if !fits(sw, sh)
+                    || rp.source.depth.len() != sw as usize * sh as usize
+                    || rp.cols.len() != w as usize
+                    || rp.rows.len() != h as usize
                 {
                     return Err(BackendError::Device(format!(
-                        "a reprojection onto a {r}² plane has a {}² source with {} pixels, {} \
-                         column and {} row windows",
-                        rp.source.resolution,
+                        "a reprojection onto a {w} × {h} plane has a {sw} × {sh} source with {} \
+                         pixels, {} column and {} row windows",
                         rp.source.depth.len(),
                         rp.cols.len(),
                         rp.rows.len()
@@ -1349,7 +1359,7 @@ impl RasterBackend for GpuBackend {
         let mut gpu_jobs = Vec::new();
         for (j, p) in prepared.iter().enumerate() {
             if p.out.vertices.is_empty() && p.sweeps.is_empty() {
-                let mut map = DepthMap::new(jobs[j].frame.resolution);
+                let mut map = DepthMap::for_frame(&jobs[j].frame);
                 if let Some(mask) = &p.mask {
                     merge_mask(&mut map, mask);
                 }
@@ -1363,11 +1373,15 @@ impl RasterBackend for GpuBackend {
         let mut waves: Vec<Vec<usize>> = Vec::new();
         let (mut tgt, mut data) = (0u64, 0u64);
         for &j in &gpu_jobs {
-            let r = jobs[j].frame.resolution as u64;
+            let (w, h) = (jobs[j].frame.width as u64, jobs[j].frame.height as u64);
             let p = &prepared[j];
             // Target and read-back, plus every reprojection's table (4 bytes a pixel).
-            let sweeps = p.sweeps.len() as u64;
-            let t = r * r * 4 + (r * 4).next_multiple_of(256) * r + sweeps * r * r * 4;
+            let tables: u64 = p
+                .sweeps
+                .iter()
+                .map(|sw| sw.source_size.0 as u64 * sw.source_size.1 as u64 * 4)
+                .sum();
+            let t = w * h * 4 + (w * 4).next_multiple_of(256) * h + tables;
             let windows: u64 = p
                 .sweeps
                 .iter()

@@ -114,17 +114,17 @@ pub fn occluder(
         return false;
     }
     let poly = &scratch.cpu.poly;
-    let r = ps.frame.resolution as f64;
+    let (w, h) = (ps.frame.width as f64, ps.frame.height as f64);
     // Geometry: the polygon clipped to the plane (keeps vertex coordinates small, so neither
     // the rasteriser's clipping nor f32 vertices lose precision).
     let g = &mut scratch.geometry;
     g.clear();
     g.extend_from_slice(poly);
     for (p0, p1) in [
-        (DVec2::new(0.0, 0.0), DVec2::new(r, 0.0)),
-        (DVec2::new(r, 0.0), DVec2::new(r, r)),
-        (DVec2::new(r, r), DVec2::new(0.0, r)),
-        (DVec2::new(0.0, r), DVec2::new(0.0, 0.0)),
+        (DVec2::new(0.0, 0.0), DVec2::new(w, 0.0)),
+        (DVec2::new(w, 0.0), DVec2::new(w, h)),
+        (DVec2::new(w, h), DVec2::new(0.0, h)),
+        (DVec2::new(0.0, h), DVec2::new(0.0, 0.0)),
     ] {
         crate::backend::cpu::clip_half_plane(g, p0, p1, &mut scratch.tmp);
         std::mem::swap(g, &mut scratch.tmp);
@@ -137,7 +137,7 @@ pub fn occluder(
         lo = lo.min(*q);
         hi = hi.max(*q);
     }
-    // Pixel origin of the edges; fragments lie in [lo − slop, hi + slop] ∩ [0, r]².
+    // Pixel origin of the edges; fragments lie in [lo − slop, hi + slop] ∩ [0, w] × [0, h].
     let origin = lo.floor().max(DVec2::ZERO);
     let ext = (hi.ceil() - origin).max_element() + 1.0;
     let f32_err = F32_ERR_PER_PX * (ext + 1.0);
@@ -264,7 +264,8 @@ mod tests {
             position: 10.0 * s,
             rect_min: DVec2::new(-8.0, -8.0),
             rect_max: DVec2::new(8.0, 8.0),
-            resolution: res,
+            width: res,
+            height: res,
         }
     }
 
