@@ -32,7 +32,10 @@ pub struct BakeSettings {
     pub resolution: u32,
     /// How much wider than tall, or taller than wide, a plane's Depth Map may be (a power of
     /// two): each map follows its rectangle's shape, keeping `resolution²` pixels
-    /// ([`crate::backend::map_size`]); 1 keeps every map square. Default 8.
+    /// ([`crate::backend::map_size`]); 1 keeps every map square. Default 2: on the coarse
+    /// forest 2, 4 and 8 cull the same (86.7 % against 84.5 % for square maps), and more
+    /// stretch lets more small Projections cover a whole pixel, which costs time where they
+    /// fuse into nothing (the fine forest: 0.99 s per cell at 2, 1.28 s at 8, 0.81 s square).
     pub max_stretch: u32,
     /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
     /// Default 1.5 (the paper's).
@@ -76,7 +79,7 @@ impl BakeSettings {
     pub const fn default_settings() -> Self {
         BakeSettings {
             resolution: 256,
-            max_stretch: 8,
+            max_stretch: 2,
             extend: 1.5,
             planes: 4,
             slice_planes: 1,

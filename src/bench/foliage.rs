@@ -200,7 +200,7 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
                     BakeSettings { extend: e, ..on() },
                 ));
             }
-            for m in [1, 2] {
+            for m in [1, 8] {
                 v.push(variant(
                     format!("--sweep --max-stretch {m}"),
                     BakeSettings {

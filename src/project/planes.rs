@@ -57,7 +57,7 @@ impl PlaneSettings {
     pub const fn default_settings() -> Self {
         PlaneSettings {
             resolution: 256,
-            max_stretch: 8,
+            max_stretch: 2,
             extend: 1.5,
             planes: 4,
             slice_planes: 1,
