@@ -71,10 +71,11 @@ pub struct BakeArgs {
     /// Depth Map resolution per side (a power of two).
     #[arg(long, default_value_t = BakeSettings::default_settings().resolution)]
     pub resolution: u32,
-    /// How much wider than tall (or taller than wide) a plane's Depth Map may be, a power of
-    /// two: each map follows its rectangle's shape with resolution² pixels, so that a flat
-    /// rectangle (a forest's band of crowns beside the cell) gets about square pixels; 1 keeps
-    /// every map square.
+    /// With the occlusion sweep: how much wider than tall (or taller than wide) a plane's Depth
+    /// Map may be, a power of two. Each map follows its rectangle's shape with resolution²
+    /// pixels, so that a flat rectangle (a forest's band of crowns beside the cell) gets
+    /// squarer pixels; 1 keeps every map square. Separate planes (--no-sweep) are always
+    /// square.
     #[arg(long, default_value_t = BakeSettings::default_settings().max_stretch)]
     pub max_stretch: u32,
     /// Extension factor of each plane's rectangle beyond the 90° frustum of the cell's face.

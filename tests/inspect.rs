@@ -261,7 +261,84 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
         checked_wall, 2,
         "the slice plane and the plane behind the wall"
     );
-    assert!(stretched > 0, "some plane's map is stretched");
+    assert_eq!(stretched, 0, "separate planes keep square maps");
+}
+
+/// Sweep planes are stretched to their rectangles: beside a flat layer of boxes their dumps
+/// (EXR layers and pyramid levels, PNG previews) have the maps' own sizes.
+#[test]
+fn stretched_sweep_planes_dump_at_their_size() {
+    use exr::prelude::*;
+    let dir = tmp();
+    let opts = DumpOptions {
+        exr: Some(dir.path().join("exr")),
+        png: Some(dir.path().join("png")),
+        cells: None,
+    };
+    // A low, wide row of boxes on each side of the cell: flat rectangles on the x planes.
+    let mut objects = Vec::new();
+    for k in 0..40 {
+        let z = -20.0 + k as f32;
+        for x in [3.0f32, -4.0] {
+            objects.push(cube(
+                &format!("box{k}_{x}"),
+                [x, -0.3, z],
+                [x + 1.0, 0.3, z + 0.6],
+            ));
+        }
+    }
+    let scene = Scene::from_objects(Path::new("row"), objects);
+    let seen: Seen = Mutex::new(Vec::new());
+    let observe = |ci: usize, k: usize, job: &PlaneJob, map: &DepthMap, hdm: &Hdm| {
+        dump_plane(&opts, ci, k, job, map, hdm).unwrap();
+        seen.lock()
+            .unwrap()
+            .push((k, job.clone(), map.clone(), hdm.clone()));
+    };
+    let settings = BakeSettings {
+        resolution: RES,
+        max_stretch: 8,
+        sweep: umbrasweep::bake::SweepChoice::On,
+        ..BakeSettings::default()
+    };
+    bake_observed(
+        &scene,
+        &[unit_cell()],
+        &settings,
+        &CpuBackend::new(),
+        None,
+        Some(&observe),
+    )
+    .unwrap();
+    let mut stretched = 0;
+    for (k, job, map, hdm) in seen.into_inner().unwrap() {
+        let (w, h) = (map.width as usize, map.height as usize);
+        assert_eq!(w * h, (RES * RES) as usize);
+        stretched += usize::from(w != h);
+        let stem = file_stem(0, k, &job);
+        let path = dir.path().join("exr").join(format!("{stem}.exr"));
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .all_layers()
+            .all_attributes()
+            .from_file(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let levels = hdm.max.len() - 1;
+        assert_eq!(image.layer_data.len(), 1 + 2 * levels);
+        assert_eq!(image.layer_data[0].size, Vec2(w, h));
+        for (li, layer) in image.layer_data.iter().enumerate().skip(1) {
+            let l = if li <= levels { li } else { li - levels };
+            assert_eq!(layer.size, Vec2((w >> l).max(1), (h >> l).max(1)));
+        }
+        for what in ["depth", "mask"] {
+            let p = dir.path().join("png").join(format!("{stem}_{what}.png"));
+            let img = image::open(&p).unwrap().to_rgb8();
+            assert_eq!(img.dimensions(), (w as u32, h as u32), "{}", p.display());
+        }
+    }
+    assert!(stretched > 0, "some sweep plane's map is stretched");
 }
 
 #[test]
