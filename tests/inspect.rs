@@ -91,6 +91,22 @@ fn bake_with_dumps(opts: &DumpOptions) -> Vec<(usize, PlaneJob, DepthMap, Hdm)> 
     seen
 }
 
+/// An EXR file with all its layers, channels and attributes (largest level).
+fn read_exr(
+    path: &Path,
+) -> exr::prelude::Image<exr::prelude::Layers<exr::prelude::AnyChannels<exr::prelude::FlatSamples>>>
+{
+    use exr::prelude::*;
+    read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 fn f32_samples(ch: &exr::prelude::AnyChannel<exr::prelude::FlatSamples>) -> Vec<f32> {
     match &ch.sample_data {
         exr::prelude::FlatSamples::F32(v) => v.clone(),
@@ -126,14 +142,7 @@ fn exr_dump_reads_back_with_channels_levels_values_and_metadata() {
             "{stem}"
         );
         let path = exr_dir.join(format!("{stem}.exr"));
-        let image = read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .all_layers()
-            .all_attributes()
-            .from_file(&path)
-            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let image = read_exr(&path);
         let layer_names: Vec<String> = image
             .layer_data
             .iter()
@@ -317,14 +326,7 @@ fn stretched_sweep_planes_dump_at_their_size() {
         stretched += usize::from(w != h);
         let stem = file_stem(0, k, &job);
         let path = dir.path().join("exr").join(format!("{stem}.exr"));
-        let image = read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .all_layers()
-            .all_attributes()
-            .from_file(&path)
-            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let image = read_exr(&path);
         let levels = hdm.max.len() - 1;
         assert_eq!(image.layer_data.len(), 1 + 2 * levels);
         assert_eq!(image.layer_data[0].size, Vec2(w, h));

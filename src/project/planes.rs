@@ -1185,6 +1185,27 @@ mod tests {
         assert!(out.len() >= 8);
     }
 
+    /// A sweep direction of `cell` without occluders, with planes at `distances`.
+    fn sweep_plan(cell: DAabb, axis: usize, positive: bool, distances: Vec<f64>) -> DirectionPlan {
+        DirectionPlan {
+            cell,
+            axis,
+            positive,
+            face: if positive {
+                cell.max[axis]
+            } else {
+                cell.min[axis]
+            },
+            parts: DirParts::default(),
+            part_object: Vec::new(),
+            part_solid: Vec::new(),
+            distances,
+            extend: 1.5,
+            sweep: true,
+            eps: 1e-9,
+        }
+    }
+
     /// Every segment from a point of the cell to a point of the bounds beyond a plane's slab
     /// start crosses the plane (or its line does) inside the relevant rectangle, for every
     /// direction; and a plane beyond everything has none.
@@ -1203,24 +1224,8 @@ mod tests {
         let mut checked = 0;
         for axis in 0..3 {
             for positive in [true, false] {
-                let face = if positive {
-                    cell.max[axis]
-                } else {
-                    cell.min[axis]
-                };
-                let plan = DirectionPlan {
-                    cell,
-                    axis,
-                    positive,
-                    face,
-                    parts: DirParts::default(),
-                    part_object: Vec::new(),
-                    part_solid: Vec::new(),
-                    distances: vec![0.5, 2.0, 7.0, 20.0, 100.0],
-                    extend: 1.5,
-                    sweep: true,
-                    eps: 1e-9,
-                };
+                let plan = sweep_plan(cell, axis, positive, vec![0.5, 2.0, 7.0, 20.0, 100.0]);
+                let face = plan.face;
                 let sg = if positive { 1.0 } else { -1.0 };
                 let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
                 for k in 0..plan.distances.len() {
@@ -1267,19 +1272,7 @@ mod tests {
         }
         assert!(checked > 15_000, "{checked}");
         // Upward (y+), plane 3's slab starts at 5.2, above the scene's top (4.8).
-        let up = DirectionPlan {
-            cell,
-            axis: 1,
-            positive: true,
-            face: 2.2,
-            parts: DirParts::default(),
-            part_object: Vec::new(),
-            part_solid: Vec::new(),
-            distances: vec![1.0, 2.0, 3.0, 4.0],
-            extend: 1.5,
-            sweep: true,
-            eps: 1e-9,
-        };
+        let up = sweep_plan(cell, 1, true, vec![1.0, 2.0, 3.0, 4.0]);
         assert!(up.relevant_rect(2, &bounds).is_some());
         assert!(up.relevant_rect(3, &bounds).is_none());
     }
