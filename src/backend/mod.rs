@@ -6,9 +6,10 @@
 //! A [`PlaneJob`] is one projection plane of one cell: the plane `x[axis] = position`, seen from
 //! the cell through its face on the `positive` (or negative) side, a rectangle `rect_min ..
 //! rect_max` on it in the world coordinates of the two other axes `(u, v) = (axis+1, axis+2)
-//! mod 3`, cut into `resolution × resolution` pixels. Pixel `(i, j)` (column `i` along u, row
-//! `j` along v) covers `[rect_min.x + i·pw, rect_min.x + (i+1)·pw] × [rect_min.y + j·ph, …]`,
-//! stored at index `j·resolution + i`.
+//! mod 3`, cut into `width × height` pixels (powers of two; a bake keeps `width · height =
+//! resolution²` and stretches sweep planes' maps towards their rectangles, [`map_size`]). Pixel
+//! `(i, j)` (column `i` along u, row `j` along v) covers `[rect_min.x + i·pw, rect_min.x +
+//! (i+1)·pw] × [rect_min.y + j·ph, …]`, stored at index `j·width + i`.
 //!
 //! The *Depth* of a point is `s·(x[axis] − position)` with `s = ±1` the side: zero on the plane,
 //! growing away from the cell.

@@ -76,7 +76,8 @@
 //! (7 ms with sources entirely in the umbra, where no loop exits early, even scissored as
 //! above), the table 0.26–0.55 ms (0.65–1.1 ms; best of 10, over several runs on the shared
 //! machine), for ~45 µs of CPU per table; no intermediate texture, and no extra render pass. The tables of a call's jobs are held in memory until the
-//! call returns (`res² × 4` bytes per reprojection, as much as the sources).
+//! call returns (`w × h × 4` bytes per reprojection for a `w × h` source, as much as the
+//! sources).
 //!
 //! # Per `render` call
 //!
@@ -85,16 +86,17 @@
 //! draw per chunk of the data buffer (one chunk unless the plane's data exceed the device's
 //! storage binding size) and per reprojection, one texture-to-buffer copy — and submitted once;
 //! then all staging buffers are mapped at once and the device is polled with a timeout. Render
-//! targets, staging buffers and reprojection tables are pooled per resolution. Planes no
+//! targets, staging buffers and reprojection tables are pooled per map size (`width × height`:
+//! sweep planes' maps are stretched, and a reprojection's source may differ from its target). Planes no
 //! occluder can cover and no reprojection can set skip the GPU. Jobs are split into several
 //! submissions only to bound memory (256 MiB of targets, read-back buffers and tables, 512 MiB
 //! of data). The CPU setup runs outside the backend's lock, so cells baked on several threads
 //! prepare their planes while another cell's are on the GPU.
 //!
-//! Per plane: 1 render pass, 1 draw (≈ 1.2 triangles per occluder drawn), `res² × 4` bytes read
-//! back (rows padded to 256 bytes below 64², i.e. `256 × res` bytes then). Each reprojection
-//! adds 1 draw and `res² × 4 + 16·(res + 1)` bytes uploaded, and `res² × 4` bytes of texture to
-//! the submission's memory budget. See [`GpuBackend::last_stats`].
+//! Per `w × h` plane: 1 render pass, 1 draw (≈ 1.2 triangles per occluder drawn), `w × h × 4`
+//! bytes read back (rows padded to 256 bytes, i.e. `256 × h` bytes when `w < 64`). Each
+//! reprojection from a `sw × sh` source adds 1 draw and `sw × sh × 4 + 8·(w + h + 3)` bytes
+//! uploaded, and `sw × sh × 4` bytes of texture to the submission's memory budget. See [`GpuBackend::last_stats`].
 //!
 //! Device loss, out-of-memory and validation errors become [`BackendError::Device`]: errors are
 //! caught by error scopes and by an uncaptured-error handler, loss by the device-lost callback,
