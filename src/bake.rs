@@ -34,10 +34,10 @@ pub struct BakeSettings {
     /// be (a power of two): each map follows its rectangle's shape, keeping `resolution²`
     /// pixels ([`crate::backend::map_size`]); 1 keeps every map square. Separate planes (no
     /// sweep) stay square: on Munich's street cells stretched maps culled 86.7 % against
-    /// 90.0 %. Default 2: on the coarse
-    /// forest 2, 4 and 8 cull the same (86.7 % against 84.5 % for square maps), and more
-    /// stretch lets more small Projections cover a whole pixel, which costs time where they
-    /// fuse into nothing (the fine forest: 0.99 s per cell at 2, 1.28 s at 8, 0.81 s square).
+    /// 90.0 %. Default 2: on the coarse forest 2, 4 and 8 cull the same (86.7 % against
+    /// 84.5 % for square maps), and more stretch lets more small Projections cover a whole
+    /// pixel, which costs time where they fuse into nothing (the fine forest: 0.99 s per cell
+    /// at 2, 1.28 s at 8, 0.81 s square).
     pub max_stretch: u32,
     /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
     /// Default 1.5 (the paper's).
