@@ -156,7 +156,9 @@ impl BakeSettings {
     fn plane_settings(&self, sweep: bool) -> PlaneSettings {
         PlaneSettings {
             resolution: self.resolution,
-            max_stretch: self.max_stretch,
+            // Separate planes keep square maps: on cities stretched ones lost culling
+            // (Munich's 50 street cells: 90.0 % culled square, 86.7 % stretched up to 2×).
+            max_stretch: if sweep { self.max_stretch } else { 1 },
             extend: self.extend,
             planes: self.planes,
             slice_planes: self.slice_planes,
@@ -503,7 +505,7 @@ impl<'a> Prepared<'a> {
         // Round k renders the k-th plane of every direction (nearest first); occluders of
         // objects hidden by earlier rounds are left out of later ones.
         for k in 0..rounds {
-            let jobs: Vec<(usize, (PlaneJob, OpenSides, Rect))> = plans
+            let jobs: Vec<(usize, (PlaneJob, Rect))> = plans
                 .par_iter()
                 .enumerate()
                 .filter(|(d, p)| k < p.distances.len() && !finished[*d])
@@ -544,13 +546,6 @@ impl<'a> Prepared<'a> {
                     if p.is_sweep() && carried.is_some() {
                         job.reproject = reprojections(&hist[d], &job.frame, p.distance(k));
                     }
-                    let (f, (r0, r1)) = (&job.frame, relevant);
-                    let open = [
-                        f.rect_min.x == r0.x,
-                        f.rect_min.y == r0.y,
-                        f.rect_max.x == r1.x,
-                        f.rect_max.y == r1.y,
-                    ];
                     if p.is_sweep()
                         && job.occluders.is_empty()
                         && job.slices.is_empty()
@@ -558,20 +553,18 @@ impl<'a> Prepared<'a> {
                     {
                         return None;
                     }
-                    Some((d, (job, open, relevant)))
+                    Some((d, (job, relevant)))
                 })
                 .collect();
             if jobs.is_empty() {
                 continue;
             }
-            let (dirs, jobs): (Vec<usize>, Vec<(PlaneJob, OpenSides, Rect)>) =
-                jobs.into_iter().unzip();
-            let (jobs, extra): (Vec<PlaneJob>, Vec<(OpenSides, Rect)>) =
-                jobs.into_iter().map(|(j, o, r)| (j, (o, r))).unzip();
+            let (dirs, jobs): (Vec<usize>, Vec<(PlaneJob, Rect)>) = jobs.into_iter().unzip();
+            let (jobs, relevant): (Vec<PlaneJob>, Vec<Rect>) = jobs.into_iter().unzip();
             let maps = backend.render(&jobs)?;
             let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
-            let ends: Vec<bool> = (jobs.iter().zip(&maps).zip(&dirs).zip(&extra))
-                .map(|(((job, map), &d), e)| ends_sweep(&plans[d], k, job, map, e.1))
+            let ends: Vec<bool> = (jobs.iter().zip(&maps).zip(&dirs).zip(&relevant))
+                .map(|(((job, map), &d), &r)| ends_sweep(&plans[d], k, job, map, r))
                 .collect();
             for ((((job, map), hdm), &d), &end) in
                 jobs.iter().zip(&maps).zip(&hdms).zip(&dirs).zip(&ends)
@@ -603,19 +596,20 @@ impl<'a> Prepared<'a> {
             }
             planes += jobs.len();
             projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
-            for (((((job, map), d), hdm), end), (open, _)) in jobs
+            for (((((job, map), d), hdm), end), r) in jobs
                 .into_iter()
                 .zip(maps)
                 .zip(dirs)
                 .zip(hdms)
                 .zip(ends)
-                .zip(extra)
+                .zip(relevant)
             {
                 if plans[d].is_sweep() {
                     prev_hdm[d] = Some((job.frame.clone(), hdm));
                     finished[d] = end;
                     let m = Arc::new(map);
                     let bounds = crate::sweep::umbra_bounds(&job.frame, &m);
+                    let open = crate::sweep::open_sides(&job.frame, r);
                     push_history(&mut hist[d], (k, job.frame, m, bounds, open));
                 }
             }

@@ -37,9 +37,9 @@ pub enum Placement {
 pub struct PlaneSettings {
     /// A plane's Depth Map has `resolution²` pixels.
     pub resolution: u32,
-    /// How much wider than tall (or taller than wide) a sweep plane's Depth Map may be, a power
-    /// of two: each map follows its rectangle's shape ([`crate::backend::map_size`]); 1 keeps
-    /// every map square. Separate planes (no sweep) are always square.
+    /// How much wider than tall (or taller than wide) a Depth Map may be, a power of two: each
+    /// map follows its rectangle's shape ([`crate::backend::map_size`]); 1 keeps every map
+    /// square (what [`crate::bake::BakeSettings`] gives separate planes).
     pub max_stretch: u32,
     /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
     pub extend: f64,
@@ -273,7 +273,7 @@ impl DirectionPlan {
         };
         let (lo, hi) = crate::project::occludee::standard_rect(&frame, &b);
         // Rounding: a relative margin far above the few f64 operations' error.
-        let (u, v) = ((a + 1) % 3, (a + 2) % 3);
+        let (u, v) = frame.uv_axes();
         let scale = [u, v]
             .iter()
             .map(|&x| bounds.min[x].abs().max(bounds.max[x].abs()))
@@ -616,14 +616,8 @@ pub fn plane_job(
     if !(rmin.x < rmax.x && rmin.y < rmax.y) {
         return None;
     }
-    // Separate planes keep square maps: on cities, stretched ones lost culling (Munich's 50
-    // street cells: 90.0 % culled square, 86.7 % stretched up to 2×).
-    let stretch = if plan.is_sweep() {
-        settings.max_stretch
-    } else {
-        1
-    };
-    let (width, height) = crate::backend::map_size(settings.resolution, rmax - rmin, stretch);
+    let (width, height) =
+        crate::backend::map_size(settings.resolution, rmax - rmin, settings.max_stretch);
     let frame = PlaneFrame {
         rect_min: rmin,
         rect_max: rmax,

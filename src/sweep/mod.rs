@@ -57,6 +57,19 @@ pub type OpenSides = [bool; 4];
 /// No open side: every window must lie inside the source rectangle.
 pub const CLOSED: OpenSides = [false; 4];
 
+/// The open sides of a plane whose rectangle was cut to `relevant`
+/// ([`crate::project::planes::DirectionPlan::relevant_rect`]): those where the cut decided
+/// the side (the rectangle's side is the relevant region's, so what lies past it is outside).
+pub fn open_sides(frame: &PlaneFrame, relevant: (glam::DVec2, glam::DVec2)) -> OpenSides {
+    let (r0, r1) = relevant;
+    [
+        frame.rect_min.x == r0.x,
+        frame.rect_min.y == r0.y,
+        frame.rect_max.x == r1.x,
+        frame.rect_max.y == r1.y,
+    ]
+}
+
 /// Reprojection of one plane's umbra onto the next plane of the sweep.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Reprojection {

@@ -849,7 +849,7 @@ impl GpuBackend {
             let mut mine = Vec::with_capacity(prepared[j].sweeps.len());
             for sw in &prepared[j].sweeps {
                 let size = sw.source_size;
-                let (res, rows) = size;
+                let (width, height) = size;
                 let k = taken.entry(size).or_default();
                 let list = pool.tables.entry(size).or_default();
                 if list.len() <= *k {
@@ -865,12 +865,12 @@ impl GpuBackend {
                     bytemuck::cast_slice(&sw.table),
                     wgpu::TexelCopyBufferLayout {
                         offset: 0,
-                        bytes_per_row: Some(res * 4),
-                        rows_per_image: Some(rows),
+                        bytes_per_row: Some(width * 4),
+                        rows_per_image: Some(height),
                     },
                     wgpu::Extent3d {
-                        width: res,
-                        height: rows,
+                        width,
+                        height,
                         depth_or_array_layers: 1,
                     },
                 );
