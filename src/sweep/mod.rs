@@ -131,44 +131,88 @@ impl Reprojection {
     /// Applies the reprojection to `map` (the target's Depth Map): every reprojected pixel
     /// keeps the minimum of its Depth and [`Reprojection::depth`].
     pub fn apply(&self, map: &mut DepthMap) {
-        let set = self.mask();
-        for (d, s) in map.depth.iter_mut().zip(set) {
-            if s && self.depth < *d {
-                *d = self.depth;
+        let depth = self.depth;
+        let tw = self.cols.len();
+        self.for_each_row(|j, row| {
+            for (d, &s) in map.depth[j * tw..(j + 1) * tw].iter_mut().zip(row) {
+                if s && depth < *d {
+                    *d = depth;
+                }
             }
-        }
+        });
     }
 
     /// The reprojected pixels of the target, row-major: the separable filter of the module
     /// docs. (The GPU backend runs the same filter in two render passes.)
     pub fn mask(&self) -> Vec<bool> {
+        let tw = self.cols.len();
+        let mut out = vec![false; tw * self.rows.len()];
+        self.for_each_row(|j, row| out[j * tw..(j + 1) * tw].copy_from_slice(row));
+        out
+    }
+
+    /// The separable filter, streamed: hands `emit` each target row `j` that has a valid
+    /// window, with its reprojected pixels. Source rows are read once, in order: pass 1 ("all
+    /// set in `cols[i]` of source row `y`") runs on each row as it comes, and pass 2 keeps, per
+    /// target column, the last source row where pass 1 failed — a target row is set where
+    /// that row lies before its window. Target rows' windows move down monotonically with
+    /// `j` (the window is an increasing affine map of the pixel), which is what lets a row be
+    /// emitted as soon as the source reaches its window's end; should they not (a future
+    /// window rule), the rows are sorted by window end first.
+    fn for_each_row(&self, mut emit: impl FnMut(usize, &[bool])) {
         let (sw, sh) = (self.source.width as usize, self.source.height as usize);
-        let (tw, th) = (self.cols.len(), self.rows.len());
+        let tw = self.cols.len();
         let src = &self.source.depth;
-        // Pass 1: for every source row y and target column i, all set in cols[i] of row y.
-        let mut horizontal = vec![false; sh * tw];
+        let mut order: Vec<usize> = (0..self.rows.len())
+            .filter(|&j| {
+                let [lo, hi] = self.rows[j];
+                lo <= hi && (hi as usize) < sh
+            })
+            .collect();
+        if !order.is_sorted_by_key(|&j| self.rows[j][1]) {
+            order.sort_by_key(|&j| self.rows[j][1]);
+        }
+        let Some(y0) = order.iter().map(|&j| self.rows[j][0] as usize).min() else {
+            return;
+        };
+        // `last_unset[i] = y + 1` for the last source row `y` read where target column `i`
+        // failed pass 1 (0: none yet).
+        let mut last_unset = vec![0u32; tw];
+        let mut horizontal = vec![false; tw];
         let mut prefix = vec![0u32; sw + 1];
-        for y in 0..sh {
+        let mut row = vec![false; tw];
+        let mut next = 0;
+        for y in y0..sh {
+            if next == order.len() {
+                break;
+            }
             for x in 0..sw {
                 let d = src[y * sw + x];
                 prefix[x + 1] = prefix[x] + u32::from(d > 0.0 || d.is_nan());
             }
-            for (i, w) in self.cols.iter().enumerate() {
-                horizontal[y * tw + i] = all_set(&prefix, *w, sw);
+            if prefix[sw] as usize == sw {
+                horizontal.fill(false);
+            } else {
+                for (h, w) in horizontal.iter_mut().zip(&self.cols) {
+                    *h = all_set(&prefix, *w, sw);
+                }
+            }
+            let mark = y as u32 + 1;
+            for (l, &h) in last_unset.iter_mut().zip(&horizontal) {
+                if !h {
+                    *l = mark;
+                }
+            }
+            while next < order.len() && self.rows[order[next]][1] as usize == y {
+                let j = order[next];
+                let lo = self.rows[j][0];
+                for (r, &l) in row.iter_mut().zip(&last_unset) {
+                    *r = l <= lo;
+                }
+                emit(j, &row);
+                next += 1;
             }
         }
-        // Pass 2: for every target pixel, all of pass 1 set in rows[j] of column i.
-        let mut out = vec![false; tw * th];
-        let mut column = vec![0u32; sh + 1];
-        for i in 0..tw {
-            for y in 0..sh {
-                column[y + 1] = column[y] + u32::from(!horizontal[y * tw + i]);
-            }
-            for (j, w) in self.rows.iter().enumerate() {
-                out[j * tw + i] = all_set(&column, *w, sh);
-            }
-        }
-        out
     }
 }
 
@@ -521,5 +565,55 @@ mod tests {
         assert!(mask[16 * 32 + 16]);
         assert!(!mask[0] && !mask[31 * 32 + 31]);
         assert_eq!(r.cols[0], NO_WINDOW);
+    }
+
+    /// The streamed filter against its definition, pixel by pixel, on arbitrary windows: not
+    /// only the monotone ones planes produce but shuffled rows, empty and out-of-range
+    /// windows, and sources of another size than the target.
+    #[test]
+    fn streamed_filter_matches_the_definition_on_any_windows() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        for case in 0..200 {
+            let (sw, sh) = (rng.random_range(1..40usize), rng.random_range(1..40usize));
+            let (tw, th) = (rng.random_range(1..30usize), rng.random_range(1..30usize));
+            let hole = [0.0, 0.02, 0.2, 1.0][case % 4];
+            let mut source = DepthMap::sized(sw as u32, sh as u32);
+            for d in source.depth.iter_mut() {
+                if rng.random_range(0.0..1.0) >= hole {
+                    *d = -rng.random_range(0.0..1.0f32);
+                }
+            }
+            let mut window = |n: usize| -> Window {
+                match rng.random_range(0..10) {
+                    0 => NO_WINDOW,
+                    1 => [0, n as u32 + rng.random_range(0..3)],
+                    _ => {
+                        let lo = rng.random_range(0..n as u32);
+                        [lo, (lo + rng.random_range(0..4)).min(n as u32 - 1)]
+                    }
+                }
+            };
+            let cols: Vec<Window> = (0..tw).map(|_| window(sw)).collect();
+            let mut rows: Vec<Window> = (0..th).map(|_| window(sh)).collect();
+            if case % 2 == 0 {
+                rows.sort_by_key(|w| w[1]);
+            }
+            let r = Reprojection {
+                source: Arc::new(source.clone()),
+                cols: cols.clone(),
+                rows: rows.clone(),
+                depth: -1.0,
+            };
+            let set = |x: usize, y: usize| source.depth[y * sw + x] <= 0.0;
+            let mask = r.mask();
+            for (j, &[r0, r1]) in rows.iter().enumerate() {
+                for (i, &[c0, c1]) in cols.iter().enumerate() {
+                    let valid = c0 <= c1 && (c1 as usize) < sw && r0 <= r1 && (r1 as usize) < sh;
+                    let want =
+                        valid && (r0..=r1).all(|y| (c0..=c1).all(|x| set(x as usize, y as usize)));
+                    assert_eq!(mask[j * tw + i], want, "case {case}, target ({i}, {j})");
+                }
+            }
+        }
     }
 }
