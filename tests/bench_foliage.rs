@@ -51,7 +51,14 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
     let bench = run("paper,coarse,jacaranda");
     // Canonical order, whatever the order asked.
     assert_eq!(bench.studies, ["coarse", "paper", "jacaranda"]);
-    assert_eq!(labels(&bench, "coarse"), ["--sweep", "--no-sweep"]);
+    assert_eq!(
+        labels(&bench, "coarse"),
+        [
+            "--sweep",
+            "--no-sweep",
+            "--sweep --resolution 1024 --sweep-planes 32"
+        ]
+    );
     assert_eq!(labels(&bench, "paper"), ["--sweep"]);
     let jacaranda = labels(&bench, "jacaranda");
     if jacaranda.is_empty() {
@@ -69,7 +76,7 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
     for r in &bench.rows {
         assert_eq!(r.row.false_culls, 0, "{} {}", r.study, r.variant);
         assert_eq!(r.row.backend, "cpu");
-        assert_eq!(r.settings.sweep, r.variant == "--sweep");
+        assert_eq!(r.settings.sweep, r.variant.starts_with("--sweep"));
     }
     let paper = bench.rows.iter().find(|r| r.study == "paper").unwrap();
     assert_eq!(paper.row.scene, "paper_forest");
@@ -80,6 +87,16 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
     let coarse = bench.rows.iter().find(|r| r.study == "coarse").unwrap();
     assert_eq!(coarse.row.cells, 1);
     assert_eq!(coarse.row.objects, 1 + 3 * 5);
+    let goal = bench
+        .rows
+        .iter()
+        .filter(|r| r.study == "coarse")
+        .nth(2)
+        .unwrap();
+    assert_eq!(
+        (goal.settings.resolution, goal.settings.sweep_planes),
+        (1024, 32)
+    );
 
     let tables = bench.tables();
     assert!(tables.contains("### coarse") && tables.contains("### paper"));
