@@ -154,11 +154,11 @@ impl Reprojection {
     /// The separable filter, streamed: hands `emit` each target row `j` that has a valid
     /// window, with its reprojected pixels. Source rows are read once, in order: pass 1 ("all
     /// set in `cols[i]` of source row `y`") runs on each row as it comes, and pass 2 keeps, per
-    /// target column, the last source row where pass 1 failed — a target row is set where
-    /// that row lies before its window. Target rows' windows move down monotonically with
-    /// `j` (the window is an increasing affine map of the pixel), which is what lets a row be
-    /// emitted as soon as the source reaches its window's end; should they not (a future
-    /// window rule), the rows are sorted by window end first.
+    /// target column, the last source row where pass 1 failed — a target pixel is set when
+    /// that row lies above its row window's start. Row windows move down monotonically with
+    /// `j` (each end is the extreme of maps increasing in the pixel's position), which lets a
+    /// target row be emitted as soon as the source reaches its window's end; should they not
+    /// (a future window rule), the rows are sorted by window end first.
     fn for_each_row(&self, mut emit: impl FnMut(usize, &[bool])) {
         let (sw, sh) = (self.source.width as usize, self.source.height as usize);
         let tw = self.cols.len();
