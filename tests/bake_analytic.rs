@@ -11,11 +11,7 @@ use umbrasweep::bake::{BakeSettings, bake};
 use umbrasweep::geom::Aabb;
 use umbrasweep::scene::Scene;
 
-use common::{Obj, cube, quad};
-
-fn unit_cell() -> Aabb {
-    Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
-}
+use common::{Obj, cube, quad, unit_cell};
 
 /// Bakes one cell with the default settings and returns the visible object names.
 fn visible(objects: Vec<Obj>, cell: Aabb) -> Vec<String> {

@@ -2,30 +2,19 @@
 //! report, and a headless-Chromium screenshot of the report (skipped without Chromium unless
 //! `CI` is set).
 
+mod common;
+
+use common::{Obj, bake_unit_cell_observed, cube, unit_cell};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::backend::{DepthMap, PlaneJob, depth_up};
-use umbrasweep::bake::{BakeSettings, bake, bake_observed, to_document};
-use umbrasweep::geom::{Aabb, box_triangles};
+use umbrasweep::bake::{BakeSettings, bake, to_document};
+use umbrasweep::geom::Aabb;
 use umbrasweep::hdm::Hdm;
 use umbrasweep::inspect::{DumpOptions, ReportArgs, dump_plane, file_stem, run_report};
 use umbrasweep::scene::Scene;
-
-type Obj = (String, Vec<[Vec3; 3]>, bool);
-
-fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
-    (
-        name.into(),
-        box_triangles(Vec3::from(min), Vec3::from(max)),
-        true,
-    )
-}
-
-fn unit_cell() -> Aabb {
-    Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
-}
 
 /// A wall in front of the cell's +z face, an object hidden behind it, one beside the cell.
 fn wall_scene() -> Vec<Obj> {
@@ -70,15 +59,7 @@ fn bake_with_dumps(opts: &DumpOptions) -> Vec<(usize, PlaneJob, DepthMap, Hdm)> 
             .unwrap()
             .push((k, job.clone(), map.clone(), hdm.clone()));
     };
-    let r = bake_observed(
-        &scene,
-        &[unit_cell()],
-        &settings(),
-        &CpuBackend::new(),
-        None,
-        Some(&observe),
-    )
-    .unwrap();
+    let r = bake_unit_cell_observed(&scene, &settings(), &observe);
     assert_eq!(errors.into_inner().unwrap(), Vec::<String>::new());
     let names: Vec<&str> = r.cells[0]
         .visible
@@ -310,15 +291,7 @@ fn stretched_sweep_planes_dump_at_their_size() {
         sweep: umbrasweep::bake::SweepChoice::On,
         ..BakeSettings::default()
     };
-    bake_observed(
-        &scene,
-        &[unit_cell()],
-        &settings,
-        &CpuBackend::new(),
-        None,
-        Some(&observe),
-    )
-    .unwrap();
+    bake_unit_cell_observed(&scene, &settings, &observe);
     let mut stretched = 0;
     for (k, job, map, hdm) in seen.into_inner().unwrap() {
         let (w, h) = (map.width as usize, map.height as usize);

@@ -13,11 +13,7 @@ use umbrasweep::bake::{BakeSettings, SweepChoice, bake, split_cell};
 use umbrasweep::geom::Aabb;
 use umbrasweep::scene::Scene;
 
-use common::{Obj, cube, quad};
-
-fn unit_cell() -> Aabb {
-    Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
-}
+use common::{Obj, cube, quad, unit_cell};
 
 const TARGET: &str = "target";
 
@@ -302,15 +298,7 @@ fn flat_layers_get_wide_maps_with_about_square_pixels() {
             max_stretch,
             ..sweep(true)
         };
-        umbrasweep::bake::bake_observed(
-            &scene,
-            &[unit_cell()],
-            &settings,
-            &CpuBackend::new(),
-            None,
-            Some(&observe),
-        )
-        .unwrap();
+        common::bake_unit_cell_observed(&scene, &settings, &observe);
         let frames = frames.into_inner().unwrap();
         let res = settings.resolution as usize;
         // Planes beside the cell (normal x or z) 10 to 40 units away, well inside the layer:

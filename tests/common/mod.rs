@@ -1,10 +1,14 @@
 //! Helpers shared by the integration tests: scene objects (closed boxes, quads) for
-//! `Scene::from_objects`, and a brute-force ray cast that names the first object a ray hits,
+//! `Scene::from_objects`, the unit cell and a one-cell bake that shows every plane, and a
+//! brute-force ray cast that names the first object a ray hits,
 //! to prove a visibility claim independently of the validator.
 #![allow(dead_code)] // each test crate uses its own subset
 
 use glam::Vec3;
-use umbrasweep::geom::box_triangles;
+use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::bake::{BakeResult, BakeSettings, PlaneObserver, bake_observed};
+use umbrasweep::geom::{Aabb, box_triangles};
+use umbrasweep::scene::Scene;
 
 /// An object as `Scene::from_objects` takes it: name, triangles, opaque.
 pub type Obj = (String, Vec<[Vec3; 3]>, bool);
@@ -16,6 +20,28 @@ pub fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
         box_triangles(Vec3::from(min), Vec3::from(max)),
         true,
     )
+}
+
+/// The cube of side 1 around the origin.
+pub fn unit_cell() -> Aabb {
+    Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
+}
+
+/// Bakes [`unit_cell`] on the CPU backend, handing every rendered plane to `observe`.
+pub fn bake_unit_cell_observed(
+    scene: &Scene,
+    settings: &BakeSettings,
+    observe: PlaneObserver,
+) -> BakeResult {
+    bake_observed(
+        scene,
+        &[unit_cell()],
+        settings,
+        &CpuBackend::new(),
+        None,
+        Some(observe),
+    )
+    .unwrap()
 }
 
 /// An opaque quad `a b c d` (two triangles).
