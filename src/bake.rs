@@ -10,7 +10,7 @@ use crate::backend::{BackendError, DepthMap, PlaneJob, RasterBackend, depth_down
 use crate::backend::{PlaneFrame, Reprojection};
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
-use crate::project::occludee::{improved_rect, pixel_rect, span, standard_rect};
+use crate::project::occludee::{improved_rects, pixel_rect, span, standard_rect};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::{
     LeaveOut, Placement, PlaneSettings, Sliceable, Spacing, SweepInputs, SweepSettings,
@@ -812,12 +812,15 @@ impl<'a> Prepared<'a> {
         if standard != Coverage::Partial || !(sp.in_front && self.settings.improved_projection) {
             return standard;
         }
-        let (lo, hi) = improved_rect(frame, b);
-        match pixel_rect(frame, lo, hi) {
-            Some([i0, j0, i1, j1]) if hdm.test(i0, j0, i1, j1, depth) == Coverage::Hidden => {
-                Coverage::Hidden
-            }
-            _ => Coverage::Partial,
+        // Either improved Projection, covered, proves the box hidden (each is sound alone).
+        let hidden = improved_rects(frame, b).into_iter().any(|(lo, hi)| {
+            pixel_rect(frame, lo, hi)
+                .is_some_and(|[i0, j0, i1, j1]| hdm.test(i0, j0, i1, j1, depth) == Coverage::Hidden)
+        });
+        if hidden {
+            Coverage::Hidden
+        } else {
+            Coverage::Partial
         }
     }
 }

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, bail};
 use clap::ValueEnum;
-use glam::Vec3;
+use glam::DVec3;
 use std::path::PathBuf;
 use umbrasweep::backend::RasterBackend;
 use umbrasweep::backend::cpu::CpuBackend;
@@ -58,7 +58,7 @@ pub struct BakeArgs {
         requires = "grid_size",
         allow_hyphen_values = true
     )]
-    pub grid_box: Option<Vec<f32>>,
+    pub grid_box: Option<Vec<f64>>,
     /// Cells per axis of --grid-box: nx,ny,nz.
     #[arg(long, value_delimiter = ',', requires = "grid_box")]
     pub grid_size: Option<Vec<u32>>,
@@ -157,7 +157,8 @@ fn read_cells(a: &BakeArgs) -> anyhow::Result<Vec<Aabb>> {
     if n.len() != 3 {
         bail!("--grid-size takes 3 counts: nx,ny,nz (got {})", n.len());
     }
-    let bounds = Aabb::new(Vec3::new(b[0], b[1], b[2]), Vec3::new(b[3], b[4], b[5]));
+    // Rounded outward to f32, like a cells file: the grid never covers less than asked.
+    let bounds = Aabb::outward(DVec3::new(b[0], b[1], b[2]), DVec3::new(b[3], b[4], b[5]));
     Ok(cells::grid(bounds, [n[0], n[1], n[2]])?)
 }
 

@@ -65,6 +65,25 @@ impl Aabb {
         self.min.cmple(p).all() && p.cmple(self.max).all()
     }
 
+    /// The smallest single-precision box holding the double-precision box `min..max`: each
+    /// `min` rounded down and each `max` rounded up to an `f32` (a cell read from a file is
+    /// never baked smaller than the user wrote it). Non-finite or out-of-range values become
+    /// infinite, which [`crate::cells::check`] refuses.
+    pub fn outward(min: DVec3, max: DVec3) -> Aabb {
+        fn down(x: f64) -> f32 {
+            let f = x as f32;
+            if (f as f64) > x { f.next_down() } else { f }
+        }
+        fn up(x: f64) -> f32 {
+            let f = x as f32;
+            if (f as f64) < x { f.next_up() } else { f }
+        }
+        Aabb::new(
+            Vec3::new(down(min.x), down(min.y), down(min.z)),
+            Vec3::new(up(max.x), up(max.y), up(max.z)),
+        )
+    }
+
     pub fn to_f64(&self) -> DAabb {
         DAabb {
             min: self.min.as_dvec3(),
@@ -141,6 +160,22 @@ pub fn box_triangles(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn outward_rounding_never_narrows_a_box() {
+        let b = Aabb::outward(
+            DVec3::new(-100000.003, 0.1, 1e5),
+            DVec3::new(100000.003, 0.3, 1e5 + 0.003),
+        );
+        assert!((b.min.x as f64) <= -100000.003 && (b.max.x as f64) >= 100000.003);
+        assert!((b.min.y as f64) <= 0.1 && (b.max.y as f64) >= 0.3);
+        assert!((b.min.z as f64) <= 1e5 && (b.max.z as f64) >= 1e5 + 0.003);
+        // Exactly representable values stay as they are.
+        let e = Aabb::outward(DVec3::splat(-0.5), DVec3::splat(100000.0));
+        assert_eq!(e, Aabb::new(Vec3::splat(-0.5), Vec3::splat(100000.0)));
+        // Nearest rounding would have narrowed this one.
+        assert!(100000.003f64 as f32 as f64 <= 100000.003);
+    }
 
     #[test]
     fn empty_box_grows_to_point_and_overlap_is_closed() {

@@ -2,7 +2,7 @@
 //! (`{"cells": [{"min": [x,y,z], "max": [x,y,z]}, …]}`) or laid out as a regular grid.
 
 use crate::geom::Aabb;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -85,7 +85,18 @@ pub fn load_json(path: &Path) -> Result<Vec<Aabb>, CellError> {
         path: path.to_path_buf(),
         source,
     })?;
-    let file: CellsFile = serde_json::from_str(&text).map_err(|e| CellError::Parse {
+    // Read in f64 and round each cell outward to f32: nearest rounding could bake a cell
+    // slightly smaller than written (100000.003 read as 100000.0).
+    #[derive(Deserialize)]
+    struct CellIn {
+        min: [f64; 3],
+        max: [f64; 3],
+    }
+    #[derive(Deserialize)]
+    struct FileIn {
+        cells: Vec<CellIn>,
+    }
+    let file: FileIn = serde_json::from_str(&text).map_err(|e| CellError::Parse {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
@@ -98,7 +109,7 @@ pub fn load_json(path: &Path) -> Result<Vec<Aabb>, CellError> {
     let cells: Vec<Aabb> = file
         .cells
         .iter()
-        .map(|c| Aabb::new(Vec3::from(c.min), Vec3::from(c.max)))
+        .map(|c| Aabb::outward(DVec3::from(c.min), DVec3::from(c.max)))
         .collect();
     check(&cells, &path.display().to_string())?;
     Ok(cells)
@@ -249,6 +260,29 @@ mod tests {
             assert!(!c.overlaps(&block));
             assert_eq!(c.min.y, 1.0);
         }
+    }
+
+    /// A cell written at a 1e5 offset is never read smaller than written (nearest rounding
+    /// to f32 read 100000.003 as 100000.0 and 99999.996 as 100000.0).
+    #[test]
+    fn cells_files_are_rounded_outward_at_a_1e5_offset() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.json");
+        std::fs::write(
+            &path,
+            r#"{"cells":[{"min":[99999.996,-100000.003,0.1],"max":[100000.003,-99999.996,0.3]}]}"#,
+        )
+        .unwrap();
+        let c = load_json(&path).unwrap()[0];
+        let (min, max) = (c.min.as_dvec3(), c.max.as_dvec3());
+        assert!(min.x <= 99999.996 && max.x >= 100000.003, "{c:?}");
+        assert!(min.y <= -100000.003 && max.y >= -99999.996, "{c:?}");
+        assert!(min.z <= 0.1 && max.z >= 0.3, "{c:?}");
+        // One f32 step at most beyond what was written.
+        assert!(
+            max.x - 100000.003 < 0.0079 && 99999.996 - min.x < 0.0079,
+            "{c:?}"
+        );
     }
 
     #[test]

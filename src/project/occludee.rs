@@ -67,55 +67,91 @@ pub fn standard_rect(frame: &PlaneFrame, b: &DAabb) -> (DVec2, DVec2) {
             }
         }
     }
-    (lo, hi)
+    // Rounding: a few ulps per value; pad outward by far more.
+    let pad = 1e-12 * (1.0 + lo.abs().max(hi.abs()).max_element());
+    (lo - pad, hi + pad)
 }
 
-/// The improved Projection (§4) of a box lying between the cell's face and the plane: per
-/// in-plane axis, the segment between the two supporting lines of the cell and the box where
-/// they meet the plane, or its mid-point when they cross before the plane. Valid with convex or
-/// planar occluders (all of ours) and the usual Depth test.
-pub fn improved_rect(frame: &PlaneFrame, b: &DAabb) -> (DVec2, DVec2) {
+/// The improved Projection (§4) of a box lying between the cell's face and the plane, for
+/// one eye depth: `eye` is how far behind the cell's face the eyes are taken (`0` the face,
+/// the cell's depth its back face). Per in-plane axis, the segment between the two supporting
+/// lines of the cell's cross-section at that depth and the box where they meet the plane, or
+/// its mid-point when they cross before the plane. Valid with convex or planar occluders (all
+/// of ours) and the usual Depth test; see [`improved_rects`] for the argument.
+pub fn improved_rect_at(frame: &PlaneFrame, b: &DAabb, eye: f64) -> (DVec2, DVec2) {
     let a = frame.axis;
     let s = frame.sign();
     let face = frame.face();
     let c = &frame.cell;
-    let l = c.max[a] - c.min[a];
     let (near, far) = if frame.positive {
         (b.min[a], b.max[a])
     } else {
         (b.max[a], b.min[a])
     };
-    let tb0 = s * (near - face);
-    let tb1 = s * (far - face);
-    let tp = s * (frame.position - face);
+    // Distances from the eyes' depth: to the box's near and far sides and to the plane.
+    let n = s * (near - face) + eye;
+    let f = s * (far - face) + eye;
+    let d = s * (frame.position - face) + eye;
     let (u, v) = frame.uv_axes();
     let mut lo = DVec2::ZERO;
     let mut hi = DVec2::ZERO;
     for (k, ax) in [u, v].into_iter().enumerate() {
         let (cu0, cu1, bu0, bu1) = (c.min[ax], c.max[ax], b.min[ax], b.max[ax]);
-        // Upper supporting line: through the cell's back top corner and the box's near top
-        // corner when the box is higher, else through the cell's front top corner and the box's
-        // far top corner.
-        let upper = if bu1 >= cu1 {
-            cu1 + (bu1 - cu1) * (tp + l) / (tb0 + l)
+        // A point at distance z from the eyes is inside the cone from the plane's segment
+        // [lo, hi] to the eye segment [cu0, cu1] when cu1 + (x − cu1)·d/z ≤ hi and
+        // cu0 + (x − cu0)·d/z ≥ lo: the upper bound is needed at the box's near side when
+        // the box reaches above the cell, at its far side otherwise (and likewise below).
+        let upper = cu1 + (bu1 - cu1) * d / if bu1 >= cu1 { n } else { f };
+        let lower = cu0 + (bu0 - cu0) * d / if bu0 <= cu0 { n } else { f };
+        let (l, h) = if lower <= upper {
+            (lower, upper)
         } else {
-            cu1 + (bu1 - cu1) * tp / tb1
-        };
-        let lower = if bu0 <= cu0 {
-            cu0 + (bu0 - cu0) * (tp + l) / (tb0 + l)
-        } else {
-            cu0 + (bu0 - cu0) * tp / tb1
-        };
-        if lower <= upper {
-            lo[k] = lower;
-            hi[k] = upper;
-        } else {
+            // The lines cross before the plane: any point between them will do.
             let m = 0.5 * (lower + upper);
-            lo[k] = m;
-            hi[k] = m;
-        }
+            (m, m)
+        };
+        // Rounding: every difference above is of nearby f32-born values (exact), so only the
+        // product and quotient round; pad by far more than their few ulps.
+        let big = cu0.abs().max(cu1.abs()).max(bu0.abs()).max(bu1.abs());
+        let pad = 1e-12 * (1.0 + big) * (1.0 + d / n);
+        lo[k] = l - pad;
+        hi[k] = h + pad;
     }
     (lo, hi)
+}
+
+/// The improved Projections (§4) of a box lying between the cell's face and the plane: the
+/// box is hidden when either rectangle is covered by occluders in front of it. The first
+/// takes the eyes on the cell's face, the second on its back face.
+///
+/// # Why it is conservative
+/// Property 2 of the paper asks that the union of the cones from the points `P` of the
+/// rectangle `R` to the cell contain the box: then every box point `P'` lies in a cone from
+/// some `P` that is in the umbra of one convex or planar occluder (a pixel of the Depth Map is
+/// covered by one occluder's extended Projection, or is a reprojected pixel whose rays are all
+/// blocked before a plane in front of the box), and `P'`, behind that occluder, is hidden
+/// (Property 1). The paper builds `R` as the product of two 2D improved Projections, one per
+/// in-plane axis, each from the supporting lines of the cell's side view. That product is not
+/// sound when the two axes' lines touch the cell at different depths (one axis through its
+/// back corner, the other through its front): a box point may then need an eye at the back
+/// for one axis and at the front for the other, and no single eye of the cell sees it through
+/// `R` (issue 22: a 2×2×40 cell culled a visible box).
+///
+/// Here both axes take their eyes on one cross-section `E` of the cell at a single depth.
+/// A point `P'` at distance `z` from `E`, with `R` at distance `d`, lies in a cone from `R` to
+/// `E` exactly when `P' = (1 − t)·e + t·P` with `t = z/d`, `e ∈ E`, `P ∈ R`: `t` is fixed by
+/// the depth alone, so the condition splits into one condition per axis, and each axis is the
+/// 2D construction with a segment for the cell (the supporting lines above). Since
+/// `E ⊂ cell`, each cone from `R` to `E` lies in the cone from `R` to the cell, and Property 2
+/// holds. Any depth gives a valid rectangle; the face is tightest along axes where the box is
+/// narrower than the cell, the back face where it is wider, so both are offered.
+pub fn improved_rects(frame: &PlaneFrame, b: &DAabb) -> [(DVec2, DVec2); 2] {
+    let a = frame.axis;
+    let depth = frame.cell.max[a] - frame.cell.min[a];
+    [
+        improved_rect_at(frame, b, 0.0),
+        improved_rect_at(frame, b, depth),
+    ]
 }
 
 /// The pixels `[i0, i1] × [j0, j1]` a world rectangle overlaps (rounded outward; a pixel that
@@ -250,25 +286,335 @@ mod tests {
     }
 
     #[test]
-    fn improved_rect_is_inside_the_standard_one_and_collapses_for_small_boxes() {
+    fn improved_rects_are_inside_the_standard_one_and_collapse_for_small_boxes() {
         let f = frame(30.0);
         let small = DAabb {
             min: DVec3::new(-0.2, -0.2, 4.0),
             max: DVec3::new(0.2, 0.2, 4.5),
         };
         let (slo, shi) = standard_rect(&f, &small);
-        let (lo, hi) = improved_rect(&f, &small);
-        assert_eq!(lo, hi, "supporting lines cross before the plane: a point");
-        assert!(lo.x >= slo.x && hi.x <= shi.x);
+        for (lo, hi) in improved_rects(&f, &small) {
+            assert!(
+                (hi - lo).max_element() < 1e-9,
+                "lines cross before the plane: a point"
+            );
+            assert!(lo.x >= slo.x && hi.x <= shi.x);
+        }
         let big = DAabb {
             min: DVec3::new(-4.0, -3.0, 5.0),
             max: DVec3::new(3.0, 2.0, 7.0),
         };
         let (slo, shi) = standard_rect(&f, &big);
-        let (lo, hi) = improved_rect(&f, &big);
-        assert!(lo.x < hi.x && lo.y < hi.y);
-        assert!(lo.x >= slo.x && lo.y >= slo.y && hi.x <= shi.x && hi.y <= shi.y);
-        assert!((hi - lo).x < (shi - slo).x, "strictly tighter");
+        for (lo, hi) in improved_rects(&f, &big) {
+            assert!(lo.x < hi.x && lo.y < hi.y);
+            assert!(lo.x >= slo.x && lo.y >= slo.y && hi.x <= shi.x && hi.y <= shi.y);
+            assert!((hi - lo).x < (shi - slo).x, "strictly tighter");
+        }
+    }
+
+    // ---- Brute force: rays from the whole cell to the box (issue 22) --------------------
+
+    /// A small deterministic generator (PCG-like LCG).
+    struct Rng(u64);
+    impl Rng {
+        fn f(&mut self, lo: f64, hi: f64) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
+        }
+        fn pick(&mut self, n: usize) -> usize {
+            (self.f(0.0, n as f64) as usize).min(n - 1)
+        }
+    }
+
+    /// A point of `b`: a corner, an edge or face point, or an interior point (the extremes of
+    /// a cone or a shadow are reached at corners, edges and faces).
+    fn point_in(r: &mut Rng, b: &DAabb) -> DVec3 {
+        let mut t = DVec3::new(r.f(0.0, 1.0), r.f(0.0, 1.0), r.f(0.0, 1.0));
+        let snap = r.pick(4); // how many coordinates go to 0 or 1
+        for _ in 0..snap {
+            let k = r.pick(3);
+            t[k] = if r.f(0.0, 1.0) < 0.5 { 0.0 } else { 1.0 };
+        }
+        b.min + (b.max - b.min) * t
+    }
+
+    /// A random configuration: a cell with aspect ratios from 1:1 to 1:50 on each axis, a
+    /// plane on a random side, and a box lying between the cell's face and the plane (the
+    /// improved Projection's case) or anywhere beyond the face (`in_front == false`), wider
+    /// than the cell on some in-plane axes and narrower on others, then scaled and offset.
+    fn config(r: &mut Rng, case: usize, in_front: bool) -> (PlaneFrame, DAabb) {
+        let (scale, offset) = match case % 4 {
+            0 => (1.0, 0.0),
+            1 => (1e-3, 0.0),
+            2 => (1.0, 1e5),
+            _ => (r.f(0.01, 100.0), r.f(-1e4, 1e4)),
+        };
+        let mut size = DVec3::ONE;
+        for k in 0..3 {
+            size[k] = if r.f(0.0, 1.0) < 0.3 {
+                1.0
+            } else {
+                50f64.powf(r.f(-1.0, 1.0))
+            };
+        }
+        let centre = DVec3::new(r.f(-5.0, 5.0), r.f(-5.0, 5.0), r.f(-5.0, 5.0));
+        let cell = DAabb {
+            min: centre - size,
+            max: centre + size,
+        };
+        let axis = case % 3;
+        let positive = (case / 3) % 2 == 0;
+        let mut f = frame(0.0);
+        f.cell = cell;
+        f.axis = axis;
+        f.positive = positive;
+        let s = f.sign();
+        let reach = size.max_element() * r.f(0.5, 20.0);
+        let tp = reach * r.f(0.2, 1.0);
+        f.position = f.face() + s * tp;
+        let (u, v) = f.uv_axes();
+        let mut min = DVec3::ZERO;
+        let mut max = DVec3::ZERO;
+        // Depth span: in front of the plane, or anywhere beyond the face.
+        let (d0, d1) = if in_front {
+            let a = r.f(0.001, 0.999) * tp;
+            (a, a + r.f(0.0, 1.0) * (tp - a))
+        } else {
+            let a = r.f(0.001, 2.0) * tp;
+            (a, a + r.f(0.0, 1.0) * tp)
+        };
+        let (n, far) = (f.face() + s * d0, f.face() + s * d1);
+        min[axis] = n.min(far);
+        max[axis] = n.max(far);
+        for ax in [u, v] {
+            // Wider than the cell, narrower, straddling one side, or off to a side.
+            let (c0, c1) = (cell.min[ax], cell.max[ax]);
+            let w = c1 - c0;
+            let (a, b) = match r.pick(4) {
+                0 => (c0 - r.f(0.0, 3.0) * w, c1 + r.f(0.0, 3.0) * w),
+                1 => {
+                    let a = r.f(c0, c1);
+                    (a, r.f(a, c1))
+                }
+                2 => (r.f(c0, c1), c1 + r.f(0.0, 2.0) * w),
+                _ => {
+                    let a = c1 + r.f(-0.5, 3.0) * w;
+                    (a, a + r.f(0.0, 2.0) * w)
+                }
+            };
+            min[ax] = a;
+            max[ax] = b;
+        }
+        let place = |p: DVec3| p * scale + DVec3::splat(offset);
+        let place_box = |b: DAabb| {
+            // Round to f32, as scenes and cells are.
+            let (a, b) = (place(b.min), place(b.max));
+            DAabb {
+                min: a.as_vec3().as_dvec3(),
+                max: b.as_vec3().as_dvec3(),
+            }
+        };
+        f.cell = place_box(f.cell);
+        f.position = f.position * scale + offset;
+        let b = place_box(DAabb { min, max });
+        (f, b)
+    }
+
+    /// The check of Property 2 the improved Projection must pass, by rays: with the minimal
+    /// occluder whose extended Projection covers `[lo, hi]` — the cross-section, at a depth
+    /// `w` between the cell's face and the box, of the convex hull of the cell and the
+    /// rectangle — every segment from a point of the cell to a point of the box must cross
+    /// that occluder. Returns a segment that does not.
+    fn unblocked_ray(
+        r: &mut Rng,
+        f: &PlaneFrame,
+        b: &DAabb,
+        lo: DVec2,
+        hi: DVec2,
+        rays: usize,
+    ) -> Option<(DVec3, DVec3)> {
+        let a = f.axis;
+        let s = f.sign();
+        let face = f.face();
+        let l = f.cell.max[a] - f.cell.min[a];
+        let d = s * (f.position - face);
+        let (near, far) = if f.positive {
+            (b.min[a], b.max[a])
+        } else {
+            (b.max[a], b.min[a])
+        };
+        let n = s * (near - face);
+        let _ = far;
+        let (u, v) = f.uv_axes();
+        for _ in 0..4 {
+            // The occluder's depth beyond the face, strictly in front of the box.
+            let w = n * r.f(0.0, 1.0);
+            // (1 − λ)·e + λ·P at depth w, e at depth in [−l, 0]: λ ∈ [w/d, (w + l)/(d + l)].
+            let (l0, l1) = (w / d, (w + l) / (d + l));
+            let in_section = |x: DVec2| {
+                // Exists λ ∈ [l0, l1] with (1 − λ)·cell + λ·R ∋ x on both axes.
+                let (mut a0, mut a1) = (l0, l1);
+                for (k, ax) in [u, v].into_iter().enumerate() {
+                    let (c0, c1) = (f.cell.min[ax], f.cell.max[ax]);
+                    // c0 + λ(lo − c0) ≤ x and x ≤ c1 + λ(hi − c1).
+                    for (base, slope, upper_side) in
+                        [(c0, lo[k] - c0, false), (c1, hi[k] - c1, true)]
+                    {
+                        let tol = 1e-9 * (1.0 + x[k].abs());
+                        // upper_side: base + λ·slope ≥ x; else base + λ·slope ≤ x.
+                        let g = if upper_side {
+                            x[k] - base - tol
+                        } else {
+                            x[k] - base + tol
+                        };
+                        if slope.abs() < 1e-300 {
+                            let ok = if upper_side { g <= 0.0 } else { g >= 0.0 };
+                            if !ok {
+                                return false;
+                            }
+                            continue;
+                        }
+                        let lam = g / slope;
+                        let lam_is_lower = upper_side == (slope > 0.0);
+                        if lam_is_lower {
+                            a0 = a0.max(lam);
+                        } else {
+                            a1 = a1.min(lam);
+                        }
+                    }
+                }
+                a0 <= a1 + 1e-12
+            };
+            for _ in 0..rays {
+                let e = point_in(r, &f.cell);
+                let q = point_in(r, b);
+                let (we, wq) = (s * (e[a] - face), s * (q[a] - face));
+                let t = (w - we) / (wq - we);
+                let x = e + (q - e) * t;
+                if !in_section(DVec2::new(x[u], x[v])) {
+                    return Some((e, q));
+                }
+            }
+        }
+        None
+    }
+
+    #[test]
+    fn improved_rects_hide_only_what_every_ray_from_the_cell_to_the_box_must_cross() {
+        let mut r = Rng(22);
+        for case in 0..3000 {
+            let (f, b) = config(&mut r, case, true);
+            for (k, (lo, hi)) in improved_rects(&f, &b).into_iter().enumerate() {
+                if let Some((e, q)) = unblocked_ray(&mut r, &f, &b, lo, hi, 200) {
+                    panic!(
+                        "case {case}, rectangle {k}: the segment {e:?} → {q:?} from the cell \
+                         to the box misses the minimal occluder of {lo:?}..{hi:?} \
+                         (cell {:?}, box {b:?}, plane {} on axis {})",
+                        f.cell, f.position, f.axis
+                    );
+                }
+            }
+        }
+    }
+
+    /// The paper's product of two 2D improved Projections, each axis with the supporting
+    /// lines through whichever cell corner suits it (the code before issue 22).
+    fn per_axis_product(f: &PlaneFrame, b: &DAabb) -> (DVec2, DVec2) {
+        let (a, s) = (f.axis, f.sign());
+        let l = f.cell.max[a] - f.cell.min[a];
+        let (near, far) = if f.positive {
+            (b.min[a], b.max[a])
+        } else {
+            (b.max[a], b.min[a])
+        };
+        let (tp, tb0, tb1) = (
+            s * (f.position - f.face()),
+            s * (near - f.face()),
+            s * (far - f.face()),
+        );
+        let (u, v) = f.uv_axes();
+        let mut lo = DVec2::ZERO;
+        let mut hi = DVec2::ZERO;
+        for (k, ax) in [u, v].into_iter().enumerate() {
+            let (c0, c1, b0, b1) = (f.cell.min[ax], f.cell.max[ax], b.min[ax], b.max[ax]);
+            let up = if b1 >= c1 {
+                c1 + (b1 - c1) * (tp + l) / (tb0 + l)
+            } else {
+                c1 + (b1 - c1) * tp / tb1
+            };
+            let dn = if b0 <= c0 {
+                c0 + (b0 - c0) * (tp + l) / (tb0 + l)
+            } else {
+                c0 + (b0 - c0) * tp / tb1
+            };
+            let m = 0.5 * (dn + up);
+            (lo[k], hi[k]) = if dn <= up { (dn, up) } else { (m, m) };
+        }
+        (lo, hi)
+    }
+
+    /// The check above can fail: it catches the per-axis product on the issue's scene (a
+    /// 2×2×40 cell) and on the random configurations.
+    #[test]
+    fn the_per_axis_product_fails_that_check() {
+        let mut f = frame(9.9);
+        f.cell = DAabb {
+            min: DVec3::new(-1.0, -1.0, -40.0),
+            max: DVec3::new(1.0, 1.0, 0.0),
+        };
+        let target = DAabb {
+            min: DVec3::new(-3.0, -0.45, 5.0),
+            max: DVec3::new(3.0, 0.45, 5.1),
+        };
+        let mut r = Rng(1);
+        let (lo, hi) = per_axis_product(&f, &target);
+        assert!(
+            unblocked_ray(&mut r, &f, &target, lo, hi, 20_000).is_some(),
+            "the per-axis product must be caught on the issue's scene"
+        );
+        for (lo, hi) in improved_rects(&f, &target) {
+            assert!(unblocked_ray(&mut r, &f, &target, lo, hi, 20_000).is_none());
+        }
+        let mut r = Rng(22);
+        let caught = (0..3000)
+            .filter(|&case| {
+                let (f, b) = config(&mut r, case, true);
+                let (lo, hi) = per_axis_product(&f, &b);
+                unblocked_ray(&mut r, &f, &b, lo, hi, 200).is_some()
+            })
+            .count();
+        eprintln!("the per-axis product was caught on {caught} of 3000 random configurations");
+        assert!(
+            caught > 0,
+            "the random configurations must catch the per-axis product"
+        );
+    }
+
+    /// The standard Projection holds the view of every box point from every cell point, for
+    /// boxes in front of, across and behind the plane, on the same random configurations.
+    #[test]
+    fn standard_rect_holds_every_view_on_random_cells_and_boxes() {
+        let mut r = Rng(15);
+        for case in 0..3000 {
+            let (f, b) = config(&mut r, case, case % 2 == 0);
+            let (lo, hi) = standard_rect(&f, &b);
+            for _ in 0..300 {
+                let e = point_in(&mut r, &f.cell);
+                let q = point_in(&mut r, &b);
+                let p = f.project(e, q);
+                let tol = 1e-9 * (1.0 + p.abs().max_element());
+                assert!(
+                    p.x >= lo.x - tol
+                        && p.y >= lo.y - tol
+                        && p.x <= hi.x + tol
+                        && p.y <= hi.y + tol,
+                    "case {case}: the view {p:?} of {q:?} from {e:?} leaves {lo:?}..{hi:?}"
+                );
+            }
+        }
     }
 
     #[test]
