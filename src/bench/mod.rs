@@ -89,6 +89,10 @@ pub struct BenchArgs {
     /// Also write the rows as JSON to this file.
     #[arg(long, value_name = "OUT.json")]
     pub json: Option<PathBuf>,
+    /// Also write every bake's PVS document to DIR/SCENE-BACKEND.json (created if needed), to
+    /// compare two builds cell for cell (`cargo run --example pvs_diff -- A.json B.json`).
+    #[arg(long, value_name = "DIR")]
+    pub pvs_out: Option<PathBuf>,
     /// Run the foliage study instead of the scene table: forests baked with and without the
     /// sweep, with sub-cells and with other sweep settings, one table per study (on the CPU
     /// backend unless --backend gpu; see docs/bench.md).
@@ -209,6 +213,7 @@ struct Plan {
     gpu_cells: usize,
     rays: u64,
     shared: Option<PathBuf>,
+    pvs_out: Option<PathBuf>,
 }
 
 impl Plan {
@@ -229,11 +234,17 @@ impl Plan {
                 SCENES.join(", ")
             );
         }
+        if let Some(dir) = &args.pvs_out {
+            std::fs::create_dir_all(dir).with_context(|| {
+                format!("--pvs-out {}: cannot create the folder", dir.display())
+            })?;
+        }
         Ok(Plan {
             cells,
             gpu_cells,
             rays,
             shared,
+            pvs_out: args.pvs_out.clone(),
         })
     }
 }
@@ -502,6 +513,11 @@ fn bench_scene(
             t.elapsed().as_secs_f64(),
             plan.rays
         );
+        if let Some(dir) = &plan.pvs_out {
+            let path = dir.join(format!("{}-{}.json", bs.name, backend.name()));
+            let doc = crate::bake::to_document(scene, cells, &result, settings);
+            crate::pvs::json::write(&path, &doc).map_err(anyhow::Error::msg)?;
+        }
         for (i, cell) in cells.iter().enumerate() {
             if samples[i].is_none() {
                 samples[i] = Some(sample(&index, scene, *cell, plan.rays, seed, i));
