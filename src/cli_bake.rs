@@ -334,6 +334,12 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             "culled      {:.1} % of objects, {:.1} % of triangles (mean over cells)",
             s.objects_culled_percent, s.triangles_culled_percent
         );
+        for c in &s.cullers {
+            eprintln!(
+                "culler      {}: hid {:.1} objects per cell ({:.1} only it), {:.1} ms per cell",
+                c.name, c.hidden, c.only, c.ms
+            );
+        }
         eprintln!(
             "time        {:.1} ms per cell (median), {:.2} s in all",
             s.median_ms_per_cell, s.total_seconds

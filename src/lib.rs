@@ -4,8 +4,13 @@
 //! inside) umbrasweep computes the potentially visible set (PVS) of scene objects, using the
 //! extended projections of Durand et al. (SIGGRAPH 2000).
 //!
-//! Data flows one way: [`scene`] → [`cells`] → per-cell culling ([`project`], the occlusion
-//! [`sweep`], [`hdm`], raster work in [`backend`]) → [`pvs`] → files. [`bake`] ties the stages together.
+//! Data flows one way: [`scene`] → [`cells`] → per-cell culling → [`pvs`] → files, and [`bake`]
+//! ties the stages together. Per cell, [`project`] lays out the projection planes and the
+//! occlusion [`sweep`] carries umbra from one plane to the next; both describe their work as the
+//! data of the raster contract, [`plane`], which a [`backend`] (CPU or GPU) turns into Depth
+//! Maps that [`hdm`] tests occludees against. The imports follow the same direction: [`plane`]
+//! depends only on [`geom`], and [`project`], [`sweep`], [`backend`] and [`hdm`] each depend on
+//! [`plane`], never on one another.
 //!
 //! The `runtime` feature alone (`--no-default-features --features runtime`) builds only
 //! [`geom`] and [`pvs`], the parts an engine needs at run time.
@@ -41,6 +46,8 @@ pub mod generate;
 pub mod hdm;
 #[cfg(feature = "bake")]
 pub mod inspect;
+#[cfg(feature = "bake")]
+pub mod plane;
 #[cfg(feature = "bake")]
 pub mod project;
 #[cfg(feature = "bake")]

@@ -364,10 +364,10 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
         );
         let cell = pl.aabb(c.cell.0, c.cell.1);
         let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
-        if seed < 4 {
-            if let Some(g) = &gpu {
-                backends.push(g);
-            }
+        if seed < 4
+            && let Some(g) = &gpu
+        {
+            backends.push(g);
         }
         for backend in backends {
             for (label, s) in &settings {

@@ -14,15 +14,14 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
+use umbrasweep::backend::coverage;
 use umbrasweep::backend::cpu::{self, CpuBackend};
 use umbrasweep::backend::gpu::{self, GpuBackend};
-use umbrasweep::backend::{
-    BackendError, DepthMap, OccluderSet, PlaneFrame, PlaneJob, RasterBackend, Reprojection,
-    depth_up,
-};
+use umbrasweep::backend::{BackendError, RasterBackend};
 use umbrasweep::bake::{BakeSettings, bake};
 use umbrasweep::generate::{self, CityOptions};
 use umbrasweep::geom::{Aabb, DAabb};
+use umbrasweep::plane::{DepthMap, OccluderSet, PlaneFrame, PlaneJob, Reprojection, depth_up};
 use umbrasweep::scene::Scene;
 
 // ---------------------------------------------------------------------------------------------
@@ -306,7 +305,8 @@ fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> Diff {
         }
         if g < c {
             diff.gpu_only += 1;
-            let legit = occluders_at(g).any(|pts| cpu::contract_slack(f, pts, i, j) >= cpu::MARGIN);
+            let legit = occluders_at(g)
+                .any(|pts| coverage::contract_slack(f, pts, i, j) >= coverage::MARGIN);
             assert!(
                 legit,
                 "GPU covers ({i}, {j}) at {res}×{rows} with Depth {g} (CPU: {c}) but no occluder of \
@@ -317,7 +317,7 @@ fn compare(job: &PlaneJob, gpu: &DepthMap, cpu_map: &DepthMap) -> Diff {
             diff.cpu_only += 1;
             // The GPU's extra shrink: the CPU's margin plus 2⁻²¹·(extent + 1) px of f32 error.
             let band = 1e-3 + res.max(rows) as f64 / (1u64 << 20) as f64;
-            let near = occluders_at(c).any(|pts| cpu::contract_slack(f, pts, i, j) < band);
+            let near = occluders_at(c).any(|pts| coverage::contract_slack(f, pts, i, j) < band);
             assert!(
                 near,
                 "CPU-only pixel ({i}, {j}) at {res}×{rows} is not on an edge"
@@ -1089,7 +1089,7 @@ fn degenerate_clipped_edges_do_not_uncover_a_triangle() {
         DVec3::new(-10.949435919824044, 8.535924727613656, -2.6336076127590715),
         DVec3::new(-4.679093122439994, 2.2980744054368625, -9.389374134012611),
     ];
-    let slack = cpu::contract_slack(&f, &tri, 62, 4);
+    let slack = coverage::contract_slack(&f, &tri, 62, 4);
     assert!(
         slack > 0.3,
         "pixel (62, 4) is well inside all 8 views: {slack}"

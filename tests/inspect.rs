@@ -9,11 +9,11 @@ use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use umbrasweep::backend::cpu::CpuBackend;
-use umbrasweep::backend::{DepthMap, PlaneJob, depth_up};
 use umbrasweep::bake::{BakeSettings, bake, to_document};
 use umbrasweep::geom::Aabb;
 use umbrasweep::hdm::Hdm;
 use umbrasweep::inspect::{DumpOptions, ReportArgs, dump_plane, file_stem, run_report};
+use umbrasweep::plane::{DepthMap, PlaneJob, depth_up};
 use umbrasweep::scene::Scene;
 
 /// A wall in front of the cell's +z face, an object hidden behind it, one beside the cell.

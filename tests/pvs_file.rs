@@ -478,6 +478,9 @@ fn bake_writes_pvs_and_inspect_reads_it() {
         }
         v["summary"]["median_ms_per_cell"] = 0.into();
         v["summary"]["total_seconds"] = 0.into();
+        for c in v["summary"]["cullers"].as_array_mut().unwrap() {
+            c["ms"] = 0.into();
+        }
         v
     };
     assert_eq!(strip(&o.stdout), strip(&std::fs::read(&js).unwrap()));
@@ -523,7 +526,7 @@ fn bake_writes_pvs_and_inspect_reads_it() {
 }
 
 #[test]
-fn version_3_keeps_the_sweep_settings_and_versions_1_and_2_still_read() {
+fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read() {
     let mut doc = city().clone();
     doc.settings.sweep = true;
     doc.settings.sweep_planes = 24;
@@ -531,10 +534,19 @@ fn version_3_keeps_the_sweep_settings_and_versions_1_and_2_still_read() {
     doc.settings.sweep_spacing = "geometric".into();
     doc.settings.subcell = Some(2.0);
     doc.settings.max_stretch = 4;
-    let v3 = binary::encode(&doc).unwrap();
-    assert_eq!(&v3[8..12], &3u32.to_le_bytes());
-    let back = PvsDatabase::from_bytes(&v3).unwrap().to_document();
+    let culler = umbrasweep::pvs::PvsCullerSummary {
+        name: "occlusion_sweep".into(),
+        hidden: 12.5,
+        only: 11.5,
+        ms: 3.25,
+        planes: 7.0,
+    };
+    doc.summary.as_mut().unwrap().cullers = vec![culler.clone()];
+    let v4 = binary::encode(&doc).unwrap();
+    assert_eq!(&v4[8..12], &4u32.to_le_bytes());
+    let back = PvsDatabase::from_bytes(&v4).unwrap().to_document();
     assert_eq!(json(&back), json(&doc));
+    assert_eq!(back.summary.unwrap().cullers, vec![culler]);
 
     // Rewrites `file`'s payload without `cut` (found in it), as version `version`.
     let older = |file: &[u8], cut: &[u8], keep: usize, version: u32| {
@@ -552,12 +564,24 @@ fn version_3_keeps_the_sweep_settings_and_versions_1_and_2_still_read() {
         out.extend(p);
         out
     };
+    // Version 3 wrote no cullers after the summary's total_seconds.
+    let mut cullers = 1u32.to_le_bytes().to_vec();
+    cullers.extend(15u32.to_le_bytes());
+    cullers.extend(b"occlusion_sweep");
+    for v in [12.5f64, 11.5, 3.25, 7.0] {
+        cullers.extend(v.to_le_bytes());
+    }
+    let v3 = older(&v4, &cullers, 0, 3);
+    let old = PvsDatabase::from_bytes(&v3).unwrap().to_document();
+    let mut expected = doc.clone();
+    expected.summary.as_mut().unwrap().cullers.clear();
+    assert_eq!(json(&old), json(&expected));
+
     // Version 2 wrote no max_stretch after the subcell size: maps were square.
     let mut v3_tail = 2.0f64.to_le_bytes().to_vec();
     v3_tail.extend(4u32.to_le_bytes());
     let v2 = older(&v3, &v3_tail, 8, 2);
     let old = PvsDatabase::from_bytes(&v2).unwrap().to_document();
-    let mut expected = doc.clone();
     expected.settings.max_stretch = 0;
     assert_eq!(json(&old), json(&expected));
 

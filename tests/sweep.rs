@@ -288,8 +288,8 @@ fn flat_layers_get_wide_maps_with_about_square_pixels() {
         let frames = std::sync::Mutex::new(Vec::new());
         let observe = |_: usize,
                        _: usize,
-                       job: &umbrasweep::backend::PlaneJob,
-                       map: &umbrasweep::backend::DepthMap,
+                       job: &umbrasweep::plane::PlaneJob,
+                       map: &umbrasweep::plane::DepthMap,
                        _: &umbrasweep::hdm::Hdm| {
             assert_eq!((map.width, map.height), (job.frame.width, job.frame.height));
             frames.lock().unwrap().push(job.frame.clone());

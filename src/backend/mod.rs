@@ -1,217 +1,21 @@
 //! The raster work of a bake — occluder extended projections, Depth Maps — behind one trait,
 //! so that the CPU backend ([`cpu`]) and the wgpu backend ([`gpu`]) give the same answers.
 //!
-//! # The contract every backend implements
-//!
-//! A [`PlaneJob`] is one projection plane of one cell: the plane `x[axis] = position`, seen from
-//! the cell through its face on the `positive` (or negative) side, a rectangle `rect_min ..
-//! rect_max` on it in the world coordinates of the two other axes `(u, v) = (axis+1, axis+2)
-//! mod 3`, cut into `width × height` pixels (powers of two; a bake keeps `width · height =
-//! resolution²` and stretches sweep planes' maps towards their rectangles, [`map_size`]). Pixel
-//! `(i, j)` (column `i` along u, row `j` along v) covers `[rect_min.x + i·pw, rect_min.x +
-//! (i+1)·pw] × [rect_min.y + j·ph, …]`, stored at index `j·width + i`.
-//!
-//! The *Depth* of a point is `s·(x[axis] − position)` with `s = ±1` the side: zero on the plane,
-//! growing away from the cell.
-//!
-//! Each occluder is a convex point set (the corners of a convex polygon or of a convex solid)
-//! lying strictly beyond the cell's face. Its *view* from cell corner `V` is the 2D convex hull
-//! of the central projections of its points from `V` onto the plane; its extended *Projection*
-//! is the intersection of the views from the 8 corners of the cell. A backend must:
-//! 1. mark pixel `(i, j)` as covered by an occluder only when the whole closed pixel square lies
-//!    inside all 8 views of that same occluder (conservative shrinking; views of different
-//!    occluders never add up), erring toward "not covered" on float error;
-//! 2. give a covered pixel the occluder's Depth: the maximum Depth of its points, rounded up to
-//!    `f32`;
-//! 3. keep per pixel the minimum over occluders (the Depth Map), `+inf` where none covers it;
-//! 4. set to `0.0` (the plane's Depth) every pixel whose square lies entirely inside a slice:
-//!    the region enclosed (even-odd) by the job's closed slice segments;
-//! 5. for every [`Reprojection`] the job carries, lower every pixel it sets (the separable window
-//!    filter of [`crate::sweep`], on the integer windows it carries) to its Depth. This part is
-//!    exact: both backends give the same pixels.
+//! Every backend implements the raster contract stated in [`crate::plane`]: a
+//! [`plane::PlaneJob`] in, a [`plane::DepthMap`] out, occluders covering only whole pixels
+//! inside all 8 views, slices, and the exact reprojection filter. The part of the work both
+//! backends share — the occluder's Projection polygon, the slice fill and the contract's
+//! brute-force definition — is [`coverage`]; each backend only rasterises the polygons its own
+//! way (spans on the CPU, a fragment shader on the GPU).
 //!
 //! The result may differ between backends only on pixels where a view's edge passes within a
 //! rounding error of a pixel corner.
 
+pub mod coverage;
 pub mod cpu;
 pub mod gpu;
 
-use crate::geom::DAabb;
-pub use crate::sweep::Reprojection;
-use glam::{DVec2, DVec3};
-
-/// One projection plane of one cell; see the module docs for the conventions.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PlaneFrame {
-    /// The cell the views are taken from.
-    pub cell: DAabb,
-    /// The plane's normal axis: 0 = x, 1 = y, 2 = z.
-    pub axis: usize,
-    /// True when the plane lies on the cell's `+axis` side.
-    pub positive: bool,
-    /// The plane's coordinate along `axis` (beyond the cell's face).
-    pub position: f64,
-    /// The rectangle on the plane, in world `(u, v)` coordinates.
-    pub rect_min: DVec2,
-    pub rect_max: DVec2,
-    /// Pixels along `u` (columns) and along `v` (rows), powers of two. Not necessarily equal:
-    /// a bake gives a long, flat rectangle (a forest's band of crowns) a wide, short map, so
-    /// that its pixels are about square in world units ([`map_size`]).
-    pub width: u32,
-    pub height: u32,
-}
-
-/// The Depth Map size `(width, height)` for a rectangle of world size `extent` with the pixel
-/// budget of a `resolution × resolution` map: powers of two with `width · height =
-/// resolution²`, the width `resolution · 2^k` with the `k` whose pixels are closest to square,
-/// `|2^k| ≤ max_stretch` (`max_stretch` 1: square maps).
-///
-/// # Panics
-/// If `resolution` or `max_stretch` is not a power of two.
-pub fn map_size(resolution: u32, extent: DVec2, max_stretch: u32) -> (u32, u32) {
-    assert!(resolution.is_power_of_two() && max_stretch.is_power_of_two());
-    let ratio = extent.x / extent.y;
-    let lim = max_stretch
-        .trailing_zeros()
-        .min(resolution.trailing_zeros()) as i32;
-    // Square pixels: width / height = ratio, so 4^k = ratio.
-    let k = if ratio.is_finite() && ratio > 0.0 {
-        ((ratio.log2() / 2.0).round() as i32).clamp(-lim, lim)
-    } else {
-        0
-    };
-    if k >= 0 {
-        (resolution << k, resolution >> k)
-    } else {
-        (resolution >> -k, resolution << -k)
-    }
-}
-
-impl PlaneFrame {
-    /// `+1.0` or `-1.0`: the direction leaving the cell.
-    pub fn sign(&self) -> f64 {
-        if self.positive { 1.0 } else { -1.0 }
-    }
-
-    /// The two in-plane axes `(u, v)`.
-    pub fn uv_axes(&self) -> (usize, usize) {
-        ((self.axis + 1) % 3, (self.axis + 2) % 3)
-    }
-
-    /// Depth of a world point: signed distance beyond the plane.
-    pub fn depth(&self, p: DVec3) -> f64 {
-        self.sign() * (p[self.axis] - self.position)
-    }
-
-    /// Coordinate of the cell's face the plane looks out of.
-    pub fn face(&self) -> f64 {
-        if self.positive {
-            self.cell.max[self.axis]
-        } else {
-            self.cell.min[self.axis]
-        }
-    }
-
-    /// Pixel size in world units `(pw, ph)`.
-    pub fn pixel_size(&self) -> DVec2 {
-        (self.rect_max - self.rect_min) / DVec2::new(self.width as f64, self.height as f64)
-    }
-
-    /// Pixels in the map: `width · height`.
-    pub fn pixels(&self) -> usize {
-        self.width as usize * self.height as usize
-    }
-
-    /// World `(u, v)` → continuous pixel coordinates (pixel `(i, j)` spans `[i, i+1] × [j, j+1]`).
-    pub fn to_pixel(&self, uv: DVec2) -> DVec2 {
-        (uv - self.rect_min) / self.pixel_size()
-    }
-
-    /// Central projection of `p` from `eye` onto the plane, in world `(u, v)`. Only meaningful
-    /// when `p` lies beyond `eye` along the plane's direction.
-    pub fn project(&self, eye: DVec3, p: DVec3) -> DVec2 {
-        let (u, v) = self.uv_axes();
-        let a = self.axis;
-        let t = (self.position - eye[a]) / (p[a] - eye[a]);
-        DVec2::new(eye[u] + (p[u] - eye[u]) * t, eye[v] + (p[v] - eye[v]) * t)
-    }
-}
-
-/// Convex occluders for one plane: occluder `k` is `points[spans[k].0 .. spans[k].1]`.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct OccluderSet {
-    pub points: Vec<DVec3>,
-    pub spans: Vec<(u32, u32)>,
-}
-
-impl OccluderSet {
-    pub fn push(&mut self, pts: impl IntoIterator<Item = DVec3>) {
-        let start = self.points.len() as u32;
-        self.points.extend(pts);
-        self.spans.push((start, self.points.len() as u32));
-    }
-
-    pub fn len(&self) -> usize {
-        self.spans.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.spans.is_empty()
-    }
-
-    pub fn get(&self, k: usize) -> &[DVec3] {
-        let (a, b) = self.spans[k];
-        &self.points[a as usize..b as usize]
-    }
-}
-
-/// Everything a backend rasterises for one plane.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PlaneJob {
-    pub frame: PlaneFrame,
-    pub occluders: OccluderSet,
-    /// Edges of the closed slice loops, in world `(u, v)` coordinates of the plane.
-    pub slices: Vec<[DVec2; 2]>,
-    /// In an occlusion sweep, the umbra of earlier planes carried onto this one
-    /// ([`crate::sweep`]): a pixel any of them sets is set. Empty elsewhere.
-    pub reproject: Vec<Reprojection>,
-}
-
-/// A plane's Depth Map: per pixel the minimum occluder Depth, `+inf` where nothing covers it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DepthMap {
-    /// Columns (along the plane's `u`).
-    pub width: u32,
-    /// Rows (along `v`).
-    pub height: u32,
-    /// Row-major: pixel `(i, j)` is `depth[j · width + i]`.
-    pub depth: Vec<f32>,
-}
-
-impl DepthMap {
-    /// A square map of `resolution²` uncovered pixels.
-    pub fn new(resolution: u32) -> Self {
-        DepthMap::sized(resolution, resolution)
-    }
-
-    /// A `width × height` map of uncovered pixels.
-    pub fn sized(width: u32, height: u32) -> Self {
-        DepthMap {
-            width,
-            height,
-            depth: vec![f32::INFINITY; width as usize * height as usize],
-        }
-    }
-
-    /// The map of a frame's size.
-    pub fn for_frame(frame: &PlaneFrame) -> Self {
-        DepthMap::sized(frame.width, frame.height)
-    }
-
-    pub fn covered(&self) -> usize {
-        self.depth.iter().filter(|d| d.is_finite()).count()
-    }
-}
+use crate::plane;
 
 /// Backend failures (device lost, out of memory, no adapter…).
 #[derive(Debug, thiserror::Error)]
@@ -240,49 +44,5 @@ pub trait RasterBackend: Send + Sync {
     ///
     /// # Errors
     /// [`BackendError`] when the device fails; never a partial result.
-    fn render(&self, jobs: &[PlaneJob]) -> Result<Vec<DepthMap>, BackendError>;
-}
-
-/// Rounds an `f64` Depth up to the nearest `f32` at or above it (conservative for occluders).
-pub fn depth_up(d: f64) -> f32 {
-    let f = d as f32;
-    if (f as f64) < d { f.next_up() } else { f }
-}
-
-/// Rounds an `f64` Depth down to the nearest `f32` at or below it (conservative for occludees).
-pub fn depth_down(d: f64) -> f32 {
-    let f = d as f32;
-    if (f as f64) > d { f.next_down() } else { f }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn map_size_keeps_the_budget_and_makes_pixels_about_square() {
-        for res in [16u32, 256, 1024] {
-            for stretch in [1u32, 2, 8, 64] {
-                for ratio in [1.0, 1.9, 3.0, 17.0, 40.0, 1000.0, 0.3, 0.01] {
-                    let (w, h) = map_size(res, DVec2::new(ratio * 3.0, 3.0), stretch);
-                    assert_eq!(w as u64 * h as u64, res as u64 * res as u64);
-                    assert!(w.is_power_of_two() && h.is_power_of_two());
-                    let limit = stretch.min(res) as f64;
-                    let k = (w as f64 / res as f64).log2();
-                    assert!(k.abs() <= limit.log2(), "{res} {stretch} {ratio}: {w}×{h}");
-                    // Pixels within 2× of square unless the stretch limit binds.
-                    let aspect = ratio * h as f64 / w as f64;
-                    let binds = k.abs() == limit.log2();
-                    assert!(
-                        binds || (0.5..=2.0).contains(&aspect),
-                        "{res} {stretch} {ratio}: {w}×{h}, pixel aspect {aspect}"
-                    );
-                }
-            }
-        }
-        assert_eq!(map_size(256, DVec2::new(85.0, 6.0), 8), (1024, 64));
-        assert_eq!(map_size(256, DVec2::new(6.0, 400.0), 8), (32, 2048));
-        assert_eq!(map_size(256, DVec2::new(85.0, 6.0), 1), (256, 256));
-        assert_eq!(map_size(256, DVec2::new(0.0, 0.0), 8), (256, 256));
-    }
+    fn render(&self, jobs: &[plane::PlaneJob]) -> Result<Vec<plane::DepthMap>, BackendError>;
 }

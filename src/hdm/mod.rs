@@ -8,7 +8,7 @@
 //! spans at most 2×2 texels and descends only into texels whose maximum is not already below
 //! `d`.
 
-use crate::backend::DepthMap;
+use crate::plane::DepthMap;
 
 /// Max and min pyramids of one Depth Map (width and height powers of two).
 #[derive(Clone, Debug)]

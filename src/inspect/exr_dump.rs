@@ -22,8 +22,8 @@
 //! and its distance from the cell's face); `rectMin`, `rectMax`, `pixelSize` (v2f, world
 //! `(u, v)`).
 
-use crate::backend::{DepthMap, PlaneJob};
 use crate::hdm::Hdm;
+use crate::plane::{DepthMap, PlaneJob};
 use exr::prelude::*;
 use std::io::Cursor;
 

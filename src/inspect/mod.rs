@@ -14,8 +14,8 @@ pub mod exr_dump;
 pub mod preview;
 pub mod report;
 
-use crate::backend::{DepthMap, PlaneJob};
 use crate::hdm::Hdm;
+use crate::plane::{DepthMap, PlaneJob};
 use std::path::{Path, PathBuf};
 
 pub use report::{ReportArgs, run_report};

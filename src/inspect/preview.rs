@@ -16,8 +16,8 @@
 //!
 //! Pixel `(i, j)` of a map is image pixel `x = i, y = j` (the plane's `v` grows downward).
 
-use crate::backend::{DepthMap, PlaneFrame};
 use crate::hdm::Hdm;
+use crate::plane::{DepthMap, PlaneFrame};
 use image::RgbImage;
 
 /// The reversed-viridis stops, from `t = 0` (near, yellow) to `t = 1` (far, dark).

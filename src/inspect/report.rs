@@ -13,9 +13,9 @@
 
 use super::preview;
 use crate::backend::cpu::CpuBackend;
-use crate::backend::{DepthMap, PlaneFrame};
 use crate::bake::{self, BakeSettings, SweepChoice};
 use crate::geom::Aabb;
+use crate::plane::{DepthMap, PlaneFrame};
 use crate::project::planes::{Placement, Spacing, SweepSettings};
 use crate::pvs::PvsDocument;
 use crate::scene::Scene;
@@ -193,7 +193,7 @@ fn rebake_cell(
     let settings = recorded_settings(doc)?;
     let cells = [cell_box(&doc.cells[cell])];
     let out: Mutex<Vec<Result<PlanePreview, String>>> = Mutex::new(Vec::new());
-    let observe = |_ci: usize, k: usize, job: &crate::backend::PlaneJob, map: &DepthMap, _: &_| {
+    let observe = |_ci: usize, k: usize, job: &crate::plane::PlaneJob, map: &DepthMap, _: &_| {
         let d = preview::plane_distance(&job.frame);
         let p = preview::encode_png(&preview::depth_image(map, d)).and_then(|depth_png| {
             Ok(PlanePreview {
@@ -402,6 +402,25 @@ fn page(
         )?;
     }
     h.push_str("</p>\n");
+    if let Some(sum) = doc.summary.as_ref().filter(|s| !s.cullers.is_empty()) {
+        h.push_str(
+            "<h2>Cullers</h2>\n<table class=\"cullers\"><thead><tr><th>culler</th>\
+             <th>objects hidden per cell</th><th>only by it</th><th>ms per cell</th>\
+             <th>planes per cell</th></tr></thead><tbody>\n",
+        );
+        for c in &sum.cullers {
+            writeln!(
+                h,
+                "<tr><td>{}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td><td>{:.1}</td></tr>",
+                esc(&c.name),
+                c.hidden,
+                c.only,
+                c.ms,
+                c.planes
+            )?;
+        }
+        h.push_str("</tbody></table>\n");
+    }
 
     let mut t = String::new();
     t.push_str(

@@ -2,8 +2,8 @@
 //! union of the views of a box from every point of the cell, and the improved Projection for
 //! boxes lying between the cell and the plane.
 
-use crate::backend::PlaneFrame;
 use crate::geom::DAabb;
+use crate::plane::PlaneFrame;
 use glam::DVec2;
 
 /// Where an occludee box lies relative to a plane.
@@ -366,7 +366,7 @@ mod tests {
             max: centre + size,
         };
         let axis = case % 3;
-        let positive = (case / 3) % 2 == 0;
+        let positive = (case / 3).is_multiple_of(2);
         let mut f = frame(0.0);
         f.cell = cell;
         f.axis = axis;

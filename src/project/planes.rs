@@ -17,8 +17,8 @@
 
 use super::occluders::{Occluders, PartKind};
 use super::slice::slice_object;
-use crate::backend::{OccluderSet, PlaneFrame, PlaneJob};
 use crate::geom::DAabb;
+use crate::plane::{OccluderSet, PlaneFrame, PlaneJob};
 use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 
@@ -38,7 +38,7 @@ pub struct PlaneSettings {
     /// A plane's Depth Map has `resolution²` pixels.
     pub resolution: u32,
     /// How much wider than tall (or taller than wide) a Depth Map may be, a power of two: each
-    /// map follows its rectangle's shape ([`crate::backend::map_size`]); 1 keeps every map
+    /// map follows its rectangle's shape ([`crate::plane::map_size`]); 1 keeps every map
     /// square (what [`crate::bake::BakeSettings`] gives separate planes).
     pub max_stretch: u32,
     /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
@@ -248,7 +248,7 @@ impl DirectionPlan {
     /// it, so a ray crossing the plane outside it meets no object beyond the slab's start: the
     /// plane's rectangle can stop there (finer pixels where the scene is flat, as a forest's
     /// canopy is), and a reprojection from this plane may treat what lies outside it as
-    /// occluded ([`crate::sweep::OpenSides`]). `None` when nothing lies beyond the slab's start.
+    /// occluded ([`crate::plane::OpenSides`]). `None` when nothing lies beyond the slab's start.
     pub fn relevant_rect(&self, k: usize, bounds: &DAabb) -> Option<(DVec2, DVec2)> {
         let (a, s) = (self.axis, if self.positive { 1.0 } else { -1.0 });
         let start = self.face + s * self.slab_start(k).max(self.eps);
@@ -617,7 +617,7 @@ pub fn plane_job(
         return None;
     }
     let (width, height) =
-        crate::backend::map_size(settings.resolution, rmax - rmin, settings.max_stretch);
+        crate::plane::map_size(settings.resolution, rmax - rmin, settings.max_stretch);
     let frame = PlaneFrame {
         rect_min: rmin,
         rect_max: rmax,

@@ -24,7 +24,7 @@ use std::path::Path;
 /// The first 8 bytes of every `.pvs` file.
 pub const MAGIC: [u8; 8] = *b"UMBRAPVS";
 /// The binary format version this crate writes and reads.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// Length of the fixed header: magic, version, checksum, payload length.
 pub const HEADER_LEN: usize = 24;
 /// The `parent` value of a key cell (a record holding the full set).
@@ -394,6 +394,14 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
                 m.total_seconds,
             ] {
                 p.extend_from_slice(&v.to_le_bytes());
+            }
+            // From version 4 on: the cullers' accounts.
+            put_u32(&mut p, m.cullers.len() as u32);
+            for c in &m.cullers {
+                put_str(&mut p, &c.name)?;
+                for v in [c.hidden, c.only, c.ms, c.planes] {
+                    p.extend_from_slice(&v.to_le_bytes());
+                }
             }
         }
     }

@@ -664,10 +664,30 @@ impl PvsDatabase {
                 triangles_culled_percent: r.f64("summary.triangles_culled_percent")?,
                 median_ms_per_cell: r.f64("summary.median_ms_per_cell")?,
                 total_seconds: r.f64("summary.total_seconds")?,
+                cullers: Vec::new(),
             })
         } else {
             None
         };
+        let mut summary = summary;
+        if version >= 4
+            && let Some(s) = &mut summary
+        {
+            let count = r.u32("summary.cullers count")?;
+            // Each entry takes at least 36 bytes: refuse counts the payload cannot hold.
+            if (count as usize).saturating_mul(36) > payload.len() - r.pos {
+                return Err(corrupt("the culler list runs past the end of the payload"));
+            }
+            for _ in 0..count {
+                s.cullers.push(crate::pvs::PvsCullerSummary {
+                    name: r.str("summary.cullers name")?,
+                    hidden: r.f64("summary.cullers hidden")?,
+                    only: r.f64("summary.cullers only")?,
+                    ms: r.f64("summary.cullers ms")?,
+                    planes: r.f64("summary.cullers planes")?,
+                });
+            }
+        }
         // Check sizes before allocating from counts.
         let left = payload.len() - r.pos;
         if (objects as usize).saturating_mul(OBJECT_RECORD_LEN + 4) > left {

@@ -68,6 +68,27 @@ pub struct PvsSummary {
     pub triangles_culled_percent: f64,
     pub median_ms_per_cell: f64,
     pub total_seconds: f64,
+    /// The cullers every cell ran, in order, with their mean account per cell (absent in
+    /// documents written before the culler pipeline).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cullers: Vec<PvsCullerSummary>,
+}
+
+/// One culler's account in a PVS document's summary: means per cell.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PvsCullerSummary {
+    /// The culler (`"extended_projections"`, `"occlusion_sweep"`, …).
+    pub name: String,
+    /// Objects culled from a cell that this culler proved hidden, mean per cell.
+    pub hidden: f64,
+    /// Of those, the objects no other culler proved hidden (a culler does not test what an
+    /// earlier one hid), mean per cell.
+    pub only: f64,
+    /// Milliseconds it ran, mean per cell.
+    pub ms: f64,
+    /// Planes it rasterised, mean per cell.
+    #[serde(default)]
+    pub planes: f64,
 }
 
 /// The bake settings recorded in a PVS document.

@@ -1,6 +1,6 @@
 //! The wgpu backend: occluder extended Projections rasterised on the GPU, with exactly the
-//! contract of [`crate::backend`] and at least the conservativeness of the CPU reference
-//! ([`cpu`]).
+//! contract of [`crate::plane`] and at least the conservativeness of the CPU reference
+//! ([`cpu`](super::cpu)).
 //!
 //! # Design: one draw per plane, coverage tested per pixel in the fragment shader
 //!
@@ -15,8 +15,9 @@
 //!
 //! Instead every occluder is a few triangles of *one* draw per plane, and the fragment shader
 //! decides coverage with edge functions. Per occluder the CPU computes (f64, rayon, before the
-//! GPU section) the Projection polygon exactly as the CPU backend does — project the points
-//! from the 8 cell corners, 8 small hulls, intersect them by clipping, the same quick rejects —
+//! GPU section) the Projection polygon with the CPU backend's own code (the shared
+//! [`coverage`] kernel) — project the points from the 8 cell corners, 8 small hulls, intersect
+//! them by clipping, the same quick rejects —
 //! and turns each polygon edge, shrunk by the pixel's half-extent along its normal
 //! (`½(|nₓ|+|n_y|)`), into an `f32` half-plane with its offset rounded up after adding the
 //! CPU's margin and a proven bound on the shader's `f32` error ([`setup`]). The geometry drawn
@@ -39,7 +40,7 @@
 //! (feature [`wgpu::Features::FLOAT32_BLENDABLE`]): every float Depth, negative or huge, is
 //! kept exactly, the minimum over occluders, and `+inf` stays where nothing covers.
 //!
-//! Slices are filled on the CPU with [`cpu::fill_slices`] as a
+//! Slices are filled on the CPU with [`coverage::fill_slices`] as a
 //! mask during the setup and merged on read-back (a per-row crossing scan: ~75 µs per plane
 //! at 256², cheaper than uploading the segments and running a stencil fill and an erosion pass,
 //! and bit-identical to the CPU reference).
@@ -104,8 +105,8 @@
 
 pub mod setup;
 
-use super::{BackendError, DepthMap, PlaneJob, RasterBackend, Reprojection, cpu};
-use crate::sweep::Window;
+use super::{BackendError, RasterBackend, coverage};
+use crate::plane::{DepthMap, PlaneJob, Reprojection, Window};
 use rayon::prelude::*;
 use setup::{Output, PlaneSetup, Scratch, Vertex};
 use std::collections::HashMap;
@@ -1252,11 +1253,11 @@ fn slice_mask(job: &PlaneJob) -> Option<DepthMap> {
         return None;
     }
     let mut mask = DepthMap::for_frame(&job.frame);
-    cpu::fill_slices(&mut mask, &job.frame, &job.slices);
+    coverage::fill_slices(&mut mask, &job.frame, &job.slices);
     Some(mask)
 }
 
-/// Per pixel minimum: what [`cpu::fill_slices`] does to a map (`0` where inside and `d > 0`).
+/// Per pixel minimum: what [`coverage::fill_slices`] does to a map (`0` where inside and `d > 0`).
 fn merge_mask(map: &mut DepthMap, mask: &DepthMap) {
     for (d, m) in map.depth.iter_mut().zip(&mask.depth) {
         if *m < *d {

@@ -1,11 +1,11 @@
 //! Per-occluder CPU setup for the GPU backend. The occluder's Projection polygon is computed
-//! exactly as the CPU backend does ([`cpu::projection_polygon`]: project the points from the 8
-//! cell corners in f64, 8 small hulls, intersected by clipping — the same quick rejects and the
-//! same polygon), then each polygon edge, eroded by the pixel's half-extent along its normal,
-//! becomes an `f32` half-plane `n·(p − o) ≥ c` relative to a per-occluder pixel origin `o`,
-//! with `c` rounded *up* after adding a bound on every `f32` error the fragment shader can make.
-//! The geometry drawn is the polygon clipped to the plane. The GPU then does the per-pixel work
-//! (`shaders/projection.wgsl`).
+//! by the kernel the CPU backend uses ([`coverage::projection_polygon`]: project the points from
+//! the 8 cell corners in f64, 8 small hulls, intersected by clipping — the same quick rejects
+//! and the same polygon), then each polygon edge, eroded by the pixel's half-extent along its
+//! normal, becomes an `f32` half-plane `n·(p − o) ≥ c` relative to a per-occluder pixel origin
+//! `o`, with `c` rounded *up* after adding a bound on every `f32` error the fragment shader can
+//! make. The geometry drawn is the polygon clipped to the plane. The GPU then does the
+//! per-pixel work (`shaders/projection.wgsl`).
 //!
 //! # Error bound
 //!
@@ -19,16 +19,16 @@
 //!
 //! So `3u·D` covers correctly rounded arithmetic (Vulkan, Metal and D3D12 require it for
 //! `+` and `×`); we add `2⁻²¹·(D + 1)` (`8u` per pixel of `D`), leaving room for a GPU a few
-//! ulps off, plus a bound on the f64 error of the edge's offset, and use the CPU backend's
+//! ulps off, plus a bound on the f64 error of the edge's offset, and use the shared kernel's
 //! [`MARGIN`] (`10⁻⁴` px) as is. A pixel the shader accepts therefore passes the CPU's exact
 //! eroded test with its margin: the GPU never covers a pixel the CPU rule would not. At 256²
 //! the extra shrink is at most ~1.2·10⁻⁴ px; at 2048², 10⁻³ px.
 //!
-//! [`cpu::projection_polygon`]: crate::backend::cpu::projection_polygon
-//! [`MARGIN`]: crate::backend::cpu::MARGIN
+//! [`coverage::projection_polygon`]: crate::backend::coverage::projection_polygon
+//! [`MARGIN`]: crate::backend::coverage::MARGIN
 
-use crate::backend::cpu::{self, MARGIN};
-use crate::backend::{PlaneFrame, depth_up};
+use crate::backend::coverage::{self, MARGIN};
+use crate::plane::{PlaneFrame, depth_up};
 use glam::{DVec2, DVec3};
 
 /// One vertex of an occluder's geometry: its position in pixel coordinates and the index of
@@ -94,7 +94,7 @@ impl PlaneSetup {
 /// Reusable buffers of [`occluder`].
 #[derive(Default)]
 pub struct Scratch {
-    cpu: cpu::Scratch,
+    polygon: coverage::Scratch,
     geometry: Vec<DVec2>,
     tmp: Vec<DVec2>,
 }
@@ -110,10 +110,10 @@ pub fn occluder(
     scratch: &mut Scratch,
     out: &mut Output,
 ) -> bool {
-    if !cpu::projection_polygon(&ps.frame, &ps.corners, pts, &mut scratch.cpu) {
+    if !coverage::projection_polygon(&ps.frame, &ps.corners, pts, &mut scratch.polygon) {
         return false;
     }
-    let poly = &scratch.cpu.poly;
+    let poly = &scratch.polygon.poly;
     let (w, h) = (ps.frame.width as f64, ps.frame.height as f64);
     // Geometry: the polygon clipped to the plane (keeps vertex coordinates small, so neither
     // the rasteriser's clipping nor f32 vertices lose precision).
@@ -126,7 +126,7 @@ pub fn occluder(
         (DVec2::new(w, h), DVec2::new(0.0, h)),
         (DVec2::new(0.0, h), DVec2::new(0.0, 0.0)),
     ] {
-        crate::backend::cpu::clip_half_plane(g, p0, p1, &mut scratch.tmp);
+        coverage::clip_half_plane(g, p0, p1, &mut scratch.tmp);
         std::mem::swap(g, &mut scratch.tmp);
         if g.len() < 3 {
             return false;
@@ -249,8 +249,9 @@ pub fn emulate(res: u32, out: &Output) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::{OccluderSet, PlaneJob};
+    use crate::backend::cpu;
     use crate::geom::DAabb;
+    use crate::plane::{OccluderSet, PlaneJob};
 
     fn frame(res: u32, axis: usize, positive: bool) -> PlaneFrame {
         let s = if positive { 1.0 } else { -1.0 };
@@ -345,7 +346,7 @@ mod tests {
                 for (k, d) in one.iter().enumerate() {
                     if d.is_finite() {
                         let (i, j) = (k as u32 % res, k as u32 / res);
-                        let sl = crate::backend::cpu::contract_slack(&f, pts, i, j);
+                        let sl = coverage::contract_slack(&f, pts, i, j);
                         assert!(sl >= MARGIN * 0.99, "({i}, {j}) at {res}²: slack {sl}");
                     }
                 }
@@ -358,7 +359,7 @@ mod tests {
                     let near = (0..job.occluders.len()).any(|o| {
                         let pts = job.occluders.get(o);
                         depth_up(depth_of(pts)) == *c
-                            && crate::backend::cpu::contract_slack(&f, pts, i, j) < 1e-3
+                            && coverage::contract_slack(&f, pts, i, j) < 1e-3
                     });
                     assert!(near, "CPU-only pixel ({i}, {j}) is not a near-tie");
                 }

@@ -1,0 +1,411 @@
+//! Baking: the settings ([`BakeSettings`]), the bake of every cell ([`bake`]) and its PVS
+//! document ([`to_document`]). A scene is prepared once ([`Prepared`], `prepare.rs`); every
+//! cell — or every sub-cell of it with `subcell` — then runs the pipeline of cullers
+//! (`pipeline.rs`, [`Culler`]): today extended projections on separate planes or the occlusion
+//! sweep (`planes.rs`). Cells run in parallel (rayon).
+
+mod pipeline;
+mod planes;
+mod prepare;
+
+pub use pipeline::{CullState, Culler, CullerStats, CullerWork, cullers};
+pub use planes::{PlaneCuller, SWEEP_TEST_REACH};
+pub use prepare::{
+    PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared, SMALL_OCCLUDER_CELLS, SMALL_OCCLUDER_SHARE,
+    choose_sweep, split_cell,
+};
+
+use crate::backend::{BackendError, RasterBackend};
+use crate::geom::Aabb;
+use crate::hdm::Hdm;
+use crate::plane::{DepthMap, PlaneJob};
+use crate::project::planes::{Placement, PlaneSettings, Spacing, SweepSettings};
+use crate::pvs::{
+    FORMAT, PvsCell, PvsCullerSummary, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION,
+};
+use crate::scene::Scene;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Everything that shapes a bake.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeSettings {
+    /// Depth Map resolution per side (a power of two): each plane's map has `resolution²`
+    /// pixels. Default 256.
+    pub resolution: u32,
+    /// How much wider than tall, or taller than wide, an occlusion sweep plane's Depth Map may
+    /// be (a power of two): each map follows its rectangle's shape, keeping `resolution²`
+    /// pixels ([`crate::plane::map_size`]); 1 keeps every map square. Separate planes (no
+    /// sweep) stay square: on Munich's street cells stretched maps culled 86.7 % against
+    /// 90.0 %. Default 2: on the coarse forest 2, 4 and 8 cull the same (86.7 % against
+    /// 84.5 % for square maps), and more stretch lets more small Projections cover a whole
+    /// pixel, which costs time where they fuse into nothing (the fine forest: 0.99 s per cell
+    /// at 2, 1.28 s at 8, 0.81 s square).
+    pub max_stretch: u32,
+    /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
+    /// Default 1.5 (the paper's).
+    pub extend: f64,
+    /// Projection planes per direction just behind occluders (all used). Default 4.
+    pub planes: u32,
+    /// Further planes per direction through the middle of the heaviest closed occluders,
+    /// receiving their slices. Default 1.
+    pub slice_planes: u32,
+    /// Where the planes of a direction go. Default geometric spacing.
+    pub placement: Placement,
+    /// Treat non-opaque (alpha-tested, blended) triangles as occluders. May cull visible
+    /// objects. Default false.
+    pub alpha_occluders: bool,
+    /// Only objects whose name matches this glob are occluders (all stay occludees).
+    pub occluders: Option<String>,
+    /// Use the improved occludee Projection of §4 for boxes in front of a plane. Default true.
+    pub improved_projection: bool,
+    /// Occlusion sweep (§5) instead of separate planes: on, off, or chosen per scene
+    /// ([`SweepChoice::Auto`], the default; see [`choose_sweep`]).
+    pub sweep: SweepChoice,
+    /// The sweep's planes per direction (at most), kernel size and spacing.
+    pub sweep_settings: SweepSettings,
+    /// Bake each cell as the union of the PVS of sub-cells no larger than this along any axis
+    /// (exact, and conservative: a point of the cell lies in one of its sub-cells). Default none.
+    pub subcell: Option<f64>,
+}
+
+/// Whether a bake sweeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SweepChoice {
+    /// The sweep for scenes dominated by small occluders ([`choose_sweep`]).
+    #[default]
+    Auto,
+    On,
+    Off,
+}
+
+impl BakeSettings {
+    /// The defaults, as a `const fn` for presets.
+    pub const fn default_settings() -> Self {
+        BakeSettings {
+            resolution: 256,
+            max_stretch: 2,
+            extend: 1.5,
+            planes: 4,
+            slice_planes: 1,
+            placement: Placement::Geometric,
+            alpha_occluders: false,
+            occluders: None,
+            improved_projection: true,
+            sweep: SweepChoice::Auto,
+            sweep_settings: SweepSettings::default_settings(),
+            subcell: None,
+        }
+    }
+
+    /// Checks the values.
+    ///
+    /// # Errors
+    /// A message naming the option at fault.
+    pub fn check(&self) -> Result<(), String> {
+        if !self.resolution.is_power_of_two() || !(4..=8192).contains(&self.resolution) {
+            return Err(format!(
+                "--resolution {}: must be a power of two between 4 and 8192 (e.g. 256)",
+                self.resolution
+            ));
+        }
+        if !self.max_stretch.is_power_of_two() || self.max_stretch > 64 {
+            return Err(format!(
+                "--max-stretch {}: must be a power of two between 1 (square maps) and 64",
+                self.max_stretch
+            ));
+        }
+        if !(self.extend.is_finite() && self.extend >= 1.0) {
+            return Err(format!(
+                "--extend {}: must be a number ≥ 1 (e.g. 1.5)",
+                self.extend
+            ));
+        }
+        if self.planes == 0 || self.planes > 64 {
+            return Err(format!(
+                "--planes {}: must be between 1 and 64",
+                self.planes
+            ));
+        }
+        let sw = &self.sweep_settings;
+        if sw.planes == 0 || sw.planes > 256 {
+            return Err(format!(
+                "--sweep-planes {}: must be between 1 and 256",
+                sw.planes
+            ));
+        }
+        if !(2..=64).contains(&sw.kernel) {
+            return Err(format!(
+                "--kernel {}: must be between 2 and 64 pixels (the paper uses 5)",
+                sw.kernel
+            ));
+        }
+        if let Some(s) = self.subcell
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(format!(
+                "--subcell {s}: must be a positive size in scene units (e.g. 1)"
+            ));
+        }
+        if self.slice_planes > 16 {
+            return Err(format!(
+                "--slice-planes {}: must be between 0 and 16",
+                self.slice_planes
+            ));
+        }
+        Ok(())
+    }
+
+    fn plane_settings(&self, sweep: bool) -> PlaneSettings {
+        PlaneSettings {
+            resolution: self.resolution,
+            // Separate planes keep square maps: on cities stretched ones lost culling
+            // (Munich's 50 street cells: 90.0 % culled square, 86.7 % stretched up to 2×).
+            max_stretch: if sweep { self.max_stretch } else { 1 },
+            extend: self.extend,
+            planes: self.planes,
+            slice_planes: self.slice_planes,
+            placement: self.placement,
+            sweep: sweep.then_some(self.sweep_settings),
+        }
+    }
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        Self::default_settings()
+    }
+}
+
+/// Bake failures.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error("{0}")]
+    Settings(String),
+    #[error(transparent)]
+    Backend(#[from] BackendError),
+}
+
+/// One cell's outcome.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellResult {
+    /// Potentially visible object ids, ascending.
+    pub visible: Vec<u32>,
+    pub ms: f64,
+    /// Planes rasterised and occluder Projections sent to the backend.
+    pub planes: usize,
+    pub occluders_projected: usize,
+    /// Per culler of the pipeline ([`BakeResult::cullers`]), its account for this cell.
+    pub cullers: Vec<CullerStats>,
+}
+
+/// A whole bake's outcome.
+#[derive(Clone, Debug)]
+pub struct BakeResult {
+    pub cells: Vec<CellResult>,
+    pub backend: String,
+    pub adapter: Option<String>,
+    pub occluder_triangles: usize,
+    pub degenerate_triangles: usize,
+    pub seconds: f64,
+    /// Whether the bake swept, and why (for the summary).
+    pub sweep: bool,
+    pub sweep_reason: String,
+    /// The names of the cullers every cell ran, in order.
+    pub cullers: Vec<&'static str>,
+}
+
+/// Bakes every cell. `progress` is called after each cell with the number done.
+///
+/// # Errors
+/// Invalid settings, or the backend's failure (no partial result).
+pub fn bake(
+    scene: &Scene,
+    cells: &[Aabb],
+    settings: &BakeSettings,
+    backend: &dyn RasterBackend,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+) -> Result<BakeResult, BakeError> {
+    bake_observed(scene, cells, settings, backend, progress, None)
+}
+
+/// Observer of every rendered plane: `(cell index, plane index within the cell, job, Depth
+/// Map, Hierarchical Depth Map)`.
+pub type PlaneObserver<'a> = &'a (dyn Fn(usize, usize, &PlaneJob, &DepthMap, &Hdm) + Sync);
+
+/// [`bake`], handing every rendered plane to `observe` (for dumps and reports).
+///
+/// # Errors
+/// Invalid settings, or the backend's failure (no partial result).
+pub fn bake_observed(
+    scene: &Scene,
+    cells: &[Aabb],
+    settings: &BakeSettings,
+    backend: &dyn RasterBackend,
+    progress: Option<&(dyn Fn(usize) + Sync)>,
+    observe: Option<PlaneObserver>,
+) -> Result<BakeResult, BakeError> {
+    let start = Instant::now();
+    let prepared = Prepared::new(scene, settings, cells)?;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let cells_out: Result<Vec<CellResult>, BakeError> = cells
+        .par_iter()
+        .enumerate()
+        .map(|(ci, c)| {
+            let r = match observe {
+                None => prepared.cell(c, backend),
+                Some(f) => {
+                    let mut k = 0;
+                    prepared.cell_observed(c, backend, &mut |job, map, hdm| {
+                        f(ci, k, job, map, hdm);
+                        k += 1;
+                    })
+                }
+            };
+            let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if let Some(p) = progress {
+                p(k);
+            }
+            r
+        })
+        .collect();
+    Ok(BakeResult {
+        cells: cells_out?,
+        backend: backend.name().to_string(),
+        adapter: backend.adapter(),
+        occluder_triangles: prepared.occluders.stats.triangles,
+        degenerate_triangles: scene.degenerate_triangles(),
+        seconds: start.elapsed().as_secs_f64(),
+        sweep: prepared.sweep,
+        sweep_reason: prepared.sweep_reason.clone(),
+        cullers: prepared.culler_names(),
+    })
+}
+
+/// Median of a list (0 for none).
+pub fn median(values: &[f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// The PVS documents' object table: every object of the scene by id, with its name, triangle
+/// count and bounds.
+pub fn object_table(scene: &Scene) -> Vec<PvsObject> {
+    scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, o)| PvsObject {
+            id: i as u32,
+            name: o.name.clone(),
+            triangles: o.triangles.len() as u32,
+            min: o.bounds.min.to_array(),
+            max: o.bounds.max.to_array(),
+        })
+        .collect()
+}
+
+/// Builds the JSON PVS document of a bake, with its summary.
+pub fn to_document(
+    scene: &Scene,
+    cells: &[Aabb],
+    result: &BakeResult,
+    settings: &BakeSettings,
+) -> PvsDocument {
+    let tri_count = |o: u32| scene.objects[o as usize].triangles.len();
+    let total_tris = scene.triangles.len().max(1);
+    let n_obj = scene.objects.len().max(1);
+    let mut obj_pct = 0.0;
+    let mut tri_pct = 0.0;
+    for c in &result.cells {
+        obj_pct += 100.0 * (1.0 - c.visible.len() as f64 / n_obj as f64);
+        let vis_tris: usize = c.visible.iter().map(|&o| tri_count(o)).sum();
+        tri_pct += 100.0 * (1.0 - vis_tris as f64 / total_tris as f64);
+    }
+    let nc = result.cells.len().max(1) as f64;
+    let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
+    PvsDocument {
+        format: FORMAT.into(),
+        version: VERSION,
+        scene: scene.source.display().to_string(),
+        settings: PvsSettings {
+            backend: result.backend.clone(),
+            resolution: settings.resolution,
+            max_stretch: settings.max_stretch,
+            extend: settings.extend,
+            planes: settings.planes,
+            slice_planes: settings.slice_planes,
+            placement: format!("{:?}", settings.placement).to_lowercase(),
+            alpha_occluders: settings.alpha_occluders,
+            occluders: settings.occluders.clone(),
+            improved_projection: settings.improved_projection,
+            sweep: result.sweep,
+            sweep_planes: settings.sweep_settings.planes,
+            kernel: settings.sweep_settings.kernel,
+            sweep_spacing: match settings.sweep_settings.spacing {
+                Spacing::Geometric => "geometric".into(),
+                Spacing::Kernel => "kernel".into(),
+            },
+            subcell: settings.subcell,
+        },
+        objects: object_table(scene),
+        cells: cells
+            .iter()
+            .zip(&result.cells)
+            .map(|(b, c)| PvsCell {
+                min: b.min.to_array(),
+                max: b.max.to_array(),
+                visible: c.visible.clone(),
+                ms: c.ms,
+            })
+            .collect(),
+        summary: Some(PvsSummary {
+            cells: cells.len(),
+            objects: scene.objects.len(),
+            triangles: scene.triangles.len(),
+            occluder_triangles: result.occluder_triangles,
+            degenerate_triangles: result.degenerate_triangles,
+            backend: result.backend.clone(),
+            adapter: result.adapter.clone(),
+            objects_culled_percent: obj_pct / nc,
+            triangles_culled_percent: tri_pct / nc,
+            median_ms_per_cell: median(&ms),
+            total_seconds: result.seconds,
+            cullers: culler_summary(result),
+        }),
+    }
+}
+
+/// The cullers' mean accounts per cell, for the PVS document's summary.
+pub fn culler_summary(result: &BakeResult) -> Vec<PvsCullerSummary> {
+    let nc = result.cells.len().max(1) as f64;
+    (result.cullers.iter().enumerate())
+        .map(|(k, name)| {
+            let sum = |f: &dyn Fn(&CullerStats) -> f64| -> f64 {
+                result
+                    .cells
+                    .iter()
+                    .filter_map(|c| c.cullers.get(k))
+                    .map(f)
+                    .sum::<f64>()
+                    / nc
+            };
+            PvsCullerSummary {
+                name: (*name).to_string(),
+                hidden: sum(&|s| s.hidden as f64),
+                only: sum(&|s| s.only as f64),
+                ms: sum(&|s| s.ms),
+                planes: sum(&|s| s.work.planes as f64),
+            }
+        })
+        .collect()
+}

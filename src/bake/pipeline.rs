@@ -1,0 +1,158 @@
+//! The per-cell pipeline of cullers. A cell's culling runs an ordered list of [`Culler`]s
+//! ([`cullers`] builds it from the settings): each gets the objects still potentially visible
+//! (those not yet in [`CullState::hidden`]) and the occluders still useful (hidden objects
+//! occlude nothing a later culler needs: leaving an occluder out is always conservative), and
+//! marks what it proves hidden. Later cullers skip what earlier ones hid. The bake records per
+//! culler and cell what it hid, what only it hid and its time ([`CullerStats`]).
+//!
+//! # Adding a culler
+//! Write a module in `src/bake/` with a type implementing [`Culler`] (its module docs say why
+//! it is conservative), give it a switch in [`BakeSettings`] and push it in [`cullers`] at its
+//! place in the order. The bake loop, the accounting, the PVS document, the `.pvs` file and the
+//! report need no change.
+
+use super::prepare::Prepared;
+use super::{BakeError, BakeSettings};
+use crate::backend::RasterBackend;
+use crate::geom::Aabb;
+use crate::hdm::Hdm;
+use crate::plane::{DepthMap, PlaneJob};
+
+/// The state one (sub-)cell's cullers share.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CullState<'k> {
+    /// Per object: proven hidden from the (sub-)cell by a culler that ran before.
+    pub hidden: Vec<bool>,
+    /// Objects already known visible from another part of the cell (with sub-cells): their
+    /// result does not matter, so they need not be tested, but they still occlude.
+    pub known_visible: Option<&'k [bool]>,
+}
+
+/// What one culler did in one (sub-)cell, besides hiding objects.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CullerWork {
+    /// Planes rasterised.
+    pub planes: usize,
+    /// Occluder Projections sent to the backend.
+    pub occluders_projected: usize,
+}
+
+/// One culler's account for one cell.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CullerStats {
+    /// Objects culled from the cell that this culler proved hidden (in some sub-cell).
+    pub hidden: u32,
+    /// Of those, the objects no other culler of the pipeline proved hidden. A culler does not
+    /// test what an earlier one hid, so this counts what the others were not asked about too.
+    pub only: u32,
+    /// Milliseconds this culler ran in the cell (all its sub-cells).
+    pub ms: f64,
+    /// Planes rasterised and occluder Projections sent.
+    pub work: CullerWork,
+}
+
+/// One culler of the pipeline: proves objects hidden from a (sub-)cell.
+///
+/// Implementations must be conservative: an object marked hidden must be invisible from every
+/// point of `cell`. They may rely on what earlier cullers marked hidden (it is), and must not
+/// unmark anything.
+pub trait Culler: Send + Sync {
+    /// The name the accounting records (`summary.cullers[].name` in the PVS document).
+    fn name(&self) -> &'static str;
+
+    /// Culls from `cell`: marks in `state.hidden` what it proves hidden, hands every plane it
+    /// renders to `observe` (dumps and reports; cullers without planes ignore it).
+    ///
+    /// # Errors
+    /// The backend's failure.
+    fn cull(
+        &self,
+        prepared: &Prepared,
+        cell: &Aabb,
+        backend: &dyn RasterBackend,
+        state: &mut CullState,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    ) -> Result<CullerWork, BakeError>;
+}
+
+/// The cullers of a bake, in order: the occlusion sweep where `sweep` (what
+/// [`super::SweepChoice`] and the automatic rule chose), else extended projections on separate
+/// planes.
+pub fn cullers(_settings: &BakeSettings, sweep: bool) -> Vec<Box<dyn Culler>> {
+    vec![Box::new(super::planes::PlaneCuller { sweep })]
+}
+
+/// A cell's accounting while its sub-cells run: per culler its stats, per object the set of
+/// cullers that hid it (bit `k` for culler `k`) in some sub-cell.
+pub(super) struct CellAccount {
+    stats: Vec<CullerStats>,
+    hid_by: Vec<u64>,
+}
+
+impl CellAccount {
+    /// An empty account for `cullers` cullers (at most 64) and `objects` objects.
+    pub(super) fn new(cullers: usize, objects: usize) -> Self {
+        assert!(cullers <= 64, "at most 64 cullers");
+        CellAccount {
+            stats: vec![CullerStats::default(); cullers],
+            hid_by: vec![0; objects],
+        }
+    }
+
+    /// The stats, with `hidden` and `only` counted over the objects culled from the cell
+    /// (`visible[o]` false).
+    pub(super) fn finish(mut self, visible: &[bool]) -> Vec<CullerStats> {
+        for (&bits, _) in self
+            .hid_by
+            .iter()
+            .zip(visible)
+            .filter(|(b, v)| **b != 0 && !**v)
+        {
+            for (k, s) in self.stats.iter_mut().enumerate() {
+                if bits & (1 << k) != 0 {
+                    s.hidden += 1;
+                    if bits == 1 << k {
+                        s.only += 1;
+                    }
+                }
+            }
+        }
+        self.stats
+    }
+}
+
+/// Runs `cullers` over one (sub-)cell, adding to `account`. Returns the objects hidden.
+///
+/// # Errors
+/// A culler's failure.
+pub(super) fn run(
+    cullers: &[Box<dyn Culler>],
+    prepared: &Prepared,
+    cell: &Aabb,
+    backend: &dyn RasterBackend,
+    known_visible: Option<&[bool]>,
+    observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    account: &mut CellAccount,
+) -> Result<Vec<bool>, BakeError> {
+    let n = prepared.scene.objects.len();
+    let mut state = CullState {
+        hidden: vec![false; n],
+        known_visible,
+    };
+    for (k, culler) in cullers.iter().enumerate() {
+        let before = state.hidden.clone();
+        let start = std::time::Instant::now();
+        let work = culler.cull(prepared, cell, backend, &mut state, observe)?;
+        let s = &mut account.stats[k];
+        s.ms += start.elapsed().as_secs_f64() * 1e3;
+        s.work.planes += work.planes;
+        s.work.occluders_projected += work.occluders_projected;
+        for (o, (&now, &was)) in state.hidden.iter().zip(&before).enumerate() {
+            debug_assert!(now || !was, "{} unmarked object {o}", culler.name());
+            if now && !was {
+                account.hid_by[o] |= 1 << k;
+            }
+        }
+    }
+    Ok(state.hidden)
+}

@@ -1,0 +1,523 @@
+//! The extended-projection cullers (Durand et al. 2000): for every direction of a cell,
+//! projection planes receive the extended Projections of the occluders beyond the cell's face
+//! (separate planes, §2–4), or a sweep of parallel planes each carrying the umbra of the ones
+//! in front (the occlusion sweep, §5, [`crate::sweep`]); the backend rasterises them, a
+//! Hierarchical Depth Map is built per plane and the object BVH is walked against it, stopping
+//! at hidden and at fully visible nodes.
+//!
+//! # Why it is conservative
+//! A pixel of a Depth Map is set only where every ray from the cell through the whole pixel
+//! square is blocked (one convex occluder's Projection covers it, or a reprojection proved it;
+//! see [`crate::backend`] and [`crate::sweep`]), with the occluder's farthest Depth rounded up.
+//! An occludee box is hidden when every pixel under a rectangle holding all its views (the
+//! standard Projection, exact extremes) or satisfying Property 2 (the improved Projections,
+//! [`crate::project::occludee::improved_rects`]) holds a Depth strictly below the box's nearest
+//! Depth rounded down. Objects touching the cell are always visible.
+
+use super::BakeError;
+use super::pipeline::{CullState, Culler, CullerWork};
+use super::prepare::Prepared;
+use crate::backend::RasterBackend;
+use crate::geom::{Aabb, DAabb};
+use crate::hdm::{Coverage, Hdm};
+use crate::plane::{DepthMap, OpenSides, PlaneFrame, PlaneJob, Reprojection, depth_down};
+use crate::project::occludee::{improved_rects, pixel_rect, span, standard_rect};
+use crate::project::planes::{LeaveOut, SweepInputs, plan_directions, plane_job};
+use obvhs::bvh2::Bvh2;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Extended projections on a cell's planes: separate planes, or the occlusion sweep.
+pub struct PlaneCuller {
+    /// Sweep each direction (§5) instead of separate planes.
+    pub sweep: bool,
+}
+
+impl Culler for PlaneCuller {
+    fn name(&self) -> &'static str {
+        if self.sweep {
+            "occlusion_sweep"
+        } else {
+            "extended_projections"
+        }
+    }
+
+    fn cull(
+        &self,
+        prepared: &Prepared,
+        cell: &Aabb,
+        backend: &dyn RasterBackend,
+        state: &mut CullState,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    ) -> Result<CullerWork, BakeError> {
+        prepared.cull_planes(cell, backend, state, observe, self.sweep)
+    }
+}
+
+/// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
+/// `SWEEP_TEST_REACH · t` (the last plane tests all). Measured on 5 path cells: reach 4, 8,
+/// 16 and unbounded culled 67.0, 71.1, 72.0 and 72.1 % of the paper-size forest, with 16 as
+/// fast as 8 and unbounded a fifth slower; the coarse forest gained 0.4 points from 8 to 16.
+pub const SWEEP_TEST_REACH: f64 = 16.0;
+
+impl Prepared<'_> {
+    /// Extended projections on the planes of every direction of one (sub-)cell, separate
+    /// planes or (`sweep`) an occlusion sweep: marks in `state.hidden` what they prove hidden
+    /// and returns the planes rendered and the occluder Projections sent. Objects already
+    /// hidden are not tested and do not occlude; objects in `state.known_visible` are not
+    /// tested (their result does not matter to the caller) but still occlude.
+    pub(super) fn cull_planes(
+        &self,
+        cell: &Aabb,
+        backend: &dyn RasterBackend,
+        state: &mut CullState,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        sweep: bool,
+    ) -> Result<CullerWork, BakeError> {
+        let known_visible = state.known_visible;
+        let mut hidden = std::mem::take(&mut state.hidden);
+        let mut node_done = vec![false; self.bvh.as_ref().map_or(0, |b| b.nodes.len())];
+        if let Some(bvh) = &self.bvh
+            && (known_visible.is_some() || hidden.contains(&true))
+        {
+            // Nodes whose objects are all hidden (by earlier cullers) or known visible.
+            let done: Vec<bool> = match known_visible {
+                Some(k) => hidden.iter().zip(k).map(|(&h, &v)| h || v).collect(),
+                None => hidden.clone(),
+            };
+            mark_done(bvh, &done, &mut node_done);
+        }
+        let skip_test =
+            |o: usize, hidden: &[bool]| hidden[o] || known_visible.is_some_and(|k| k[o]);
+        let cell64 = cell.to_f64();
+        let ps = self.settings.plane_settings(sweep);
+        let plans = plan_directions(&cell64, &self.occluders, &self.sliceable, &ps);
+        let rounds = plans.iter().map(|p| p.distances.len()).max().unwrap_or(0);
+        let (mut planes, mut projected) = (0, 0);
+        // In a sweep, the last plane rendered per direction (its umbra is carried onward), and
+        // whether the direction is finished (its umbra covers the whole plane: what lies behind
+        // within its frame is hidden on that plane already).
+        let mut finished = vec![false; plans.len()];
+        let mut hist: Vec<Vec<Rendered>> = vec![Vec::new(); plans.len()];
+        let mut prev_hdm: Vec<Option<(PlaneFrame, Hdm)>> = vec![None; plans.len()];
+        let mut piece_hidden = vec![false; self.piece_boxes.len()];
+        // Round k renders the k-th plane of every direction (nearest first); occluders of
+        // objects hidden by earlier rounds are left out of later ones.
+        for k in 0..rounds {
+            let jobs: Vec<(usize, (PlaneJob, Rect))> = plans
+                .par_iter()
+                .enumerate()
+                .filter(|(d, p)| k < p.distances.len() && !finished[*d])
+                .filter_map(|(d, p)| {
+                    // The rectangle holds what the previous plane's umbra may carry (older
+                    // planes' umbra reaching further out is left out: it would cost
+                    // resolution everywhere for a few pixels at the edge).
+                    let relevant = p.relevant_rect(k, &self.bounds)?;
+                    let carried = hist[d]
+                        .last()
+                        .and_then(|e| crate::sweep::carried_rect(&e.1, e.3?, e.4, p.distance(k)));
+                    let leave_out = LeaveOut {
+                        object: &|o| hidden[o as usize],
+                        // Occluders the previous plane already proves hidden add nothing.
+                        hidden: &|b| {
+                            prev_hdm[d].as_ref().is_some_and(|(f, h)| {
+                                self.test_box(f, h, b, &cell64, (0.0, f64::INFINITY))
+                                    == Coverage::Hidden
+                            })
+                        },
+                    };
+                    let slab = p
+                        .is_sweep()
+                        .then(|| self.gather_slab(p, k, &leave_out, &hidden, &node_done));
+                    let mut job = plane_job(
+                        p,
+                        k,
+                        self.scene,
+                        &self.sliceable,
+                        &ps,
+                        &leave_out,
+                        SweepInputs {
+                            carried,
+                            relevant: Some(relevant),
+                            slab: slab.as_ref(),
+                        },
+                    )?;
+                    if p.is_sweep() && carried.is_some() {
+                        job.reproject = reprojections(&hist[d], &job.frame, p.distance(k));
+                    }
+                    if p.is_sweep()
+                        && job.occluders.is_empty()
+                        && job.slices.is_empty()
+                        && job.reproject.is_empty()
+                    {
+                        return None;
+                    }
+                    Some((d, (job, relevant)))
+                })
+                .collect();
+            if jobs.is_empty() {
+                continue;
+            }
+            let (dirs, jobs): (Vec<usize>, Vec<(PlaneJob, Rect)>) = jobs.into_iter().unzip();
+            let (jobs, relevant): (Vec<PlaneJob>, Vec<Rect>) = jobs.into_iter().unzip();
+            let maps = backend.render(&jobs)?;
+            let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
+            let ends: Vec<bool> = (jobs.iter().zip(&maps).zip(&dirs).zip(&relevant))
+                .map(|(((job, map), &d), &r)| ends_sweep(&plans[d], k, job, map, r))
+                .collect();
+            for ((((job, map), hdm), &d), &end) in
+                jobs.iter().zip(&maps).zip(&hdms).zip(&dirs).zip(&ends)
+            {
+                observe(job, map, hdm);
+                // In a sweep, boxes far behind this plane wait for later planes (the last plane,
+                // or one whose umbra covers its whole frame and so ends the direction, tests
+                // everything): the umbra is rarely finished this far in front of them, and
+                // testing every box on every plane is most of a forest's bake time.
+                let last = k + 1 == plans[d].distances.len() || end;
+                let after = if plans[d].is_sweep() && !last {
+                    (
+                        plans[d].slab_start(k),
+                        SWEEP_TEST_REACH * plans[d].distance(k),
+                    )
+                } else {
+                    (plans[d].slab_start(k), f64::INFINITY)
+                };
+                self.traverse(
+                    job,
+                    hdm,
+                    &cell64,
+                    after,
+                    &mut hidden,
+                    &mut node_done,
+                    &mut piece_hidden,
+                    &skip_test,
+                );
+            }
+            planes += jobs.len();
+            projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
+            for (((((job, map), d), hdm), end), r) in jobs
+                .into_iter()
+                .zip(maps)
+                .zip(dirs)
+                .zip(hdms)
+                .zip(ends)
+                .zip(relevant)
+            {
+                if plans[d].is_sweep() {
+                    prev_hdm[d] = Some((job.frame.clone(), hdm));
+                    finished[d] = end;
+                    let m = Arc::new(map);
+                    let bounds = crate::sweep::umbra_bounds(&job.frame, &m);
+                    let open = crate::sweep::open_sides(&job.frame, r);
+                    push_history(&mut hist[d], (k, job.frame, m, bounds, open));
+                }
+            }
+        }
+        state.hidden = hidden;
+        Ok(CullerWork {
+            planes,
+            occluders_projected: projected,
+        })
+    }
+
+    /// The occluder parts of sweep plane `k`'s slab: a walk of the object hierarchy that
+    /// descends only into nodes overlapping the slab and its frustum and not proven hidden by
+    /// the previous plane (their objects' occluders would add nothing), then the parts of the
+    /// objects reached ([`crate::project::planes::gather_slab`] filters and cuts them).
+    fn gather_slab(
+        &self,
+        plan: &crate::project::planes::DirectionPlan,
+        k: usize,
+        leave_out: &LeaveOut,
+        hidden: &[bool],
+        node_hidden: &[bool],
+    ) -> crate::project::planes::SlabParts {
+        let mut parts: Vec<u32> = Vec::new();
+        if let Some(bvh) = &self.bvh {
+            let start = plan.slab_start(k);
+            let mut stack = vec![0u32];
+            while let Some(ni) = stack.pop() {
+                let node = &bvh.nodes[ni as usize];
+                let b = DAabb {
+                    min: glam::Vec3::from(node.aabb.min).as_dvec3(),
+                    max: glam::Vec3::from(node.aabb.max).as_dvec3(),
+                };
+                // (Object bounds hold their parts: merged polygons are built within objects'
+                // triangles or attributed to one of them, and a part left out only loosens.)
+                if node_hidden[ni as usize] && self.settings.subcell.is_none() {
+                    continue;
+                }
+                if !plan.slab_may_hold(k, &b) {
+                    continue;
+                }
+                if plan.distances_of(&b).0 > start && (leave_out.hidden)(&b) {
+                    continue;
+                }
+                if node.is_leaf() {
+                    for j in 0..node.prim_count {
+                        let o = bvh.primitive_indices[(node.first_index + j) as usize] as usize;
+                        if !hidden[o] {
+                            parts.extend_from_slice(&self.object_parts[o]);
+                        }
+                    }
+                } else {
+                    stack.push(node.first_index);
+                    stack.push(node.first_index + 1);
+                }
+            }
+        }
+        crate::project::planes::gather_slab(plan, k, &self.occluders, parts, leave_out)
+    }
+
+    /// Tests the object BVH against one plane, marking hidden objects, and nodes whose whole
+    /// subtree is hidden (skipped on the following planes).
+    #[allow(clippy::too_many_arguments)]
+    fn traverse(
+        &self,
+        job: &PlaneJob,
+        hdm: &Hdm,
+        cell: &DAabb,
+        after: (f64, f64),
+        hidden: &mut [bool],
+        node_hidden: &mut [bool],
+        piece_hidden: &mut [bool],
+        skip_test: &dyn Fn(usize, &[bool]) -> bool,
+    ) {
+        let Some(bvh) = &self.bvh else { return };
+        let mut stack = vec![0u32];
+        while let Some(ni) = stack.pop() {
+            if node_hidden[ni as usize] {
+                continue;
+            }
+            let node = &bvh.nodes[ni as usize];
+            let b = DAabb {
+                min: glam::Vec3::from(node.aabb.min).as_dvec3(),
+                max: glam::Vec3::from(node.aabb.max).as_dvec3(),
+            };
+            match self.test_box(&job.frame, hdm, &b, cell, after) {
+                Coverage::Hidden => {
+                    mark_hidden(bvh, ni, hidden, node_hidden);
+                    continue;
+                }
+                Coverage::Empty => continue,
+                Coverage::Partial => {}
+            }
+            if node.is_leaf() {
+                for k in 0..node.prim_count {
+                    let o = bvh.primitive_indices[(node.first_index + k) as usize] as usize;
+                    if skip_test(o, hidden) {
+                        continue;
+                    }
+                    let ob = self.scene.objects[o].bounds.to_f64();
+                    match self.test_box(&job.frame, hdm, &ob, cell, after) {
+                        Coverage::Hidden => hidden[o] = true,
+                        Coverage::Empty => {}
+                        Coverage::Partial => {
+                            // Pieces of the object may be hidden on different planes.
+                            let r = self.pieces[o].clone();
+                            if r.is_empty() {
+                                continue;
+                            }
+                            let mut all = true;
+                            for pi in r {
+                                let pi = pi as usize;
+                                if !piece_hidden[pi] {
+                                    piece_hidden[pi] = self.test_box(
+                                        &job.frame,
+                                        hdm,
+                                        &self.piece_boxes[pi],
+                                        cell,
+                                        after,
+                                    ) == Coverage::Hidden;
+                                }
+                                all &= piece_hidden[pi];
+                                if !all {
+                                    // A piece left visible here: the object stays visible on
+                                    // this plane, and its other pieces are tried on later
+                                    // planes (testing them all here culled 0.2 points more
+                                    // of the forests' objects for a fifth more bake time).
+                                    break;
+                                }
+                            }
+                            hidden[o] |= all;
+                        }
+                    }
+                }
+                node_hidden[ni as usize] = (0..node.prim_count).all(|k| {
+                    skip_test(
+                        bvh.primitive_indices[(node.first_index + k) as usize] as usize,
+                        hidden,
+                    )
+                });
+            } else {
+                stack.push(node.first_index);
+                stack.push(node.first_index + 1);
+            }
+        }
+    }
+
+    /// The occlusion test of one box on one plane: `Hidden`; `Empty` when nothing inside the
+    /// box can be hidden on this plane (it lies on the cell's side of the face, its Projection
+    /// misses the plane's rectangle, or covers no occluded pixel of it — a child's Projection
+    /// lies inside its parent's); `Partial` otherwise, including boxes touching the cell.
+    ///
+    /// `range.0` is the distance beyond the face before which nothing can be hidden on this
+    /// plane: 0, or in a sweep the previous plane — every Depth of a sweep plane is at least the
+    /// previous plane's, and a box entirely in front of it has a smaller Depth everywhere.
+    /// Boxes starting beyond `range.1` are not tested (`Empty`, which is never a cull).
+    fn test_box(
+        &self,
+        frame: &PlaneFrame,
+        hdm: &Hdm,
+        b: &DAabb,
+        cell: &DAabb,
+        range: (f64, f64),
+    ) -> Coverage {
+        if b.is_empty() {
+            return Coverage::Empty;
+        }
+        let a = frame.axis;
+        let (near, far) = if frame.positive {
+            (b.min[a], b.max[a])
+        } else {
+            (b.max[a], b.min[a])
+        };
+        let sg = frame.sign();
+        if sg * (far - frame.face()) <= range.0 || sg * (near - frame.face()) > range.1 {
+            return Coverage::Empty;
+        }
+        if b.overlaps(cell) {
+            return Coverage::Partial;
+        }
+        let Some(sp) = span(frame, b) else {
+            return Coverage::Partial;
+        };
+        let depth = depth_down(sp.depth);
+        let (lo, hi) = standard_rect(frame, b);
+        let standard = match pixel_rect(frame, lo, hi) {
+            Some([i0, j0, i1, j1]) => hdm.test(i0, j0, i1, j1, depth),
+            None => {
+                // Partly outside the plane: only the part inside can hold a descendant.
+                let (clo, chi) = (lo.max(frame.rect_min), hi.min(frame.rect_max));
+                if !(clo.x <= chi.x && clo.y <= chi.y) {
+                    return Coverage::Empty;
+                }
+                match pixel_rect(frame, clo, chi) {
+                    Some([i0, j0, i1, j1])
+                        if hdm.test(i0, j0, i1, j1, f32::INFINITY) == Coverage::Empty =>
+                    {
+                        Coverage::Empty
+                    }
+                    _ => Coverage::Partial,
+                }
+            }
+        };
+        if standard != Coverage::Partial || !(sp.in_front && self.settings.improved_projection) {
+            return standard;
+        }
+        // Either improved Projection, covered, proves the box hidden (each is sound alone).
+        let hidden = improved_rects(frame, b).into_iter().any(|(lo, hi)| {
+            pixel_rect(frame, lo, hi)
+                .is_some_and(|[i0, j0, i1, j1]| hdm.test(i0, j0, i1, j1, depth) == Coverage::Hidden)
+        });
+        if hidden {
+            Coverage::Hidden
+        } else {
+            Coverage::Partial
+        }
+    }
+}
+
+/// True when sweep plane `k`'s umbra covers its whole frame: what lies behind it in the
+/// frame is hidden on it, and the direction needs no further plane.
+fn ends_sweep(
+    plan: &crate::project::planes::DirectionPlan,
+    k: usize,
+    job: &PlaneJob,
+    map: &DepthMap,
+    relevant: Rect,
+) -> bool {
+    // The frame cut to the relevant region, computed as `plane_job` cuts the rectangle.
+    plan.is_sweep()
+        && job.frame.rect_min == plan.frame_min(k).max(relevant.0)
+        && job.frame.rect_max == plan.frame_max(k).min(relevant.1)
+        && map.depth.iter().all(|&x| x <= 0.0)
+}
+
+/// A rectangle on a plane, world `(u, v)`: lower and upper corners.
+type Rect = (glam::DVec2, glam::DVec2);
+
+/// A rendered sweep plane kept for later reprojections: its index in the sweep, frame, map,
+/// the bounds of its umbra and its rectangle's open sides.
+type Rendered = (usize, PlaneFrame, Arc<DepthMap>, Option<Rect>, OpenSides);
+
+/// Adds plane `k` to a direction's history, keeping only what [`reprojections`] may use: the
+/// newest plane and, for every level `m ≥ 1`, the newest plane whose index is a multiple of
+/// `2^m` (a skip list, `O(log planes)` maps).
+fn push_history(history: &mut Vec<Rendered>, plane: Rendered) {
+    history.push(plane);
+    let newest_at = |level: u32, h: &[Rendered]| {
+        h.iter()
+            .rposition(|e| e.0 % (1usize << level) == 0)
+            .unwrap_or(usize::MAX)
+    };
+    let keep: Vec<bool> = (0..history.len())
+        .map(|i| i + 1 == history.len() || (1..usize::BITS).any(|m| newest_at(m, history) == i))
+        .collect();
+    let mut it = keep.into_iter();
+    history.retain(|_| it.next().unwrap_or(false));
+}
+
+/// The reprojections onto a sweep plane (frame `to`, at `distance` beyond the face) from the
+/// planes kept in its direction's history ([`push_history`]): the previous plane, and the
+/// newest planes with indices multiples of 2, 4, 8… — a skip list. The previous plane alone
+/// would carry everything, but each reprojection rounds its windows outward (up to a pixel per
+/// side): umbra from far back that reaches this plane through a few reprojections instead of a
+/// chain of them loses less. On the coarse forest (5 cells, 48 planes, resolution 256) this
+/// took the culled share from 46 % to 54 %.
+fn reprojections(history: &[Rendered], to: &PlaneFrame, distance: f64) -> Vec<Reprojection> {
+    history
+        .iter()
+        .rev()
+        .filter(|e| {
+            e.3.is_some_and(|b| crate::sweep::carried_rect(&e.1, b, e.4, distance).is_some())
+        })
+        .map(|e| Reprojection::with_open_sides(&e.1, to, e.2.clone(), e.4))
+        .collect()
+}
+
+/// Marks the BVH nodes whose objects are all in `done` (bottom-up over the tree).
+fn mark_done(bvh: &Bvh2, done: &[bool], node_done: &mut [bool]) {
+    fn visit(bvh: &Bvh2, ni: u32, done: &[bool], node_done: &mut [bool]) -> bool {
+        let n = &bvh.nodes[ni as usize];
+        let all = if n.is_leaf() {
+            (0..n.prim_count)
+                .all(|k| done[bvh.primitive_indices[(n.first_index + k) as usize] as usize])
+        } else {
+            let a = visit(bvh, n.first_index, done, node_done);
+            let b = visit(bvh, n.first_index + 1, done, node_done);
+            a && b
+        };
+        node_done[ni as usize] = all;
+        all
+    }
+    if !bvh.nodes.is_empty() {
+        visit(bvh, 0, done, node_done);
+    }
+}
+
+fn mark_hidden(bvh: &Bvh2, node: u32, hidden: &mut [bool], node_hidden: &mut [bool]) {
+    let mut stack = vec![node];
+    while let Some(ni) = stack.pop() {
+        node_hidden[ni as usize] = true;
+        let n = &bvh.nodes[ni as usize];
+        if n.is_leaf() {
+            for k in 0..n.prim_count {
+                hidden[bvh.primitive_indices[(n.first_index + k) as usize] as usize] = true;
+            }
+        } else {
+            stack.push(n.first_index);
+            stack.push(n.first_index + 1);
+        }
+    }
+}

@@ -1,0 +1,317 @@
+//! The per-scene preparation shared by every cell of a bake ([`Prepared`]: occluder parts,
+//! sliceable objects, a BVH over object bounds, occludee pieces, the cullers), the automatic
+//! choice of the occlusion sweep ([`choose_sweep`]), and the per-cell driver that runs the
+//! culler pipeline on each cell or on each of its sub-cells.
+
+use super::pipeline::{self, CellAccount, Culler};
+use super::{BakeError, BakeSettings, CellResult, SweepChoice};
+use crate::backend::RasterBackend;
+use crate::geom::{Aabb, DAabb};
+use crate::hdm::Hdm;
+use crate::plane::{DepthMap, PlaneJob};
+use crate::project::occluders::{self, Occluders};
+use crate::project::planes::Sliceable;
+use crate::scene::Scene;
+use obvhs::bvh2::Bvh2;
+use std::time::Instant;
+
+/// The per-scene preparation shared by all cells.
+pub struct Prepared<'a> {
+    pub scene: &'a Scene,
+    pub occluders: Occluders,
+    pub sliceable: Sliceable,
+    pub(super) bvh: Option<Bvh2>,
+    pub(super) settings: BakeSettings,
+    /// The cullers every cell runs, in order ([`pipeline::cullers`]).
+    pub(super) cullers: Vec<Box<dyn Culler>>,
+    /// Whether cells are baked with the occlusion sweep, and why.
+    pub sweep: bool,
+    pub sweep_reason: String,
+    /// Per object, its pieces in `piece_boxes` (empty for small objects): boxes around parts of
+    /// its triangles, tested when the object's own box is not hidden.
+    pub(super) pieces: Vec<std::ops::Range<u32>>,
+    pub(super) piece_boxes: Vec<DAabb>,
+    /// Per object, its occluder parts (indices into `occluders.parts`).
+    pub(super) object_parts: Vec<Vec<u32>>,
+    /// A box holding every object: planes' rectangles stop where no ray toward it passes
+    /// ([`crate::project::planes::DirectionPlan::relevant_rect`]).
+    pub(super) bounds: DAabb,
+}
+
+/// Objects with at least this many triangles are also tested as pieces.
+pub const PIECE_MIN_TRIANGLES: usize = 16;
+/// Median splits per object for its pieces (at most `2^PIECE_LEVELS` pieces).
+pub const PIECE_LEVELS: u32 = 4;
+
+/// Boxes around pieces of each object's triangles: median splits of the triangles' centres
+/// along the longest axis, [`PIECE_LEVELS`] deep. An object is hidden when all its pieces are,
+/// each possibly on another plane: the union of the pieces holds every triangle, so this is as
+/// conservative as testing the object's box, and much tighter for round or hollow objects (a
+/// tree crown's box has empty corners that low rays see under the other crowns).
+fn object_pieces(scene: &Scene) -> (Vec<std::ops::Range<u32>>, Vec<DAabb>) {
+    let mut ranges = Vec::with_capacity(scene.objects.len());
+    let mut boxes = Vec::new();
+    for o in &scene.objects {
+        let start = boxes.len() as u32;
+        if o.triangles.len() >= PIECE_MIN_TRIANGLES {
+            let mut tris: Vec<(glam::DVec3, DAabb)> = o
+                .triangles
+                .clone()
+                .map(|t| {
+                    let [a, b, c] = scene.triangle(t as usize).map(|p| p.as_dvec3());
+                    let bx = DAabb {
+                        min: a.min(b).min(c),
+                        max: a.max(b).max(c),
+                    };
+                    ((a + b + c) / 3.0, bx)
+                })
+                .collect();
+            split_pieces(&mut tris, PIECE_LEVELS, &mut boxes);
+        }
+        ranges.push(start..boxes.len() as u32);
+    }
+    (ranges, boxes)
+}
+
+fn split_pieces(tris: &mut [(glam::DVec3, DAabb)], levels: u32, out: &mut Vec<DAabb>) {
+    if tris.is_empty() {
+        return;
+    }
+    let mut b = tris[0].1;
+    for t in tris.iter() {
+        b.min = b.min.min(t.1.min);
+        b.max = b.max.max(t.1.max);
+    }
+    if levels == 0 || tris.len() < 4 {
+        out.push(b);
+        return;
+    }
+    let axis = (b.max - b.min).max_position();
+    let mid = tris.len() / 2;
+    tris.select_nth_unstable_by(mid, |x, y| x.0[axis].total_cmp(&y.0[axis]));
+    let (lo, hi) = tris.split_at_mut(mid);
+    split_pieces(lo, levels - 1, out);
+    split_pieces(hi, levels - 1, out);
+}
+
+/// Small occluders: parts whose largest side is under this many times the median cell's
+/// largest side.
+pub const SMALL_OCCLUDER_CELLS: f64 = 2.0;
+/// The sweep is chosen when small occluders hold at least this share of the occluders' area.
+pub const SMALL_OCCLUDER_SHARE: f64 = 0.5;
+
+/// The rule of [`SweepChoice::Auto`]: sweep when occluder parts (convex polygons and solids)
+/// smaller than [`SMALL_OCCLUDER_CELLS`] × the median cell's largest side hold at least
+/// [`SMALL_OCCLUDER_SHARE`] of the occluders' area (each part weighted by the square of its
+/// largest side). Leaves next to a cell fuse only through the sweep; walls and boxes larger than
+/// the cell hide on their own, and separate planes fitted to them cull more. Returns the choice
+/// and a sentence for the summary.
+pub fn choose_sweep(occ: &Occluders, cells: &[Aabb]) -> (bool, String) {
+    let mut sides: Vec<f64> = cells
+        .iter()
+        .map(|c| (c.max - c.min).max_element() as f64)
+        .collect();
+    if sides.is_empty() || occ.parts.is_empty() {
+        return (false, "no cells or no occluders".into());
+    }
+    sides.sort_by(f64::total_cmp);
+    let cell = sides[sides.len() / 2];
+    let limit = SMALL_OCCLUDER_CELLS * cell;
+    let (mut small, mut total) = (0.0, 0.0);
+    for p in &occ.parts {
+        let e = (p.bounds.max - p.bounds.min).max_element();
+        total += e * e;
+        if e < limit {
+            small += e * e;
+        }
+    }
+    let share = if total > 0.0 { small / total } else { 0.0 };
+    let sweep = share >= SMALL_OCCLUDER_SHARE;
+    (
+        sweep,
+        format!(
+            "{:.0} % of the occluder area is in parts smaller than {limit:.3} ({SMALL_OCCLUDER_CELLS} × the median cell side {cell:.3}); the sweep is chosen from {:.0} %",
+            100.0 * share,
+            100.0 * SMALL_OCCLUDER_SHARE
+        ),
+    )
+}
+
+struct ObjBox(obvhs::aabb::Aabb);
+impl obvhs::Boundable for ObjBox {
+    fn aabb(&self) -> obvhs::aabb::Aabb {
+        self.0
+    }
+}
+
+impl<'a> Prepared<'a> {
+    /// Prepares a scene for baking with `settings`.
+    ///
+    /// # Errors
+    /// Invalid settings or an occluder pattern that is not a valid glob.
+    /// [`SweepChoice::Auto`] is decided here with [`choose_sweep`] on `cells`.
+    pub fn new(
+        scene: &'a Scene,
+        settings: &BakeSettings,
+        cells: &[Aabb],
+    ) -> Result<Self, BakeError> {
+        settings.check().map_err(BakeError::Settings)?;
+        let is_occluder: Vec<bool> = match &settings.occluders {
+            None => vec![true; scene.objects.len()],
+            Some(pat) => {
+                let glob = globset::Glob::new(pat)
+                    .map_err(|e| {
+                        BakeError::Settings(format!(
+                            "--occluders {pat:?}: not a valid pattern: {e}"
+                        ))
+                    })?
+                    .compile_matcher();
+                scene
+                    .objects
+                    .iter()
+                    .map(|o| glob.is_match(&o.name))
+                    .collect()
+            }
+        };
+        let occluders = occluders::prepare(scene, &is_occluder, settings.alpha_occluders);
+        let sliceable = Sliceable::new(scene, &is_occluder, settings.alpha_occluders);
+        let boxes: Vec<ObjBox> = scene
+            .objects
+            .iter()
+            .map(|o| {
+                let b = if o.bounds.is_empty() {
+                    Aabb::new(glam::Vec3::ZERO, glam::Vec3::ZERO)
+                } else {
+                    o.bounds
+                };
+                ObjBox(obvhs::aabb::Aabb::new(b.min.into(), b.max.into()))
+            })
+            .collect();
+        let bvh = if boxes.is_empty() {
+            None
+        } else {
+            let mut t = std::time::Duration::ZERO;
+            Some(obvhs::bvh2::builder::build_bvh2(
+                &boxes,
+                obvhs::BvhBuildParams::fastest_build(),
+                &mut t,
+            ))
+        };
+        let (sweep, sweep_reason) = match settings.sweep {
+            SweepChoice::On => (true, "--sweep".to_string()),
+            SweepChoice::Off => (false, "--no-sweep".to_string()),
+            SweepChoice::Auto => choose_sweep(&occluders, cells),
+        };
+        let (pieces, piece_boxes) = object_pieces(scene);
+        let mut object_parts = vec![Vec::new(); scene.objects.len()];
+        for (i, p) in occluders.parts.iter().enumerate() {
+            object_parts[p.object as usize].push(i as u32);
+        }
+        let bounds = scene
+            .objects
+            .iter()
+            .filter(|o| !o.bounds.is_empty())
+            .fold(Aabb::EMPTY, |b, o| b.union(&o.bounds))
+            .to_f64();
+        Ok(Prepared {
+            cullers: pipeline::cullers(settings, sweep),
+            bounds,
+            scene,
+            occluders,
+            sliceable,
+            bvh,
+            settings: settings.clone(),
+            sweep,
+            sweep_reason,
+            pieces,
+            piece_boxes,
+            object_parts,
+        })
+    }
+
+    /// The names of the cullers every cell runs, in order.
+    pub fn culler_names(&self) -> Vec<&'static str> {
+        self.cullers.iter().map(|c| c.name()).collect()
+    }
+
+    /// Bakes one cell.
+    ///
+    /// # Errors
+    /// The backend's failure.
+    pub fn cell(&self, cell: &Aabb, backend: &dyn RasterBackend) -> Result<CellResult, BakeError> {
+        self.cell_observed(cell, backend, &mut |_, _, _| {})
+    }
+
+    /// Bakes one cell, handing every rendered plane to `observe` (its job, its Depth Map and
+    /// its Hierarchical Depth Map) before its occludees are tested: for dumps and reports.
+    ///
+    /// # Errors
+    /// The backend's failure.
+    pub fn cell_observed(
+        &self,
+        cell: &Aabb,
+        backend: &dyn RasterBackend,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    ) -> Result<CellResult, BakeError> {
+        let start = Instant::now();
+        let n = self.scene.objects.len();
+        let subcells = match self.settings.subcell {
+            Some(size) => split_cell(cell, size),
+            None => vec![*cell],
+        };
+        let mut visible = vec![false; n];
+        let mut account = CellAccount::new(self.cullers.len(), n);
+        for (k, sub) in subcells.iter().enumerate() {
+            let known = (k > 0).then_some(visible.as_slice());
+            let hidden = pipeline::run(
+                &self.cullers,
+                self,
+                sub,
+                backend,
+                known,
+                observe,
+                &mut account,
+            )?;
+            for (v, h) in visible.iter_mut().zip(hidden) {
+                *v |= !h;
+            }
+        }
+        let stats = account.finish(&visible);
+        let visible = (0..n as u32)
+            .filter(|&o| visible[o as usize] && !self.scene.objects[o as usize].bounds.is_empty())
+            .collect();
+        Ok(CellResult {
+            visible,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+            planes: stats.iter().map(|s| s.work.planes).sum(),
+            occluders_projected: stats.iter().map(|s| s.work.occluders_projected).sum(),
+            cullers: stats,
+        })
+    }
+}
+
+/// The sub-cells of `cell` no larger than `size` along any axis: a regular split, as few per
+/// axis as fit.
+pub fn split_cell(cell: &Aabb, size: f64) -> Vec<Aabb> {
+    let ext = (cell.max - cell.min).as_dvec3();
+    let n = (ext / size).ceil().max(glam::DVec3::ONE).as_uvec3();
+    let mut out = Vec::with_capacity((n.x * n.y * n.z) as usize);
+    let at = |a: usize, k: u32| {
+        if k == n[a] {
+            cell.max[a]
+        } else {
+            cell.min[a] + (ext[a] * k as f64 / n[a] as f64) as f32
+        }
+    };
+    for x in 0..n.x {
+        for y in 0..n.y {
+            for z in 0..n.z {
+                out.push(Aabb::new(
+                    glam::Vec3::new(at(0, x), at(1, y), at(2, z)),
+                    glam::Vec3::new(at(0, x + 1), at(1, y + 1), at(2, z + 1)),
+                ));
+            }
+        }
+    }
+    out
+}
