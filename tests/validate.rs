@@ -1,6 +1,8 @@
 //! Tests of `umbrasweep validate` (owned by the validator work): analytic scenes built in
-//! memory, hand-written PVS documents, the library API (`sample_cell`, `check`) and the
-//! command line (exit codes 0/1/2, `--json`).
+//! memory, hand-written PVS documents, the library API (`sample_cell`, `check`, hunt mode) and
+//! the command line (exit codes 0/1/2, `--json`, `--hunt`).
+
+mod common;
 
 use glam::{Vec3, vec3};
 use std::path::{Path, PathBuf};
@@ -63,6 +65,11 @@ fn scene(objects: Vec<Obj>) -> Scene {
 
 /// A PVS document for `scene` with one cell (the test cell) whose PVS is `visible`.
 fn doc(scene: &Scene, visible: Vec<u32>, alpha_occluders: bool) -> PvsDocument {
+    doc_cells(scene, vec![(cell(), visible)], alpha_occluders)
+}
+
+/// A PVS document for `scene` with the given cells and their PVS.
+fn doc_cells(scene: &Scene, cells: Vec<(Aabb, Vec<u32>)>, alpha_occluders: bool) -> PvsDocument {
     PvsDocument {
         format: FORMAT.into(),
         version: VERSION,
@@ -72,12 +79,15 @@ fn doc(scene: &Scene, visible: Vec<u32>, alpha_occluders: bool) -> PvsDocument {
             ..Default::default()
         },
         objects: umbrasweep::bake::object_table(scene),
-        cells: vec![PvsCell {
-            min: cell().min.to_array(),
-            max: cell().max.to_array(),
-            visible,
-            ms: 0.0,
-        }],
+        cells: cells
+            .into_iter()
+            .map(|(c, visible)| PvsCell {
+                min: c.min.to_array(),
+                max: c.max.to_array(),
+                visible,
+                ms: 0.0,
+            })
+            .collect(),
         summary: None,
     }
 }
@@ -86,7 +96,7 @@ fn opts(rays: u64) -> CheckOptions {
     CheckOptions {
         rays,
         seed: 7,
-        progress: false,
+        ..Default::default()
     }
 }
 
@@ -513,4 +523,387 @@ fn cli_bad_input_exits_2() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(!json.exists(), "no report on bad input");
+}
+
+// ---- --hunt ----
+
+/// Object ids of [`corner_slit_scene`].
+const SLIT_WALL: u32 = 0;
+const SLIT_TARGET: u32 = 1;
+const SLIT_HIDDEN: u32 = 2;
+const SLIT_HIDDEN_COUNT: u32 = 1000;
+
+/// The hunt scene: a closed wall at z = 3 with a slit |x| < 0.01, |y| < 0.1, and behind it the
+/// target, a box 0.2 wide centred at (−3, −3, 9) on the line from the cell's corner (1, 1, 1)
+/// through the slit. That line leaves the cell at the corner, so only from within about 0.15
+/// of that corner does a line through the slit reach the target: in a simulation, 0.8 % of
+/// the hunting rays (all starting near the corner or an edge) and 0.0005 % of rays from
+/// uniform origins did. 1000 boxes behind the wall, out of the slit's view, stand for the
+/// objects a conservative PVS keeps without the sampling ever finding them: the plain
+/// sampling's aimed and targeted rays are spread over them.
+fn corner_slit_scene() -> Scene {
+    let xs = [-50.0, -0.01, 0.01, 50.0];
+    let ys = [-50.0, -0.1, 0.1, 50.0];
+    let mut objects: Vec<Obj> = vec![
+        (
+            "slit_wall".into(),
+            grid_wall(3.0, &xs, &ys, |i, j| i == 1 && j == 1),
+            true,
+        ),
+        (
+            "target".into(),
+            cuboid(vec3(-3.1, -3.1, 8.9), vec3(-2.9, -2.9, 9.1)),
+            true,
+        ),
+    ];
+    for i in 0..SLIT_HIDDEN_COUNT {
+        let p = vec3(
+            8.0 + (i % 40) as f32 * 0.8,
+            -20.0 + (i / 40) as f32 * 1.6,
+            5.0 + (i % 7) as f32 * 0.5,
+        );
+        objects.push((
+            format!("hidden{i}"),
+            cuboid(p - Vec3::splat(0.25), p + Vec3::splat(0.25)),
+            true,
+        ));
+    }
+    scene(objects)
+}
+
+/// A PVS of [`corner_slit_scene`] that keeps everything but the target: over-conservative
+/// (the hidden boxes) and wrong (the target).
+fn slit_doc_without_target(s: &Scene) -> PvsDocument {
+    let all: Vec<u32> = (0..s.objects.len() as u32)
+        .filter(|&o| o != SLIT_TARGET)
+        .collect();
+    doc(s, all, false)
+}
+
+fn hunt_opts(rays: u64) -> CheckOptions {
+    CheckOptions {
+        hunt: true,
+        ..opts(rays)
+    }
+}
+
+/// Where the ray from `origin` along `dir` crosses the plane z = `z`.
+fn at_z(origin: Vec3, dir: Vec3, z: f32) -> Vec3 {
+    origin + dir * ((z - origin.z) / dir.z)
+}
+
+#[test]
+fn hunt_finds_a_false_cull_that_plain_sampling_misses() {
+    let s = corner_slit_scene();
+    let d = slit_doc_without_target(&s);
+
+    // Plain sampling with 2,000 rays: 600 aimed rays and 1,000 targeted ones are shared by
+    // the 1,001 objects it never finds, so a few go to the target, and almost never one from
+    // the corner. It misses the target and passes the wrong PVS. (Over seeds 0..300 it found
+    // the target with seeds 4 and 10 only; the hunt found it with every seed, within 1,360
+    // rays at worst and about 100 typically.)
+    let plain = check(&s, &d, &opts(2_000)).unwrap();
+    assert!(!plain.hunt);
+    assert_eq!(
+        plain.false_culls,
+        0,
+        "the plain sampling was expected to miss the target:\n{}",
+        plain.table()
+    );
+    assert!(!plain.cells[0].visible.contains(&SLIT_TARGET));
+    assert_eq!(plain.cells[0].visible, vec![SLIT_WALL]);
+
+    // --hunt with the same budget: the target is the only culled object, all 2,000 rays go
+    // to it, and about 1 % of them pass the slit.
+    let r = check(&s, &d, &hunt_opts(2_000)).unwrap();
+    assert!(r.hunt);
+    assert_eq!(
+        (r.hunted_objects, r.rays_per_culled_object),
+        (Some(1), Some(2_000))
+    );
+    assert_eq!(r.false_culls, 1, "{}", r.table());
+    let c = &r.cells[0];
+    assert_eq!((c.hunted, c.rays_per_culled_object), (Some(1), Some(2_000)));
+    assert!(c.rays <= 2_000 && c.rays >= 1);
+    // The visible set is not measured.
+    assert!(c.visible.is_empty() && c.vs == 0 && c.pvs_over_vs.is_none());
+    assert_eq!(c.pvs, s.objects.len() - 1);
+    let f = &c.false_culls[0];
+    assert_eq!(
+        (f.object, f.name.as_str(), f.reason.as_str()),
+        (SLIT_TARGET, "target", "ray")
+    );
+    assert!(f.ray.unwrap() < 2_000);
+    assert_eq!(
+        f.ray.unwrap() + 1,
+        c.rays,
+        "the hunt stops at its first witness"
+    );
+    let (origin, dir, hit) = (f.origin.unwrap(), f.direction.unwrap(), f.hit.unwrap());
+    assert!(strictly_inside(origin, &cell()), "origin {origin:?}");
+    assert!((dir.length() - 1.0).abs() < 1e-5);
+    assert!(on_object(&s, SLIT_TARGET, hit), "hit {hit:?}");
+    // The witness passes the slit, and starts near the corner it is seen from.
+    let w = at_z(origin, dir, 3.0);
+    assert!(w.x.abs() <= 0.0101 && w.y.abs() <= 0.1001, "{w:?}");
+    assert!(origin.cmpgt(Vec3::splat(0.8)).all(), "origin {origin:?}");
+    // An independent brute-force cast agrees that the target is the first thing it hits.
+    let tris: Vec<(String, Vec<[Vec3; 3]>)> = s
+        .objects
+        .iter()
+        .map(|o| {
+            let t = o
+                .triangles
+                .clone()
+                .map(|t| s.triangle(t as usize))
+                .collect();
+            (o.name.clone(), t)
+        })
+        .collect();
+    let objects = tris.iter().map(|(n, t)| (n.as_str(), &t[..]));
+    assert_eq!(common::first_hit(objects, origin, dir), Some("target"));
+    let table = r.table();
+    assert!(
+        table.contains("FALSE CULL cell 0: object 1 \"target\""),
+        "{table}"
+    );
+    assert!(table.contains("rays/obj"), "{table}");
+}
+
+#[test]
+fn hunt_reports_no_false_cull_for_a_correct_pvs() {
+    // The slit scene with a correct PVS: wall and target kept, the 1,000 boxes behind the
+    // wall culled. Each of them gets 50 rays, none of which gets through.
+    let s = corner_slit_scene();
+    let d = doc(&s, vec![SLIT_WALL, SLIT_TARGET], false);
+    let r = check(&s, &d, &hunt_opts(50_000)).unwrap();
+    assert_eq!(r.false_culls, 0, "{}", r.table());
+    let c = &r.cells[0];
+    assert_eq!(c.hunted, Some(SLIT_HIDDEN_COUNT as usize));
+    assert_eq!(c.rays_per_culled_object, Some(50));
+    // Nothing was seen, so every ray was cast.
+    assert_eq!(c.rays, 50_000);
+    assert_eq!(r.rays_cast, c.rays);
+    let table = r.table();
+    assert!(
+        table.contains("no false cull in 1 cells (hunt: 1000 culled objects, at least 50 rays"),
+        "{table}"
+    );
+
+    // A single hidden box behind a closed, subdivided slab gets all 100,000 rays, many of them
+    // aimed at its edges and corners through the slab's shared edges: none leaks.
+    let xs = breaks(-50.0, 50.0, 17);
+    let mut wall = grid_wall(4.0, &xs, &xs, |_, _| false);
+    wall.extend(grid_wall(5.0, &xs, &xs, |_, _| false));
+    wall.extend(cuboid(vec3(-50.0, -50.0, 4.0), vec3(50.0, 50.0, 5.0)));
+    let s = scene(vec![
+        ("wall".into(), wall, true),
+        (
+            "hidden".into(),
+            cuboid(vec3(-1.0, -1.0, 10.0), vec3(1.0, 1.0, 12.0)),
+            true,
+        ),
+    ]);
+    let r = check(&s, &doc(&s, vec![0], false), &hunt_opts(100_000)).unwrap();
+    assert_eq!(r.false_culls, 0, "{}", r.table());
+    assert_eq!(r.cells[0].rays_per_culled_object, Some(100_000));
+    assert_eq!(r.rays_cast, 100_000);
+    // A PVS that culls nothing leaves nothing to hunt.
+    let r = check(&s, &doc(&s, vec![0, 1], false), &hunt_opts(1_000)).unwrap();
+    assert_eq!((r.false_culls, r.rays_cast), (0, 0));
+    assert_eq!(r.cells[0].hunted, Some(0));
+    assert_eq!(r.rays_per_culled_object, Some(0));
+}
+
+#[test]
+fn hunt_honours_see_through_triangles_and_overlap() {
+    let xs = breaks(-50.0, 50.0, 4);
+    let s = scene(vec![
+        (
+            "foliage".into(),
+            grid_wall(5.0, &xs, &xs, |_, _| false),
+            false,
+        ),
+        (
+            "behind".into(),
+            cuboid(vec3(-1.0, -1.0, 10.0), vec3(1.0, 1.0, 12.0)),
+            true,
+        ),
+        (
+            "inside".into(),
+            cuboid(vec3(-0.2, -0.2, -0.2), vec3(0.2, 0.2, 0.2)),
+            true,
+        ),
+    ]);
+    // See-through foliage: the box behind it is seen, unless the PVS was baked with alpha
+    // occluders.
+    let r = check(&s, &doc(&s, vec![0, 2], false), &hunt_opts(1_000)).unwrap();
+    assert_eq!(r.false_culls, 1, "{}", r.table());
+    assert_eq!(r.cells[0].false_culls[0].object, 1);
+    let r = check(&s, &doc(&s, vec![0, 2], true), &hunt_opts(1_000)).unwrap();
+    assert_eq!(r.false_culls, 0, "{}", r.table());
+    // Culling the foliage itself is caught too (its triangles are seen first).
+    let r = check(&s, &doc(&s, vec![1, 2], true), &hunt_opts(1_000)).unwrap();
+    assert_eq!(r.false_culls, 1);
+    assert_eq!(r.cells[0].false_culls[0].object, 0);
+    // An object inside the cell is visible, by a ray or by definition.
+    let r = check(&s, &doc(&s, vec![0, 1], false), &hunt_opts(1_000)).unwrap();
+    assert_eq!(r.false_culls, 1);
+    assert_eq!(r.cells[0].false_culls[0].object, 2);
+}
+
+#[test]
+fn hunt_gives_the_same_report_on_one_and_two_threads() {
+    // Three cells of the slit scene; each PVS culls the target and a few hidden boxes, so the
+    // budget of 30,001 rays is split 6 ways into several chunks per object (several waves),
+    // and the first cell has a false cull to find.
+    let s = corner_slit_scene();
+    let culled = [
+        SLIT_TARGET,
+        SLIT_HIDDEN,
+        SLIT_HIDDEN + 7,
+        SLIT_HIDDEN + 150,
+        SLIT_HIDDEN + 999,
+        SLIT_HIDDEN + 42,
+    ];
+    let keep: Vec<u32> = (0..s.objects.len() as u32)
+        .filter(|o| !culled.contains(o))
+        .collect();
+    let cells = vec![
+        (cell(), keep.clone()),
+        (
+            Aabb::new(vec3(-1.0, -1.0, -3.0), vec3(1.0, 1.0, -1.5)),
+            keep.clone(),
+        ),
+        (Aabb::new(vec3(1.0, 1.0, 0.0), vec3(2.0, 2.0, 1.0)), keep),
+    ];
+    let d = doc_cells(&s, cells, false);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let r = pool.install(|| check(&s, &d, &hunt_opts(30_001)).unwrap());
+        assert_eq!(r.rays_per_culled_object, Some(5_000));
+        assert!(r.false_culls >= 1, "{}", r.table());
+        assert!(
+            r.cells[0]
+                .false_culls
+                .iter()
+                .any(|f| f.object == SLIT_TARGET)
+        );
+        serde_json::to_string(&r).unwrap()
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(2));
+    let other_seed = {
+        let o = CheckOptions {
+            seed: 8,
+            ..hunt_opts(30_001)
+        };
+        serde_json::to_string(&check(&s, &d, &o).unwrap()).unwrap()
+    };
+    assert_ne!(one, other_seed, "the seed should change the witness rays");
+}
+
+#[test]
+fn cli_hunt_exits_1_on_a_false_cull_and_0_on_a_good_pvs() {
+    let out = Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
+        .args(["validate", "--help"])
+        .output()
+        .unwrap();
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        help.contains("--hunt") && help.contains("validate forest.obj forest_pvs.json --hunt"),
+        "{help}"
+    );
+
+    let s = corner_slit_scene();
+    let dir = tmpdir();
+    let Some(obj) = obj_scene(dir.path(), &s) else {
+        return;
+    };
+    let pvs = dir.path().join("pvs.json");
+    let json = dir.path().join("out.json");
+    write_doc(&slit_doc_without_target(&s), &pvs);
+    let args = |hunt: bool| {
+        let mut a: Vec<&std::ffi::OsStr> = vec![
+            obj.as_os_str(),
+            pvs.as_os_str(),
+            "--rays".as_ref(),
+            "2000".as_ref(),
+            "--seed".as_ref(),
+            "7".as_ref(),
+            "--json".as_ref(),
+            json.as_os_str(),
+        ];
+        if hunt {
+            a.push("--hunt".as_ref());
+        }
+        validate(&a)
+    };
+    let read_json =
+        || -> serde_json::Value { serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap() };
+
+    // Plain: misses the target, exits 0, and its report has no hunt fields.
+    let out = args(false);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let v = read_json();
+    for k in ["hunt", "hunted_objects", "rays_per_culled_object"] {
+        assert!(v.get(k).is_none(), "{k}");
+    }
+    assert!(v["cells"][0].get("rays_per_culled_object").is_none());
+
+    // --hunt: finds it, exits 1.
+    let out = args(true);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("FALSE CULL cell 0: object 1 \"target\""),
+        "{stdout}"
+    );
+    let v = read_json();
+    assert_eq!(v["hunt"], true);
+    assert_eq!(v["hunted_objects"], 1);
+    assert_eq!(v["rays_per_culled_object"], 2000);
+    assert_eq!(v["rays_per_cell"], 2000);
+    assert_eq!(v["false_culls"], 1);
+    let c = &v["cells"][0];
+    assert_eq!(c["hunted"], 1);
+    assert_eq!(c["rays_per_culled_object"], 2000);
+    assert_eq!(c["false_culls"][0]["object"], 1);
+    assert_eq!(c["false_culls"][0]["reason"], "ray");
+    for k in ["origin", "direction", "hit"] {
+        assert_eq!(
+            c["false_culls"][0][k].as_array().map(|a| a.len()),
+            Some(3),
+            "{k}"
+        );
+    }
+
+    // A good PVS (the boxes behind the wall culled) exits 0.
+    write_doc(&doc(&s, vec![SLIT_WALL, SLIT_TARGET], false), &pvs);
+    let out = args(true);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let v = read_json();
+    assert_eq!(v["hunt"], true);
+    assert_eq!(v["hunted_objects"], 1000);
+    assert_eq!(v["rays_per_culled_object"], 2);
+    assert_eq!(v["false_culls"], 0);
 }

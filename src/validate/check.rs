@@ -1,7 +1,9 @@
 //! Checking a PVS document against ray-sampled visible sets: input checks (scene/PVS match,
 //! cells, ray count), the per-cell and total [`Report`] (the `--json` document) and its
-//! human-readable table.
+//! human-readable table. With [`CheckOptions::hunt`] the rays go to the culled objects instead
+//! (`super::hunt`).
 
+use super::hunt::{HuntCell, HuntResult, hunt_cells};
 use super::sample::{CellSample, Witness, sample_cell_progress};
 use super::trace::SceneRays;
 use crate::geom::Aabb;
@@ -33,7 +35,8 @@ pub enum ValidateError {
     },
 }
 
-/// Options of [`check`].
+/// Options of [`check`]. Build them with `..Default::default()` for the fields you leave
+/// alone: fields may be added.
 #[derive(Clone, Debug)]
 pub struct CheckOptions {
     /// Rays per cell (at least 1).
@@ -42,6 +45,12 @@ pub struct CheckOptions {
     pub seed: u64,
     /// Show a progress bar on stderr (drawn only when stderr is a terminal).
     pub progress: bool,
+    /// `--hunt`: spend each cell's whole budget on the objects its PVS culls (objects with
+    /// area not in its list), split evenly between them
+    /// ([`rays_per_culled_object`](super::rays_per_culled_object)), instead of sampling the
+    /// visible set. The visible set is then not measured: [`Report::hunt`] is true and the
+    /// VS fields of the report are empty (see [`CellReport::visible`]). Default `false`.
+    pub hunt: bool,
 }
 
 impl Default for CheckOptions {
@@ -50,6 +59,7 @@ impl Default for CheckOptions {
             rays: 1_000_000,
             seed: 0,
             progress: false,
+            hunt: false,
         }
     }
 }
@@ -70,7 +80,10 @@ pub struct FalseCull {
     pub hit: Option<Vec3>,
     /// The scene triangle the witness ray hits.
     pub triangle: Option<u32>,
-    /// Global index of the witness ray in the cell's budget.
+    /// Global index of the witness ray in the cell's budget. With `--hunt`, culled object
+    /// number `k` of the cell (ascending by id) owns rays `[k·m, (k+1)·m)`, `m` being
+    /// [`CellReport::rays_per_culled_object`]; the witness may be a ray aimed at another
+    /// culled object that met this one first.
     pub ray: Option<u64>,
     /// `"ray"` (a ray sees it) or `"overlap"` (its bounds overlap the cell).
     pub reason: String,
@@ -83,9 +96,11 @@ pub struct CellReport {
     pub min: [f32; 3],
     /// Cell corner (as in the PVS).
     pub max: [f32; 3],
-    /// The sampled visible set (VS), ascending.
+    /// The sampled visible set (VS), ascending. Not measured with `--hunt`: empty, and `vs`
+    /// 0, `pvs_over_vs` `None`, `late_found` 0.
     pub visible: Vec<u32>,
-    /// VS objects absent from the PVS, ascending by object.
+    /// VS objects absent from the PVS, ascending by object. With `--hunt`: the culled
+    /// objects a hunting ray saw, and culled objects whose bounds overlap the cell.
     pub false_culls: Vec<FalseCull>,
     /// |PVS|.
     pub pvs: usize,
@@ -99,14 +114,25 @@ pub struct CellReport {
     pub triangles_culled_percent: f64,
     /// VS objects first found in the last 10 % of the rays.
     pub late_found: u32,
-    /// Rays cast (fewer than asked when every object was found early).
+    /// Rays cast (fewer than asked when every object was found early; with `--hunt`, the
+    /// culled objects' budgets less the rays not cast once an object was seen).
     pub rays: u64,
+    /// `--hunt` only (absent otherwise): the culled objects with area that were hunted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hunted: Option<usize>,
+    /// `--hunt` only (absent otherwise): rays cast at each hunted object, `rays / hunted`
+    /// and at least 1 (0 when the cell culls nothing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rays_per_culled_object: Option<u64>,
 }
 
 /// The check of a whole PVS document: the `--json` output of `umbrasweep validate`.
 ///
-/// Everything in it is deterministic for a given scene, PVS, ray count and seed (no timings),
-/// so two runs can be compared byte for byte.
+/// Everything in it is deterministic for a given scene, PVS, ray count, seed and mode (no
+/// timings), so two runs can be compared byte for byte. The `--hunt` fields (`hunt`,
+/// `hunted_objects`, `rays_per_culled_object`, and per cell `hunted` and
+/// `rays_per_culled_object`) are written only in hunt mode, so a plain report is unchanged;
+/// reading a report without them gives `false` and `None`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Report {
     /// One entry per PVS cell, in PVS order.
@@ -135,6 +161,19 @@ pub struct Report {
     pub late_found: u64,
     /// Rays cast over all cells.
     pub rays_cast: u64,
+    /// Whether the rays hunted the culled objects (`--hunt`) instead of sampling the visible
+    /// set; then the VS fields (`pvs_over_vs`, `late_found`, and per cell `visible`, `vs`,
+    /// `pvs_over_vs`, `late_found`) are not measured. Written only when `true`.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub hunt: bool,
+    /// `--hunt` only: (cell, culled object) pairs hunted, over all cells.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hunted_objects: Option<u64>,
+    /// `--hunt` only: the fewest rays any culled object of any cell got (the minimum of
+    /// [`CellReport::rays_per_culled_object`] over the cells that cull something; 0 when none
+    /// does).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rays_per_culled_object: Option<u64>,
     /// Wall-clock seconds spent tracing (not serialised, so reports stay comparable).
     #[serde(skip)]
     pub seconds: f64,
@@ -151,8 +190,94 @@ impl Report {
     }
 
     /// The human-readable table: one line per cell, a total line, then every false cull with
-    /// the ray that proves it, and a one-line verdict.
+    /// the ray that proves it, and a one-line verdict. In hunt mode the VS columns give way
+    /// to the number of culled objects hunted and the rays cast at each.
     pub fn table(&self) -> String {
+        let mut s = if self.hunt {
+            self.hunt_rows()
+        } else {
+            self.rows()
+        };
+        self.false_cull_lines(&mut s);
+        if self.false_culls == 0 {
+            if self.hunt {
+                let _ = writeln!(
+                    s,
+                    "no false cull in {} cells (hunt: {} culled objects, at least {} rays \
+                     each, seed {})",
+                    self.cells.len(),
+                    self.hunted_objects.unwrap_or(0),
+                    self.rays_per_culled_object.unwrap_or(0),
+                    self.seed
+                );
+            } else {
+                let _ = writeln!(
+                    s,
+                    "no false cull in {} cells ({} rays per cell, seed {})",
+                    self.cells.len(),
+                    self.rays_per_cell,
+                    self.seed
+                );
+            }
+        } else {
+            let _ = writeln!(
+                s,
+                "{} false culls in {} of {} cells: the PVS is NOT conservative",
+                self.false_culls,
+                self.cells_with_false_culls,
+                self.cells.len()
+            );
+        }
+        if self.late_found > 0 {
+            let _ = writeln!(
+                s,
+                "note: {} visible objects were first found in the last 10 % of the rays; \
+                 more rays (--rays) may find more",
+                self.late_found
+            );
+        }
+        s
+    }
+
+    /// The per-cell and total lines of a hunt: |PVS|, culled objects hunted, rays per
+    /// culled object, culled percentages, false culls.
+    fn hunt_rows(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "{:>6} {:>7} {:>7} {:>9} {:>10} {:>10} {:>11}",
+            "cell", "|PVS|", "hunted", "rays/obj", "obj cull%", "tri cull%", "false culls"
+        );
+        for (i, c) in self.cells.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "{:>6} {:>7} {:>7} {:>9} {:>10.1} {:>10.1} {:>11}",
+                i,
+                c.pvs,
+                c.hunted.unwrap_or(0),
+                c.rays_per_culled_object.unwrap_or(0),
+                c.objects_culled_percent,
+                c.triangles_culled_percent,
+                c.false_culls.len()
+            );
+        }
+        let _ = writeln!(
+            s,
+            "{:>6} {:>7} {:>7} {:>9} {:>10.1} {:>10.1} {:>11}",
+            "total",
+            self.cells.iter().map(|c| c.pvs).sum::<usize>(),
+            self.hunted_objects.unwrap_or(0),
+            self.rays_per_culled_object
+                .map_or_else(|| "-".to_string(), |r| format!(">={r}")),
+            self.objects_culled_percent,
+            self.triangles_culled_percent,
+            self.false_culls
+        );
+        s
+    }
+
+    /// The per-cell and total lines of the plain sampling.
+    fn rows(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(
             s,
@@ -188,6 +313,11 @@ impl Report {
             self.late_found,
             self.false_culls
         );
+        s
+    }
+
+    /// Every false cull with the ray that proves it.
+    fn false_cull_lines(&self, s: &mut String) {
         let v = |p: Option<Vec3>| {
             p.map_or_else(
                 || "-".to_string(),
@@ -216,32 +346,6 @@ impl Report {
                 }
             }
         }
-        if self.false_culls == 0 {
-            let _ = writeln!(
-                s,
-                "no false cull in {} cells ({} rays per cell, seed {})",
-                self.cells.len(),
-                self.rays_per_cell,
-                self.seed
-            );
-        } else {
-            let _ = writeln!(
-                s,
-                "{} false culls in {} of {} cells: the PVS is NOT conservative",
-                self.false_culls,
-                self.cells_with_false_culls,
-                self.cells.len()
-            );
-        }
-        if self.late_found > 0 {
-            let _ = writeln!(
-                s,
-                "note: {} visible objects were first found in the last 10 % of the rays; \
-                 more rays (--rays) may find more",
-                self.late_found
-            );
-        }
-        s
     }
 }
 
@@ -315,7 +419,8 @@ pub fn check(
     check_with(&rays, scene, doc, opts)
 }
 
-/// [`check`] with a [`SceneRays`] already built from `scene`.
+/// [`check`] with a [`SceneRays`] already built from `scene`. With [`CheckOptions::hunt`],
+/// hunts the culled objects of every cell instead of sampling the visible sets.
 ///
 /// # Errors
 /// Bad input, see [`check_input`].
@@ -327,16 +432,12 @@ pub fn check_with(
 ) -> Result<Report, ValidateError> {
     check_input(scene, doc, opts.rays)?;
     let alpha = doc.settings.alpha_occluders;
-    let progress = opts.progress.then(|| {
-        let total = opts.rays.saturating_mul(doc.cells.len() as u64);
-        let pb = indicatif::ProgressBar::new(total);
-        if let Ok(style) = indicatif::ProgressStyle::with_template(
-            "validate {bar:40} {percent:>3}% {human_pos}/{human_len} rays, {per_sec}, eta {eta}",
-        ) {
-            pb.set_style(style);
-        }
-        pb
-    });
+    if opts.hunt {
+        return Ok(hunt_with(index, scene, doc, opts));
+    }
+    let progress = opts
+        .progress
+        .then(|| progress_bar(opts.rays.saturating_mul(doc.cells.len() as u64)));
     let start = std::time::Instant::now();
     let mut cells = Vec::with_capacity(doc.cells.len());
     for (i, c) in doc.cells.iter().enumerate() {
@@ -360,15 +461,134 @@ pub fn check_with(
     Ok(summarize(scene, opts, alpha, cells, seconds))
 }
 
-/// Compares one cell's PVS with its sample.
-pub fn cell_report(scene: &Scene, cell: &crate::pvs::PvsCell, sample: &CellSample) -> CellReport {
-    let n = scene.objects.len();
-    let mut in_pvs = vec![false; n];
+fn progress_bar(total: u64) -> indicatif::ProgressBar {
+    let pb = indicatif::ProgressBar::new(total);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "validate {bar:40} {percent:>3}% {human_pos}/{human_len} rays, {per_sec}, eta {eta}",
+    ) {
+        pb.set_style(style);
+    }
+    pb
+}
+
+/// The PVS of `cell` as a mask over the scene's objects.
+fn pvs_mask(scene: &Scene, cell: &crate::pvs::PvsCell) -> Vec<bool> {
+    let mut in_pvs = vec![false; scene.objects.len()];
     for &o in &cell.visible {
         if let Some(x) = in_pvs.get_mut(o as usize) {
             *x = true;
         }
     }
+    in_pvs
+}
+
+/// [`check_with`] in hunt mode (input already checked).
+fn hunt_with(index: &SceneRays, scene: &Scene, doc: &PvsDocument, opts: &CheckOptions) -> Report {
+    let alpha = doc.settings.alpha_occluders;
+    let cells: Vec<HuntCell> = doc
+        .cells
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let in_pvs = pvs_mask(scene, c);
+            HuntCell {
+                cell: Aabb::new(Vec3::from(c.min), Vec3::from(c.max)),
+                cell_index: i as u64,
+                culled: index
+                    .targetable_objects()
+                    .iter()
+                    .copied()
+                    .filter(|&o| !in_pvs[o as usize])
+                    .collect(),
+            }
+        })
+        .collect();
+    let progress = opts.progress.then(|| {
+        progress_bar(
+            cells
+                .iter()
+                .map(|c| {
+                    let m = super::hunt::rays_per_culled_object(opts.rays, c.culled.len());
+                    m.saturating_mul(c.culled.len() as u64)
+                })
+                .fold(0u64, u64::saturating_add),
+        )
+    });
+    let start = std::time::Instant::now();
+    let results = hunt_cells(
+        index,
+        scene,
+        &cells,
+        opts.rays,
+        opts.seed,
+        alpha,
+        progress.as_ref(),
+    );
+    let seconds = start.elapsed().as_secs_f64();
+    if let Some(pb) = &progress {
+        pb.finish_and_clear();
+    }
+    let reports = doc
+        .cells
+        .iter()
+        .zip(&cells)
+        .zip(&results)
+        .map(|((c, h), r)| hunt_report(scene, c, h, r))
+        .collect();
+    let mut report = summarize(scene, opts, alpha, reports, seconds);
+    report.hunt = true;
+    report.pvs_over_vs = None;
+    report.hunted_objects = Some(cells.iter().map(|c| c.culled.len() as u64).sum());
+    report.rays_per_culled_object = Some(
+        results
+            .iter()
+            .zip(&cells)
+            .filter(|(_, c)| !c.culled.is_empty())
+            .map(|(r, _)| r.rays_per_object)
+            .min()
+            .unwrap_or(0),
+    );
+    report
+}
+
+/// The report of one hunted cell: the VS is not measured; the false culls are the culled
+/// objects a ray saw, then (as in [`cell_report`]) culled objects no ray saw whose bounds
+/// overlap the cell.
+fn hunt_report(
+    scene: &Scene,
+    cell: &crate::pvs::PvsCell,
+    hunt: &HuntCell,
+    result: &HuntResult,
+) -> CellReport {
+    let in_pvs = pvs_mask(scene, cell);
+    let bounds = hunt.cell;
+    let mut culls: Vec<(u32, Option<&Witness>)> =
+        result.seen.iter().map(|(o, w)| (*o, Some(w))).collect();
+    for (o, obj) in scene.objects.iter().enumerate() {
+        let o = o as u32;
+        if !in_pvs[o as usize]
+            && obj.bounds.overlaps(&bounds)
+            && result.seen.binary_search_by_key(&o, |e| e.0).is_err()
+        {
+            culls.push((o, None));
+        }
+    }
+    culls.sort_by_key(|e| e.0);
+    let mut r = cell_report(scene, cell, &CellSample::default());
+    r.false_culls = culls
+        .into_iter()
+        .map(|(o, w)| false_cull(scene, o, w))
+        .collect();
+    r.rays = result.rays_cast;
+    r.hunted = Some(hunt.culled.len());
+    r.rays_per_culled_object = Some(result.rays_per_object);
+    r
+}
+
+/// Compares one cell's PVS with its sample.
+pub fn cell_report(scene: &Scene, cell: &crate::pvs::PvsCell, sample: &CellSample) -> CellReport {
+    let n = scene.objects.len();
+    let in_pvs = pvs_mask(scene, cell);
     let pvs = in_pvs.iter().filter(|&&b| b).count();
     let total_tris = scene.triangles.len();
     let culled_tris: usize = scene
@@ -398,6 +618,8 @@ pub fn cell_report(scene: &Scene, cell: &crate::pvs::PvsCell, sample: &CellSampl
         triangles_culled_percent: percent(culled_tris, total_tris),
         late_found: sample.late_found,
         rays: sample.rays_cast,
+        hunted: None,
+        rays_per_culled_object: None,
     }
 }
 
@@ -452,6 +674,9 @@ fn summarize(
         triangles_culled_percent: mean(&|c| c.triangles_culled_percent),
         late_found: cells.iter().map(|c| u64::from(c.late_found)).sum(),
         rays_cast: cells.iter().map(|c| c.rays).sum(),
+        hunt: false,
+        hunted_objects: None,
+        rays_per_culled_object: None,
         seconds,
         cells,
     }

@@ -9,8 +9,16 @@
 //! proves it. [`check`] does this for a whole [`PvsDocument`](crate::pvs::PvsDocument) and
 //! returns a [`Report`].
 //!
+//! With [`CheckOptions::hunt`] (`--hunt`) the visible set is not sampled: each cell's budget
+//! is split evenly between the objects its PVS culls ([`rays_per_culled_object`]), and rays
+//! from the cell are aimed at points of each (on its surface, inside its bounds, near its
+//! triangles' edges and vertices); one that reaches the culled object proves a false cull.
+//! The plain sampling finds a false cull only if it finds the object among all the visible
+//! ones; the hunt gives every culled object its share of the whole budget.
+//!
 //! * `trace` — the BVH, the watertight ray/triangle test, point sampling on objects;
 //! * `sample` — ray budget, phases, random streams, deterministic merge;
+//! * `hunt` — `--hunt`: rays aimed at the culled objects, in deterministic waves;
 //! * `check` — input checks, the report and its table.
 //!
 //! ```no_run
@@ -26,6 +34,7 @@
 //! ```
 
 mod check;
+mod hunt;
 mod sample;
 mod trace;
 
@@ -33,6 +42,7 @@ pub use check::{
     CellReport, CheckOptions, FalseCull, Report, ValidateError, cell_report, check, check_input,
     check_with,
 };
+pub use hunt::{HUNT_PHASE, rays_per_culled_object};
 pub use sample::{CHUNK, CellSample, Witness, sample_cell};
 pub use trace::{SceneRays, TraceHit};
 
@@ -42,12 +52,22 @@ use std::path::PathBuf;
 
 /// Options of `umbrasweep validate`.
 #[derive(clap::Args, Debug, Clone)]
+#[command(after_help = "Examples:
+  umbrasweep validate data/demo_city.obj demo.json
+  umbrasweep validate forest.obj forest_pvs.json --rays 200000 --seed 3 --json report.json
+  umbrasweep validate forest.obj forest_pvs.json --hunt --rays 1000000 --json hunt.json
+
+--hunt spends each cell's whole budget on the objects its PVS culls, rays / culled count
+rays each (at least 1), aimed from inside, the faces, edges and corners of the cell at their
+surfaces, bounds, edges and vertices. The visible set is then not measured (the |VS|, PVS/VS
+and late columns give way to the culled objects hunted and the rays per object). Run without
+--hunt to measure PVS/VS, with --hunt to look hard for false culls.")]
 pub struct ValidateArgs {
     /// The scene the PVS was baked from (.obj, .gltf, .glb).
     pub scene: PathBuf,
     /// The PVS document written by `umbrasweep bake -o`.
     pub pvs: PathBuf,
-    /// Rays cast per cell.
+    /// Rays cast per cell (with --hunt: split evenly between the cell's culled objects).
     #[arg(long, default_value_t = 1_000_000)]
     pub rays: u64,
     /// Seed of the random rays (the same seed gives the same result on any thread count).
@@ -56,6 +76,10 @@ pub struct ValidateArgs {
     /// Also write the report as JSON to this file.
     #[arg(long, value_name = "OUT.json")]
     pub json: Option<PathBuf>,
+    /// Spend the whole ray budget of each cell on the objects its PVS culls (split evenly
+    /// between them) instead of sampling the visible set, which is then not measured.
+    #[arg(long)]
+    pub hunt: bool,
 }
 
 /// Runs `umbrasweep validate`: prints the table on stdout, writes `--json` if asked, and
@@ -82,6 +106,7 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
         rays: args.rays,
         seed: args.seed,
         progress: std::io::stderr().is_terminal(),
+        hunt: args.hunt,
     };
     let index = SceneRays::new(&scene);
     let report = check_with(&index, &scene, &doc, &opts)?;

@@ -42,7 +42,8 @@ pub struct Witness {
     pub hit: Vec3,
     /// The scene triangle hit.
     pub triangle: u32,
-    /// Sampling phase of the ray (0: uniform, 1: aimed, 2…: targeted rounds).
+    /// Sampling phase of the ray (0: uniform, 1: aimed, 2…6: targeted rounds;
+    /// [`HUNT_PHASE`](super::HUNT_PHASE): a `--hunt` ray aimed at a culled object).
     pub phase: u32,
     /// Global index of the ray in the cell's budget (`0..rays`).
     pub ray: u64,
@@ -126,7 +127,7 @@ fn mix64(mut z: u64) -> u64 {
 }
 
 /// The random stream of one chunk.
-fn chunk_rng(seed: u64, cell: u64, phase: u64, chunk: u64) -> Pcg64Mcg {
+pub(super) fn chunk_rng(seed: u64, cell: u64, phase: u64, chunk: u64) -> Pcg64Mcg {
     let mut h = mix64(seed);
     h = mix64(h ^ cell);
     h = mix64(h ^ phase.wrapping_mul(0x5851_f42d_4c95_7f2d));
@@ -137,12 +138,12 @@ fn chunk_rng(seed: u64, cell: u64, phase: u64, chunk: u64) -> Pcg64Mcg {
 
 /// Uniform in the open interval (0, 1).
 #[inline]
-fn unit(rng: &mut Pcg64Mcg) -> f64 {
+pub(super) fn unit(rng: &mut Pcg64Mcg) -> f64 {
     ((rng.next_u64() >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
 }
 
 /// Moves `p` strictly inside `cell` on every axis where the cell has room for it.
-fn clamp_inside(p: DVec3, cell: &Aabb) -> Vec3 {
+pub(super) fn clamp_inside(p: DVec3, cell: &Aabb) -> Vec3 {
     let mut q = p.as_vec3();
     for k in 0..3 {
         let (lo, hi) = (cell.min[k], cell.max[k]);
@@ -204,7 +205,7 @@ fn targeted_origin(rng: &mut Pcg64Mcg, cell: &Aabb) -> Vec3 {
     clamp_inside(p, cell)
 }
 
-fn sphere_direction(rng: &mut Pcg64Mcg) -> DVec3 {
+pub(super) fn sphere_direction(rng: &mut Pcg64Mcg) -> DVec3 {
     let z = 1.0 - 2.0 * unit(rng);
     let phi = std::f64::consts::TAU * unit(rng);
     let r = (1.0 - z * z).max(0.0).sqrt();

@@ -235,14 +235,29 @@ impl SceneRays {
         alpha_blocks: bool,
         hits: &mut Vec<RawHit>,
     ) {
+        self.trace_raw_until(origin, direction, f32::INFINITY, alpha_blocks, hits);
+    }
+
+    /// [`SceneRays::trace_raw`] for the segment `t ∈ [0, tmax]` of the ray (in units of the
+    /// direction's length): the same hits as the whole ray up to `tmax`, and nothing beyond.
+    /// Used by `--hunt`, whose rays only need to reach the far side of one object's bounds.
+    #[inline]
+    pub(crate) fn trace_raw_until(
+        &self,
+        origin: Vec3,
+        direction: Vec3,
+        tmax: f32,
+        alpha_blocks: bool,
+        hits: &mut Vec<RawHit>,
+    ) {
         hits.clear();
-        if self.tris.is_empty() {
+        if self.tris.is_empty() || tmax.is_nan() || tmax < 0.0 {
             return;
         }
         let o = Vec3A::from(origin);
         let d = Vec3A::from(direction);
         let shear = Shear::new(o, d);
-        let mut ray = Ray::new_inf(o, d);
+        let mut ray = Ray::new(o, d, 0.0, tmax);
         let mut state = self.bvh.new_traversal(d);
         let mut node;
         obvhs::traverse!(
@@ -293,6 +308,21 @@ impl SceneRays {
         let [p0, p1, p2] = tri.corners.map(|p| p.as_dvec3());
         let s = r1.sqrt();
         Some(p0 * (1.0 - s) + p1 * (s * (1.0 - r2)) + p2 * (s * r2))
+    }
+
+    /// Number of non-degenerate triangles of object `o` (those [`SceneRays::object_triangle`]
+    /// picks from).
+    #[inline]
+    pub(crate) fn object_triangle_count(&self, o: u32) -> u32 {
+        let a = &self.areas[o as usize];
+        a.end - a.start
+    }
+
+    /// The corners of non-degenerate triangle `i` (`< object_triangle_count(o)`) of object
+    /// `o`, in the object's order.
+    #[inline]
+    pub(crate) fn object_triangle(&self, o: u32, i: u32) -> [Vec3; 3] {
+        self.samples[(self.areas[o as usize].start + i) as usize].corners
     }
 
     /// The point where a witness ray meets scene triangle `t`, in double precision (plane
@@ -500,6 +530,36 @@ mod tests {
         assert_eq!(hits.len(), 1);
         assert!((hits[0].t - 3.0).abs() < 1e-6);
         assert!(rays.trace(Vec3::ZERO, -Vec3::Z, false).is_empty());
+    }
+
+    #[test]
+    fn segment_trace_stops_at_tmax() {
+        let scene = Scene::from_objects(
+            Path::new("mem"),
+            vec![
+                ("near".into(), quad(4.0, 1.0), false),
+                ("far".into(), quad(6.0, 1.0), true),
+            ],
+        );
+        let rays = SceneRays::new(&scene);
+        let mut hits = Vec::new();
+        let objects = |rays: &SceneRays, hits: &[RawHit]| {
+            let mut o: Vec<u32> = hits.iter().map(|h| rays.meta(h.slot).object).collect();
+            o.sort_unstable();
+            o.dedup();
+            o
+        };
+        rays.trace_raw_until(Vec3::ZERO, Vec3::Z, 3.9, false, &mut hits);
+        assert!(hits.is_empty());
+        rays.trace_raw_until(Vec3::ZERO, Vec3::Z, 5.0, false, &mut hits);
+        assert_eq!(objects(&rays, &hits), vec![0]);
+        rays.trace_raw_until(Vec3::ZERO, Vec3::Z, 6.5, false, &mut hits);
+        assert_eq!(objects(&rays, &hits), vec![0, 1]);
+        // A blocking near triangle hides the far one whatever the segment's length.
+        rays.trace_raw_until(Vec3::ZERO, Vec3::Z, 6.5, true, &mut hits);
+        assert_eq!(objects(&rays, &hits), vec![0]);
+        rays.trace_raw_until(Vec3::ZERO, Vec3::Z, -1.0, false, &mut hits);
+        assert!(hits.is_empty());
     }
 
     #[test]
