@@ -17,9 +17,9 @@ use umbrasweep::pvs::PvsDocument;
 
 fn read(path: &Path) -> Result<PvsDocument, String> {
     if path.extension().is_some_and(|e| e == "pvs") {
-        umbrasweep::pvs::binary::read(path)
+        umbrasweep::pvs::binary::read(path).map_err(|e| e.to_string())
     } else {
-        umbrasweep::pvs::json::read(path)
+        umbrasweep::pvs::json::read(path).map_err(|e| e.to_string())
     }
 }
 
@@ -95,6 +95,11 @@ fn main() -> ExitCode {
     let run = || -> Result<bool, String> {
         let mut same = true;
         for (pa, pb) in pairs(a, b)? {
+            if !pb.exists() {
+                same = false;
+                println!("MISSING: {} (no {})", pa.display(), pb.display());
+                continue;
+            }
             let (da, db) = (read(&pa)?, read(&pb)?);
             let d = diff(&da, &db);
             let cells = da.cells.len();

@@ -22,7 +22,9 @@ use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
 use crate::plane::{DepthMap, OpenSides, PlaneFrame, PlaneJob, Reprojection, depth_down};
 use crate::project::occludee::{improved_rects, pixel_rect, span, standard_rect};
-use crate::project::planes::{LeaveOut, SweepInputs, plan_directions, plane_job};
+use crate::project::planes::{
+    DirectionPlan, LeaveOut, PlaneSettings, SweepInputs, plan_directions, plane_job,
+};
 use obvhs::bvh2::Bvh2;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -93,98 +95,29 @@ impl Prepared<'_> {
         let ps = self.settings.plane_settings(sweep);
         let plans = plan_directions(&cell64, &self.occluders, &self.sliceable, &ps);
         let rounds = plans.iter().map(|p| p.distances.len()).max().unwrap_or(0);
-        let (mut planes, mut projected) = (0, 0);
-        // In a sweep, the last plane rendered per direction (its umbra is carried onward), and
-        // whether the direction is finished (its umbra covers the whole plane: what lies behind
-        // within its frame is hidden on that plane already).
-        let mut finished = vec![false; plans.len()];
-        let mut hist: Vec<Vec<Rendered>> = vec![Vec::new(); plans.len()];
-        let mut prev_hdm: Vec<Option<(PlaneFrame, Hdm)>> = vec![None; plans.len()];
+        let mut work = CullerWork::default();
+        let mut dirs: Vec<DirectionState> = (0..plans.len()).map(|_| Default::default()).collect();
         let mut piece_hidden = vec![false; self.piece_boxes.len()];
         // Round k renders the k-th plane of every direction (nearest first); occluders of
         // objects hidden by earlier rounds are left out of later ones.
         for k in 0..rounds {
-            let jobs: Vec<(usize, (PlaneJob, Rect))> = plans
-                .par_iter()
-                .enumerate()
-                .filter(|(d, p)| k < p.distances.len() && !finished[*d])
-                .filter_map(|(d, p)| {
-                    // The rectangle holds what the previous plane's umbra may carry (older
-                    // planes' umbra reaching further out is left out: it would cost
-                    // resolution everywhere for a few pixels at the edge).
-                    let relevant = p.relevant_rect(k, &self.bounds)?;
-                    let carried = hist[d]
-                        .last()
-                        .and_then(|e| crate::sweep::carried_rect(&e.1, e.3?, e.4, p.distance(k)));
-                    let leave_out = LeaveOut {
-                        object: &|o| hidden[o as usize],
-                        // Occluders the previous plane already proves hidden add nothing.
-                        hidden: &|b| {
-                            prev_hdm[d].as_ref().is_some_and(|(f, h)| {
-                                self.test_box(f, h, b, &cell64, (0.0, f64::INFINITY))
-                                    == Coverage::Hidden
-                            })
-                        },
-                    };
-                    let slab = p
-                        .is_sweep()
-                        .then(|| self.gather_slab(p, k, &leave_out, &hidden, &node_done));
-                    let mut job = plane_job(
-                        p,
-                        k,
-                        self.scene,
-                        &self.sliceable,
-                        &ps,
-                        &leave_out,
-                        SweepInputs {
-                            carried,
-                            relevant: Some(relevant),
-                            slab: slab.as_ref(),
-                        },
-                    )?;
-                    if p.is_sweep() && carried.is_some() {
-                        job.reproject = reprojections(&hist[d], &job.frame, p.distance(k));
-                    }
-                    if p.is_sweep()
-                        && job.occluders.is_empty()
-                        && job.slices.is_empty()
-                        && job.reproject.is_empty()
-                    {
-                        return None;
-                    }
-                    Some((d, (job, relevant)))
-                })
-                .collect();
-            if jobs.is_empty() {
+            let round = Round {
+                k,
+                plans: &plans,
+                settings: &ps,
+                cell: &cell64,
+            };
+            let planned = self.plan_round(&round, &dirs, &hidden, &node_done);
+            if planned.is_empty() {
                 continue;
             }
-            let (dirs, jobs): (Vec<usize>, Vec<(PlaneJob, Rect)>) = jobs.into_iter().unzip();
-            let (jobs, relevant): (Vec<PlaneJob>, Vec<Rect>) = jobs.into_iter().unzip();
-            let maps = backend.render(&jobs)?;
-            let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
-            let ends: Vec<bool> = (jobs.iter().zip(&maps).zip(&dirs).zip(&relevant))
-                .map(|(((job, map), &d), &r)| ends_sweep(&plans[d], k, job, map, r))
-                .collect();
-            for ((((job, map), hdm), &d), &end) in
-                jobs.iter().zip(&maps).zip(&hdms).zip(&dirs).zip(&ends)
-            {
-                observe(job, map, hdm);
-                // In a sweep, boxes far behind this plane wait for later planes (the last plane,
-                // or one whose umbra covers its whole frame and so ends the direction, tests
-                // everything): the umbra is rarely finished this far in front of them, and
-                // testing every box on every plane is most of a forest's bake time.
-                let last = k + 1 == plans[d].distances.len() || end;
-                let after = if plans[d].is_sweep() && !last {
-                    (
-                        plans[d].slab_start(k),
-                        SWEEP_TEST_REACH * plans[d].distance(k),
-                    )
-                } else {
-                    (plans[d].slab_start(k), f64::INFINITY)
-                };
+            let rendered = render_round(&round, backend, planned)?;
+            for r in &rendered {
+                observe(&r.job, &r.map, &r.hdm);
+                let after = round.test_range(r);
                 self.traverse(
-                    job,
-                    hdm,
+                    &r.job,
+                    &r.hdm,
                     &cell64,
                     after,
                     &mut hidden,
@@ -193,31 +126,86 @@ impl Prepared<'_> {
                     &skip_test,
                 );
             }
-            planes += jobs.len();
-            projected += jobs.iter().map(|j| j.occluders.len()).sum::<usize>();
-            for (((((job, map), d), hdm), end), r) in jobs
-                .into_iter()
-                .zip(maps)
-                .zip(dirs)
-                .zip(hdms)
-                .zip(ends)
-                .zip(relevant)
-            {
-                if plans[d].is_sweep() {
-                    prev_hdm[d] = Some((job.frame.clone(), hdm));
-                    finished[d] = end;
-                    let m = Arc::new(map);
-                    let bounds = crate::sweep::umbra_bounds(&job.frame, &m);
-                    let open = crate::sweep::open_sides(&job.frame, r);
-                    push_history(&mut hist[d], (k, job.frame, m, bounds, open));
-                }
-            }
+            work.planes += rendered.len();
+            work.occluders_projected += rendered
+                .iter()
+                .map(|r| r.job.occluders.len())
+                .sum::<usize>();
+            carry_round(&round, &mut dirs, rendered);
         }
         state.hidden = hidden;
-        Ok(CullerWork {
-            planes,
-            occluders_projected: projected,
-        })
+        Ok(work)
+    }
+
+    /// The planes of round `k`, one per direction that has a `k`-th plane and is not
+    /// finished, planned in parallel: each plane's job (occluders, slices, reprojections) and
+    /// its relevant region. A plane with nothing beyond it, and a sweep plane with nothing to
+    /// render, are left out.
+    fn plan_round(
+        &self,
+        round: &Round,
+        dirs: &[DirectionState],
+        hidden: &[bool],
+        node_done: &[bool],
+    ) -> Vec<PlannedPlane> {
+        let k = round.k;
+        round
+            .plans
+            .par_iter()
+            .enumerate()
+            .filter(|(d, p)| k < p.distances.len() && !dirs[*d].finished)
+            .filter_map(|(d, p)| {
+                let dir = &dirs[d];
+                // The rectangle holds what the previous plane's umbra may carry (older
+                // planes' umbra reaching further out is left out: it would cost
+                // resolution everywhere for a few pixels at the edge).
+                let relevant = p.relevant_rect(k, &self.bounds)?;
+                let carried = dir.history.last().and_then(|e| {
+                    crate::sweep::carried_rect(&e.frame, e.umbra?, e.open, p.distance(k))
+                });
+                let leave_out = LeaveOut {
+                    object: &|o| hidden[o as usize],
+                    // Occluders the previous plane already proves hidden add nothing.
+                    hidden: &|b| {
+                        dir.prev.as_ref().is_some_and(|(f, h)| {
+                            self.test_box(f, h, b, round.cell, (0.0, f64::INFINITY))
+                                == Coverage::Hidden
+                        })
+                    },
+                };
+                let slab = p
+                    .is_sweep()
+                    .then(|| self.gather_slab(p, k, &leave_out, hidden, node_done));
+                let mut job = plane_job(
+                    p,
+                    k,
+                    self.scene,
+                    &self.sliceable,
+                    round.settings,
+                    &leave_out,
+                    SweepInputs {
+                        carried,
+                        relevant: Some(relevant),
+                        slab: slab.as_ref(),
+                    },
+                )?;
+                if p.is_sweep() && carried.is_some() {
+                    job.reproject = reprojections(&dir.history, &job.frame, p.distance(k));
+                }
+                if p.is_sweep()
+                    && job.occluders.is_empty()
+                    && job.slices.is_empty()
+                    && job.reproject.is_empty()
+                {
+                    return None;
+                }
+                Some(PlannedPlane {
+                    dir: d,
+                    job,
+                    relevant,
+                })
+            })
+            .collect()
     }
 
     /// The occluder parts of sweep plane `k`'s slab: a walk of the object hierarchy that
@@ -447,18 +435,144 @@ fn ends_sweep(
 /// A rectangle on a plane, world `(u, v)`: lower and upper corners.
 type Rect = (glam::DVec2, glam::DVec2);
 
-/// A rendered sweep plane kept for later reprojections: its index in the sweep, frame, map,
-/// the bounds of its umbra and its rectangle's open sides.
-type Rendered = (usize, PlaneFrame, Arc<DepthMap>, Option<Rect>, OpenSides);
+/// What one round of planes shares: its index (the `k`-th plane of every direction), the
+/// cell's direction plans, the plane settings and the cell.
+struct Round<'a> {
+    k: usize,
+    plans: &'a [DirectionPlan],
+    settings: &'a PlaneSettings,
+    cell: &'a DAabb,
+}
+
+impl Round<'_> {
+    /// The distances beyond the face of the boxes plane `r` tests (see `test_box`'s `range`).
+    /// In a sweep, boxes far behind this plane wait for later planes (the last plane, or one
+    /// whose umbra covers its whole frame and so ends the direction, tests everything): the
+    /// umbra is rarely finished this far in front of them, and testing every box on every
+    /// plane is most of a forest's bake time.
+    fn test_range(&self, r: &RenderedPlane) -> (f64, f64) {
+        let plan = &self.plans[r.dir];
+        let last = self.k + 1 == plan.distances.len() || r.ends;
+        if plan.is_sweep() && !last {
+            (
+                plan.slab_start(self.k),
+                SWEEP_TEST_REACH * plan.distance(self.k),
+            )
+        } else {
+            (plan.slab_start(self.k), f64::INFINITY)
+        }
+    }
+}
+
+/// What a direction keeps from round to round.
+#[derive(Default)]
+struct DirectionState {
+    /// In a sweep: the umbra covers the whole plane, so what lies behind within its frame is
+    /// hidden on that plane already and the direction needs no further plane.
+    finished: bool,
+    /// In a sweep: the planes kept for reprojection ([`push_history`]).
+    history: Vec<SweepPlane>,
+    /// In a sweep: the last plane's frame and Hierarchical Depth Map (occluders it proves
+    /// hidden are left out of the next plane).
+    prev: Option<(PlaneFrame, Hdm)>,
+}
+
+/// A plane planned for rendering: its direction, its job and the relevant region of its plane.
+struct PlannedPlane {
+    dir: usize,
+    job: PlaneJob,
+    relevant: Rect,
+}
+
+/// A rendered plane: [`PlannedPlane`] with its Depth Map, its Hierarchical Depth Map and
+/// whether it ends its direction's sweep ([`ends_sweep`]).
+struct RenderedPlane {
+    dir: usize,
+    job: PlaneJob,
+    relevant: Rect,
+    map: DepthMap,
+    hdm: Hdm,
+    ends: bool,
+}
+
+/// A rendered sweep plane kept for later reprojections.
+#[derive(Clone)]
+struct SweepPlane {
+    /// Its index in the sweep.
+    index: usize,
+    frame: PlaneFrame,
+    map: Arc<DepthMap>,
+    /// The bounds of its umbra ([`crate::sweep::umbra_bounds`]).
+    umbra: Option<Rect>,
+    /// Its rectangle's open sides.
+    open: OpenSides,
+}
+
+/// Renders a round's planes on the backend (one call for all) and builds their Hierarchical
+/// Depth Maps in parallel.
+///
+/// # Errors
+/// The backend's failure.
+fn render_round(
+    round: &Round,
+    backend: &dyn RasterBackend,
+    planned: Vec<PlannedPlane>,
+) -> Result<Vec<RenderedPlane>, BakeError> {
+    let (jobs, meta): (Vec<PlaneJob>, Vec<(usize, Rect)>) = planned
+        .into_iter()
+        .map(|p| (p.job, (p.dir, p.relevant)))
+        .unzip();
+    let maps = backend.render(&jobs)?;
+    let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
+    Ok((jobs.into_iter().zip(meta).zip(maps).zip(hdms))
+        .map(|(((job, (dir, relevant)), map), hdm)| {
+            let ends = ends_sweep(&round.plans[dir], round.k, &job, &map, relevant);
+            RenderedPlane {
+                dir,
+                job,
+                relevant,
+                map,
+                hdm,
+                ends,
+            }
+        })
+        .collect())
+}
+
+/// Keeps what the next rounds need of a round's sweep planes: each direction's last plane
+/// and its history for reprojection, and whether it ended its direction.
+fn carry_round(round: &Round, dirs: &mut [DirectionState], rendered: Vec<RenderedPlane>) {
+    for r in rendered {
+        if !round.plans[r.dir].is_sweep() {
+            continue;
+        }
+        let dir = &mut dirs[r.dir];
+        dir.finished = r.ends;
+        let map = Arc::new(r.map);
+        let umbra = crate::sweep::umbra_bounds(&r.job.frame, &map);
+        let open = crate::sweep::open_sides(&r.job.frame, r.relevant);
+        dir.prev = Some((r.job.frame.clone(), r.hdm));
+        push_history(
+            &mut dir.history,
+            SweepPlane {
+                index: round.k,
+                frame: r.job.frame,
+                map,
+                umbra,
+                open,
+            },
+        );
+    }
+}
 
 /// Adds plane `k` to a direction's history, keeping only what [`reprojections`] may use: the
 /// newest plane and, for every level `m ≥ 1`, the newest plane whose index is a multiple of
 /// `2^m` (a skip list, `O(log planes)` maps).
-fn push_history(history: &mut Vec<Rendered>, plane: Rendered) {
+fn push_history(history: &mut Vec<SweepPlane>, plane: SweepPlane) {
     history.push(plane);
-    let newest_at = |level: u32, h: &[Rendered]| {
+    let newest_at = |level: u32, h: &[SweepPlane]| {
         h.iter()
-            .rposition(|e| e.0 % (1usize << level) == 0)
+            .rposition(|e| e.index % (1usize << level) == 0)
             .unwrap_or(usize::MAX)
     };
     let keep: Vec<bool> = (0..history.len())
@@ -475,14 +589,16 @@ fn push_history(history: &mut Vec<Rendered>, plane: Rendered) {
 /// side): umbra from far back that reaches this plane through a few reprojections instead of a
 /// chain of them loses less. On the coarse forest (5 cells, 48 planes, resolution 256) this
 /// took the culled share from 46 % to 54 %.
-fn reprojections(history: &[Rendered], to: &PlaneFrame, distance: f64) -> Vec<Reprojection> {
+fn reprojections(history: &[SweepPlane], to: &PlaneFrame, distance: f64) -> Vec<Reprojection> {
     history
         .iter()
         .rev()
         .filter(|e| {
-            e.3.is_some_and(|b| crate::sweep::carried_rect(&e.1, b, e.4, distance).is_some())
+            (e.umbra).is_some_and(|b| {
+                crate::sweep::carried_rect(&e.frame, b, e.open, distance).is_some()
+            })
         })
-        .map(|e| Reprojection::with_open_sides(&e.1, to, e.2.clone(), e.4))
+        .map(|e| Reprojection::with_open_sides(&e.frame, to, e.map.clone(), e.open))
         .collect()
 }
 
