@@ -17,18 +17,25 @@
 //!
 //! ```no_run
 //! # #[cfg(feature = "bake")] {
-//! use umbrasweep::{bake, cells, scene};
+//! use umbrasweep::{BakeSettings, CpuBackend, bake, cells, scene};
 //! let scene = scene::load("data/demo_city.obj".as_ref()).unwrap();
 //! let cells = cells::load_json("data/demo_city_cells.json".as_ref()).unwrap();
-//! let settings = bake::BakeSettings::default();
-//! let backend = umbrasweep::backend::cpu::CpuBackend::new();
-//! let result = bake::bake(&scene, &cells, &settings, &backend, None).unwrap();
+//! let result = bake(&scene, &cells, &BakeSettings::default(), &CpuBackend::new(), None).unwrap();
 //! println!("{} cells baked", result.cells.len());
 //! # }
 //! ```
 
 pub mod geom;
 pub mod pvs;
+
+pub use pvs::{PvsDatabase, PvsDocument};
+
+#[cfg(feature = "bake")]
+pub use backend::{RasterBackend, cpu::CpuBackend, gpu::GpuBackend};
+#[cfg(feature = "bake")]
+pub use bake::{BakeError, BakeResult, BakeSettings, Culler, SweepChoice, bake, to_document};
+#[cfg(feature = "bake")]
+pub use scene::Scene;
 
 #[cfg(feature = "bake")]
 pub mod backend;
