@@ -27,6 +27,7 @@
 
 pub mod geom;
 pub mod pvs;
+pub mod settings;
 
 pub use pvs::{PvsDatabase, PvsDocument};
 

@@ -19,7 +19,8 @@ use crate::backend::{BackendError, RasterBackend};
 use crate::geom::Aabb;
 use crate::hdm::Hdm;
 use crate::plane::{DepthMap, PlaneJob};
-use crate::project::planes::{Placement, PlaneSettings, Spacing, SweepSettings};
+use crate::project::planes::PlaneSettings;
+use crate::settings::Spacing;
 use crate::pvs::{
     FORMAT, PvsCell, PvsCullerSummary, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION,
 };
@@ -27,136 +28,11 @@ use crate::scene::Scene;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Everything that shapes a bake.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BakeSettings {
-    /// Depth Map resolution per side (a power of two): each plane's map has `resolution²`
-    /// pixels. Default 256.
-    pub resolution: u32,
-    /// How much wider than tall, or taller than wide, an occlusion sweep plane's Depth Map may
-    /// be (a power of two): each map follows its rectangle's shape, keeping `resolution²`
-    /// pixels ([`crate::plane::map_size`]); 1 keeps every map square. Separate planes (no
-    /// sweep) stay square: on Munich's street cells stretched maps culled 86.7 % against
-    /// 90.0 %. Default 2: on the coarse forest 2, 4 and 8 cull the same (86.7 % against
-    /// 84.5 % for square maps), and more stretch lets more small Projections cover a whole
-    /// pixel, which costs time where they fuse into nothing (the fine forest: 0.99 s per cell
-    /// at 2, 1.28 s at 8, 0.81 s square).
-    pub max_stretch: u32,
-    /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
-    /// Default 1.5 (the paper's).
-    pub extend: f64,
-    /// Projection planes per direction just behind occluders (all used). Default 4.
-    pub planes: u32,
-    /// Further planes per direction through the middle of the heaviest closed occluders,
-    /// receiving their slices. Default 1.
-    pub slice_planes: u32,
-    /// Where the planes of a direction go. Default geometric spacing.
-    pub placement: Placement,
-    /// Treat non-opaque (alpha-tested, blended) triangles as occluders. May cull visible
-    /// objects. Default false.
-    pub alpha_occluders: bool,
-    /// Only objects whose name matches this glob are occluders (all stay occludees).
-    pub occluders: Option<String>,
-    /// Use the improved occludee Projection of §4 for boxes in front of a plane. Default true.
-    pub improved_projection: bool,
-    /// Occlusion sweep (§5) instead of separate planes: on, off, or chosen per scene
-    /// ([`SweepChoice::Auto`], the default; see [`choose_sweep`]).
-    pub sweep: SweepChoice,
-    /// The sweep's planes per direction (at most), kernel size and spacing.
-    pub sweep_settings: SweepSettings,
-    /// Bake each cell as the union of the PVS of sub-cells no larger than this along any axis
-    /// (exact, and conservative: a point of the cell lies in one of its sub-cells). Default none.
-    pub subcell: Option<f64>,
-}
-
-/// Whether a bake sweeps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum SweepChoice {
-    /// The sweep for scenes dominated by small occluders ([`choose_sweep`]).
-    #[default]
-    Auto,
-    On,
-    Off,
-}
+pub use crate::settings::{BakeSettings, SettingsError, SweepChoice};
 
 impl BakeSettings {
-    /// The defaults, as a `const fn` for presets.
-    pub const fn default_settings() -> Self {
-        BakeSettings {
-            resolution: 256,
-            max_stretch: 2,
-            extend: 1.5,
-            planes: 4,
-            slice_planes: 1,
-            placement: Placement::Geometric,
-            alpha_occluders: false,
-            occluders: None,
-            improved_projection: true,
-            sweep: SweepChoice::Auto,
-            sweep_settings: SweepSettings::default_settings(),
-            subcell: None,
-        }
-    }
-
-    /// Checks the values.
-    ///
-    /// # Errors
-    /// A message naming the option at fault.
-    pub fn check(&self) -> Result<(), String> {
-        if !self.resolution.is_power_of_two() || !(4..=8192).contains(&self.resolution) {
-            return Err(format!(
-                "--resolution {}: must be a power of two between 4 and 8192 (e.g. 256)",
-                self.resolution
-            ));
-        }
-        if !self.max_stretch.is_power_of_two() || self.max_stretch > 64 {
-            return Err(format!(
-                "--max-stretch {}: must be a power of two between 1 (square maps) and 64",
-                self.max_stretch
-            ));
-        }
-        if !(self.extend.is_finite() && self.extend >= 1.0) {
-            return Err(format!(
-                "--extend {}: must be a number ≥ 1 (e.g. 1.5)",
-                self.extend
-            ));
-        }
-        if self.planes == 0 || self.planes > 64 {
-            return Err(format!(
-                "--planes {}: must be between 1 and 64",
-                self.planes
-            ));
-        }
-        let sw = &self.sweep_settings;
-        if sw.planes == 0 || sw.planes > 256 {
-            return Err(format!(
-                "--sweep-planes {}: must be between 1 and 256",
-                sw.planes
-            ));
-        }
-        if !(2..=64).contains(&sw.kernel) {
-            return Err(format!(
-                "--kernel {}: must be between 2 and 64 pixels (the paper uses 5)",
-                sw.kernel
-            ));
-        }
-        if let Some(s) = self.subcell
-            && !(s.is_finite() && s > 0.0)
-        {
-            return Err(format!(
-                "--subcell {s}: must be a positive size in scene units (e.g. 1)"
-            ));
-        }
-        if self.slice_planes > 16 {
-            return Err(format!(
-                "--slice-planes {}: must be between 0 and 16",
-                self.slice_planes
-            ));
-        }
-        Ok(())
-    }
-
-    fn plane_settings(&self, sweep: bool) -> PlaneSettings {
+    /// The plane layout of this bake's cells: separate planes, or (`sweep`) an occlusion sweep.
+    pub(crate) fn plane_settings(&self, sweep: bool) -> PlaneSettings {
         PlaneSettings {
             resolution: self.resolution,
             // Separate planes keep square maps: on cities stretched ones lost culling
@@ -171,17 +47,13 @@ impl BakeSettings {
     }
 }
 
-impl Default for BakeSettings {
-    fn default() -> Self {
-        Self::default_settings()
-    }
-}
 
 /// Bake failures.
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
-    #[error("{0}")]
-    Settings(String),
+    /// A setting out of its range (or an `--occluders` pattern that is not a glob).
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
     #[error(transparent)]
     Backend(#[from] BackendError),
 }

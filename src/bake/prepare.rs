@@ -161,9 +161,11 @@ impl<'a> Prepared<'a> {
             Some(pat) => {
                 let glob = globset::Glob::new(pat)
                     .map_err(|e| {
-                        BakeError::Settings(format!(
-                            "--occluders {pat:?}: not a valid pattern: {e}"
-                        ))
+                        BakeError::Settings(crate::settings::SettingsError {
+                            option: "occluders",
+                            value: format!("{pat:?}"),
+                            expected: format!("not a valid pattern: {e}"),
+                        })
                     })?
                     .compile_matcher();
                 scene

@@ -22,15 +22,7 @@ use crate::plane::{OccluderSet, PlaneFrame, PlaneJob};
 use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 
-/// Where the planes of a direction go.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Placement {
-    /// Geometric spacing between the nearest and the far occluders (default: measured best).
-    #[default]
-    Geometric,
-    /// Weighted quantiles of the occluders' far distances (weight `extent² / distance²`).
-    Quantile,
-}
+pub use crate::settings::{Placement, Spacing, SweepSettings};
 
 /// How planes are laid out; see [`crate::bake::BakeSettings`] for the user-facing knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -64,44 +56,6 @@ impl PlaneSettings {
             placement: Placement::Geometric,
             sweep: None,
         }
-    }
-}
-
-/// How the planes of an occlusion sweep are spaced.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Spacing {
-    /// The paper's rule: each step is as long as makes the kernel (the inverse image of the cell
-    /// seen through one pixel of the previous plane) `K` pixels wide on the next,
-    /// `ΔD = D·(K−1)·P / (C·N)` — with the resolution `N`, which the printed formula lacks.
-    Kernel,
-    /// `planes` planes spaced geometrically between the nearest occluders and the far ones.
-    #[default]
-    Geometric,
-}
-
-/// The layout of an occlusion sweep (one per direction).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SweepSettings {
-    /// The most planes per direction (both spacings). Default 24.
-    pub planes: u32,
-    /// Kernel size `K` in pixels for [`Spacing::Kernel`]. Default 5 (the paper's).
-    pub kernel: u32,
-    pub spacing: Spacing,
-}
-
-impl SweepSettings {
-    pub const fn default_settings() -> Self {
-        SweepSettings {
-            planes: 24,
-            kernel: 5,
-            spacing: Spacing::Geometric,
-        }
-    }
-}
-
-impl Default for SweepSettings {
-    fn default() -> Self {
-        Self::default_settings()
     }
 }
 

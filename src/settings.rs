@@ -1,0 +1,384 @@
+//! The bake settings as data: one serde type, [`BakeSettings`], that the CLI fills, the bake
+//! checks ([`BakeSettings::check`], a typed [`SettingsError`]), the PVS document records as it
+//! is (`settings` in the JSON document, flattened beside `backend`) and `report` and `bench`
+//! read back. Its defaults are written once ([`BakeSettings::default_settings`]).
+//!
+//! Built with the `runtime` feature too (serde only), since the PVS document holds it.
+//!
+//! Reading documents written by older versions: a field they lack takes the value the bake
+//! that wrote them used — `sweep` false, `subcell` none, `max_stretch` 1 (square maps; older
+//! documents wrote 0 for it, read as 1 too) — and every other absent field its default.
+
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+/// Everything that shapes a bake.
+///
+/// ```
+/// use umbrasweep::settings::{BakeSettings, SweepChoice};
+/// let s = BakeSettings { resolution: 512, sweep: SweepChoice::On, ..BakeSettings::default() };
+/// assert!(s.check().is_ok());
+/// let json = serde_json::to_string(&s).unwrap();
+/// assert!(json.contains(r#""resolution":512"#) && json.contains(r#""sweep":true"#));
+/// assert_eq!(serde_json::from_str::<BakeSettings>(&json).unwrap(), s);
+/// ```
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct BakeSettings {
+    /// Depth Map resolution per side (a power of two): each plane's map has `resolution²`
+    /// pixels. Default 256.
+    pub resolution: u32,
+    /// How much wider than tall, or taller than wide, an occlusion sweep plane's Depth Map may
+    /// be (a power of two): each map follows its rectangle's shape, keeping `resolution²`
+    /// pixels (`plane::map_size`); 1 keeps every map square. Separate planes (no
+    /// sweep) stay square: on Munich's street cells stretched maps culled 86.7 % against
+    /// 90.0 %. Default 2: on the coarse forest 2, 4 and 8 cull the same (86.7 % against
+    /// 84.5 % for square maps), and more stretch lets more small Projections cover a whole
+    /// pixel, which costs time where they fuse into nothing (the fine forest: 0.99 s per cell
+    /// at 2, 1.28 s at 8, 0.81 s square).
+    #[serde(default = "square_maps", deserialize_with = "stretch_of_old_documents")]
+    pub max_stretch: u32,
+    /// The plane rectangle is at most the 90° frustum from the cell's face scaled by this.
+    /// Default 1.5 (the paper's).
+    pub extend: f64,
+    /// Projection planes per direction just behind occluders (all used). Default 4.
+    pub planes: u32,
+    /// Further planes per direction through the middle of the heaviest closed occluders,
+    /// receiving their slices. Default 1.
+    pub slice_planes: u32,
+    /// Where the planes of a direction go. Default geometric spacing.
+    pub placement: Placement,
+    /// Treat non-opaque (alpha-tested, blended) triangles as occluders. May cull visible
+    /// objects. Default false.
+    pub alpha_occluders: bool,
+    /// Only objects whose name matches this glob are occluders (all stay occludees).
+    pub occluders: Option<String>,
+    /// Use the improved occludee Projection of §4 for boxes in front of a plane. Default true.
+    pub improved_projection: bool,
+    /// Occlusion sweep (§5) instead of separate planes: on, off, or chosen per scene
+    /// ([`SweepChoice::Auto`], the default). A PVS document records what the bake chose
+    /// (`true` or `false`).
+    #[serde(default = "sweep_of_old_documents")]
+    pub sweep: SweepChoice,
+    /// The sweep's planes per direction (at most), kernel size and spacing (recorded as
+    /// `sweep_planes`, `kernel` and `sweep_spacing`).
+    #[serde(flatten)]
+    pub sweep_settings: SweepSettings,
+    /// Bake each cell as the union of the PVS of sub-cells no larger than this along any axis
+    /// (exact, and conservative: a point of the cell lies in one of its sub-cells). Default none.
+    pub subcell: Option<f64>,
+}
+
+fn square_maps() -> u32 {
+    1
+}
+
+/// Documents written before stretched maps recorded `max_stretch` 0: their maps were square.
+fn stretch_of_old_documents<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
+    Ok(u32::deserialize(d)?.max(1))
+}
+
+fn sweep_of_old_documents() -> SweepChoice {
+    SweepChoice::Off
+}
+
+/// Whether a bake sweeps. Serialized as `true` (on), `false` (off) or `"auto"`; read from those
+/// or from `"on"`, `"off"`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SweepChoice {
+    /// The sweep for scenes dominated by small occluders (`bake::choose_sweep`).
+    #[default]
+    Auto,
+    /// Always the occlusion sweep.
+    On,
+    /// Never the occlusion sweep: extended projections on separate planes.
+    Off,
+}
+
+impl Serialize for SweepChoice {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            SweepChoice::Auto => s.serialize_str("auto"),
+            SweepChoice::On => s.serialize_bool(true),
+            SweepChoice::Off => s.serialize_bool(false),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for SweepChoice {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Repr {
+            Bool(bool),
+            Name(String),
+        }
+        match Repr::deserialize(d)? {
+            Repr::Bool(true) => Ok(SweepChoice::On),
+            Repr::Bool(false) => Ok(SweepChoice::Off),
+            Repr::Name(n) => match n.as_str() {
+                "auto" => Ok(SweepChoice::Auto),
+                "on" => Ok(SweepChoice::On),
+                "off" => Ok(SweepChoice::Off),
+                other => Err(serde::de::Error::custom(format!(
+                    "sweep {other:?}: expected true, false or \"auto\""
+                ))),
+            },
+        }
+    }
+}
+
+/// Where the planes of a direction go.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Placement {
+    /// Geometric spacing between the nearest and the far occluders (default: measured best).
+    #[default]
+    Geometric,
+    /// Weighted quantiles of the occluders' far distances (weight `extent² / distance²`).
+    Quantile,
+}
+
+/// How the planes of an occlusion sweep are spaced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Spacing {
+    /// The paper's rule: each step is as long as makes the kernel (the inverse image of the cell
+    /// seen through one pixel of the previous plane) `K` pixels wide on the next,
+    /// `ΔD = D·(K−1)·P / (C·N)` — with the resolution `N`, which the printed formula lacks.
+    Kernel,
+    /// `planes` planes spaced geometrically between the nearest occluders and the far ones.
+    #[default]
+    Geometric,
+}
+
+/// The layout of an occlusion sweep (one per direction).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SweepSettings {
+    /// The most planes per direction (both spacings). Default 24.
+    #[serde(rename = "sweep_planes")]
+    pub planes: u32,
+    /// Kernel size `K` in pixels for [`Spacing::Kernel`]. Default 5 (the paper's).
+    pub kernel: u32,
+    /// How the planes are spaced. Default geometric.
+    #[serde(rename = "sweep_spacing")]
+    pub spacing: Spacing,
+}
+
+impl SweepSettings {
+    /// The defaults, as a `const fn` for presets.
+    pub const fn default_settings() -> Self {
+        SweepSettings {
+            planes: 24,
+            kernel: 5,
+            spacing: Spacing::Geometric,
+        }
+    }
+}
+
+impl Default for SweepSettings {
+    fn default() -> Self {
+        Self::default_settings()
+    }
+}
+
+/// A setting out of its range: the option (as the CLI spells it, without `--`), the value
+/// given and what is expected. Its message reads `--OPTION VALUE: EXPECTED`.
+///
+/// When this occurs: [`BakeSettings::check`] (every bake calls it) found a value the baker
+/// cannot use. How to handle: change that option as the message says.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("--{option} {value}: {expected}")]
+pub struct SettingsError {
+    /// The option, as the CLI spells it without `--` (`resolution`, `sweep-planes`, …).
+    pub option: &'static str,
+    /// The value given.
+    pub value: String,
+    /// What is expected.
+    pub expected: String,
+}
+
+impl SettingsError {
+    fn new(option: &'static str, value: impl ToString, expected: &str) -> Self {
+        SettingsError {
+            option,
+            value: value.to_string(),
+            expected: expected.to_string(),
+        }
+    }
+}
+
+impl BakeSettings {
+    /// The defaults, as a `const fn` for presets.
+    pub const fn default_settings() -> Self {
+        BakeSettings {
+            resolution: 256,
+            max_stretch: 2,
+            extend: 1.5,
+            planes: 4,
+            slice_planes: 1,
+            placement: Placement::Geometric,
+            alpha_occluders: false,
+            occluders: None,
+            improved_projection: true,
+            sweep: SweepChoice::Auto,
+            sweep_settings: SweepSettings::default_settings(),
+            subcell: None,
+        }
+    }
+
+    /// Checks the values.
+    ///
+    /// # Errors
+    /// The first option out of its range, with its value and what is expected.
+    pub fn check(&self) -> Result<(), SettingsError> {
+        if !self.resolution.is_power_of_two() || !(4..=8192).contains(&self.resolution) {
+            return Err(SettingsError::new(
+                "resolution",
+                self.resolution,
+                "must be a power of two between 4 and 8192 (e.g. 256)",
+            ));
+        }
+        if !self.max_stretch.is_power_of_two() || self.max_stretch > 64 {
+            return Err(SettingsError::new(
+                "max-stretch",
+                self.max_stretch,
+                "must be a power of two between 1 (square maps) and 64",
+            ));
+        }
+        if !(self.extend.is_finite() && self.extend >= 1.0) {
+            return Err(SettingsError::new(
+                "extend",
+                self.extend,
+                "must be a number ≥ 1 (e.g. 1.5)",
+            ));
+        }
+        if self.planes == 0 || self.planes > 64 {
+            return Err(SettingsError::new(
+                "planes",
+                self.planes,
+                "must be between 1 and 64",
+            ));
+        }
+        let sw = &self.sweep_settings;
+        if sw.planes == 0 || sw.planes > 256 {
+            return Err(SettingsError::new(
+                "sweep-planes",
+                sw.planes,
+                "must be between 1 and 256",
+            ));
+        }
+        if !(2..=64).contains(&sw.kernel) {
+            return Err(SettingsError::new(
+                "kernel",
+                sw.kernel,
+                "must be between 2 and 64 pixels (the paper uses 5)",
+            ));
+        }
+        if let Some(s) = self.subcell
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(SettingsError::new(
+                "subcell",
+                s,
+                "must be a positive size in scene units (e.g. 1)",
+            ));
+        }
+        if self.slice_planes > 16 {
+            return Err(SettingsError::new(
+                "slice-planes",
+                self.slice_planes,
+                "must be between 0 and 16",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        Self::default_settings()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_name_the_option_the_value_and_what_is_expected() {
+        let s = BakeSettings {
+            resolution: 300,
+            ..BakeSettings::default()
+        };
+        let err = s.check().unwrap_err();
+        assert_eq!(err.option, "resolution");
+        assert_eq!(err.value, "300");
+        assert_eq!(
+            err.to_string(),
+            "--resolution 300: must be a power of two between 4 and 8192 (e.g. 256)"
+        );
+        let s = BakeSettings {
+            sweep_settings: SweepSettings {
+                kernel: 1,
+                ..SweepSettings::default()
+            },
+            ..BakeSettings::default()
+        };
+        assert_eq!(s.check().unwrap_err().option, "kernel");
+        assert!(BakeSettings::default().check().is_ok());
+    }
+
+    #[test]
+    fn the_recorded_form_has_the_documents_keys_and_reads_back() {
+        let s = BakeSettings {
+            sweep: SweepChoice::On,
+            subcell: Some(2.0),
+            placement: Placement::Quantile,
+            ..BakeSettings::default()
+        };
+        let v = serde_json::to_value(&s).unwrap();
+        for key in [
+            "resolution",
+            "max_stretch",
+            "extend",
+            "planes",
+            "slice_planes",
+            "placement",
+            "alpha_occluders",
+            "occluders",
+            "improved_projection",
+            "sweep",
+            "sweep_planes",
+            "kernel",
+            "sweep_spacing",
+            "subcell",
+        ] {
+            assert!(v.get(key).is_some(), "{key} in {v}");
+        }
+        assert_eq!(v["sweep"], true);
+        assert_eq!(v["placement"], "quantile");
+        assert_eq!(v["sweep_spacing"], "geometric");
+        assert_eq!(serde_json::from_value::<BakeSettings>(v).unwrap(), s);
+        let auto = serde_json::to_value(BakeSettings::default()).unwrap();
+        assert_eq!(auto["sweep"], "auto");
+    }
+
+    #[test]
+    fn documents_from_older_versions_read_as_their_bakes_ran() {
+        // Before the sweep (no sweep fields) and before stretched maps (max_stretch 0).
+        let old: BakeSettings =
+            serde_json::from_str(r#"{"resolution": 512, "planes": 8, "max_stretch": 0}"#).unwrap();
+        assert_eq!(old.resolution, 512);
+        assert_eq!(old.planes, 8);
+        assert_eq!(old.max_stretch, 1);
+        assert_eq!(old.sweep, SweepChoice::Off);
+        assert_eq!(old.subcell, None);
+        assert_eq!(old.sweep_settings, SweepSettings::default());
+        assert_eq!(old.extend, 1.5);
+        let older: BakeSettings = serde_json::from_str("{}").unwrap();
+        assert_eq!(older.max_stretch, 1);
+        assert!(serde_json::from_str::<BakeSettings>(r#"{"sweep": "maybe"}"#).is_err());
+        assert!(serde_json::from_str::<BakeSettings>(r#"{"placement": "random"}"#).is_err());
+    }
+}
