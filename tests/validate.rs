@@ -308,24 +308,34 @@ fn missing_visible_object_is_a_false_cull_with_a_witness_ray() {
 fn same_seed_gives_the_same_report_on_one_and_two_threads() {
     let s = three_box_scene();
     let d = doc(&s, vec![0, 1], false);
+    same_report_on_one_and_two_threads(&s, &d, &opts(30_001), |_| {});
+}
+
+/// Checks `d` with `o` on pools of 1 and 2 threads (`inspect` looks at each report): the JSON
+/// reports must be identical, and another seed must change them.
+fn same_report_on_one_and_two_threads(
+    s: &Scene,
+    d: &PvsDocument,
+    o: &CheckOptions,
+    inspect: impl Fn(&umbrasweep::validate::Report),
+) {
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
-        let r = pool.install(|| check(&s, &d, &opts(30_001)).unwrap());
+        let r = pool.install(|| check(s, d, o).unwrap());
+        inspect(&r);
         serde_json::to_string(&r).unwrap()
     };
     let one = run(1);
     assert_eq!(one, run(2));
     assert_eq!(one, run(2));
-    let other_seed = {
-        let o = CheckOptions {
-            seed: 8,
-            ..opts(30_001)
-        };
-        serde_json::to_string(&check(&s, &d, &o).unwrap()).unwrap()
+    let other = CheckOptions {
+        seed: o.seed + 1,
+        ..o.clone()
     };
+    let other_seed = serde_json::to_string(&check(s, d, &other).unwrap()).unwrap();
     assert_ne!(one, other_seed, "the seed should change the witness rays");
 }
 
@@ -778,12 +788,7 @@ fn hunt_gives_the_same_report_on_one_and_two_threads() {
         (Aabb::new(vec3(1.0, 1.0, 0.0), vec3(2.0, 2.0, 1.0)), keep),
     ];
     let d = doc_cells(&s, cells, false);
-    let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let r = pool.install(|| check(&s, &d, &hunt_opts(30_001)).unwrap());
+    same_report_on_one_and_two_threads(&s, &d, &hunt_opts(30_001), |r| {
         assert_eq!(r.rays_per_culled_object, Some(5_000));
         assert!(r.false_culls >= 1, "{}", r.table());
         assert!(
@@ -792,19 +797,7 @@ fn hunt_gives_the_same_report_on_one_and_two_threads() {
                 .iter()
                 .any(|f| f.object == SLIT_TARGET)
         );
-        serde_json::to_string(&r).unwrap()
-    };
-    let one = run(1);
-    assert_eq!(one, run(2));
-    assert_eq!(one, run(2));
-    let other_seed = {
-        let o = CheckOptions {
-            seed: 8,
-            ..hunt_opts(30_001)
-        };
-        serde_json::to_string(&check(&s, &d, &o).unwrap()).unwrap()
-    };
-    assert_ne!(one, other_seed, "the seed should change the witness rays");
+    });
 }
 
 #[test]

@@ -19,34 +19,15 @@ use crate::backend::{BackendError, RasterBackend};
 use crate::geom::Aabb;
 use crate::hdm::Hdm;
 use crate::plane::{DepthMap, PlaneJob};
-use crate::project::planes::PlaneSettings;
-use crate::settings::Spacing;
 use crate::pvs::{
     FORMAT, PvsCell, PvsCullerSummary, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION,
 };
 use crate::scene::Scene;
+use crate::settings::Spacing;
 use rayon::prelude::*;
 use std::time::Instant;
 
 pub use crate::settings::{BakeSettings, SettingsError, SweepChoice};
-
-impl BakeSettings {
-    /// The plane layout of this bake's cells: separate planes, or (`sweep`) an occlusion sweep.
-    pub(crate) fn plane_settings(&self, sweep: bool) -> PlaneSettings {
-        PlaneSettings {
-            resolution: self.resolution,
-            // Separate planes keep square maps: on cities stretched ones lost culling
-            // (Munich's 50 street cells: 90.0 % culled square, 86.7 % stretched up to 2×).
-            max_stretch: if sweep { self.max_stretch } else { 1 },
-            extend: self.extend,
-            planes: self.planes,
-            slice_planes: self.slice_planes,
-            placement: self.placement,
-            sweep: sweep.then_some(self.sweep_settings),
-        }
-    }
-}
-
 
 /// Bake failures.
 #[derive(Debug, thiserror::Error)]

@@ -92,7 +92,7 @@ impl Prepared<'_> {
         let skip_test =
             |o: usize, hidden: &[bool]| hidden[o] || known_visible.is_some_and(|k| k[o]);
         let cell64 = cell.to_f64();
-        let ps = self.settings.plane_settings(sweep);
+        let ps = PlaneSettings::of(&self.settings, sweep);
         let plans = plan_directions(&cell64, &self.occluders, &self.sliceable, &ps);
         let rounds = plans.iter().map(|p| p.distances.len()).max().unwrap_or(0);
         let mut work = CullerWork::default();

@@ -22,6 +22,7 @@ use crate::plane::{OccluderSet, PlaneFrame, PlaneJob};
 use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 
+use crate::settings::BakeSettings;
 pub use crate::settings::{Placement, Spacing, SweepSettings};
 
 /// How planes are laid out; see [`crate::bake::BakeSettings`] for the user-facing knobs.
@@ -46,22 +47,27 @@ pub struct PlaneSettings {
 }
 
 impl PlaneSettings {
-    pub const fn default_settings() -> Self {
+    /// The plane layout of a bake's cells with `settings`: separate planes, or (`sweep`) an
+    /// occlusion sweep.
+    pub fn of(settings: &BakeSettings, sweep: bool) -> Self {
         PlaneSettings {
-            resolution: 256,
-            max_stretch: 2,
-            extend: 1.5,
-            planes: 4,
-            slice_planes: 1,
-            placement: Placement::Geometric,
-            sweep: None,
+            resolution: settings.resolution,
+            // Separate planes keep square maps: on cities stretched ones lost culling
+            // (Munich's 50 street cells: 90.0 % culled square, 86.7 % stretched up to 2×).
+            max_stretch: if sweep { settings.max_stretch } else { 1 },
+            extend: settings.extend,
+            planes: settings.planes,
+            slice_planes: settings.slice_planes,
+            placement: settings.placement,
+            sweep: sweep.then_some(settings.sweep_settings),
         }
     }
 }
 
 impl Default for PlaneSettings {
+    /// Separate planes with [`BakeSettings::default`].
     fn default() -> Self {
-        Self::default_settings()
+        Self::of(&BakeSettings::default(), false)
     }
 }
 
