@@ -11,7 +11,8 @@ use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{BakeSettings, bake, to_document};
 use umbrasweep::pvs::binary::{self, FORMAT_VERSION, HEADER_LEN, MAX_DEPTH, crc32};
 use umbrasweep::pvs::{
-    CellId, PvsCell, PvsDatabase, PvsDocument, PvsErrorKind, PvsObject, PvsSummary,
+    CellId, EncodeError, PvsCell, PvsDatabase, PvsDocument, PvsErrorKind, PvsJsonErrorKind,
+    PvsObject, PvsSummary, PvsWriteErrorKind,
 };
 
 /// The demo city baked once (CPU backend, default settings).
@@ -182,20 +183,48 @@ fn empty_and_tiny_documents() {
 fn encode_refuses_what_it_cannot_hold() {
     let mut doc = synthetic(2, 1, 10, 1);
     doc.cells[1].visible = vec![3, 2];
-    assert!(binary::encode(&doc).unwrap_err().contains("ascending"));
-    doc.cells[1].visible = vec![10];
-    assert!(
-        binary::encode(&doc)
-            .unwrap_err()
-            .contains("only 10 objects")
+    let e = binary::encode(&doc).unwrap_err();
+    assert_eq!(
+        e,
+        EncodeError::NotAscending {
+            cell: 1,
+            previous: 3,
+            id: 2
+        }
     );
+    assert!(e.to_string().contains("ascending"), "{e}");
+    doc.cells[1].visible = vec![10];
+    let e = binary::encode(&doc).unwrap_err();
+    assert!(matches!(
+        e,
+        EncodeError::MissingObject {
+            cell: 1,
+            object: 10,
+            objects: 10
+        }
+    ));
+    assert!(e.to_string().contains("only 10 objects"), "{e}");
     doc.cells[1].visible = vec![];
     doc.objects[4].id = 7;
-    assert!(
-        binary::encode(&doc)
-            .unwrap_err()
-            .contains("object 4 has id 7")
+    let e = binary::encode(&doc).unwrap_err();
+    assert!(matches!(
+        e,
+        EncodeError::ObjectOutOfOrder { index: 4, id: 7 }
+    ));
+    assert!(e.to_string().contains("object 4 has id 7"), "{e}");
+    // Writing names the file and leaves nothing behind.
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("bad.pvs");
+    let e = binary::write(&p, &doc).unwrap_err();
+    assert!(matches!(e.kind, PvsWriteErrorKind::Encode(_)), "{e}");
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "{}: object 4 has id 7: the .pvs format numbers objects 0, 1, 2… in order",
+            p.display()
+        )
     );
+    assert!(!p.exists());
 }
 
 fn kind(bytes: &[u8]) -> PvsErrorKind {
@@ -438,6 +467,61 @@ fn open_names_the_file() {
     assert!(e.to_string().contains("truncated"), "{e}");
     let e = PvsDatabase::open(dir.path().join("missing.pvs")).unwrap_err();
     assert!(matches!(e.kind, PvsErrorKind::Io(_)), "{e}");
+}
+
+#[test]
+fn writers_and_the_json_reader_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    // No such directory: an I/O error naming the file, once.
+    let p = dir.path().join("missing").join("city.pvs");
+    for e in [
+        binary::write(&p, city()).unwrap_err(),
+        umbrasweep::pvs::json::write(&p, city()).unwrap_err(),
+    ] {
+        assert!(matches!(e.kind, PvsWriteErrorKind::Io(_)), "{e}");
+        let text = e.to_string();
+        let name = p.display().to_string();
+        assert!(text.starts_with(&format!("{name}: ")), "{e}");
+        assert_eq!(text.matches(&name).count(), 1, "{e}");
+    }
+    // The JSON reader: missing, binary, other format, missing object.
+    let read = |p: &Path| umbrasweep::pvs::json::read(p).unwrap_err();
+    let e = read(&dir.path().join("none.json"));
+    assert!(matches!(e.kind, PvsJsonErrorKind::Io(_)), "{e}");
+    assert!(e.to_string().contains("none.json: cannot read: "), "{e}");
+    let bin = dir.path().join("city.pvs");
+    std::fs::write(&bin, city_bytes()).unwrap();
+    let e = read(&bin);
+    assert!(
+        matches!(e.kind, PvsJsonErrorKind::Io(_) | PvsJsonErrorKind::Parse(_)),
+        "{e}"
+    );
+    let mut doc = synthetic(2, 1, 3, 1);
+    doc.format = "other".into();
+    let js = dir.path().join("doc.json");
+    std::fs::write(&js, json(&doc)).unwrap();
+    assert_eq!(
+        read(&js).to_string(),
+        format!(
+            "{}: format is \"other\", expected \"umbrasweep-pvs\"",
+            js.display()
+        )
+    );
+    doc.format = umbrasweep::pvs::FORMAT.into();
+    doc.cells[0].visible = vec![5];
+    std::fs::write(&js, json(&doc)).unwrap();
+    let e = read(&js);
+    assert!(
+        matches!(
+            e.kind,
+            PvsJsonErrorKind::MissingObject {
+                cell: 0,
+                object: 5,
+                objects: 3
+            }
+        ),
+        "{e}"
+    );
 }
 
 fn umbrasweep(args: &[&str]) -> std::process::Output {

@@ -2,11 +2,10 @@
 //! [`PvsDocument`], laid out in `docs/pvs-format.md` so that engines in any language can read
 //! it.
 //!
-//! This module holds the format's constants, its checksum ([`crc32`]), the encoder
-//! ([`encode`], and [`write`] with the `bake` feature) and the low-level decoding helpers that
-//! [`PvsDatabase`](super::database::PvsDatabase) uses. Reading a file is
-//! [`PvsDatabase::open`](super::database::PvsDatabase::open); [`read`] turns it back into the
-//! document.
+//! This module is the writer: the encoder ([`encode`], and `write` with the `bake`
+//! feature) and the choice of each cell's parent. The format's constants and checksum are
+//! defined in [`format`](super::format) (and re-exported here). Reading a file is
+//! [`PvsDatabase::open`]; [`read`] turns it back into the document.
 //!
 //! # Delta-PVS
 //!
@@ -17,100 +16,23 @@
 //! and the tree's depth is capped at [`MAX_DEPTH`]. Each record is stored as a bitset, as
 //! run lengths or as a list of ids, whichever is smallest.
 
+// The format's constants and checksum, at their old paths (`pvs::binary::FORMAT_VERSION`…).
+pub use super::format::{
+    CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_DEPTH,
+    NO_PARENT, NO_STRING, OBJECT_RECORD_LEN, crc32,
+};
+
 use super::PvsDocument;
+use super::database::PvsDatabase;
+use super::error::{EncodeError, PvsError};
+#[cfg(feature = "bake")]
+use super::error::{PvsWriteError, PvsWriteErrorKind};
+use super::format::{put_varint, varint_len};
 #[cfg(feature = "bake")]
 use std::path::Path;
 
-/// The first 8 bytes of every `.pvs` file.
-pub const MAGIC: [u8; 8] = *b"UMBRAPVS";
-/// The binary format version this crate writes and reads.
-pub const FORMAT_VERSION: u32 = 4;
-/// Length of the fixed header: magic, version, checksum, payload length.
-pub const HEADER_LEN: usize = 24;
-/// The `parent` value of a key cell (a record holding the full set).
-pub const NO_PARENT: u32 = u32::MAX;
-/// The `length` value of an absent optional string.
-pub const NO_STRING: u32 = u32::MAX;
-/// Record encoding: a bitset of `ceil(objects / 8)` bytes, least significant bit first.
-pub const ENC_BITSET: u8 = 0;
-/// Record encoding: LEB128 run lengths, alternately clear and set, starting with clear.
-pub const ENC_RUNS: u8 = 1;
-/// Record encoding: LEB128 gaps between ascending set ids.
-pub const ENC_LIST: u8 = 2;
-/// Bytes per object record (triangles, min, max).
-pub const OBJECT_RECORD_LEN: usize = 28;
-/// Bytes per cell record (min, max, parent, visible count, data length, encoding, reserved).
-pub const CELL_RECORD_LEN: usize = 40;
-/// The writer's cap on the number of records decoded to rebuild one cell from scratch.
-pub const MAX_DEPTH: u32 = 16;
 /// How many nearest cells (by centre distance) are parent candidates of each cell.
 const NEIGHBOURS: usize = 10;
-
-/// The CRC-32 of `bytes` (IEEE 802.3, reflected polynomial `0xEDB88320`, initial value and
-/// final XOR `0xFFFFFFFF`): the checksum of zlib's `crc32`, PNG and gzip.
-pub fn crc32(bytes: &[u8]) -> u32 {
-    const TABLE: [u32; 256] = {
-        let mut t = [0u32; 256];
-        let mut i = 0;
-        while i < 256 {
-            let mut c = i as u32;
-            let mut k = 0;
-            while k < 8 {
-                c = if c & 1 != 0 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-                k += 1;
-            }
-            t[i] = c;
-            i += 1;
-        }
-        t
-    };
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in bytes {
-        c = TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
-    }
-    c ^ 0xFFFF_FFFF
-}
-
-/// Bytes of `v` as an unsigned LEB128 varint.
-pub(crate) fn varint_len(v: u32) -> usize {
-    match v {
-        0..0x80 => 1,
-        0x80..0x4000 => 2,
-        0x4000..0x20_0000 => 3,
-        0x20_0000..0x1000_0000 => 4,
-        _ => 5,
-    }
-}
-
-fn put_varint(out: &mut Vec<u8>, mut v: u32) {
-    while v >= 0x80 {
-        out.push((v as u8) | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
-}
-
-/// Reads an unsigned LEB128 varint of at most 5 bytes at `*pos`, advancing it; `None` when
-/// it is cut short or overflows 32 bits.
-pub(crate) fn get_varint(bytes: &[u8], pos: &mut usize) -> Option<u32> {
-    let mut v = 0u32;
-    for k in 0..5 {
-        let b = *bytes.get(*pos)?;
-        *pos += 1;
-        if k == 4 && b > 0x0F {
-            return None;
-        }
-        v |= ((b & 0x7F) as u32) << (7 * k);
-        if b & 0x80 == 0 {
-            return Some(v);
-        }
-    }
-    None
-}
 
 /// Calls `f(start, len)` for each maximal run of set bits, in ascending order.
 pub(crate) fn for_each_run(bits: &[u64], mut f: impl FnMut(u32, u32)) {
@@ -192,17 +114,17 @@ fn put_u32(out: &mut Vec<u8>, v: u32) {
     out.extend_from_slice(&v.to_le_bytes());
 }
 
-fn put_str(out: &mut Vec<u8>, s: &str) -> Result<(), String> {
+fn put_str(out: &mut Vec<u8>, s: &str) -> Result<(), EncodeError> {
     let n = u32::try_from(s.len())
         .ok()
         .filter(|&n| n != NO_STRING)
-        .ok_or("a string is longer than 4 GiB")?;
+        .ok_or(EncodeError::StringTooLong { len: s.len() })?;
     put_u32(out, n);
     out.extend_from_slice(s.as_bytes());
     Ok(())
 }
 
-fn put_opt_str(out: &mut Vec<u8>, s: Option<&str>) -> Result<(), String> {
+fn put_opt_str(out: &mut Vec<u8>, s: Option<&str>) -> Result<(), EncodeError> {
     match s {
         Some(s) => put_str(out, s),
         None => {
@@ -304,28 +226,29 @@ fn choose_parents(doc: &PvsDocument, sets: &[Vec<u64>], objects: u32) -> Vec<u32
 /// Encodes `doc` as the bytes of a `.pvs` file.
 ///
 /// # Errors
-/// A document the format cannot hold: object ids that are not `0, 1, 2…` in order, a cell
-/// whose visible ids are not strictly ascending or name a missing object, or more than
-/// `u32::MAX - 1` cells or objects.
-pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
+/// An [`EncodeError`] for a document the format cannot hold: object ids that are not
+/// `0, 1, 2…` in order, a cell whose visible ids are not strictly ascending or name a missing
+/// object, or more than `u32::MAX - 1` cells or objects.
+pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, EncodeError> {
     let objects = u32::try_from(doc.objects.len())
         .ok()
         .filter(|&n| n != u32::MAX)
-        .ok_or("too many objects for the .pvs format")?;
+        .ok_or(EncodeError::TooManyObjects {
+            objects: doc.objects.len(),
+        })?;
     let cells = u32::try_from(doc.cells.len())
         .ok()
         .filter(|&n| n != u32::MAX)
-        .ok_or("too many cells for the .pvs format")?;
+        .ok_or(EncodeError::TooManyCells {
+            cells: doc.cells.len(),
+        })?;
     if let Some((i, o)) = doc
         .objects
         .iter()
         .enumerate()
         .find(|(i, o)| o.id as usize != *i)
     {
-        return Err(format!(
-            "object {i} has id {}: the .pvs format numbers objects 0, 1, 2… in order",
-            o.id
-        ));
+        return Err(EncodeError::ObjectOutOfOrder { index: i, id: o.id });
     }
     let words = objects.div_ceil(64) as usize;
     let mut sets = Vec::with_capacity(doc.cells.len());
@@ -334,15 +257,18 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
         let mut prev: Option<u32> = None;
         for &id in &c.visible {
             if id >= objects {
-                return Err(format!(
-                    "cell {i} lists object {id}, but there are only {objects} objects"
-                ));
+                return Err(EncodeError::MissingObject {
+                    cell: i,
+                    object: id,
+                    objects,
+                });
             }
-            if prev.is_some_and(|p| p >= id) {
-                return Err(format!(
-                    "cell {i}: visible ids are not strictly ascending ({} then {id})",
-                    prev.unwrap_or(0)
-                ));
+            if let Some(previous) = prev.filter(|&p| p >= id) {
+                return Err(EncodeError::NotAscending {
+                    cell: i,
+                    previous,
+                    id,
+                });
             }
             prev = Some(id);
             bits[(id / 64) as usize] |= 1 << (id % 64);
@@ -438,7 +364,8 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
             .unwrap_or(ENC_BITSET);
         let start = data.len();
         put_record(&mut data, set, objects, enc);
-        let len = u32::try_from(data.len() - start).map_err(|_| "a record exceeds 4 GiB")?;
+        let len = u32::try_from(data.len() - start)
+            .map_err(|_| EncodeError::RecordTooLarge { cell: i })?;
         for v in c.min.iter().chain(&c.max) {
             table.extend_from_slice(&v.to_le_bytes());
         }
@@ -453,7 +380,7 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
     }
     put_u32(
         &mut p,
-        u32::try_from(data.len()).map_err(|_| "the PVS data exceeds 4 GiB")?,
+        u32::try_from(data.len()).map_err(|_| EncodeError::DataTooLarge)?,
     );
     p.extend_from_slice(&data);
 
@@ -469,58 +396,29 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, String> {
 /// Writes `doc` as a binary `.pvs` file, atomically (temporary file, then rename).
 ///
 /// # Errors
-/// A document the format cannot hold (see [`encode`]), or I/O errors; messages name the file.
+/// A [`PvsWriteError`] naming the file: [`PvsWriteErrorKind::Encode`] for a document the
+/// format cannot hold (see [`encode`]; nothing is written), [`PvsWriteErrorKind::Io`] when
+/// the file cannot be written.
 #[cfg(feature = "bake")]
-pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), String> {
-    let bytes = encode(doc).map_err(|e| format!("{}: {e}", path.display()))?;
-    crate::util::write_atomic(path, &bytes)
+pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), PvsWriteError> {
+    let bytes = encode(doc).map_err(|e| PvsWriteError {
+        path: path.to_path_buf(),
+        kind: PvsWriteErrorKind::Encode(e),
+    })?;
+    crate::util::write_atomic(path, &bytes).map_err(|m| PvsWriteError::io(path, m))
 }
 
 /// Reads a `.pvs` file back into the document `bake -o OUT.json` would have written.
 ///
 /// # Errors
-/// Any [`PvsError`](super::database::PvsError) of
-/// [`PvsDatabase::open`](super::database::PvsDatabase::open), as a message naming the file.
-pub fn read(path: &std::path::Path) -> Result<PvsDocument, String> {
-    super::database::PvsDatabase::open(path)
-        .map(|db| db.to_document())
-        .map_err(|e| e.to_string())
+/// Any [`PvsError`] of [`PvsDatabase::open`], naming the file.
+pub fn read(path: &std::path::Path) -> Result<PvsDocument, PvsError> {
+    PvsDatabase::open(path).map(|db| db.to_document())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn crc32_check_value() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-        assert_eq!(crc32(b""), 0);
-    }
-
-    #[test]
-    fn varints_round_trip() {
-        for v in [
-            0,
-            1,
-            127,
-            128,
-            16383,
-            16384,
-            1 << 21,
-            (1 << 28) - 1,
-            1 << 28,
-            u32::MAX,
-        ] {
-            let mut b = Vec::new();
-            put_varint(&mut b, v);
-            assert_eq!(b.len(), varint_len(v));
-            let mut pos = 0;
-            assert_eq!(get_varint(&b, &mut pos), Some(v));
-            assert_eq!(pos, b.len());
-        }
-        assert_eq!(get_varint(&[0x80], &mut 0), None);
-        assert_eq!(get_varint(&[0xFF, 0xFF, 0xFF, 0xFF, 0x1F], &mut 0), None);
-    }
 
     #[test]
     fn runs_are_maximal() {

@@ -42,14 +42,15 @@
 //! }
 //! ```
 
-use super::binary::{
+pub use super::error::{PvsError, PvsErrorKind};
+use super::format::{
     CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, FORMAT_VERSION, HEADER_LEN, MAGIC, NO_PARENT,
     NO_STRING, OBJECT_RECORD_LEN, crc32, get_varint,
 };
 use super::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
 use glam::Vec3;
 use std::fmt;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The index of a cell in a [`PvsDatabase`] (its position in the baked cell list).
@@ -68,78 +69,6 @@ impl fmt::Display for CellId {
         self.0.fmt(f)
     }
 }
-
-/// What is wrong with a `.pvs` file.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum PvsErrorKind {
-    /// The file could not be read.
-    Io(String),
-    /// The file does not start with [`MAGIC`]; `looks_like_json` when it starts with `{`.
-    BadMagic { looks_like_json: bool },
-    /// The file has another format version.
-    UnsupportedVersion { found: u32 },
-    /// The file is shorter than its header says (`expected` bytes).
-    Truncated { expected: u64, actual: u64 },
-    /// The file is longer than its header says.
-    TrailingBytes { expected: u64, actual: u64 },
-    /// The payload's CRC-32 is not the one in the header.
-    Checksum { stored: u32, computed: u32 },
-    /// The checksum matches but the content is inconsistent (a writer's bug).
-    Corrupt(String),
-}
-
-/// An error opening a `.pvs` file: the file (when known) and what is wrong.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct PvsError {
-    /// The file, for [`PvsDatabase::open`]; `None` for [`PvsDatabase::from_bytes`].
-    pub path: Option<PathBuf>,
-    /// What is wrong.
-    pub kind: PvsErrorKind,
-}
-
-impl fmt::Display for PvsError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if let Some(p) = &self.path {
-            write!(f, "{}: ", p.display())?;
-        }
-        match &self.kind {
-            PvsErrorKind::Io(e) => write!(f, "cannot read: {e}"),
-            PvsErrorKind::BadMagic { looks_like_json } => {
-                write!(
-                    f,
-                    "not a umbrasweep .pvs file (no \"UMBRAPVS\" magic number)"
-                )?;
-                if *looks_like_json {
-                    write!(f, "; it looks like JSON, the other PVS format")?;
-                }
-                Ok(())
-            }
-            PvsErrorKind::UnsupportedVersion { found } => write!(
-                f,
-                ".pvs format version {found} is not supported (this build reads versions 1 to \
-                 {FORMAT_VERSION})"
-            ),
-            PvsErrorKind::Truncated { expected, actual } => write!(
-                f,
-                "truncated: the file has {actual} bytes, its header says {expected}"
-            ),
-            PvsErrorKind::TrailingBytes { expected, actual } => write!(
-                f,
-                "{} unexpected bytes after the end of the PVS ({actual} bytes, header says \
-                 {expected})",
-                actual - expected
-            ),
-            PvsErrorKind::Checksum { stored, computed } => write!(
-                f,
-                "checksum mismatch (header {stored:08x}, content {computed:08x}): the file is \
-                 corrupt"
-            ),
-            PvsErrorKind::Corrupt(m) => write!(f, "corrupt .pvs file: {m}"),
-        }
-    }
-}
-
-impl std::error::Error for PvsError {}
 
 fn corrupt(m: impl Into<String>) -> PvsErrorKind {
     PvsErrorKind::Corrupt(m.into())
@@ -160,7 +89,7 @@ pub struct ObjectInfo<'a> {
 pub struct CellRecordInfo {
     /// The cell whose set this record is a difference from; `None` for a key cell.
     pub parent: Option<CellId>,
-    /// [`ENC_BITSET`], [`ENC_RUNS`] or [`ENC_LIST`](super::binary::ENC_LIST).
+    /// [`ENC_BITSET`], [`ENC_RUNS`] or [`ENC_LIST`].
     pub encoding: u8,
     /// The record's size in bytes.
     pub bytes: usize,

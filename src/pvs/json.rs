@@ -1,39 +1,36 @@
 //! Reading and writing the JSON PVS document, with errors naming the file.
 
+use super::error::{PvsJsonError, PvsJsonErrorKind, PvsWriteError, PvsWriteErrorKind};
 use super::{FORMAT, PvsDocument, VERSION};
 use std::path::Path;
 
 /// Reads a PVS JSON document and checks its format tag, version and ids.
 ///
 /// # Errors
-/// A message naming the file: unreadable, not JSON, another format or version, or cells
-/// naming objects that do not exist.
-pub fn read(path: &Path) -> Result<PvsDocument, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
-    let doc: PvsDocument = serde_json::from_str(&text)
-        .map_err(|e| format!("{}: not a PVS document: {e}", path.display()))?;
+/// A [`PvsJsonError`] naming the file: unreadable, not JSON, another format or version, or
+/// cells naming objects that do not exist.
+pub fn read(path: &Path) -> Result<PvsDocument, PvsJsonError> {
+    let fail = |kind| PvsJsonError {
+        path: path.to_path_buf(),
+        kind,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| fail(PvsJsonErrorKind::Io(e)))?;
+    let doc: PvsDocument =
+        serde_json::from_str(&text).map_err(|e| fail(PvsJsonErrorKind::Parse(e)))?;
     if doc.format != FORMAT {
-        return Err(format!(
-            "{}: format is {:?}, expected {FORMAT:?}",
-            path.display(),
-            doc.format
-        ));
+        return Err(fail(PvsJsonErrorKind::Format { found: doc.format }));
     }
     if doc.version != VERSION {
-        return Err(format!(
-            "{}: PVS version {} is not supported (this build reads version {VERSION})",
-            path.display(),
-            doc.version
-        ));
+        return Err(fail(PvsJsonErrorKind::Version { found: doc.version }));
     }
     let n = doc.objects.len() as u32;
     for (i, c) in doc.cells.iter().enumerate() {
-        if let Some(bad) = c.visible.iter().find(|&&id| id >= n) {
-            return Err(format!(
-                "{}: cell {i} lists object {bad}, but there are only {n} objects",
-                path.display()
-            ));
+        if let Some(&bad) = c.visible.iter().find(|&&id| id >= n) {
+            return Err(fail(PvsJsonErrorKind::MissingObject {
+                cell: i,
+                object: bad,
+                objects: n,
+            }));
         }
     }
     Ok(doc)
@@ -42,8 +39,12 @@ pub fn read(path: &Path) -> Result<PvsDocument, String> {
 /// Writes the document atomically (temporary file, then rename).
 ///
 /// # Errors
-/// I/O errors, with the path.
-pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), String> {
-    let text = serde_json::to_vec_pretty(doc).map_err(|e| e.to_string())?;
-    crate::util::write_atomic(path, &text)
+/// A [`PvsWriteError`] naming the file: [`PvsWriteErrorKind::Io`] when it cannot be written
+/// (`path` is then untouched).
+pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), PvsWriteError> {
+    let text = serde_json::to_vec_pretty(doc).map_err(|e| PvsWriteError {
+        path: path.to_path_buf(),
+        kind: PvsWriteErrorKind::Serialize(e),
+    })?;
+    crate::util::write_atomic(path, &text).map_err(|m| PvsWriteError::io(path, m))
 }

@@ -119,9 +119,16 @@ pub struct PvsSettings {
     pub subcell: Option<f64>,
 }
 
+// Imports run one way: `format` (byte-level definitions) ← `error` ← `database` (reader) ←
+// `binary` (writer); `json` uses `error`; all use the document types above.
 pub mod binary;
 pub mod database;
+mod error;
+pub mod format;
 #[cfg(feature = "bake")]
 pub mod json;
 
-pub use database::{CellId, PvsCursor, PvsDatabase, PvsError, PvsErrorKind};
+pub use database::{CellId, PvsCursor, PvsDatabase};
+pub use error::{EncodeError, PvsError, PvsErrorKind};
+#[cfg(feature = "bake")]
+pub use error::{PvsJsonError, PvsJsonErrorKind, PvsWriteError, PvsWriteErrorKind};
