@@ -76,7 +76,10 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
     for r in &bench.rows {
         assert_eq!(r.row.false_culls, 0, "{} {}", r.study, r.variant);
         assert_eq!(r.row.backend, "cpu");
-        assert_eq!(r.settings.sweep, r.variant.starts_with("--sweep"));
+        assert_eq!(
+            r.settings.sweep == umbrasweep::bake::SweepChoice::On,
+            r.variant.starts_with("--sweep")
+        );
     }
     let paper = bench.rows.iter().find(|r| r.study == "paper").unwrap();
     assert_eq!(paper.row.scene, "paper_forest");
@@ -94,7 +97,10 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
         .nth(2)
         .unwrap();
     assert_eq!(
-        (goal.settings.resolution, goal.settings.sweep_planes),
+        (
+            goal.settings.resolution,
+            goal.settings.sweep_settings.planes
+        ),
         (1024, 32)
     );
 

@@ -1,8 +1,10 @@
 //! Tests of the wgpu backend: shader validation with naga, and GPU Depth Maps against the CPU
 //! reference on analytic jobs (random triangles, quads and boxes on every axis and side,
 //! resolutions 16–256, slice rings, occlusion-sweep reprojections, which must match
-//! bit for bit), plus the adapter handling rule: without an adapter a test
-//! prints why and passes, unless the environment variable `CI` is set, where it fails.
+//! bit for bit), a backend on a device the test creates itself as an engine would
+//! (`GpuBackend::with_device`: the same maps as `GpuBackend::new()`'s), plus the adapter
+//! handling rule: without an adapter a test prints why and passes, unless the environment
+//! variable `CI` is set, where it fails.
 //!
 //! Timings come from the CLI: `umbrasweep bake … --backend gpu` against `--backend cpu`.
 #![cfg(feature = "bake")]
@@ -74,16 +76,19 @@ fn backend() -> Option<&'static GpuBackend> {
                 eprintln!("gpu tests on {}", b.adapter().unwrap_or_default());
                 Some(b)
             }
-            Err(BackendError::NoAdapter(why)) => {
-                if std::env::var_os("CI").is_some() {
-                    panic!("CI is set but the GPU backend found no adapter: {why}");
-                }
-                eprintln!("skipping GPU comparison: {why}");
-                None
-            }
+            Err(BackendError::NoAdapter(why)) => no_adapter(&why),
             Err(e) => panic!("GPU backend failed to start: {e}"),
         })
         .as_ref()
+}
+
+/// Without an adapter: `None` after printing why, or a failure when `CI` is set.
+fn no_adapter<T>(why: &str) -> Option<T> {
+    if std::env::var_os("CI").is_some() {
+        panic!("CI is set but the GPU backend found no adapter: {why}");
+    }
+    eprintln!("skipping GPU comparison: {why}");
+    None
 }
 
 #[test]
@@ -135,6 +140,158 @@ fn oversized_planes_are_refused() {
         Err(BackendError::Device(msg)) => assert!(msg.contains("size"), "{msg}"),
         other => panic!("expected an error, got {other:?}"),
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// An engine's device (`GpuBackend::with_device`)
+
+/// A device created the way an engine creates its own — instance, adapter, device — with
+/// `features` and `limits`, or `None` (after printing why) when there is no adapter outside CI.
+fn engine_device(
+    features: wgpu::Features,
+    limits: wgpu::Limits,
+) -> Option<(wgpu::Device, wgpu::Queue)> {
+    // The backends `WGPU_BACKEND` names, as `GpuBackend::new` searches.
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    if desc.backends.is_empty() {
+        desc.backends = wgpu::Backends::PRIMARY;
+    }
+    let instance = wgpu::Instance::new(desc);
+    let options = wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        ..Default::default()
+    };
+    let adapter = match pollster::block_on(instance.request_adapter(&options)) {
+        Ok(a) => a,
+        Err(e) => return no_adapter(&format!("no adapter for an engine's device: {e}")),
+    };
+    if !adapter.features().contains(GpuBackend::REQUIRED_FEATURES) {
+        let info = adapter.get_info();
+        return no_adapter(&format!(
+            "the engine's adapter {} ({:?}) lacks {:?}",
+            info.name,
+            info.backend,
+            GpuBackend::REQUIRED_FEATURES
+        ));
+    }
+    let device = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("engine device"),
+        required_features: features,
+        required_limits: limits,
+        ..Default::default()
+    }));
+    Some(device.expect("the engine's adapter creates a device"))
+}
+
+/// Renders `jobs` on `engine` (a backend on an engine's device) and on [`backend`]'s own
+/// device: the maps are identical bit for bit when both run on the same adapter, and within
+/// the CPU-agreement contract ([`assert_close_to_the_cpu`]) in any case.
+fn assert_same_maps_as_new(engine: &GpuBackend, jobs: &[PlaneJob], what: &str) {
+    let Some(own) = backend() else { return };
+    let maps = engine.render(jobs).expect("renders on the engine's device");
+    let (a, b) = (engine.adapter_info(), own.adapter_info());
+    if (&a.name, a.backend) == (&b.name, b.backend) {
+        let reference = own
+            .render(jobs)
+            .expect("renders on the backend's own device");
+        assert_eq!(maps.len(), reference.len());
+        for (k, (m, r)) in maps.iter().zip(&reference).enumerate() {
+            assert_bits_equal(m, r, &format!("{what}, job {k}"));
+        }
+    } else {
+        eprintln!(
+            "{what}: the engine's adapter {} is not new()'s {}: CPU contract only",
+            a.name, b.name
+        );
+    }
+    assert_close_to_the_cpu(engine, jobs, what);
+}
+
+/// Occluders of every shape, slices and reprojections: a bake's kinds of planes.
+fn mixed_jobs() -> Vec<PlaneJob> {
+    let mut jobs = random_jobs(41, Shape::Triangle, 40, &[16, 64, 256]);
+    jobs.extend(random_jobs(42, Shape::Box, 40, &[32, 128]));
+    jobs.extend(reprojection_jobs(43, &[32, 128]));
+    jobs
+}
+
+/// A backend built on a device the test created itself, with WebGPU's default limits (as an
+/// engine would), renders the same maps as `GpuBackend::new()`'s, and keeps the CPU contract.
+#[test]
+fn an_engine_device_renders_the_same_maps_as_new() {
+    let Some((device, queue)) =
+        engine_device(GpuBackend::REQUIRED_FEATURES, wgpu::Limits::default())
+    else {
+        return;
+    };
+    let engine = GpuBackend::with_device(device.clone(), queue).expect("a backend on it");
+    assert_eq!(engine.adapter(), Some(device.adapter_info().name));
+    assert_eq!(engine.name(), "gpu");
+    let jobs = mixed_jobs();
+    assert_same_maps_as_new(&engine, &jobs, "engine device");
+    let stats = engine.last_stats();
+    assert!(stats.reprojections > 0 && stats.gpu_planes > 0, "{stats:?}");
+    // Resources are reused: a second call gives the same maps.
+    let again = engine.render(&jobs).unwrap();
+    let first = engine.render(&jobs).unwrap();
+    assert_eq!(again, first);
+}
+
+/// On a device whose storage bindings hold only 256 words, a plane's occluders are drawn in
+/// several chunks (more draws than passes), with the same maps.
+#[test]
+fn small_storage_bindings_split_the_draws_and_keep_the_maps() {
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 4096,
+        ..wgpu::Limits::default()
+    };
+    let Some((device, queue)) = engine_device(GpuBackend::REQUIRED_FEATURES, limits) else {
+        return;
+    };
+    let engine = GpuBackend::with_device(device, queue).expect("a backend on it");
+    let jobs = random_jobs(44, Shape::Box, 200, &[64, 256]);
+    assert_same_maps_as_new(&engine, &jobs, "small bindings");
+    let stats = engine.last_stats();
+    assert!(stats.draws >= 3 * stats.passes, "{stats:?}");
+}
+
+/// A device created without `FLOAT32_BLENDABLE` is refused with a message that says what to
+/// request.
+#[test]
+fn a_device_without_the_required_features_is_refused() {
+    let Some((device, queue)) = engine_device(wgpu::Features::empty(), wgpu::Limits::default())
+    else {
+        return;
+    };
+    match GpuBackend::with_device(device, queue) {
+        Err(BackendError::Device(msg)) => {
+            assert!(msg.contains("FLOAT32_BLENDABLE"), "{msg}");
+            assert!(msg.contains("required_features"), "{msg}");
+        }
+        other => panic!("expected a device error, got {other:?}"),
+    }
+}
+
+/// The engine's device lost (destroyed through the engine's handle): the backend, which
+/// installs no device-lost callback there, still ends the call with `BackendError::Device`,
+/// promptly.
+#[test]
+fn losing_an_engine_device_is_an_error_not_a_hang() {
+    let Some((device, queue)) =
+        engine_device(GpuBackend::REQUIRED_FEATURES, wgpu::Limits::default())
+    else {
+        return;
+    };
+    let engine = GpuBackend::with_device(device.clone(), queue).expect("a backend on it");
+    let jobs = random_jobs(45, Shape::Triangle, 20, &[64]);
+    engine.render(&jobs).expect("renders before the loss");
+    device.destroy();
+    let t = std::time::Instant::now();
+    match engine.render(&jobs) {
+        Err(BackendError::Device(msg)) => eprintln!("after loss: {msg}"),
+        other => panic!("expected a device error, got {other:?}"),
+    }
+    assert!(t.elapsed().as_secs() < 10);
 }
 
 // ---------------------------------------------------------------------------------------------

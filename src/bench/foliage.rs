@@ -240,84 +240,30 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
     }
 }
 
-/// The settings of a row, as the `--json` document records them.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct FoliageSettings {
-    /// Depth Map resolution.
-    pub resolution: u32,
-    /// How far a Depth Map may be stretched to its rectangle (1: square maps).
-    pub max_stretch: u32,
-    /// Plane extension factor.
-    pub extend: f64,
-    /// The occlusion sweep (every variant sets it on or off).
-    pub sweep: bool,
-    /// The sweep's most planes per direction.
-    pub sweep_planes: u32,
-    /// `geometric` or `kernel`.
-    pub sweep_spacing: String,
-    /// Kernel size K (used by `kernel` spacing).
-    pub kernel: u32,
-    /// Separate planes per direction without the sweep.
-    pub planes: u32,
-    /// Slice planes per direction without the sweep.
-    pub slice_planes: u32,
-    /// `geometric` or `quantile` (separate planes).
-    pub placement: String,
-    /// Sub-cell size, if any.
-    pub subcell: Option<f64>,
-}
-
-impl FoliageSettings {
-    fn of(s: &BakeSettings) -> Self {
-        FoliageSettings {
-            resolution: s.resolution,
-            max_stretch: s.max_stretch,
-            extend: s.extend,
-            sweep: s.sweep == SweepChoice::On,
-            sweep_planes: s.sweep_settings.planes,
-            sweep_spacing: spacing_name(s.sweep_settings.spacing).into(),
-            kernel: s.sweep_settings.kernel,
-            planes: s.planes,
-            slice_planes: s.slice_planes,
-            placement: match s.placement {
-                Placement::Geometric => "geometric",
-                Placement::Quantile => "quantile",
-            }
-            .into(),
-            subcell: s.subcell,
+/// The table's short form of a row's settings: what the bake used (e.g. `sweep ≤24
+/// geometric, res 256, extend 1.5`).
+pub fn describe(s: &BakeSettings) -> String {
+    let sw = &s.sweep_settings;
+    let mut out = if s.sweep == SweepChoice::On {
+        match sw.spacing {
+            Spacing::Kernel => format!("sweep ≤{} kernel K={}", sw.planes, sw.kernel),
+            Spacing::Geometric => format!("sweep ≤{} geometric", sw.planes),
         }
-    }
-
-    /// The table's short form: what the bake used (e.g. `sweep ≤24 geometric, res 256,
-    /// extend 1.5`).
-    pub fn describe(&self) -> String {
-        let mut out = if self.sweep {
-            match self.sweep_spacing.as_str() {
-                "kernel" => format!("sweep ≤{} kernel K={}", self.sweep_planes, self.kernel),
-                sp => format!("sweep ≤{} {sp}", self.sweep_planes),
-            }
-        } else {
-            format!(
-                "{}+{} planes {}",
-                self.planes, self.slice_planes, self.placement
-            )
+    } else {
+        let placement = match s.placement {
+            Placement::Geometric => "geometric",
+            Placement::Quantile => "quantile",
         };
-        let _ = write!(out, ", res {}, extend {:.1}", self.resolution, self.extend);
-        if self.max_stretch != BakeSettings::default_settings().max_stretch {
-            let _ = write!(out, ", stretch ≤{}", self.max_stretch);
-        }
-        if let Some(s) = self.subcell {
-            let _ = write!(out, ", subcell {s}");
-        }
-        out
+        format!("{}+{} planes {placement}", s.planes, s.slice_planes)
+    };
+    let _ = write!(out, ", res {}, extend {:.1}", s.resolution, s.extend);
+    if s.max_stretch != BakeSettings::default_settings().max_stretch {
+        let _ = write!(out, ", stretch ≤{}", s.max_stretch);
     }
-}
-
-fn spacing_name(s: Spacing) -> &'static str {
-    match s {
-        Spacing::Kernel => "kernel",
-        Spacing::Geometric => "geometric",
+    if let Some(x) = s.subcell {
+        let _ = write!(out, ", subcell {x}");
     }
+    out
 }
 
 /// One row of the foliage study: a [`BenchRow`] (its fields flattened into the JSON row)
@@ -328,8 +274,8 @@ pub struct FoliageRow {
     pub study: String,
     /// The `umbrasweep bake` flags of the variant (e.g. `--sweep --subcell 2`).
     pub variant: String,
-    /// The settings the bake used.
-    pub settings: FoliageSettings,
+    /// The settings the bake used (in the PVS document's form: `"sweep": true`, …).
+    pub settings: BakeSettings,
     /// Scene, sizes, cells, times, culling, false culls, planes (see [`BenchRow`]).
     #[serde(flatten)]
     pub row: BenchRow,
@@ -723,7 +669,7 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
             rows.push(FoliageRow {
                 study: study.into(),
                 variant: v.label.clone(),
-                settings: FoliageSettings::of(&v.settings),
+                settings: v.settings.clone(),
                 row,
                 peak_mib: peak,
             });
@@ -822,7 +768,7 @@ impl FoliageBench {
                         b.false_culls.to_string(),
                         format!("{:.1}", b.planes_per_cell),
                         r.peak_mib.map_or("n/a".into(), |p| format!("{p:.0}")),
-                        r.settings.describe(),
+                        describe(&r.settings),
                     ]
                 })
                 .collect();
@@ -913,7 +859,7 @@ mod tests {
         assert_eq!(params[12].label, "--sweep --extend 2.0");
         assert_eq!(params[13].settings.max_stretch, 1);
         assert_eq!(
-            FoliageSettings::of(&params[13].settings).describe(),
+            describe(&params[13].settings),
             format!(
                 "sweep ≤{} geometric, res 256, extend 1.5, stretch ≤1",
                 default.sweep_settings.planes
@@ -924,18 +870,18 @@ mod tests {
         assert_eq!(fine[3].max_cells, Some(3));
         assert_eq!(fine[4].settings.sweep, SweepChoice::Off);
         assert_eq!(
-            FoliageSettings::of(&params[0].settings).describe(),
+            describe(&params[0].settings),
             "sweep ≤256 kernel K=3, res 256, extend 1.5"
         );
         assert_eq!(
-            FoliageSettings::of(&fine[1].settings).describe(),
+            describe(&fine[1].settings),
             format!(
                 "sweep ≤{} geometric, res 256, extend 1.5, subcell 2",
                 default.sweep_settings.planes
             )
         );
         assert_eq!(
-            FoliageSettings::of(&fine[4].settings).describe(),
+            describe(&fine[4].settings),
             "4+1 planes geometric, res 256, extend 1.5"
         );
     }

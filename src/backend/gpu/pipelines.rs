@@ -1,0 +1,199 @@
+//! The backend's device resources that do not depend on the work: the two render pipelines
+//! (occluder Projections, reprojections) and their bind group layouts, created once per device
+//! by [`Pipelines::new`].
+
+use super::device::ErrorScopes;
+use super::setup::Vertex;
+use super::{PROJECTION_WGSL, REPROJECT_WGSL};
+use crate::backend::BackendError;
+use std::num::NonZeroU64;
+
+/// The blend of every pass into a Depth Map: the minimum of the fragment's and the target's
+/// Depth.
+const MIN_BLEND: wgpu::BlendComponent = wgpu::BlendComponent {
+    src_factor: wgpu::BlendFactor::One,
+    dst_factor: wgpu::BlendFactor::One,
+    operation: wgpu::BlendOperation::Min,
+};
+
+/// Both render pipelines of the backend and their bind group layouts.
+#[derive(Debug)]
+pub(super) struct Pipelines {
+    /// The occluders' draw (`shaders/projection.wgsl`).
+    pub projection: wgpu::RenderPipeline,
+    /// Its bind group: the plane's uniforms and a chunk of its records and edges.
+    pub projection_layout: wgpu::BindGroupLayout,
+    /// The reprojections' draw into the plane's target (`shaders/reproject.wgsl`).
+    pub reproject: wgpu::RenderPipeline,
+    /// Its bind group: the reprojection's windows and its summed-area table.
+    pub reproject_layout: wgpu::BindGroupLayout,
+}
+
+impl Pipelines {
+    /// Compiles the shaders and creates both pipelines on `device`, every object labelled.
+    ///
+    /// # Errors
+    /// [`BackendError::Device`] when the device reports a validation or out-of-memory error.
+    pub fn new(device: &wgpu::Device) -> Result<Self, BackendError> {
+        let scope = ErrorScopes::push(device);
+        let (projection, projection_layout) = projection_pipeline(device);
+        let (reproject, reproject_layout) = reproject_pipeline(device);
+        scope.check()?;
+        Ok(Pipelines {
+            projection,
+            projection_layout,
+            reproject,
+            reproject_layout,
+        })
+    }
+}
+
+/// The colour target of every pass into a Depth Map: `R32Float`, red only, blended with
+/// [`MIN_BLEND`].
+fn depth_min_target() -> wgpu::ColorTargetState {
+    wgpu::ColorTargetState {
+        format: wgpu::TextureFormat::R32Float,
+        blend: Some(wgpu::BlendState {
+            color: MIN_BLEND,
+            alpha: MIN_BLEND,
+        }),
+        write_mask: wgpu::ColorWrites::RED,
+    }
+}
+
+/// The occluders' pipeline (a triangle list of [`Vertex`] into the `R32Float` Depth Map) and
+/// its bind group layout: the plane's uniforms (vertex stage) and the records and edges
+/// (storage, both stages).
+fn projection_pipeline(device: &wgpu::Device) -> (wgpu::RenderPipeline, wgpu::BindGroupLayout) {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("shaders/projection.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(PROJECTION_WGSL.into()),
+    });
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("projection bind group layout"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: NonZeroU64::new(16),
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: NonZeroU64::new(16),
+                },
+                count: None,
+            },
+        ],
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("projection pipeline layout"),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Uint32];
+    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("projection pipeline"),
+        layout: Some(&pipeline_layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &attributes,
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(depth_min_target())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    });
+    (pipeline, layout)
+}
+
+/// The reprojections' pipeline (a fullscreen triangle into the `R32Float` Depth Map) and its
+/// bind group layout: the windows (storage) and the summed-area table.
+fn reproject_pipeline(device: &wgpu::Device) -> (wgpu::RenderPipeline, wgpu::BindGroupLayout) {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("shaders/reproject.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(REPROJECT_WGSL.into()),
+    });
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("reprojection bind group layout"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    // The header (six words) and one window.
+                    min_binding_size: NonZeroU64::new(32),
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Uint,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
+        ],
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("reprojection pipeline layout"),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("reprojection pipeline"),
+        layout: Some(&pipeline_layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_fullscreen"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_reproject"),
+            compilation_options: Default::default(),
+            targets: &[Some(depth_min_target())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    });
+    (pipeline, layout)
+}
