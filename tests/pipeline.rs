@@ -67,7 +67,12 @@ fn each_choice_of_the_sweep_runs_its_culler_and_accounts_for_what_it_hid() {
                 .count() as u32;
             assert_eq!(s.hidden, culled, "{name}, cell {ci}");
             assert_eq!(s.only, culled, "{name}, cell {ci}");
-            assert!(s.ms > 0.0 && s.ms <= c.ms, "{name}, cell {ci}: {} of {}", s.ms, c.ms);
+            assert!(
+                s.ms > 0.0 && s.ms <= c.ms,
+                "{name}, cell {ci}: {} of {}",
+                s.ms,
+                c.ms
+            );
             assert_eq!(s.work.planes, c.planes);
             assert_eq!(s.work.occluders_projected, c.occluders_projected);
             assert!(c.planes > 0);
@@ -111,7 +116,10 @@ fn sub_cells_count_only_what_the_whole_cell_hides() {
         .filter(|o| !c.visible.contains(o))
         .count() as u32;
     assert!(c.visible.contains(&1), "seen_c is seen from the right half");
-    assert!(!c.visible.contains(&2), "hidden_d is hidden from both halves");
+    assert!(
+        !c.visible.contains(&2),
+        "hidden_d is hidden from both halves"
+    );
     assert_eq!(c.cullers[0].hidden, culled);
     assert_eq!(c.cullers[0].only, culled);
 }

@@ -14,6 +14,7 @@ use umbrasweep::pvs::{
     CellId, EncodeError, PvsCell, PvsDatabase, PvsDocument, PvsErrorKind, PvsJsonErrorKind,
     PvsObject, PvsSummary, PvsWriteErrorKind,
 };
+use umbrasweep::settings::{Spacing, SweepChoice, SweepSettings};
 
 /// The demo city baked once (CPU backend, default settings).
 fn city() -> &'static PvsDocument {
@@ -612,12 +613,13 @@ fn bake_writes_pvs_and_inspect_reads_it() {
 #[test]
 fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read() {
     let mut doc = city().clone();
-    doc.settings.sweep = true;
-    doc.settings.sweep_planes = 24;
-    doc.settings.kernel = 5;
-    doc.settings.sweep_spacing = "geometric".into();
-    doc.settings.subcell = Some(2.0);
-    doc.settings.max_stretch = 4;
+    let s = &mut doc.settings.bake;
+    s.sweep = SweepChoice::On;
+    s.sweep_settings.planes = 20;
+    s.sweep_settings.kernel = 7;
+    s.sweep_settings.spacing = Spacing::Kernel;
+    s.subcell = Some(2.0);
+    s.max_stretch = 4;
     let culler = umbrasweep::pvs::PvsCullerSummary {
         name: "occlusion_sweep".into(),
         hidden: 12.5,
@@ -666,24 +668,22 @@ fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read
     v3_tail.extend(4u32.to_le_bytes());
     let v2 = older(&v3, &v3_tail, 8, 2);
     let old = PvsDatabase::from_bytes(&v2).unwrap().to_document();
-    expected.settings.max_stretch = 0;
+    expected.settings.bake.max_stretch = 1;
     assert_eq!(json(&old), json(&expected));
 
     // The same file as version 1 wrote it: without the sweep fields.
     let mut ext = vec![1u8];
-    ext.extend(24u32.to_le_bytes());
-    ext.extend(5u32.to_le_bytes());
-    ext.extend(9u32.to_le_bytes());
-    ext.extend(b"geometric");
+    ext.extend(20u32.to_le_bytes());
+    ext.extend(7u32.to_le_bytes());
+    ext.extend(6u32.to_le_bytes());
+    ext.extend(b"kernel");
     ext.push(1);
     ext.extend(2.0f64.to_le_bytes());
     let v1 = older(&v2, &ext, 0, 1);
     let old = PvsDatabase::from_bytes(&v1).unwrap().to_document();
-    assert!(!old.settings.sweep && old.settings.subcell.is_none());
-    expected.settings.sweep = false;
-    expected.settings.sweep_planes = 0;
-    expected.settings.kernel = 0;
-    expected.settings.sweep_spacing = String::new();
-    expected.settings.subcell = None;
+    assert!(old.settings.bake.sweep == SweepChoice::Off && old.settings.bake.subcell.is_none());
+    expected.settings.bake.sweep = SweepChoice::Off;
+    expected.settings.bake.sweep_settings = SweepSettings::default();
+    expected.settings.bake.subcell = None;
     assert_eq!(json(&old), json(&expected));
 }

@@ -75,7 +75,10 @@ fn doc_cells(scene: &Scene, cells: Vec<(Aabb, Vec<u32>)>, alpha_occluders: bool)
         version: VERSION,
         scene: scene.source.display().to_string(),
         settings: PvsSettings {
-            alpha_occluders,
+            bake: umbrasweep::BakeSettings {
+                alpha_occluders,
+                ..Default::default()
+            },
             ..Default::default()
         },
         objects: umbrasweep::bake::object_table(scene),

@@ -23,7 +23,6 @@ use crate::pvs::{
     FORMAT, PvsCell, PvsCullerSummary, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION,
 };
 use crate::scene::Scene;
-use crate::settings::Spacing;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -192,23 +191,14 @@ pub fn to_document(
         scene: scene.source.display().to_string(),
         settings: PvsSettings {
             backend: result.backend.clone(),
-            resolution: settings.resolution,
-            max_stretch: settings.max_stretch,
-            extend: settings.extend,
-            planes: settings.planes,
-            slice_planes: settings.slice_planes,
-            placement: format!("{:?}", settings.placement).to_lowercase(),
-            alpha_occluders: settings.alpha_occluders,
-            occluders: settings.occluders.clone(),
-            improved_projection: settings.improved_projection,
-            sweep: result.sweep,
-            sweep_planes: settings.sweep_settings.planes,
-            kernel: settings.sweep_settings.kernel,
-            sweep_spacing: match settings.sweep_settings.spacing {
-                Spacing::Geometric => "geometric".into(),
-                Spacing::Kernel => "kernel".into(),
+            bake: BakeSettings {
+                sweep: if result.sweep {
+                    SweepChoice::On
+                } else {
+                    SweepChoice::Off
+                },
+                ..settings.clone()
             },
-            subcell: settings.subcell,
         },
         objects: object_table(scene),
         cells: cells

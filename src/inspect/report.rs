@@ -13,10 +13,9 @@
 
 use super::preview;
 use crate::backend::cpu::CpuBackend;
-use crate::bake::{self, BakeSettings, SweepChoice};
+use crate::bake::{self, BakeSettings};
 use crate::geom::Aabb;
 use crate::plane::{DepthMap, PlaneFrame};
-use crate::project::planes::{Placement, Spacing, SweepSettings};
 use crate::pvs::PvsDocument;
 use crate::scene::Scene;
 use anyhow::{Context, bail};
@@ -127,56 +126,7 @@ fn cell_box(c: &crate::pvs::PvsCell) -> Aabb {
 /// # Errors
 /// An unknown placement or settings the baker refuses.
 pub fn recorded_settings(doc: &PvsDocument) -> anyhow::Result<BakeSettings> {
-    let d = BakeSettings::default();
-    let s = &doc.settings;
-    let settings = BakeSettings {
-        resolution: if s.resolution == 0 {
-            d.resolution
-        } else {
-            s.resolution
-        },
-        max_stretch: s.max_stretch.max(1),
-        extend: if s.extend == 0.0 { d.extend } else { s.extend },
-        planes: if s.planes == 0 { d.planes } else { s.planes },
-        slice_planes: if s.resolution == 0 {
-            d.slice_planes
-        } else {
-            s.slice_planes
-        },
-        placement: match s.placement.as_str() {
-            "" | "geometric" => Placement::Geometric,
-            "quantile" => Placement::Quantile,
-            other => bail!("settings.placement {other:?}: expected \"geometric\" or \"quantile\""),
-        },
-        alpha_occluders: s.alpha_occluders,
-        occluders: s.occluders.clone(),
-        improved_projection: s.improved_projection || s.resolution == 0,
-        sweep: if s.sweep {
-            SweepChoice::On
-        } else {
-            SweepChoice::Off
-        },
-        sweep_settings: SweepSettings {
-            planes: if s.sweep_planes == 0 {
-                d.sweep_settings.planes
-            } else {
-                s.sweep_planes
-            },
-            kernel: if s.kernel == 0 {
-                d.sweep_settings.kernel
-            } else {
-                s.kernel
-            },
-            spacing: match s.sweep_spacing.as_str() {
-                "" | "geometric" => Spacing::Geometric,
-                "kernel" => Spacing::Kernel,
-                other => {
-                    bail!("settings.sweep_spacing {other:?}: expected \"geometric\" or \"kernel\"")
-                }
-            },
-        },
-        subcell: s.subcell,
-    };
+    let settings = doc.settings.bake.clone();
     settings
         .check()
         .map_err(|e| anyhow::anyhow!("the PVS document's settings: {e}"))?;
@@ -388,11 +338,11 @@ fn page(
         doc.objects.len(),
         doc.cells.len(),
         esc(&s.backend),
-        s.resolution,
-        s.planes,
-        s.slice_planes,
-        esc(&s.placement),
-        s.extend
+        s.bake.resolution,
+        s.bake.planes,
+        s.bake.slice_planes,
+        esc(&format!("{:?}", s.bake.placement).to_lowercase()),
+        s.bake.extend
     )?;
     if let Some(sum) = &doc.summary {
         write!(

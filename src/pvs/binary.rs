@@ -28,6 +28,7 @@ use super::error::{EncodeError, PvsError};
 #[cfg(feature = "bake")]
 use super::error::{PvsWriteError, PvsWriteErrorKind};
 use super::format::{put_varint, varint_len};
+use crate::settings::{Placement, Spacing, SweepChoice};
 #[cfg(feature = "bake")]
 use std::path::Path;
 
@@ -281,20 +282,33 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, EncodeError> {
     put_u32(&mut p, objects);
     put_u32(&mut p, cells);
     put_str(&mut p, &doc.scene)?;
-    let s = &doc.settings;
-    put_str(&mut p, &s.backend)?;
+    put_str(&mut p, &doc.settings.backend)?;
+    let s = &doc.settings.bake;
     put_u32(&mut p, s.resolution);
     p.extend_from_slice(&s.extend.to_le_bytes());
     put_u32(&mut p, s.planes);
     put_u32(&mut p, s.slice_planes);
-    put_str(&mut p, &s.placement)?;
+    put_str(
+        &mut p,
+        match s.placement {
+            Placement::Geometric => "geometric",
+            Placement::Quantile => "quantile",
+        },
+    )?;
     p.push(s.alpha_occluders as u8);
     put_opt_str(&mut p, s.occluders.as_deref())?;
     p.push(s.improved_projection as u8);
-    p.push(s.sweep as u8);
-    put_u32(&mut p, s.sweep_planes);
-    put_u32(&mut p, s.kernel);
-    put_str(&mut p, &s.sweep_spacing)?;
+    // The sweep as the bake chose it (a document with `"auto"` was not written by a bake).
+    p.push((s.sweep == SweepChoice::On) as u8);
+    put_u32(&mut p, s.sweep_settings.planes);
+    put_u32(&mut p, s.sweep_settings.kernel);
+    put_str(
+        &mut p,
+        match s.sweep_settings.spacing {
+            Spacing::Geometric => "geometric",
+            Spacing::Kernel => "kernel",
+        },
+    )?;
     p.push(s.subcell.is_some() as u8);
     p.extend_from_slice(&s.subcell.unwrap_or(0.0).to_le_bytes());
     put_u32(&mut p, s.max_stretch);

@@ -48,6 +48,7 @@ use super::format::{
     NO_STRING, OBJECT_RECORD_LEN, crc32, get_varint,
 };
 use super::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
+use crate::settings::{Placement, Spacing, SweepChoice};
 use glam::Vec3;
 use std::fmt;
 use std::path::Path;
@@ -555,30 +556,44 @@ impl PvsDatabase {
             return Err(corrupt("object or cell count is 0xFFFFFFFF"));
         }
         let scene = r.str("the scene path")?;
-        let settings = PvsSettings {
+        let mut settings = PvsSettings {
             backend: r.str("settings.backend")?,
-            resolution: r.u32("settings.resolution")?,
-            extend: r.f64("settings.extend")?,
-            planes: r.u32("settings.planes")?,
-            slice_planes: r.u32("settings.slice_planes")?,
-            placement: r.str("settings.placement")?,
-            alpha_occluders: r.bool("settings.alpha_occluders")?,
-            occluders: r.opt_str("settings.occluders")?,
-            improved_projection: r.bool("settings.improved_projection")?,
             ..PvsSettings::default()
         };
-        let mut settings = settings;
+        let s = &mut settings.bake;
+        s.resolution = r.u32("settings.resolution")?;
+        s.extend = r.f64("settings.extend")?;
+        s.planes = r.u32("settings.planes")?;
+        s.slice_planes = r.u32("settings.slice_planes")?;
+        s.placement = match r.str("settings.placement")?.as_str() {
+            "" | "geometric" => Placement::Geometric,
+            "quantile" => Placement::Quantile,
+            _ => return Err(corrupt("settings.placement is not geometric or quantile")),
+        };
+        s.alpha_occluders = r.bool("settings.alpha_occluders")?;
+        s.occluders = r.opt_str("settings.occluders")?;
+        s.improved_projection = r.bool("settings.improved_projection")?;
+        // Files before version 2 were baked without the sweep and sub-cells, before version 3
+        // with square maps.
+        s.sweep = SweepChoice::Off;
+        s.max_stretch = 1;
         if version >= 2 {
-            settings.sweep = r.bool("settings.sweep")?;
-            settings.sweep_planes = r.u32("settings.sweep_planes")?;
-            settings.kernel = r.u32("settings.kernel")?;
-            settings.sweep_spacing = r.str("settings.sweep_spacing")?;
-            settings.subcell = r.bool("settings.subcell flag")?.then_some(0.0);
+            if r.bool("settings.sweep")? {
+                s.sweep = SweepChoice::On;
+            }
+            s.sweep_settings.planes = r.u32("settings.sweep_planes")?;
+            s.sweep_settings.kernel = r.u32("settings.kernel")?;
+            s.sweep_settings.spacing = match r.str("settings.sweep_spacing")?.as_str() {
+                "" | "geometric" => Spacing::Geometric,
+                "kernel" => Spacing::Kernel,
+                _ => return Err(corrupt("settings.sweep_spacing is not geometric or kernel")),
+            };
+            let has_subcell = r.bool("settings.subcell flag")?;
             let size = r.f64("settings.subcell")?;
-            settings.subcell = settings.subcell.map(|_| size);
+            s.subcell = has_subcell.then_some(size);
         }
         if version >= 3 {
-            settings.max_stretch = r.u32("settings.max_stretch")?;
+            s.max_stretch = r.u32("settings.max_stretch")?.max(1);
         }
         let summary = if r.bool("the summary flag")? {
             Some(PvsSummary {

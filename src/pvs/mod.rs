@@ -91,32 +91,33 @@ pub struct PvsCullerSummary {
     pub planes: f64,
 }
 
-/// The bake settings recorded in a PVS document.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+/// The bake settings recorded in a PVS document: the backend that ran and the
+/// [`BakeSettings`](crate::settings::BakeSettings) themselves, flattened beside it, with `sweep`
+/// as the bake chose it (`true` or `false`). Fields a document lacks read as the bake that
+/// wrote it ran ([`crate::settings`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct PvsSettings {
+    /// The backend that baked (`cpu` or `gpu`).
     pub backend: String,
-    pub resolution: u32,
-    /// [`crate::bake::BakeSettings::max_stretch`]; 0 in documents written before Depth Maps
-    /// could be stretched (their maps were square, as with 1).
-    pub max_stretch: u32,
-    pub extend: f64,
-    pub planes: u32,
-    pub slice_planes: u32,
-    pub placement: String,
-    pub alpha_occluders: bool,
-    pub occluders: Option<String>,
-    pub improved_projection: bool,
-    /// Whether the cells were baked with the occlusion sweep (what `--sweep`/`--no-sweep`, or
-    /// the automatic rule, chose).
-    pub sweep: bool,
-    /// The sweep's most planes per direction, kernel size (pixels) and spacing
-    /// (`"geometric"` or `"kernel"`); meaningful when `sweep` is true.
-    pub sweep_planes: u32,
-    pub kernel: u32,
-    pub sweep_spacing: String,
-    /// Sub-cell size when cells were baked as unions of sub-cells.
-    pub subcell: Option<f64>,
+    /// The settings of the bake.
+    #[serde(flatten)]
+    pub bake: crate::settings::BakeSettings,
+}
+
+impl Default for PvsSettings {
+    /// What a document without settings reads as: the defaults, as a bake without the sweep
+    /// and with square maps ran (the reading of fields older documents lack).
+    fn default() -> Self {
+        PvsSettings {
+            backend: String::new(),
+            bake: crate::settings::BakeSettings {
+                sweep: crate::settings::SweepChoice::Off,
+                max_stretch: 1,
+                ..crate::settings::BakeSettings::default()
+            },
+        }
+    }
 }
 
 // Imports run one way: `format` (byte-level definitions) ← `error` ← `database` (reader) ←

@@ -431,7 +431,7 @@ pub fn check_with(
     opts: &CheckOptions,
 ) -> Result<Report, ValidateError> {
     check_input(scene, doc, opts.rays)?;
-    let alpha = doc.settings.alpha_occluders;
+    let alpha = doc.settings.bake.alpha_occluders;
     if opts.hunt {
         return Ok(hunt_with(index, scene, doc, opts));
     }
@@ -484,7 +484,7 @@ fn pvs_mask(scene: &Scene, cell: &crate::pvs::PvsCell) -> Vec<bool> {
 
 /// [`check_with`] in hunt mode (input already checked).
 fn hunt_with(index: &SceneRays, scene: &Scene, doc: &PvsDocument, opts: &CheckOptions) -> Report {
-    let alpha = doc.settings.alpha_occluders;
+    let alpha = doc.settings.bake.alpha_occluders;
     let cells: Vec<HuntCell> = doc
         .cells
         .iter()
