@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 /// An axis-aligned box in scene units (single precision, as stored in scenes and PVS files).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Aabb {
+    /// Lower corner.
     pub min: Vec3,
+    /// Upper corner (below `min` on some axis for an empty box).
     pub max: Vec3,
 }
 
@@ -18,6 +20,7 @@ impl Aabb {
         max: Vec3::NEG_INFINITY,
     };
 
+    /// The box `min..max`, taken as given (not checked or reordered).
     pub const fn new(min: Vec3, max: Vec3) -> Self {
         Aabb { min, max }
     }
@@ -31,11 +34,13 @@ impl Aabb {
         b
     }
 
+    /// Extends the box to hold `p`.
     pub fn grow(&mut self, p: Vec3) {
         self.min = self.min.min(p);
         self.max = self.max.max(p);
     }
 
+    /// The smallest box holding both boxes.
     pub fn union(&self, o: &Aabb) -> Aabb {
         Aabb::new(self.min.min(o.min), self.max.max(o.max))
     }
@@ -45,10 +50,12 @@ impl Aabb {
         self.min.cmpgt(self.max).any()
     }
 
+    /// The center point (meaningless for an empty box).
     pub fn center(&self) -> Vec3 {
         (self.min + self.max) * 0.5
     }
 
+    /// The extent `max - min` per axis (negative on some axis for an empty box).
     pub fn size(&self) -> Vec3 {
         self.max - self.min
     }
@@ -61,6 +68,7 @@ impl Aabb {
             && o.min.cmple(self.max).all()
     }
 
+    /// True when `p` lies inside or on the boundary (closed box).
     pub fn contains_point(&self, p: Vec3) -> bool {
         self.min.cmple(p).all() && p.cmple(self.max).all()
     }
@@ -84,6 +92,7 @@ impl Aabb {
         )
     }
 
+    /// The same box in double precision (exact).
     pub fn to_f64(&self) -> DAabb {
         DAabb {
             min: self.min.as_dvec3(),
@@ -95,29 +104,37 @@ impl Aabb {
 /// An axis-aligned box in double precision, used by the culling geometry.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct DAabb {
+    /// Lower corner.
     pub min: DVec3,
+    /// Upper corner (below `min` on some axis for an empty box).
     pub max: DVec3,
 }
 
 impl DAabb {
+    /// The empty box: `min = +inf`, `max = -inf`; growing it by a point gives that point.
     pub const EMPTY: DAabb = DAabb {
         min: DVec3::INFINITY,
         max: DVec3::NEG_INFINITY,
     };
 
+    /// Extends the box to hold `p`.
     pub fn grow(&mut self, p: DVec3) {
         self.min = self.min.min(p);
         self.max = self.max.max(p);
     }
 
+    /// True when the box holds no point (`min > max` on some axis).
     pub fn is_empty(&self) -> bool {
         self.min.cmpgt(self.max).any()
     }
 
+    /// The center point (meaningless for an empty box).
     pub fn center(&self) -> DVec3 {
         (self.min + self.max) * 0.5
     }
 
+    /// Closed-box overlap: boxes that only touch overlap. Unlike [`Aabb::overlaps`], empty
+    /// boxes are not special-cased.
     pub fn overlaps(&self, o: &DAabb) -> bool {
         self.min.cmple(o.max).all() && o.min.cmple(self.max).all()
     }

@@ -4,7 +4,9 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod cli_bake;
+mod cli_gen;
 mod cli_inspect;
+mod cli_validate;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -22,9 +24,9 @@ enum Command {
     /// Bake the potentially visible set of every view cell of a scene.
     Bake(cli_bake::BakeArgs),
     /// Check a PVS against ray-sampled ground truth (exit 0: no false cull, 1: false culls).
-    Validate(umbrasweep::validate::ValidateArgs),
+    Validate(cli_validate::ValidateArgs),
     /// Generate a test scene (forest, city, boxfield) as OBJ, with matching view cells.
-    Gen(umbrasweep::generate::GenArgs),
+    Gen(cli_gen::GenArgs),
     /// Bake and validate a fixed set of scenes with each backend and print one table.
     Bench(umbrasweep::bench::BenchArgs),
     /// Summarise a binary PVS file, list a cell's objects, or print it as JSON.
@@ -37,8 +39,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Bake(a) => cli_bake::run(a).map(|_| 0),
-        Command::Validate(a) => umbrasweep::validate::run(a),
-        Command::Gen(a) => umbrasweep::generate::run(a).map(|_| 0),
+        Command::Validate(a) => cli_validate::run(a),
+        Command::Gen(a) => cli_gen::run(a).map(|_| 0),
         Command::Bench(a) => umbrasweep::bench::run(a).map(|_| 0),
         Command::Inspect(a) => cli_inspect::run(a).map(|_| 0),
         Command::Report(a) => umbrasweep::inspect::run_report(a).map(|_| 0),

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 pub struct CpuBackend;
 
 impl CpuBackend {
+    /// The CPU backend (stateless; same as `CpuBackend::default()`).
     pub fn new() -> Self {
         CpuBackend
     }

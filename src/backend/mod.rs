@@ -20,8 +20,10 @@ use crate::plane;
 /// Backend failures (device lost, out of memory, no adapter…).
 #[derive(Debug, thiserror::Error)]
 pub enum BackendError {
+    /// No usable GPU adapter; the message says why (none found, or none with the needed features).
     #[error("no GPU adapter found: {0}")]
     NoAdapter(String),
+    /// The device failed while rendering (device lost, out of memory, failed read-back…).
     #[error("GPU error: {0}")]
     Device(String),
 }

@@ -34,6 +34,7 @@ pub enum BakeError {
     /// A setting out of its range (or an `--occluders` pattern that is not a glob).
     #[error(transparent)]
     Settings(#[from] SettingsError),
+    /// The backend failed (no adapter, device lost…).
     #[error(transparent)]
     Backend(#[from] BackendError),
 }
@@ -43,9 +44,11 @@ pub enum BakeError {
 pub struct CellResult {
     /// Potentially visible object ids, ascending.
     pub visible: Vec<u32>,
+    /// Wall time spent baking this cell, in milliseconds.
     pub ms: f64,
     /// Planes rasterised and occluder Projections sent to the backend.
     pub planes: usize,
+    /// Occluder projections sent to the backend, over all planes of the cell.
     pub occluders_projected: usize,
     /// Per culler of the pipeline ([`BakeResult::cullers`]), its account for this cell.
     pub cullers: Vec<CullerStats>,
@@ -54,14 +57,21 @@ pub struct CellResult {
 /// A whole bake's outcome.
 #[derive(Clone, Debug)]
 pub struct BakeResult {
+    /// Per cell, in the order of the cells given to the bake.
     pub cells: Vec<CellResult>,
+    /// The backend's name ([`RasterBackend::name`], e.g. `cpu` or `gpu`).
     pub backend: String,
+    /// The GPU adapter's description, `None` for the CPU backend.
     pub adapter: Option<String>,
+    /// Triangles used as occluders (opaque, selected, not degenerate).
     pub occluder_triangles: usize,
+    /// Zero-area triangles skipped.
     pub degenerate_triangles: usize,
+    /// Wall time of the whole bake (preparation included), in seconds.
     pub seconds: f64,
     /// Whether the bake swept, and why (for the summary).
     pub sweep: bool,
+    /// Why the bake swept or not, one human-readable line.
     pub sweep_reason: String,
     /// The names of the cullers every cell ran, in order.
     pub cullers: Vec<&'static str>,

@@ -259,7 +259,10 @@ impl Prepared<'_> {
 
     /// Tests the object BVH against one plane, marking hidden objects, and nodes whose whole
     /// subtree is hidden (skipped on the following planes).
-    #[allow(clippy::too_many_arguments)]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the BVH walk needs the plane job, HDM, cell, slab range and three output masks; bundling them into a struct would only move the list"
+    )]
     fn traverse(
         &self,
         job: &PlaneJob,

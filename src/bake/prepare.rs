@@ -17,8 +17,11 @@ use std::time::Instant;
 
 /// The per-scene preparation shared by all cells.
 pub struct Prepared<'a> {
+    /// The scene being baked.
     pub scene: &'a Scene,
+    /// The convex occluder parts of the scene.
     pub occluders: Occluders,
+    /// Objects whose cross-sections may serve as slices.
     pub sliceable: Sliceable,
     pub(super) bvh: Option<Bvh2>,
     pub(super) settings: BakeSettings,
@@ -26,6 +29,7 @@ pub struct Prepared<'a> {
     pub(super) cullers: Vec<Box<dyn Culler>>,
     /// Whether cells are baked with the occlusion sweep, and why.
     pub sweep: bool,
+    /// Why cells are swept or not, one human-readable line.
     pub sweep_reason: String,
     /// Per object, its pieces in `piece_boxes` (empty for small objects): boxes around parts of
     /// its triangles, tested when the object's own box is not hidden.

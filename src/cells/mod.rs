@@ -9,22 +9,36 @@ use std::path::{Path, PathBuf};
 /// Errors for cell input; each names the file or option at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum CellError {
+    /// The cells file could not be read.
     #[error("{path}: cannot read: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The I/O error.
         #[source]
         source: std::io::Error,
     },
+    /// The cells file is not JSON of the cells-file shape; `message` is the parser's.
     #[error(
         "{path}: not a cells file: {message} (expected {{\"cells\": [{{\"min\": [x,y,z], \"max\": [x,y,z]}}, …]}})"
     )]
-    Parse { path: PathBuf, message: String },
-    #[error("{origin}: cell {index}: {message}")]
-    BadCell {
-        origin: String,
-        index: usize,
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The JSON parser's message.
         message: String,
     },
+    /// Cell `index` (0-based) of `origin` (a file or option) is not a valid box.
+    #[error("{origin}: cell {index}: {message}")]
+    BadCell {
+        /// The file or option the cell came from.
+        origin: String,
+        /// The cell's position in its list, 0-based.
+        index: usize,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// A cell grid option is invalid (the message names the option and the fault).
     #[error("{0}")]
     BadGrid(String),
 }
@@ -32,21 +46,26 @@ pub enum CellError {
 /// The cells file.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct CellsFile {
+    /// The cells, in bake order (cell `i` of the PVS is entry `i`).
     pub cells: Vec<CellBox>,
 }
 
-/// One cell as written in a cells file.
+/// One cell as written in a cells file. Coordinates are read in `f64` and rounded outward to
+/// the `f32` cell that is baked; a cell made from an `f32` box is written with its exact
+/// values, so it reads back unchanged.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct CellBox {
-    pub min: [f32; 3],
-    pub max: [f32; 3],
+    /// Lower corner, in scene units.
+    pub min: [f64; 3],
+    /// Upper corner, in scene units (`max >= min` on every axis).
+    pub max: [f64; 3],
 }
 
 impl From<Aabb> for CellBox {
     fn from(b: Aabb) -> Self {
         CellBox {
-            min: b.min.to_array(),
-            max: b.max.to_array(),
+            min: b.min.as_dvec3().to_array(),
+            max: b.max.as_dvec3().to_array(),
         }
     }
 }
@@ -87,16 +106,7 @@ pub fn load_json(path: &Path) -> Result<Vec<Aabb>, CellError> {
     })?;
     // Read in f64 and round each cell outward to f32: nearest rounding could bake a cell
     // slightly smaller than written (100000.003 read as 100000.0).
-    #[derive(Deserialize)]
-    struct CellIn {
-        min: [f64; 3],
-        max: [f64; 3],
-    }
-    #[derive(Deserialize)]
-    struct FileIn {
-        cells: Vec<CellIn>,
-    }
-    let file: FileIn = serde_json::from_str(&text).map_err(|e| CellError::Parse {
+    let file: CellsFile = serde_json::from_str(&text).map_err(|e| CellError::Parse {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
@@ -283,6 +293,22 @@ mod tests {
             max.x - 100000.003 < 0.0079 && 99999.996 - min.x < 0.0079,
             "{c:?}"
         );
+    }
+
+    /// Cells written by `save_json` (the generators' cells files) read back bit for bit.
+    #[test]
+    fn saved_cells_read_back_unchanged() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cells.json");
+        let cells = vec![
+            Aabb::new(
+                Vec3::new(-22.392307, 0.1, 1e5),
+                Vec3::new(-20.0, 0.3, 1e5 + 0.5),
+            ),
+            Aabb::new(Vec3::splat(-1.0 / 3.0), Vec3::splat(2.0 / 3.0)),
+        ];
+        save_json(&path, &cells).unwrap();
+        assert_eq!(load_json(&path).unwrap(), cells);
     }
 
     #[test]

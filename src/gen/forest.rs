@@ -70,7 +70,7 @@ pub struct ForestOptions {
 
 /// The volume a procedural crown's leaves fill (of radius `crown_radius`, height
 /// `crown_height`); `gen forest --crown-shape`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum CrownShape {
     /// A vertical cylinder: the canopy reaches down to --crown-base at its full width.
     #[default]

@@ -2,7 +2,7 @@
 //! 1e-4 grid of [`quantize`](super::quantize)), objects formatted in parallel and written in
 //! order, through an atomic write so no partial file is left.
 
-use super::{GenObject, Generated, NO_VERTEX};
+use super::{GenError, GenObject, Generated, NO_VERTEX};
 use rayon::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -22,8 +22,8 @@ pub fn mtl_path(obj: &Path) -> PathBuf {
 /// materials `opaque` (`d 1`) and `translucent` (`d 0.5`) and refers to it with `mtllib`.
 ///
 /// # Errors
-/// I/O errors with the path; on error neither file is left (an existing file stays as it was).
-pub fn write_obj(path: &Path, g: &Generated) -> Result<(), String> {
+/// [`GenError::Write`]: I/O errors with the path; on error neither file is left (an existing file stays as it was).
+pub fn write_obj(path: &Path, g: &Generated) -> Result<(), GenError> {
     let materials = g.has_translucent();
     let mtl = mtl_path(path);
     crate::util::write_atomic_with(path, |w| {
@@ -73,7 +73,8 @@ pub fn write_obj(path: &Path, g: &Generated) -> Result<(), String> {
             }
         }
         Ok(())
-    })?;
+    })
+    .map_err(GenError::Write)?;
     if materials {
         let text = format!(
             "# umbrasweep gen materials: translucent faces were not opaque in the source model\n\
@@ -81,7 +82,7 @@ pub fn write_obj(path: &Path, g: &Generated) -> Result<(), String> {
         );
         if let Err(e) = crate::util::write_atomic(&mtl, text.as_bytes()) {
             let _ = std::fs::remove_file(path);
-            return Err(e);
+            return Err(GenError::Write(e));
         }
     }
     Ok(())

@@ -13,12 +13,15 @@ use crate::plane::DepthMap;
 /// Max and min pyramids of one Depth Map (width and height powers of two).
 #[derive(Clone, Debug)]
 pub struct Hdm {
+    /// Width of level 0 (the Depth Map), in pixels; a power of two.
     pub width: u32,
+    /// Height of level 0 (the Depth Map), in pixels; a power of two.
     pub height: u32,
     /// `max[k]` has [`Hdm::level_size`]`(k)` texels, row-major; `max[0]` is the Depth Map. A
     /// map wider than tall keeps halving its width after its height has reached 1 texel (and
     /// the other way round): texel `(i >> k, j >> k)` of level `k` always holds pixel `(i, j)`.
     pub max: Vec<Vec<f32>>,
+    /// Like `max`, but each texel holds the smallest Depth of its pixels.
     pub min: Vec<Vec<f32>>,
 }
 
@@ -117,7 +120,10 @@ impl Hdm {
 
     /// True when all level-0 pixels of texel `(tx, ty)` of `level` inside the rectangle hold a
     /// Depth below `depth`.
-    #[allow(clippy::too_many_arguments)]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a hot inner query over a texel rectangle; passing the corners as scalars keeps it allocation- and struct-free"
+    )]
     fn hidden_in(
         &self,
         level: usize,

@@ -57,11 +57,13 @@ pub struct PlaneFrame {
     pub position: f64,
     /// The rectangle on the plane, in world `(u, v)` coordinates.
     pub rect_min: DVec2,
+    /// Upper corner of that rectangle (`rect_min` is the lower one).
     pub rect_max: DVec2,
     /// Pixels along `u` (columns) and along `v` (rows), powers of two. Not necessarily equal:
     /// a bake gives a long, flat rectangle (a forest's band of crowns) a wide, short map, so
     /// that its pixels are about square in world units ([`map_size`]).
     pub width: u32,
+    /// Pixels along `v` (rows); see `width`.
     pub height: u32,
 }
 
@@ -144,25 +146,31 @@ impl PlaneFrame {
 /// Convex occluders for one plane: occluder `k` is `points[spans[k].0 .. spans[k].1]`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct OccluderSet {
+    /// The vertices of all occluders, each occluder's in order.
     pub points: Vec<DVec3>,
+    /// Per occluder, its range `start..end` in `points`.
     pub spans: Vec<(u32, u32)>,
 }
 
 impl OccluderSet {
+    /// Appends one convex occluder with the vertices `pts`.
     pub fn push(&mut self, pts: impl IntoIterator<Item = DVec3>) {
         let start = self.points.len() as u32;
         self.points.extend(pts);
         self.spans.push((start, self.points.len() as u32));
     }
 
+    /// The number of occluders.
     pub fn len(&self) -> usize {
         self.spans.len()
     }
 
+    /// True when there are no occluders.
     pub fn is_empty(&self) -> bool {
         self.spans.is_empty()
     }
 
+    /// The vertices of occluder `k` (panics when `k >= len()`).
     pub fn get(&self, k: usize) -> &[DVec3] {
         let (a, b) = self.spans[k];
         &self.points[a as usize..b as usize]
@@ -172,7 +180,9 @@ impl OccluderSet {
 /// Everything a backend rasterises for one plane.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlaneJob {
+    /// The plane, its rectangle and its map size.
     pub frame: PlaneFrame,
+    /// The convex occluders to project onto the plane.
     pub occluders: OccluderSet,
     /// Edges of the closed slice loops, in world `(u, v)` coordinates of the plane.
     pub slices: Vec<[DVec2; 2]>,
@@ -212,6 +222,7 @@ impl DepthMap {
         DepthMap::sized(frame.width, frame.height)
     }
 
+    /// The number of covered pixels (those with a finite Depth).
     pub fn covered(&self) -> usize {
         self.depth.iter().filter(|d| d.is_finite()).count()
     }

@@ -22,7 +22,10 @@ pub enum PartKind {
     /// A closed convex solid; the points are its (already shrunk) vertices. Its interior
     /// counts as opaque only for eyes outside it: `hull` bounds the unshrunk solid, and a cell
     /// overlapping it must not use the part as a solid (a ray from inside crosses no triangle).
-    Solid { hull: DAabb },
+    Solid {
+        /// Bounds of the unshrunk solid: cells overlapping it must not use the part as a solid.
+        hull: DAabb,
+    },
     /// A planar convex polygon, points in order.
     Polygon {
         /// Unit normal of the fitted plane.
@@ -33,10 +36,15 @@ pub enum PartKind {
 /// One convex part of an occluder object.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OccluderPart {
+    /// Start of the part's points in [`Occluders::points`].
     pub start: u32,
+    /// End (exclusive) of the part's points in [`Occluders::points`].
     pub end: u32,
+    /// Bounds of the part's points.
     pub bounds: DAabb,
+    /// Id of the scene object the part belongs to.
     pub object: u32,
+    /// Solid or polygon, with the data of each.
     pub kind: PartKind,
     /// For polygons: the largest distance of a vertex from the fitted plane (0 for exact
     /// planes and all triangles). A ray crossing a slightly bent polygon at a grazing angle θ
@@ -51,8 +59,11 @@ pub struct OccluderPart {
 /// All occluder parts of a scene.
 #[derive(Clone, Debug, Default)]
 pub struct Occluders {
+    /// The points of all parts; part `k` owns `parts[k].start..parts[k].end`.
     pub points: Vec<DVec3>,
+    /// The convex parts.
     pub parts: Vec<OccluderPart>,
+    /// Counts for the summary.
     pub stats: OccluderStats,
     /// Bounds of all parts (empty — min > max — without parts).
     pub bounds: DAabb,
@@ -65,11 +76,14 @@ pub struct OccluderStats {
     pub triangles: usize,
     /// Zero-area triangles skipped.
     pub degenerate: usize,
+    /// Convex solids made from closed objects.
     pub solids: usize,
+    /// Convex planar polygons (merged coplanar triangles, or single triangles).
     pub polygons: usize,
 }
 
 impl Occluders {
+    /// The points of part `k` (panics when `k` is out of range).
     pub fn part_points(&self, k: usize) -> &[DVec3] {
         let p = &self.parts[k];
         &self.points[p.start as usize..p.end as usize]
@@ -372,9 +386,15 @@ fn convex_solid(verts: &[DVec3], tris: &[[u32; 3]]) -> Option<Vec<DVec3>> {
 /// A merged convex polygon.
 #[derive(Clone, Debug)]
 pub struct MergedPolygon {
+    /// Indices of the polygon's vertices, in order around it, into the `verts` given to
+    /// [`merge_coplanar`].
     pub verts: Vec<u32>,
+    /// Unit normal of the fitted plane.
     pub normal: DVec3,
+    /// The largest distance of a vertex from the fitted plane (see [`OccluderPart::deviation`]).
     pub deviation: f64,
+    /// The distance from the vertex centroid to the nearest edge (see
+    /// [`OccluderPart::inradius`]).
     pub inradius: f64,
 }
 

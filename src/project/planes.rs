@@ -41,6 +41,7 @@ pub struct PlaneSettings {
     /// Further planes per direction through the middle of closed occluders, which receive
     /// their slices (§3.3) at Depth 0.
     pub slice_planes: u32,
+    /// Where the planes of each direction go.
     pub placement: Placement,
     /// When set, every direction is an occlusion sweep ([`crate::sweep`]) instead.
     pub sweep: Option<SweepSettings>,
@@ -75,11 +76,15 @@ impl Default for PlaneSettings {
 /// and occluders.
 #[derive(Clone, Debug, Default)]
 pub struct Sliceable {
+    /// Ids of the sliceable objects, ascending.
     pub objects: Vec<u32>,
+    /// Bounds of each sliceable object, parallel to `objects`.
     pub bounds: Vec<DAabb>,
 }
 
 impl Sliceable {
+    /// The sliceable objects of `scene`: closed ones, flagged in `is_occluder`, with only opaque
+    /// triangles (or any, when `alpha_occluders`).
     pub fn new(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Self {
         let mut s = Sliceable::default();
         for (i, o) in scene.objects.iter().enumerate() {
@@ -722,7 +727,10 @@ fn summarize(
 
 /// The entries `only` of `summary`, with their points cut at `face + eps` where the part
 /// crosses the face (parts that vanish in the cut are dropped).
-#[allow(clippy::too_many_arguments)]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a private helper of the slab gather; the cell, face, eps and part selections are all independent inputs"
+)]
 fn cut_parts(
     cell: &DAabb,
     occ: &Occluders,
@@ -981,10 +989,12 @@ pub struct SlabParts {
 }
 
 impl SlabParts {
+    /// The number of parts gathered.
     pub fn len(&self) -> usize {
         self.object.len()
     }
 
+    /// True when no part was gathered.
     pub fn is_empty(&self) -> bool {
         self.object.is_empty()
     }

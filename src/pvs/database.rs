@@ -78,10 +78,13 @@ fn corrupt(m: impl Into<String>) -> PvsErrorKind {
 /// One object of the scene.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ObjectInfo<'a> {
+    /// The object's name in the scene (may be empty).
     pub name: &'a str,
+    /// Triangle count of the object.
     pub triangles: u32,
     /// World bounds (`+inf`/`-inf` for an object without triangles).
     pub min: [f32; 3],
+    /// Upper corner of the world bounds (see `min`).
     pub max: [f32; 3],
 }
 
@@ -101,7 +104,9 @@ pub struct CellRecordInfo {
 /// Sizes and shape of a database, for `umbrasweep inspect` and reports.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PvsStats {
+    /// Number of cells.
     pub cells: usize,
+    /// Number of objects.
     pub objects: usize,
     /// Cells stored in full.
     pub key_cells: usize,
@@ -117,7 +122,9 @@ pub struct PvsStats {
     pub plain_bitset_bytes: usize,
     /// Mean number of visible objects per cell.
     pub mean_visible: f64,
+    /// The largest [`CellRecordInfo::depth`] over cells (records decoded for the worst cell).
     pub max_depth: u32,
+    /// The mean [`CellRecordInfo::depth`] over cells.
     pub mean_depth: f64,
 }
 

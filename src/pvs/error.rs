@@ -55,26 +55,47 @@ pub enum PvsErrorKind {
         "not a umbrasweep .pvs file (no \"UMBRAPVS\" magic number){}",
         json_hint(.looks_like_json)
     )]
-    BadMagic { looks_like_json: bool },
+    BadMagic {
+        /// True when the file starts with `{` (probably a JSON PVS document).
+        looks_like_json: bool,
+    },
     /// The file has another format version.
     #[error(
         ".pvs format version {found} is not supported (this build reads versions 1 to \
          {FORMAT_VERSION})"
     )]
-    UnsupportedVersion { found: u32 },
+    UnsupportedVersion {
+        /// The version in the header.
+        found: u32,
+    },
     /// The file is shorter than its header says (`expected` bytes).
     #[error("truncated: the file has {actual} bytes, its header says {expected}")]
-    Truncated { expected: u64, actual: u64 },
+    Truncated {
+        /// The size the header states, in bytes.
+        expected: u64,
+        /// The file's actual size, in bytes.
+        actual: u64,
+    },
     /// The file is longer than its header says.
     #[error(
         "{} unexpected bytes after the end of the PVS ({actual} bytes, header says \
          {expected})",
         .actual - .expected
     )]
-    TrailingBytes { expected: u64, actual: u64 },
+    TrailingBytes {
+        /// The size the header states, in bytes.
+        expected: u64,
+        /// The file's actual size, in bytes.
+        actual: u64,
+    },
     /// The payload's CRC-32 is not the one in the header.
     #[error("checksum mismatch (header {stored:08x}, content {computed:08x}): the file is corrupt")]
-    Checksum { stored: u32, computed: u32 },
+    Checksum {
+        /// The CRC-32 stored in the header.
+        stored: u32,
+        /// The CRC-32 of the payload as read.
+        computed: u32,
+    },
     /// The checksum matches but the content is inconsistent (a writer's bug).
     #[error("corrupt .pvs file: {0}")]
     Corrupt(String),
@@ -106,30 +127,57 @@ fn json_hint(looks_like_json: &bool) -> &'static str {
 pub enum EncodeError {
     /// `objects` objects: the format counts them in a `u32` below `0xFFFFFFFF`.
     #[error("too many objects for the .pvs format")]
-    TooManyObjects { objects: usize },
+    TooManyObjects {
+        /// The number of objects in the document.
+        objects: usize,
+    },
     /// `cells` cells: the format counts them in a `u32` below `0xFFFFFFFF`.
     #[error("too many cells for the .pvs format")]
-    TooManyCells { cells: usize },
+    TooManyCells {
+        /// The number of cells in the document.
+        cells: usize,
+    },
     /// The object at position `index` has id `id`: the format numbers objects by position.
     #[error("object {index} has id {id}: the .pvs format numbers objects 0, 1, 2… in order")]
-    ObjectOutOfOrder { index: usize, id: u32 },
+    ObjectOutOfOrder {
+        /// The object's position in the document.
+        index: usize,
+        /// Its id.
+        id: u32,
+    },
     /// Cell `cell` lists object `object`, but the document has only `objects` objects.
     #[error("cell {cell} lists object {object}, but there are only {objects} objects")]
     MissingObject {
+        /// The cell's position in the document.
         cell: usize,
+        /// The id it lists.
         object: u32,
+        /// The number of objects in the document.
         objects: u32,
     },
     /// Cell `cell` lists `id` after `previous` (not strictly ascending: unsorted or repeated).
     #[error("cell {cell}: visible ids are not strictly ascending ({previous} then {id})")]
-    NotAscending { cell: usize, previous: u32, id: u32 },
+    NotAscending {
+        /// The cell's position in the document.
+        cell: usize,
+        /// The id listed before `id`.
+        previous: u32,
+        /// The offending id.
+        id: u32,
+    },
     /// A string of `len` bytes (scene path, setting, object or culler name): the format
     /// stores lengths in a `u32` below `0xFFFFFFFF`.
     #[error("a string is longer than 4 GiB")]
-    StringTooLong { len: usize },
+    StringTooLong {
+        /// The string's length in bytes.
+        len: usize,
+    },
     /// The record of cell `cell` needs more than `u32::MAX` bytes.
     #[error("a record exceeds 4 GiB")]
-    RecordTooLarge { cell: usize },
+    RecordTooLarge {
+        /// The cell's position in the document.
+        cell: usize,
+    },
     /// The records together need more than `u32::MAX` bytes.
     #[error("the PVS data exceeds 4 GiB")]
     DataTooLarge,
@@ -229,15 +277,24 @@ pub enum PvsJsonErrorKind {
     Parse(serde_json::Error),
     /// The `format` tag is `found`, not [`FORMAT`](super::FORMAT).
     #[error("format is {found:?}, expected {FORMAT:?}")]
-    Format { found: String },
+    Format {
+        /// The document's `format` value.
+        found: String,
+    },
     /// The document's `version` is `found`, not [`VERSION`](super::VERSION).
     #[error("PVS version {found} is not supported (this build reads version {VERSION})")]
-    Version { found: u32 },
+    Version {
+        /// The document's `version` value.
+        found: u32,
+    },
     /// Cell `cell` lists object `object`, but the document has only `objects` objects.
     #[error("cell {cell} lists object {object}, but there are only {objects} objects")]
     MissingObject {
+        /// The cell's position in the document.
         cell: usize,
+        /// The id it lists.
         object: u32,
+        /// The number of objects in the document.
         objects: u32,
     },
 }

@@ -16,14 +16,18 @@ pub const VERSION: u32 = 1;
 /// A whole PVS document.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PvsDocument {
+    /// Always [`FORMAT`]; checked on reading.
     pub format: String,
+    /// The schema version, [`VERSION`] for documents this crate writes.
     pub version: u32,
     /// The scene file the PVS was baked from.
     pub scene: String,
     /// The settings used, for reproducing the bake.
     #[serde(default)]
     pub settings: PvsSettings,
+    /// The scene's objects; object `i` has id `i`.
     pub objects: Vec<PvsObject>,
+    /// The cells, in bake order, each with its potentially visible set.
     pub cells: Vec<PvsCell>,
     /// Totals of the bake; absent in documents made by other tools.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -33,17 +37,24 @@ pub struct PvsDocument {
 /// One scene object, as the PVS numbers it.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PvsObject {
+    /// The object's id: its index in the scene (and in [`PvsDocument::objects`]).
     pub id: u32,
+    /// The object's name in the scene (may be empty).
     pub name: String,
+    /// Triangle count of the object.
     pub triangles: u32,
+    /// Lower corner of the world bounds (`+inf` for an object without triangles).
     pub min: [f32; 3],
+    /// Upper corner of the world bounds (`-inf` for an object without triangles).
     pub max: [f32; 3],
 }
 
 /// One cell and its potentially visible set.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PvsCell {
+    /// Lower corner of the cell, in scene units.
     pub min: [f32; 3],
+    /// Upper corner of the cell, in scene units.
     pub max: [f32; 3],
     /// Ids of the potentially visible objects, sorted ascending.
     pub visible: Vec<u32>,
@@ -55,18 +66,27 @@ pub struct PvsCell {
 /// Totals over all cells.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct PvsSummary {
+    /// Number of cells baked.
     pub cells: usize,
+    /// Number of objects in the scene.
     pub objects: usize,
+    /// Number of triangles in the scene.
     pub triangles: usize,
+    /// Triangles used as occluders (opaque, selected, not degenerate).
     pub occluder_triangles: usize,
+    /// Zero-area triangles skipped.
     pub degenerate_triangles: usize,
+    /// The backend that baked (e.g. `cpu` or `gpu`).
     pub backend: String,
+    /// The GPU adapter's description; `None` for the CPU backend.
     pub adapter: Option<String>,
     /// Mean over cells of the percentage of objects culled.
     pub objects_culled_percent: f64,
     /// Mean over cells of the percentage of triangles culled.
     pub triangles_culled_percent: f64,
+    /// Median over cells of the bake time per cell, in milliseconds.
     pub median_ms_per_cell: f64,
+    /// Wall time of the whole bake, in seconds.
     pub total_seconds: f64,
     /// The cullers every cell ran, in order, with their mean account per cell (absent in
     /// documents written before the culler pipeline).

@@ -32,6 +32,7 @@ pub struct SceneObject {
 pub struct Scene {
     /// The file the scene came from (for messages).
     pub source: PathBuf,
+    /// All vertex positions, in world space.
     pub vertices: Vec<Vec3>,
     /// Vertex indices, grouped by object (see [`SceneObject::triangles`]).
     pub triangles: Vec<[u32; 3]>,
@@ -47,22 +48,39 @@ pub struct Scene {
 /// Errors of scene import. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
+    /// The scene file could not be read.
     #[error("{path}: cannot read: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The I/O error.
         #[source]
         source: std::io::Error,
     },
+    /// The file has a syntax error at `line` (1-based).
     #[error("{path}:{line}: {message}")]
     Parse {
+        /// The file.
         path: PathBuf,
+        /// The line of the error, 1-based.
         line: usize,
+        /// What is wrong.
         message: String,
     },
+    /// The file parsed but its content is unusable; `message` says why.
     #[error("{path}: {message}")]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The file's extension is none of `.obj`, `.gltf`, `.glb`.
     #[error("{path}: unsupported file type (expected .obj, .gltf or .glb)")]
-    UnknownFormat { path: PathBuf },
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
 }
 
 impl Scene {

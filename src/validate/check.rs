@@ -30,21 +30,42 @@ pub enum ValidateError {
     BadCell {
         /// Position of the cell in the PVS.
         index: usize,
+        /// Lower corner of the cell as stored.
         min: [f32; 3],
+        /// Upper corner of the cell as stored.
         max: [f32; 3],
     },
 }
 
+/// What [`check_with`] tells a [`CheckOptions::progress`] callback.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Progress {
+    /// The rays start: `total` rays will be reported through [`Progress::Advance`] in all.
+    Start {
+        /// Rays the whole check casts (or skips).
+        total: u64,
+    },
+    /// `n` more rays were cast (or skipped when a cell's sampling stopped early).
+    Advance(u64),
+    /// The rays are done (sent once, after the last [`Progress::Advance`]).
+    Finish,
+}
+
+/// A progress callback of [`CheckOptions::progress`]; it is called from the rayon worker
+/// threads, so it must be cheap and thread-safe (a progress bar, a counter).
+pub type ProgressFn = std::sync::Arc<dyn Fn(Progress) + Send + Sync>;
+
 /// Options of [`check`]. Build them with `..Default::default()` for the fields you leave
 /// alone: fields may be added.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct CheckOptions {
     /// Rays per cell (at least 1).
     pub rays: u64,
     /// Seed of all random streams.
     pub seed: u64,
-    /// Show a progress bar on stderr (drawn only when stderr is a terminal).
-    pub progress: bool,
+    /// Called with the rays' [`Progress`] (start, advances, finish); `None` (the default)
+    /// reports nothing. The library draws nothing itself.
+    pub progress: Option<ProgressFn>,
     /// `--hunt`: spend each cell's whole budget on the objects its PVS culls (objects with
     /// area not in its list), split evenly between them
     /// ([`rays_per_culled_object`](super::rays_per_culled_object)), instead of sampling the
@@ -58,9 +79,34 @@ impl Default for CheckOptions {
         CheckOptions {
             rays: 1_000_000,
             seed: 0,
-            progress: false,
+            progress: None,
             hunt: false,
         }
+    }
+}
+
+impl std::fmt::Debug for CheckOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CheckOptions")
+            .field("rays", &self.rays)
+            .field("seed", &self.seed)
+            .field("progress", &self.progress.as_ref().map(|_| "Fn(Progress)"))
+            .field("hunt", &self.hunt)
+            .finish()
+    }
+}
+
+/// Sends [`Progress::Start`] to the callback of `opts`, if any, and returns the callback.
+fn start_progress(opts: &CheckOptions, total: u64) -> Option<&ProgressFn> {
+    let p = opts.progress.as_ref()?;
+    p(Progress::Start { total });
+    Some(p)
+}
+
+/// Sends [`Progress::Finish`] to `progress`, if any.
+fn finish_progress(progress: Option<&ProgressFn>) {
+    if let Some(p) = progress {
+        p(Progress::Finish);
     }
 }
 
@@ -435,40 +481,19 @@ pub fn check_with(
     if opts.hunt {
         return Ok(hunt_with(index, scene, doc, opts));
     }
-    let progress = opts
-        .progress
-        .then(|| progress_bar(opts.rays.saturating_mul(doc.cells.len() as u64)));
+    let progress = start_progress(opts, opts.rays.saturating_mul(doc.cells.len() as u64));
     let start = std::time::Instant::now();
     let mut cells = Vec::with_capacity(doc.cells.len());
     for (i, c) in doc.cells.iter().enumerate() {
         let cell = Aabb::new(Vec3::from(c.min), Vec3::from(c.max));
         let sample = sample_cell_progress(
-            index,
-            scene,
-            cell,
-            opts.rays,
-            opts.seed,
-            i as u64,
-            alpha,
-            progress.as_ref(),
+            index, scene, cell, opts.rays, opts.seed, i as u64, alpha, progress,
         );
         cells.push(cell_report(scene, c, &sample));
     }
     let seconds = start.elapsed().as_secs_f64();
-    if let Some(pb) = &progress {
-        pb.finish_and_clear();
-    }
+    finish_progress(progress);
     Ok(summarize(scene, opts, alpha, cells, seconds))
-}
-
-fn progress_bar(total: u64) -> indicatif::ProgressBar {
-    let pb = indicatif::ProgressBar::new(total);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "validate {bar:40} {percent:>3}% {human_pos}/{human_len} rays, {per_sec}, eta {eta}",
-    ) {
-        pb.set_style(style);
-    }
-    pb
 }
 
 /// The PVS of `cell` as a mask over the scene's objects.
@@ -503,31 +528,18 @@ fn hunt_with(index: &SceneRays, scene: &Scene, doc: &PvsDocument, opts: &CheckOp
             }
         })
         .collect();
-    let progress = opts.progress.then(|| {
-        progress_bar(
-            cells
-                .iter()
-                .map(|c| {
-                    let m = super::hunt::rays_per_culled_object(opts.rays, c.culled.len());
-                    m.saturating_mul(c.culled.len() as u64)
-                })
-                .fold(0u64, u64::saturating_add),
-        )
-    });
+    let total = cells
+        .iter()
+        .map(|c| {
+            let m = super::hunt::rays_per_culled_object(opts.rays, c.culled.len());
+            m.saturating_mul(c.culled.len() as u64)
+        })
+        .fold(0u64, u64::saturating_add);
+    let progress = start_progress(opts, total);
     let start = std::time::Instant::now();
-    let results = hunt_cells(
-        index,
-        scene,
-        &cells,
-        opts.rays,
-        opts.seed,
-        alpha,
-        progress.as_ref(),
-    );
+    let results = hunt_cells(index, scene, &cells, opts.rays, opts.seed, alpha, progress);
     let seconds = start.elapsed().as_secs_f64();
-    if let Some(pb) = &progress {
-        pb.finish_and_clear();
-    }
+    finish_progress(progress);
     let reports = doc
         .cells
         .iter()

@@ -132,7 +132,7 @@ pub(crate) fn hunt_cells(
     rays: u64,
     seed: u64,
     alpha_blocks: bool,
-    progress: Option<&indicatif::ProgressBar>,
+    progress: Option<&super::check::ProgressFn>,
 ) -> Vec<HuntResult> {
     let mut results: Vec<HuntResult> = cells
         .iter()
@@ -178,7 +178,7 @@ pub(crate) fn hunt_cells(
                 let rng = chunk_rng(seed, c.cell_index, HUNT_STREAM + u64::from(object), j);
                 let out = hunt_chunk(index, c, p.pos, rng, begin..end, alpha_blocks, scratch);
                 if let Some(pb) = progress {
-                    pb.inc(end - begin);
+                    pb(super::check::Progress::Advance(end - begin));
                 }
                 out
             })

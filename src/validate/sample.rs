@@ -310,7 +310,10 @@ pub fn sample_cell(
 
 /// [`sample_cell`], advancing `progress` by the rays cast (and by the rays skipped when the
 /// sampling stops early).
-#[allow(clippy::too_many_arguments)]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the sampler inputs (scene, cell, ray count, seed, cell index, alpha rule, progress) are independent; callers pass them straight through"
+)]
 pub(crate) fn sample_cell_progress(
     index: &SceneRays,
     scene: &Scene,
@@ -319,7 +322,7 @@ pub(crate) fn sample_cell_progress(
     seed: u64,
     cell_index: u64,
     alpha_blocks: bool,
-    progress: Option<&indicatif::ProgressBar>,
+    progress: Option<&super::check::ProgressFn>,
 ) -> CellSample {
     const NONE: u32 = u32::MAX;
     let n_obj = scene.objects.len();
@@ -395,7 +398,7 @@ pub(crate) fn sample_cell_progress(
                     }
                     s.touched.clear();
                     if let Some(pb) = progress {
-                        pb.inc(end - begin);
+                        pb(super::check::Progress::Advance(end - begin));
                     }
                     // Within one ray, several objects may be new: keep ray order, then
                     // object order, so the list does not depend on traversal order.
@@ -424,7 +427,7 @@ pub(crate) fn sample_cell_progress(
         rays_cast += count;
     }
     if let Some(pb) = progress {
-        pb.inc(rays - rays_cast);
+        pb(super::check::Progress::Advance(rays - rays_cast));
     }
 
     let late_found = found.iter().filter(|(_, w)| w.ray >= late_from).count() as u32;

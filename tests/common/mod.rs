@@ -2,7 +2,10 @@
 //! `Scene::from_objects`, the unit cell and a one-cell bake that shows every plane, and a
 //! brute-force ray cast that names the first object a ray hits,
 //! to prove a visibility claim independently of the validator.
-#![allow(dead_code)] // each test crate uses its own subset
+#![allow(
+    dead_code,
+    reason = "each test crate uses its own subset of these helpers, so what is dead differs per crate"
+)]
 
 use glam::Vec3;
 use umbrasweep::backend::cpu::CpuBackend;

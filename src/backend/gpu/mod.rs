@@ -205,7 +205,9 @@ pub struct RenderStats {
     pub draws: usize,
     /// Occluders drawn (after the quick rejects), their triangles and their eroded edges.
     pub occluders: usize,
+    /// Triangles of the occluders drawn.
     pub triangles: usize,
+    /// Eroded edges drawn (conservative rasterisation of the occluders' outlines).
     pub edges: usize,
     /// Bytes written to GPU buffers and textures (vertices, records and edges, uniforms,
     /// reprojection windows and summed-area tables).
@@ -214,7 +216,9 @@ pub struct RenderStats {
     pub bytes_read_back: u64,
     /// Wall time of the CPU setup (parallel), of the GPU section (upload to read-back), total.
     pub setup: Duration,
+    /// Wall time of the GPU section, from the first upload to the last read-back.
     pub gpu: Duration,
+    /// Wall time of the whole render, setup included.
     pub total: Duration,
 }
 
