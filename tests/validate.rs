@@ -223,10 +223,10 @@ fn object_seen_only_through_a_narrow_slit_is_found() {
     );
 }
 
-#[test]
-fn alpha_wall_hides_only_when_alpha_occluders_is_set() {
+/// A see-through (alpha-tested) wall of quads at z = 5 and an opaque box behind it.
+fn alpha_wall_and_box() -> Vec<Obj> {
     let xs = breaks(-50.0, 50.0, 4);
-    let s = scene(vec![
+    vec![
         (
             "foliage".into(),
             grid_wall(5.0, &xs, &xs, |_, _| false),
@@ -237,7 +237,12 @@ fn alpha_wall_hides_only_when_alpha_occluders_is_set() {
             cuboid(vec3(-1.0, -1.0, 10.0), vec3(1.0, 1.0, 12.0)),
             true,
         ),
-    ]);
+    ]
+}
+
+#[test]
+fn alpha_wall_hides_only_when_alpha_occluders_is_set() {
+    let s = scene(alpha_wall_and_box());
     let rays = SceneRays::new(&s);
     let seen = sample_cell(&rays, &s, cell(), 20_000, 5, 0, false);
     assert_eq!(seen.visible, vec![0, 1]);
@@ -730,24 +735,13 @@ fn hunt_reports_no_false_cull_for_a_correct_pvs() {
 
 #[test]
 fn hunt_honours_see_through_triangles_and_overlap() {
-    let xs = breaks(-50.0, 50.0, 4);
-    let s = scene(vec![
-        (
-            "foliage".into(),
-            grid_wall(5.0, &xs, &xs, |_, _| false),
-            false,
-        ),
-        (
-            "behind".into(),
-            cuboid(vec3(-1.0, -1.0, 10.0), vec3(1.0, 1.0, 12.0)),
-            true,
-        ),
-        (
-            "inside".into(),
-            cuboid(vec3(-0.2, -0.2, -0.2), vec3(0.2, 0.2, 0.2)),
-            true,
-        ),
-    ]);
+    let mut objects = alpha_wall_and_box();
+    objects.push((
+        "inside".into(),
+        cuboid(vec3(-0.2, -0.2, -0.2), vec3(0.2, 0.2, 0.2)),
+        true,
+    ));
+    let s = scene(objects);
     // See-through foliage: the box behind it is seen, unless the PVS was baked with alpha
     // occluders.
     let r = check(&s, &doc(&s, vec![0, 2], false), &hunt_opts(1_000)).unwrap();
