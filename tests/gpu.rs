@@ -112,7 +112,8 @@ fn empty_input_gives_empty_output() {
     assert!(b.render(&[]).unwrap().is_empty());
 }
 
-/// A lost device ends every later call with `BackendError::Device`, promptly, never a hang.
+/// A lost device ends every later call with a device failure (`BackendError::device_failed`),
+/// promptly, never a hang.
 #[test]
 fn device_loss_is_an_error_not_a_hang() {
     if backend().is_none() {
@@ -124,7 +125,7 @@ fn device_loss_is_an_error_not_a_hang() {
     b.simulate_device_loss();
     let t = std::time::Instant::now();
     match b.render(&jobs) {
-        Err(BackendError::Device(msg)) => eprintln!("after loss: {msg}"),
+        Err(e) if e.device_failed() => eprintln!("after loss: {e}"),
         other => panic!("expected a device error, got {other:?}"),
     }
     assert!(t.elapsed().as_secs() < 10);
@@ -137,7 +138,11 @@ fn oversized_planes_are_refused() {
     let mut jobs = random_jobs(22, Shape::Triangle, 1, &[16]);
     jobs[0].frame.width = 1 << 20;
     match b.render(&jobs[..1]) {
-        Err(BackendError::Device(msg)) => assert!(msg.contains("size"), "{msg}"),
+        Err(e @ BackendError::PlaneSize { width, max, .. }) => {
+            assert_eq!(width, 1 << 20);
+            assert!(max < width);
+            assert!(e.to_string().contains("size"), "{e}");
+        }
         other => panic!("expected an error, got {other:?}"),
     }
 }
@@ -264,7 +269,9 @@ fn a_device_without_the_required_features_is_refused() {
         return;
     };
     match GpuBackend::with_device(device, queue) {
-        Err(BackendError::Device(msg)) => {
+        Err(e @ BackendError::MissingFeatures { missing }) => {
+            assert_eq!(missing, GpuBackend::REQUIRED_FEATURES);
+            let msg = e.to_string();
             assert!(msg.contains("FLOAT32_BLENDABLE"), "{msg}");
             assert!(msg.contains("required_features"), "{msg}");
         }
@@ -273,8 +280,8 @@ fn a_device_without_the_required_features_is_refused() {
 }
 
 /// The engine's device lost (destroyed through the engine's handle): the backend, which
-/// installs no device-lost callback there, still ends the call with `BackendError::Device`,
-/// promptly.
+/// installs no device-lost callback there, still ends the call with a device failure
+/// (`BackendError::device_failed`), promptly.
 #[test]
 fn losing_an_engine_device_is_an_error_not_a_hang() {
     let Some((device, queue)) =
@@ -288,7 +295,7 @@ fn losing_an_engine_device_is_an_error_not_a_hang() {
     device.destroy();
     let t = std::time::Instant::now();
     match engine.render(&jobs) {
-        Err(BackendError::Device(msg)) => eprintln!("after loss: {msg}"),
+        Err(e) if e.device_failed() => eprintln!("after loss: {e}"),
         other => panic!("expected a device error, got {other:?}"),
     }
     assert!(t.elapsed().as_secs() < 10);

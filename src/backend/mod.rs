@@ -17,15 +17,283 @@ pub mod gpu;
 
 use crate::plane;
 
-/// Backend failures (device lost, out of memory, no adapter…).
-#[derive(Debug, thiserror::Error)]
+/// Why a backend could not start or could not render.
+///
+/// The variants fall in four groups, each handled its own way:
+/// * **No adapter** ([`NoAdapter`](Self::NoAdapter)): there is no GPU to use; fall back to
+///   the CPU backend ([`cpu::CpuBackend`]), which gives the same results.
+/// * **The device does not suit the backend** ([`CreateDevice`](Self::CreateDevice),
+///   [`MissingFeatures`](Self::MissingFeatures), [`LimitTooLow`](Self::LimitTooLow),
+///   [`UniformAlignment`](Self::UniformAlignment)): only when the backend is created; create
+///   the device as the message says, or fall back to the CPU.
+/// * **The jobs do not fit the device** ([`PlaneSize`](Self::PlaneSize),
+///   [`BadReprojection`](Self::BadReprojection), [`BufferTooLarge`](Self::BufferTooLarge),
+///   [`OccluderTooLarge`](Self::OccluderTooLarge)): refused before anything is drawn and the
+///   backend stays usable; lower the resolution or the occluders' detail, or render those jobs
+///   on the CPU.
+/// * **The device failed** ([`DeviceLost`](Self::DeviceLost),
+///   [`OutOfMemory`](Self::OutOfMemory), [`Validation`](Self::Validation),
+///   [`Uncaptured`](Self::Uncaptured), [`PollFailed`](Self::PollFailed),
+///   [`ReadBack`](Self::ReadBack), [`Timeout`](Self::Timeout)): the call's results are lost
+///   (never partial) and, for a lost device, so is every later call;
+///   [`device_failed`](Self::device_failed) says so. Drop the backend and create a new one, or
+///   fall back to the CPU.
+///
+/// The messages are those the backend always printed: `no GPU adapter found: …` for
+/// [`NoAdapter`](Self::NoAdapter), `GPU error: …` for the rest.
+#[derive(Clone, Debug, thiserror::Error)]
 pub enum BackendError {
-    /// No usable GPU adapter; the message says why (none found, or none with the needed features).
+    /// No usable GPU adapter; the message says why (none found, or none with the needed
+    /// features).
+    ///
+    /// **When this occurs:** [`gpu::GpuBackend::new`] on a machine without a Vulkan, Metal or
+    /// DX12 adapter, or whose adapters all lack `FLOAT32_BLENDABLE`.
+    ///
+    /// **How to handle:** use the CPU backend; on Linux without a GPU, Mesa's software Vulkan
+    /// driver (`mesa-vulkan-drivers`) provides an adapter.
     #[error("no GPU adapter found: {0}")]
     NoAdapter(String),
-    /// The device failed while rendering (device lost, out of memory, failed read-back…).
-    #[error("GPU error: {0}")]
-    Device(String),
+    /// The adapter refused to create the backend's device.
+    ///
+    /// **When this occurs:** [`gpu::GpuBackend::new`], when `request_device` fails on the best
+    /// adapter (driver error, out of memory).
+    ///
+    /// **How to handle:** use the CPU backend, or another adapter (`WGPU_BACKEND`).
+    #[error("GPU error: cannot create a device on {adapter}: {message}")]
+    CreateDevice {
+        /// The adapter's name.
+        adapter: String,
+        /// wgpu's message.
+        message: String,
+    },
+    /// The device lacks a feature the backend needs.
+    ///
+    /// **When this occurs:** [`gpu::GpuBackend::with_device`] on a device created without
+    /// [`gpu::GpuBackend::REQUIRED_FEATURES`].
+    ///
+    /// **How to handle:** request `missing` in the `DeviceDescriptor`'s `required_features`
+    /// (`adapter.features()` says whether the adapter has them).
+    #[error(
+        "GPU error: the device lacks the feature(s) {missing:?}: request them in the \
+         DeviceDescriptor's required_features (adapter.features() says whether the adapter has \
+         them)"
+    )]
+    MissingFeatures {
+        /// The required features the device lacks.
+        missing: wgpu::Features,
+    },
+    /// A device limit is below what the backend's pipelines need.
+    ///
+    /// **When this occurs:** [`gpu::GpuBackend::with_device`] on a device created with limits
+    /// below WebGPU's defaults (e.g. WebGL2's, without storage buffers).
+    ///
+    /// **How to handle:** request at least [`wgpu::Limits::default`] in the
+    /// `DeviceDescriptor`'s `required_limits`.
+    #[error(
+        "GPU error: the device's {limit} is {value}, the GPU backend needs at least {need}: \
+         request at least wgpu::Limits::default() (WebGPU's defaults) in the DeviceDescriptor's \
+         required_limits"
+    )]
+    LimitTooLow {
+        /// The limit's name in [`wgpu::Limits`].
+        limit: &'static str,
+        /// The device's value.
+        value: u64,
+        /// The least the backend needs.
+        need: u64,
+    },
+    /// The device's uniform offset alignment does not divide the backend's uniform stride.
+    ///
+    /// **When this occurs:** [`gpu::GpuBackend::with_device`] on a device whose
+    /// `min_uniform_buffer_offset_alignment` exceeds WebGPU's maximum of 256.
+    ///
+    /// **How to handle:** request WebGPU's default alignment (256) or less.
+    #[error(
+        "GPU error: the device's min_uniform_buffer_offset_alignment is {align}, the GPU \
+         backend needs a divisor of {stride} (WebGPU allows at most 256)"
+    )]
+    UniformAlignment {
+        /// The device's `min_uniform_buffer_offset_alignment`.
+        align: u64,
+        /// The stride between planes' uniforms, which it must divide.
+        stride: u64,
+    },
+    /// A plane (or a reprojection's source) is larger than the device's textures, or empty.
+    ///
+    /// **When this occurs:** [`RasterBackend::render`] on the GPU backend, before any work,
+    /// for a job whose frame is outside `1..=max` pixels per side.
+    ///
+    /// **How to handle:** lower the resolution (or `max_stretch`), or render the job on the
+    /// CPU; the backend stays usable.
+    #[error(
+        "GPU error: plane size {width} × {height} is outside 1..={max} per side supported by \
+         {adapter}"
+    )]
+    PlaneSize {
+        /// The plane's width in pixels.
+        width: u32,
+        /// The plane's height in pixels.
+        height: u32,
+        /// The largest side the device supports.
+        max: u32,
+        /// The adapter's name.
+        adapter: String,
+    },
+    /// A job's reprojection does not match its plane or its own source.
+    ///
+    /// **When this occurs:** [`RasterBackend::render`] on the GPU backend, before any work, when
+    /// a reprojection's source is too large or empty, or its depth, column or row windows do
+    /// not have the sizes of the source and the plane.
+    ///
+    /// **How to handle:** a bug in the caller that built the job; the backend stays usable.
+    #[error(
+        "GPU error: a reprojection onto a {width} × {height} plane has a {source_width} × \
+         {source_height} source with {source_pixels} pixels, {cols} column and {rows} row \
+         windows"
+    )]
+    BadReprojection {
+        /// The plane's width.
+        width: u32,
+        /// The plane's height.
+        height: u32,
+        /// The source's width.
+        source_width: u32,
+        /// The source's height.
+        source_height: u32,
+        /// The number of depths the source holds.
+        source_pixels: usize,
+        /// The number of column windows (the plane's width when valid).
+        cols: usize,
+        /// The number of row windows (the plane's height when valid).
+        rows: usize,
+    },
+    /// One of the backend's buffers would exceed the device's largest buffer.
+    ///
+    /// **When this occurs:** [`RasterBackend::render`] on the GPU backend, when one plane's
+    /// data (vertices, reprojection windows, summed-area tables) is too large for a buffer.
+    ///
+    /// **How to handle:** lower the resolution or the occluders' detail, or render on the CPU.
+    #[error("GPU error: {label}: {size} bytes exceed the device's maximum buffer size {max}")]
+    BufferTooLarge {
+        /// The buffer's label.
+        label: &'static str,
+        /// The bytes needed.
+        size: u64,
+        /// The device's `max_buffer_size`.
+        max: u64,
+    },
+    /// One occluder's data exceed a storage binding.
+    ///
+    /// **When this occurs:** [`RasterBackend::render`] on the GPU backend, for an occluder
+    /// with more edges than `max_storage_buffer_binding_size` holds.
+    ///
+    /// **How to handle:** simplify the occluder, or render on the CPU.
+    #[error("GPU error: an occluder has {edges} edges, more than one storage binding holds")]
+    OccluderTooLarge {
+        /// The occluder's number of edges.
+        edges: usize,
+    },
+    /// The backend's own device was lost (driver reset, `destroy`, …).
+    ///
+    /// **When this occurs:** any call after the device-lost callback fired.
+    ///
+    /// **How to handle:** every later call fails too: drop the backend and create a new one.
+    #[error("GPU error: device lost ({reason:?}): {message}")]
+    DeviceLost {
+        /// wgpu's reason.
+        reason: wgpu::DeviceLostReason,
+        /// wgpu's message.
+        message: String,
+    },
+    /// The device ran out of memory (caught by an error scope).
+    ///
+    /// **When this occurs:** creating the pipelines, or a render whose wave's buffers and
+    /// targets do not fit.
+    ///
+    /// **How to handle:** render fewer jobs per call or at a lower resolution; the backend may
+    /// stay usable.
+    #[error("GPU error: out of GPU memory: {message}")]
+    OutOfMemory {
+        /// wgpu's message.
+        message: String,
+    },
+    /// The device reported a validation error (caught by an error scope): a bug in the
+    /// backend, or a device that does not support what it claims.
+    ///
+    /// **When this occurs:** creating the pipelines, or a render.
+    ///
+    /// **How to handle:** report it; fall back to the CPU.
+    #[error("GPU error: GPU validation error: {message}")]
+    Validation {
+        /// wgpu's message.
+        message: String,
+    },
+    /// An error no error scope caught reached the backend's own device's handler.
+    ///
+    /// **When this occurs:** any call after the handler fired (backend's own device only).
+    ///
+    /// **How to handle:** drop the backend and create a new one, or fall back to the CPU.
+    #[error("GPU error: uncaptured GPU error: {message}")]
+    Uncaptured {
+        /// wgpu's message.
+        message: String,
+    },
+    /// Polling the device failed: on an engine's device (no device-lost callback), a lost
+    /// device shows here.
+    ///
+    /// **When this occurs:** [`RasterBackend::render`], while waiting for the GPU.
+    ///
+    /// **How to handle:** as [`DeviceLost`](Self::DeviceLost).
+    #[error("GPU error: poll failed (is the device lost?): {message}")]
+    PollFailed {
+        /// wgpu's message.
+        message: String,
+    },
+    /// Mapping or reading a read-back buffer failed.
+    ///
+    /// **When this occurs:** [`RasterBackend::render`], after the GPU finished, typically on a
+    /// lost device.
+    ///
+    /// **How to handle:** as [`DeviceLost`](Self::DeviceLost).
+    #[error("GPU error: {step}: {message}")]
+    ReadBack {
+        /// What failed: `read-back failed` (the mapping) or `read-back mapping` (the mapped
+        /// range).
+        step: &'static str,
+        /// wgpu's message.
+        message: String,
+    },
+    /// The GPU did not finish a wave of planes in time; never a hang.
+    ///
+    /// **When this occurs:** [`RasterBackend::render`], on a hung or far too slow device.
+    ///
+    /// **How to handle:** as [`DeviceLost`](Self::DeviceLost).
+    #[error("GPU error: the GPU did not finish {planes} planes within {deadline:?}")]
+    Timeout {
+        /// The planes of the wave.
+        planes: usize,
+        /// How long the backend waited.
+        deadline: std::time::Duration,
+    },
+}
+
+impl BackendError {
+    /// True when the device failed while working (lost, out of memory, validation or
+    /// uncaptured error, failed poll or read-back, timeout): the call's results are lost and
+    /// the backend may be unusable. False for a missing adapter, an unsuitable device, or jobs
+    /// refused before any work.
+    pub fn device_failed(&self) -> bool {
+        matches!(
+            self,
+            BackendError::DeviceLost { .. }
+                | BackendError::OutOfMemory { .. }
+                | BackendError::Validation { .. }
+                | BackendError::Uncaptured { .. }
+                | BackendError::PollFailed { .. }
+                | BackendError::ReadBack { .. }
+                | BackendError::Timeout { .. }
+        )
+    }
 }
 
 /// The raster work of a bake.

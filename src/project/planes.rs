@@ -412,6 +412,11 @@ pub struct LeaveOut<'a> {
 /// The job of plane `k` of a direction, leaving out occluders (and slices) of objects for
 /// which `skip` is true — objects already proven hidden add no occlusion, and leaving an
 /// occluder out is always conservative. `None` when nothing projects onto the plane.
+///
+/// The steps, in order: the probe frame over the extended frustum (`PlaneProbe::new`), the
+/// occluder sources cut where needed (`gather_sources`), their Projections' bounds in the
+/// frame (`kept_projections`), the slices (`plane_slices`), the rectangle that holds them
+/// (`fit_rect`), and the job on it (`assemble_job`).
 pub fn plane_job(
     plan: &DirectionPlan,
     k: usize,
@@ -427,31 +432,144 @@ pub fn plane_job(
         slab,
     } = sweep;
     let skip = leave_out.object;
+    let parts = match slab {
+        Some(sp) => PartsView {
+            parts: &sp.parts,
+            object: &sp.object,
+            solid: &sp.solid,
+        },
+        None => PartsView {
+            parts: &plan.parts,
+            object: &plan.part_object,
+            solid: &plan.part_solid,
+        },
+    };
+    let probe = PlaneProbe::new(plan, k, settings);
+    let sources = gather_sources(plan, k, &probe, parts, skip);
+    let kept = kept_projections(plan, &probe, &sources);
+    let slices = plane_slices(plan, &probe, scene, sliceable, skip);
+    let rect = fit_rect(&probe, &kept, &slices, carried, relevant)?;
+    assemble_job(&probe, rect, &sources, &kept, slices, settings, carried)
+}
+
+/// The parts a plane job reads: the direction's, or a sweep slab's, with each part's object
+/// and whether it is a solid.
+#[derive(Clone, Copy)]
+struct PartsView<'a> {
+    /// The parts: bounds, distances and points.
+    parts: &'a DirParts,
+    /// Object of each part.
+    object: &'a [u32],
+    /// Whether each part is a solid (else a planar polygon).
+    solid: &'a [bool],
+}
+
+/// Where plane `k` lies: its distance beyond the face and the probe frame, the plane's
+/// largest rectangle (the 90° frustum from the face at this distance, extended) at the
+/// settings' resolution.
+struct PlaneProbe {
+    /// The probe frame: the whole extended frustum.
+    frame: PlaneFrame,
+    /// The plane's distance beyond the face.
+    tp: f64,
+    /// `+1` or `-1`: the direction's sign along its axis.
+    s: f64,
+    /// The plane's two in-plane axes `(axis + 1, axis + 2) mod 3`.
+    u: usize,
+    /// See `u`.
+    v: usize,
+}
+
+impl PlaneProbe {
+    /// Frame step: the probe frame of plane `k` of `plan`.
+    fn new(plan: &DirectionPlan, k: usize, settings: &PlaneSettings) -> Self {
+        let (axis, positive) = (plan.axis, plan.positive);
+        let s = if positive { 1.0 } else { -1.0 };
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let tp = plan.distances[k];
+        let position = plan.face + s * tp;
+        let (fmin, fmax) = plan.frame(k);
+        let frame = PlaneFrame {
+            cell: plan.cell,
+            axis,
+            positive,
+            position,
+            rect_min: fmin,
+            rect_max: fmax,
+            width: settings.resolution,
+            height: settings.resolution,
+        };
+        PlaneProbe { frame, tp, s, u, v }
+    }
+
+    /// The frame's lower corner (world `(u, v)`).
+    fn fmin(&self) -> DVec2 {
+        self.frame.rect_min
+    }
+
+    /// The frame's upper corner (world `(u, v)`).
+    fn fmax(&self) -> DVec2 {
+        self.frame.rect_max
+    }
+}
+
+/// Where an occluder source's points live: an uncut part, referenced in place, or a piece cut
+/// from one.
+#[derive(Clone, Copy)]
+enum Source {
+    /// Part `i` of the [`PartsView`], uncut.
+    Part(usize),
+    /// Piece `i` of [`Sources::pieces`].
+    Piece(usize),
+}
+
+/// The occluders that may project onto a plane, in order: parts used whole, and pieces cut
+/// from the others.
+struct Sources<'a> {
+    /// The parts the sources index.
+    parts: PartsView<'a>,
+    /// The cut pieces.
+    pieces: OccluderSet,
+    /// Every source, in the parts' order.
+    list: Vec<Source>,
+}
+
+impl Sources<'_> {
+    /// The points of `src`.
+    fn points(&self, src: Source) -> &[DVec3] {
+        match src {
+            Source::Piece(k) => self.pieces.get(k),
+            Source::Part(k) => self.parts.parts.set.get(k),
+        }
+    }
+}
+
+/// Occluder gathering step: the parts that may project onto the plane (not left out by
+/// `skip`, large enough for [`may_project`], seen from their bounds inside the frame), cut
+/// where needed.
+///
+/// The views of an occluder from the 8 corners bound its views from every point of the cell
+/// only when it lies on one side of the plane: for a point P of the plane, the eyes whose
+/// line through P meets the occluder form one convex cone when the occluder is wholly in
+/// front of P or wholly behind it, but the union of two cones when it crosses the plane, and
+/// then all 8 corners may see P covered while the cell's centre looks past the occluder.
+/// So an occluder crossing the plane is cut into its front and back pieces, each projected
+/// on its own (they do not add up: conservative). In a sweep a plane receives only what lies
+/// between it and the previous plane.
+fn gather_sources<'a>(
+    plan: &DirectionPlan,
+    k: usize,
+    probe: &PlaneProbe,
+    view: PartsView<'a>,
+    skip: &dyn Fn(u32) -> bool,
+) -> Sources<'a> {
     let cell = &plan.cell;
-    let (axis, positive) = (plan.axis, plan.positive);
-    let s = if positive { 1.0 } else { -1.0 };
-    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let (parts, part_object, part_solid) = match slab {
-        Some(sp) => (&sp.parts, &sp.object, &sp.solid),
-        None => (&plan.parts, &plan.part_object, &plan.part_solid),
-    };
-    let corners = cell.corners();
+    let axis = plan.axis;
+    let (u, v, s, tp) = (probe.u, probe.v, probe.s, probe.tp);
+    let (fmin, fmax) = (probe.fmin(), probe.fmax());
+    let parts = view.parts;
     let cell_uv = DVec2::new(cell.max[u] - cell.min[u], cell.max[v] - cell.min[v]);
-    let tp = plan.distances[k];
-    let position = plan.face + s * tp;
-    // The frame: the 90° frustum from the face at this distance, extended.
-    let (fmin, fmax) = plan.frame(k);
     let center = 0.5 * (fmin + fmax);
-    let probe = PlaneFrame {
-        cell: *cell,
-        axis,
-        positive,
-        position,
-        rect_min: fmin,
-        rect_max: fmax,
-        width: settings.resolution,
-        height: settings.resolution,
-    };
     // A Projection lies inside the view from the cell's centre, and that inside the view of
     // the part's bounds: parts whose bounds' view misses the frame are skipped unprojected.
     let eye = DVec2::new(center.x, center.y);
@@ -468,23 +586,13 @@ pub fn plane_job(
         }
         (lo, hi)
     };
-    // Projection bounding boxes, clipped to the frame.
-    //
-    // The views of an occluder from the 8 corners bound its views from every point of the cell
-    // only when it lies on one side of the plane: for a point P of the plane, the eyes whose
-    // line through P meets the occluder form one convex cone when the occluder is wholly in
-    // front of P or wholly behind it, but the union of two cones when it crosses the plane, and
-    // then all 8 corners may see P covered while the cell's centre looks past the occluder.
-    // So an occluder crossing the plane is cut into its front and back pieces, each projected
-    // on its own (they do not add up: conservative).
     let mut pieces = OccluderSet::default();
     let mut buf: Vec<DVec3> = Vec::new();
     let dist = |p: DVec3| s * (p[axis] - plan.face);
-    // Uncut parts are referenced in place, cut pieces live in `pieces`.
-    let mut sources: Vec<(bool, usize)> = Vec::new();
+    let mut list: Vec<Source> = Vec::new();
     let start = plan.slab_start(k);
     for i in 0..parts.set.len() {
-        if skip(part_object[i])
+        if skip(view.object[i])
             || !may_project(parts.near[i], parts.far[i], parts.extent[i], cell_uv, tp)
         {
             continue;
@@ -499,10 +607,10 @@ pub fn plane_job(
             // what is in front is carried by the reprojection, what is behind goes to later
             // planes. The pieces lie in front of the plane, so their Projections are umbra.
             if parts.near[i] >= start && parts.far[i] <= tp {
-                sources.push((false, i));
+                list.push(Source::Part(i));
                 continue;
             }
-            let solid = part_solid[i];
+            let solid = view.solid[i];
             buf.clear();
             clip_part(solid, pts, |p| tp - dist(p), &mut buf);
             if parts.near[i] < start && buf.len() >= 3 {
@@ -510,38 +618,72 @@ pub fn plane_job(
                 clip_part(solid, &front, |p| dist(p) - start, &mut buf);
             }
             if buf.len() >= 3 {
-                sources.push((true, pieces.len()));
+                list.push(Source::Piece(pieces.len()));
                 pieces.push(buf.iter().copied());
             }
             continue;
         }
         if parts.near[i] < tp && tp < parts.far[i] {
-            let solid = part_solid[i];
+            let solid = view.solid[i];
             for side in [1.0, -1.0] {
                 buf.clear();
                 clip_part(solid, pts, |p| side * (tp - dist(p)), &mut buf);
                 if buf.len() >= 3 {
-                    sources.push((true, pieces.len()));
+                    list.push(Source::Piece(pieces.len()));
                     pieces.push(buf.iter().copied());
                 }
             }
         } else {
-            sources.push((false, i));
+            list.push(Source::Part(i));
         }
     }
-    let points_of = |(cut, k): (bool, usize)| {
-        if cut { pieces.get(k) } else { parts.set.get(k) }
-    };
-    let mut kept: Vec<((bool, usize), DVec2, DVec2)> = Vec::new();
-    for &src in &sources {
-        if let Some((lo, hi)) = projection_bounds(&probe, &corners, points_of(src)) {
+    Sources {
+        parts: view,
+        pieces,
+        list,
+    }
+}
+
+/// A source whose Projection's bounding box, clipped to the probe frame, is not empty.
+#[derive(Clone, Copy)]
+struct Kept {
+    /// The source.
+    source: Source,
+    /// The clipped bounding box's lower corner (world `(u, v)`).
+    lo: DVec2,
+    /// Its upper corner.
+    hi: DVec2,
+}
+
+/// Projection step: every source's Projection bounding box ([`projection_bounds`]) clipped to
+/// the probe frame, keeping the sources where it is not empty, in order.
+fn kept_projections(plan: &DirectionPlan, probe: &PlaneProbe, sources: &Sources) -> Vec<Kept> {
+    let corners = plan.cell.corners();
+    let (fmin, fmax) = (probe.fmin(), probe.fmax());
+    let mut kept: Vec<Kept> = Vec::new();
+    for &source in &sources.list {
+        if let Some((lo, hi)) = projection_bounds(&probe.frame, &corners, sources.points(source)) {
             let (lo, hi) = (lo.max(fmin), hi.min(fmax));
             if lo.x < hi.x && lo.y < hi.y {
-                kept.push((src, lo, hi));
+                kept.push(Kept { source, lo, hi });
             }
         }
     }
-    // Slices of closed objects the plane cuts, when the cell is outside them.
+    kept
+}
+
+/// Slice step: the slices of the closed objects the plane cuts inside the frame, when the cell
+/// is outside them (objects `skip` leaves out excepted).
+fn plane_slices(
+    plan: &DirectionPlan,
+    probe: &PlaneProbe,
+    scene: &Scene,
+    sliceable: &Sliceable,
+    skip: &dyn Fn(u32) -> bool,
+) -> Vec<[DVec2; 2]> {
+    let (axis, u, v) = (plan.axis, probe.u, probe.v);
+    let position = probe.frame.position;
+    let (fmin, fmax) = (probe.fmin(), probe.fmax());
     let mut slices = Vec::new();
     for (i, b) in sliceable.bounds.iter().enumerate() {
         if b.min[axis] < position
@@ -550,19 +692,42 @@ pub fn plane_job(
             && b.min[u] <= fmax.x
             && b.max[v] >= fmin.y
             && b.min[v] <= fmax.y
-            && !b.overlaps(cell)
+            && !b.overlaps(&plan.cell)
             && !skip(sliceable.objects[i])
         {
             slice_object(scene, sliceable.objects[i], axis, position, &mut slices);
         }
     }
+    slices
+}
+
+/// A plane's rectangle (world `(u, v)`).
+#[derive(Clone, Copy)]
+struct PlaneRect {
+    /// Lower corner.
+    min: DVec2,
+    /// Upper corner.
+    max: DVec2,
+}
+
+/// Rectangle step: the box of the kept Projections and the slices (clipped to the frame), and
+/// in a sweep of what the reprojection may carry, stopped at the relevant region; `None` when
+/// it is empty.
+fn fit_rect(
+    probe: &PlaneProbe,
+    kept: &[Kept],
+    slices: &[[DVec2; 2]],
+    carried: Option<(DVec2, DVec2)>,
+    relevant: Option<(DVec2, DVec2)>,
+) -> Option<PlaneRect> {
+    let (fmin, fmax) = (probe.fmin(), probe.fmax());
     let mut rmin = DVec2::INFINITY;
     let mut rmax = DVec2::NEG_INFINITY;
-    for &(_, lo, hi) in &kept {
-        rmin = rmin.min(lo);
-        rmax = rmax.max(hi);
+    for kp in kept {
+        rmin = rmin.min(kp.lo);
+        rmax = rmax.max(kp.hi);
     }
-    for seg in &slices {
+    for seg in slices {
         for p in seg {
             rmin = rmin.min(p.max(fmin));
             rmax = rmax.max(p.min(fmax));
@@ -581,21 +746,42 @@ pub fn plane_job(
     if !(rmin.x < rmax.x && rmin.y < rmax.y) {
         return None;
     }
-    let (width, height) =
-        crate::plane::map_size(settings.resolution, rmax - rmin, settings.max_stretch);
+    Some(PlaneRect {
+        min: rmin,
+        max: rmax,
+    })
+}
+
+/// Job assembly step: the frame on `rect` at its map size ([`crate::plane::map_size`]), the
+/// kept sources whose Projection box is at least a pixel on both axes, and the slices; `None`
+/// when the plane receives nothing (no occluder, no slice, nothing carried).
+fn assemble_job(
+    probe: &PlaneProbe,
+    rect: PlaneRect,
+    sources: &Sources,
+    kept: &[Kept],
+    slices: Vec<[DVec2; 2]>,
+    settings: &PlaneSettings,
+    carried: Option<(DVec2, DVec2)>,
+) -> Option<PlaneJob> {
+    let (width, height) = crate::plane::map_size(
+        settings.resolution,
+        rect.max - rect.min,
+        settings.max_stretch,
+    );
     let frame = PlaneFrame {
-        rect_min: rmin,
-        rect_max: rmax,
+        rect_min: rect.min,
+        rect_max: rect.max,
         width,
         height,
-        ..probe
+        ..probe.frame
     };
     let px = frame.pixel_size();
     let mut set = OccluderSet::default();
-    for &(src, lo, hi) in &kept {
+    for kp in kept {
         // A Projection narrower than a pixel covers no whole pixel.
-        if hi.x - lo.x >= px.x && hi.y - lo.y >= px.y {
-            set.push(points_of(src).iter().copied());
+        if kp.hi.x - kp.lo.x >= px.x && kp.hi.y - kp.lo.y >= px.y {
+            set.push(sources.points(kp.source).iter().copied());
         }
     }
     if set.is_empty() && slices.is_empty() && carried.is_none() {

@@ -12,8 +12,8 @@ use std::sync::{Arc, Mutex};
 /// Depth Map's `Min` blend).
 pub(super) const REQUIRED_FEATURES: wgpu::Features = wgpu::Features::FLOAT32_BLENDABLE;
 
-/// The first device-lost or uncaptured-error message; once set, every call fails.
-pub(super) type Failure = Arc<Mutex<Option<String>>>;
+/// The first device loss or uncaptured error, as the error every later call returns.
+pub(super) type Failure = Arc<Mutex<Option<BackendError>>>;
 
 /// Adapter ranking: hardware first, software rasterisers last.
 fn rank(t: wgpu::DeviceType) -> u32 {
@@ -92,7 +92,7 @@ pub(super) fn best_adapter() -> Result<wgpu::Adapter, BackendError> {
 /// has, labelled `umbrasweep device`.
 ///
 /// # Errors
-/// [`BackendError::Device`] when the adapter refuses.
+/// [`BackendError::CreateDevice`] when the adapter refuses.
 pub(super) fn request_device(
     adapter: &wgpu::Adapter,
 ) -> Result<(wgpu::Device, wgpu::Queue), BackendError> {
@@ -104,11 +104,9 @@ pub(super) fn request_device(
         memory_hints: wgpu::MemoryHints::Performance,
         trace: wgpu::Trace::Off,
     }))
-    .map_err(|e| {
-        BackendError::Device(format!(
-            "cannot create a device on {}: {e}",
-            adapter.get_info().name
-        ))
+    .map_err(|e| BackendError::CreateDevice {
+        adapter: adapter.get_info().name,
+        message: e.to_string(),
     })
 }
 
@@ -120,14 +118,16 @@ pub(super) fn install_failure_handlers(device: &wgpu::Device) -> Failure {
         let failure = failure.clone();
         device.set_device_lost_callback(move |reason, message| {
             let mut f = failure.lock().unwrap_or_else(|e| e.into_inner());
-            f.get_or_insert(format!("device lost ({reason:?}): {message}"));
+            f.get_or_insert(BackendError::DeviceLost { reason, message });
         });
     }
     {
         let failure = failure.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
             let mut f = failure.lock().unwrap_or_else(|e| e.into_inner());
-            f.get_or_insert(format!("uncaptured GPU error: {e}"));
+            f.get_or_insert(BackendError::Uncaptured {
+                message: e.to_string(),
+            });
         }));
     }
     failure
@@ -150,16 +150,15 @@ impl DeviceLimits {
     /// The limits the backend works within on a device with `features` and `limits`.
     ///
     /// # Errors
-    /// [`BackendError::Device`], naming the feature or limit and what to request, when the
-    /// device lacks [`REQUIRED_FEATURES`] or a limit is below what the backend's pipelines
-    /// need. WebGPU's default limits ([`wgpu::Limits::default`]) are enough.
+    /// [`BackendError::MissingFeatures`] when the device lacks [`REQUIRED_FEATURES`];
+    /// [`BackendError::LimitTooLow`] or [`BackendError::UniformAlignment`] when a limit is
+    /// below what the backend's pipelines need (each message names it and says what to
+    /// request). WebGPU's default limits ([`wgpu::Limits::default`]) are enough.
     pub fn check(features: wgpu::Features, limits: &wgpu::Limits) -> Result<Self, BackendError> {
         if !features.contains(REQUIRED_FEATURES) {
-            return Err(BackendError::Device(format!(
-                "the device lacks the feature(s) {:?}: request them in the DeviceDescriptor's \
-                 required_features (adapter.features() says whether the adapter has them)",
-                REQUIRED_FEATURES - features
-            )));
+            return Err(BackendError::MissingFeatures {
+                missing: REQUIRED_FEATURES - features,
+            });
         }
         let storage_align = limits.min_storage_buffer_offset_alignment.max(16) as u64;
         let max_binding = limits
@@ -218,20 +217,20 @@ impl DeviceLimits {
         ];
         for (name, value, least) in needs {
             if value < least {
-                return Err(BackendError::Device(format!(
-                    "the device's {name} is {value}, the GPU backend needs at least {least}: \
-                     request at least wgpu::Limits::default() (WebGPU's defaults) in the \
-                     DeviceDescriptor's required_limits"
-                )));
+                return Err(BackendError::LimitTooLow {
+                    limit: name,
+                    value,
+                    need: least,
+                });
             }
         }
         // Planes' uniforms lie UNIFORM_STRIDE bytes apart.
         let uniform_align = u64::from(limits.min_uniform_buffer_offset_alignment);
         if !UNIFORM_STRIDE.is_multiple_of(uniform_align) {
-            return Err(BackendError::Device(format!(
-                "the device's min_uniform_buffer_offset_alignment is {uniform_align}, the GPU \
-                 backend needs a divisor of {UNIFORM_STRIDE} (WebGPU allows at most 256)"
-            )));
+            return Err(BackendError::UniformAlignment {
+                align: uniform_align,
+                stride: UNIFORM_STRIDE,
+            });
         }
         Ok(DeviceLimits {
             max_chunk_words: ((max_binding / storage_align * storage_align) / 16) as usize,
@@ -259,13 +258,18 @@ impl ErrorScopes {
     /// Pops both scopes.
     ///
     /// # Errors
-    /// [`BackendError::Device`] with the first error either caught (out of memory first).
+    /// [`BackendError::OutOfMemory`] or [`BackendError::Validation`] with the first error
+    /// either caught (out of memory first).
     pub fn check(self) -> Result<(), BackendError> {
         let validation = pollster::block_on(self.validation.pop());
         let oom = pollster::block_on(self.oom.pop());
         match (oom, validation) {
-            (Some(e), _) => Err(BackendError::Device(format!("out of GPU memory: {e}"))),
-            (None, Some(e)) => Err(BackendError::Device(format!("GPU validation error: {e}"))),
+            (Some(e), _) => Err(BackendError::OutOfMemory {
+                message: e.to_string(),
+            }),
+            (None, Some(e)) => Err(BackendError::Validation {
+                message: e.to_string(),
+            }),
             (None, None) => Ok(()),
         }
     }
@@ -304,8 +308,12 @@ mod tests {
     #[test]
     fn missing_features_and_limits_are_named() {
         let msg = |r: Result<DeviceLimits, BackendError>| match r {
-            Err(BackendError::Device(m)) => m,
-            other => panic!("expected a device error, got {other:?}"),
+            Err(
+                e @ (BackendError::MissingFeatures { .. }
+                | BackendError::LimitTooLow { .. }
+                | BackendError::UniformAlignment { .. }),
+            ) => e.to_string(),
+            other => panic!("expected an unsuitable-device error, got {other:?}"),
         };
         let m = msg(DeviceLimits::check(
             wgpu::Features::empty(),

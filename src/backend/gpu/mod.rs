@@ -112,7 +112,9 @@
 //! then prepares its jobs on the CPU (`prepare.rs`) and runs them on the GPU in waves
 //! (`wave.rs`: layout, allocate, upload, encode, submit, wait, read back).
 //!
-//! Device loss, out-of-memory and validation errors become [`BackendError::Device`]: errors of
+//! Device loss, out-of-memory and validation errors become [`BackendError`]s
+//! ([`BackendError::DeviceLost`], [`BackendError::OutOfMemory`], [`BackendError::Validation`],
+//! …; [`BackendError::device_failed`] is true for all of them): errors of
 //! the backend's work are caught by error scopes (on its own device, also by the
 //! uncaptured-error handler), loss by the device-lost callback (on an engine's device, by the
 //! failing submission, poll or read-back), and waits poll with a timeout, so a failing device
@@ -256,7 +258,8 @@ impl GpuBackend {
     ///
     /// # Errors
     /// [`BackendError::NoAdapter`] when no adapter exists or none supports `float32-blendable`
-    /// render targets; [`BackendError::Device`] when the device or pipeline cannot be created.
+    /// render targets; [`BackendError::CreateDevice`] when the device cannot be created; as
+    /// [`Self::with_device`] otherwise.
     pub fn new() -> Result<Self, BackendError> {
         let adapter = device::best_adapter()?;
         let (device, queue) = device::request_device(&adapter)?;
@@ -287,9 +290,11 @@ impl GpuBackend {
     /// polls it (`Device::poll`) while it waits, which also runs the engine's callbacks.
     ///
     /// # Errors
-    /// [`BackendError::Device`] when the device lacks a required feature or a limit the
-    /// pipelines need (the message names it and says what to request when creating the
-    /// device), or when it reports an error while the pipelines are created.
+    /// [`BackendError::MissingFeatures`], [`BackendError::LimitTooLow`] or
+    /// [`BackendError::UniformAlignment`] when the device lacks a required feature or a limit
+    /// the pipelines need (the message names it and says what to request when creating the
+    /// device); [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when it reports
+    /// an error while the pipelines are created.
     ///
     /// # Example
     ///
@@ -348,7 +353,7 @@ impl GpuBackend {
     }
 
     /// Destroys the device, as a driver reset would lose it: every later call fails with
-    /// [`BackendError::Device`]. For tests of the failure path.
+    /// [`BackendError::DeviceLost`]. For tests of the failure path.
     #[doc(hidden)]
     pub fn simulate_device_loss(&self) {
         self.device.destroy();
@@ -371,7 +376,7 @@ impl GpuBackend {
     fn check_failure(&self) -> Result<(), BackendError> {
         let f = self.failure.lock().unwrap_or_else(|e| e.into_inner());
         match &*f {
-            Some(msg) => Err(BackendError::Device(msg.clone())),
+            Some(e) => Err(e.clone()),
             None => Ok(()),
         }
     }
@@ -385,10 +390,12 @@ impl GpuBackend {
         for job in jobs {
             let (w, h) = (job.frame.width, job.frame.height);
             if !fits(w, h) {
-                return Err(BackendError::Device(format!(
-                    "plane size {w} × {h} is outside 1..={max} per side supported by {}",
-                    self.adapter_name
-                )));
+                return Err(BackendError::PlaneSize {
+                    width: w,
+                    height: h,
+                    max,
+                    adapter: self.adapter_name.clone(),
+                });
             }
             for rp in &job.reproject {
                 let (sw, sh) = (rp.source.width, rp.source.height);
@@ -397,13 +404,15 @@ impl GpuBackend {
                     || rp.cols.len() != w as usize
                     || rp.rows.len() != h as usize
                 {
-                    return Err(BackendError::Device(format!(
-                        "a reprojection onto a {w} × {h} plane has a {sw} × {sh} source with {} \
-                         pixels, {} column and {} row windows",
-                        rp.source.depth.len(),
-                        rp.cols.len(),
-                        rp.rows.len()
-                    )));
+                    return Err(BackendError::BadReprojection {
+                        width: w,
+                        height: h,
+                        source_width: sw,
+                        source_height: sh,
+                        source_pixels: rp.source.depth.len(),
+                        cols: rp.cols.len(),
+                        rows: rp.rows.len(),
+                    });
                 }
             }
         }

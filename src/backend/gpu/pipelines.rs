@@ -33,7 +33,7 @@ impl Pipelines {
     /// Compiles the shaders and creates both pipelines on `device`, every object labelled.
     ///
     /// # Errors
-    /// [`BackendError::Device`] when the device reports a validation or out-of-memory error.
+    /// [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports one.
     pub fn new(device: &wgpu::Device) -> Result<Self, BackendError> {
         let scope = ErrorScopes::push(device);
         let (projection, projection_layout) = projection_pipeline(device);

@@ -54,7 +54,7 @@ pub(super) struct Chunk {
 /// and the reprojections that can set a pixel.
 ///
 /// # Errors
-/// [`BackendError::Device`] when one occluder's data exceed `max_chunk_words`.
+/// [`BackendError::OccluderTooLarge`] when one occluder's data exceed `max_chunk_words`.
 pub(super) fn prepare(job: &PlaneJob, max_chunk_words: usize) -> Result<Prepared, BackendError> {
     let (mut out, occluders) = setup_occluders(job);
     let chunks = split_chunks(&mut out, max_chunk_words)?;
@@ -113,7 +113,7 @@ fn setup_occluders(job: &PlaneJob) -> (Output, usize) {
 /// rebases the vertices' record indices onto their chunk's data.
 ///
 /// # Errors
-/// [`BackendError::Device`] when one occluder's data exceed `max_chunk_words`.
+/// [`BackendError::OccluderTooLarge`] when one occluder's data exceed `max_chunk_words`.
 fn split_chunks(out: &mut Output, max_chunk_words: usize) -> Result<Vec<Chunk>, BackendError> {
     let mut chunks = Vec::new();
     let (mut first, mut base, mut current) = (0usize, 0usize, u32::MAX);
@@ -123,10 +123,9 @@ fn split_chunks(out: &mut Output, max_chunk_words: usize) -> Result<Vec<Chunk>, 
             current = rec;
             let end = rec as usize + 1 + out.data[rec as usize][2] as usize;
             if end - rec as usize > max_chunk_words {
-                return Err(BackendError::Device(format!(
-                    "an occluder has {} edges, more than one storage binding holds",
-                    end - rec as usize - 1
-                )));
+                return Err(BackendError::OccluderTooLarge {
+                    edges: end - rec as usize - 1,
+                });
             }
             if end - base > max_chunk_words {
                 chunks.push(Chunk {

@@ -254,8 +254,9 @@ impl GpuBackend {
     /// `out`, in the steps listed in the [module docs](self), inside error scopes.
     ///
     /// # Errors
-    /// [`BackendError::Device`] when a buffer would exceed the device's limits, on a
-    /// validation or out-of-memory error, a failed read-back, a lost device or the deadline.
+    /// [`BackendError::BufferTooLarge`] when a buffer would exceed the device's limits;
+    /// [`BackendError::Validation`] or [`BackendError::OutOfMemory`] from the error scopes;
+    /// otherwise as [`Self::wait`] and [`read_back`].
     pub(super) fn render_wave(
         &self,
         pool: &mut Pool,
@@ -284,7 +285,7 @@ impl GpuBackend {
     /// the targets and tables it places beyond their ends.
     ///
     /// # Errors
-    /// [`BackendError::Device`] when a buffer would exceed the device's largest.
+    /// [`BackendError::BufferTooLarge`] when a buffer would exceed the device's largest.
     fn allocate(&self, pool: &mut Pool, layout: &WaveLayout) -> Result<(), BackendError> {
         if layout.window_bytes > 0 {
             self.ensure_buffer(
@@ -600,8 +601,10 @@ impl GpuBackend {
     /// read-back buffers are mapped, checking for a lost device between slices.
     ///
     /// # Errors
-    /// [`BackendError::Device`] on a lost device, a failed poll or mapping, or when
-    /// [`DEADLINE`] passes — never a hang.
+    /// The recorded failure ([`BackendError::DeviceLost`], [`BackendError::Uncaptured`]) on
+    /// the backend's own device; [`BackendError::PollFailed`] on a failed poll (an engine's
+    /// lost device); [`BackendError::ReadBack`] on a failed mapping; [`BackendError::Timeout`]
+    /// when [`DEADLINE`] passes — never a hang.
     fn wait(
         &self,
         submission: wgpu::SubmissionIndex,
@@ -622,22 +625,26 @@ impl GpuBackend {
                     self.check_failure()?;
                     // Without a device-lost callback (an engine's device), a lost device shows
                     // here: the submission was refused.
-                    return Err(BackendError::Device(format!(
-                        "poll failed (is the device lost?): {e}"
-                    )));
+                    return Err(BackendError::PollFailed {
+                        message: e.to_string(),
+                    });
                 }
             }
             while let Ok((w, r)) = mapped.try_recv() {
-                r.map_err(|e| BackendError::Device(format!("read-back failed: {e}")))?;
+                r.map_err(|e| BackendError::ReadBack {
+                    step: "read-back failed",
+                    message: e.to_string(),
+                })?;
                 if !done[w] {
                     done[w] = true;
                     remaining -= 1;
                 }
             }
             if remaining > 0 && start.elapsed() > DEADLINE {
-                return Err(BackendError::Device(format!(
-                    "the GPU did not finish {planes} planes within {DEADLINE:?}"
-                )));
+                return Err(BackendError::Timeout {
+                    planes,
+                    deadline: DEADLINE,
+                });
             }
         }
         Ok(())
@@ -646,22 +653,24 @@ impl GpuBackend {
     /// Makes `slot` a buffer of at least `size` bytes (grown to a power of two, never shrunk).
     ///
     /// # Errors
-    /// [`BackendError::Device`] when `size` exceeds the device's largest buffer.
+    /// [`BackendError::BufferTooLarge`] when `size` exceeds the device's largest buffer.
     fn ensure_buffer(
         &self,
         slot: &mut Option<wgpu::Buffer>,
         size: u64,
         usage: wgpu::BufferUsages,
-        label: &str,
+        label: &'static str,
     ) -> Result<(), BackendError> {
         if slot.as_ref().is_some_and(|b| b.size() >= size) {
             return Ok(());
         }
         let max_buffer = self.limits.max_buffer;
         if size > max_buffer {
-            return Err(BackendError::Device(format!(
-                "{label}: {size} bytes exceed the device's maximum buffer size {max_buffer}"
-            )));
+            return Err(BackendError::BufferTooLarge {
+                label,
+                size,
+                max: max_buffer,
+            });
         }
         let cap = size
             .next_power_of_two()
@@ -750,7 +759,7 @@ type Mapped = mpsc::Receiver<(usize, Result<(), wgpu::BufferAsyncError>)>;
 /// dropped), the buffer unmapped, the slice mask merged, into `out[job]`.
 ///
 /// # Errors
-/// [`BackendError::Device`] when a mapped range cannot be read.
+/// [`BackendError::ReadBack`] when a mapped range cannot be read.
 fn read_back(
     pool: &Pool,
     layout: &WaveLayout,
@@ -769,7 +778,10 @@ fn read_back(
             let view = target
                 .staging
                 .get_mapped_range(..)
-                .map_err(|e| BackendError::Device(format!("read-back mapping: {e}")))?;
+                .map_err(|e| BackendError::ReadBack {
+                    step: "read-back mapping",
+                    message: e.to_string(),
+                })?;
             let row_bytes = width as usize * 4;
             for row in view.chunks(target.padded_row as usize) {
                 map.depth
