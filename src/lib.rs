@@ -12,8 +12,10 @@
 //! depends only on [`geom`], and [`project`], [`sweep`], [`backend`] and [`hdm`] each depend on
 //! [`plane`], never on one another.
 //!
-//! The `runtime` feature alone (`--no-default-features --features runtime`) builds only
-//! [`geom`] and [`pvs`], the parts an engine needs at run time.
+//! Features: `cli` (the default) adds the `umbrasweep` command; `bake` is this whole library
+//! without the command's dependencies; `runtime` alone (`--no-default-features --features
+//! runtime`) builds only [`geom`], [`settings`] and [`pvs`], the parts an engine needs at run
+//! time.
 //!
 //! ```no_run
 //! # #[cfg(feature = "bake")] {

@@ -1,11 +1,13 @@
-//! The `umbrasweep` command line: bake, validate, gen (and later bench, inspect, report).
+//! The `umbrasweep` command line: bake, validate, gen, bench, inspect, report.
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod cli_bake;
+mod cli_bench;
 mod cli_gen;
 mod cli_inspect;
+mod cli_report;
 mod cli_validate;
 
 #[derive(Parser, Debug)]
@@ -28,11 +30,11 @@ enum Command {
     /// Generate a test scene (forest, city, boxfield) as OBJ, with matching view cells.
     Gen(cli_gen::GenArgs),
     /// Bake and validate a fixed set of scenes with each backend and print one table.
-    Bench(umbrasweep::bench::BenchArgs),
+    Bench(cli_bench::BenchArgs),
     /// Summarise a binary PVS file, list a cell's objects, or print it as JSON.
     Inspect(cli_inspect::InspectArgs),
     /// Write a static HTML report of a PVS: top-down picture, per-cell table, plane previews.
-    Report(umbrasweep::inspect::ReportArgs),
+    Report(cli_report::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -41,9 +43,9 @@ fn main() -> ExitCode {
         Command::Bake(a) => cli_bake::run(a).map(|_| 0),
         Command::Validate(a) => cli_validate::run(a),
         Command::Gen(a) => cli_gen::run(a).map(|_| 0),
-        Command::Bench(a) => umbrasweep::bench::run(a).map(|_| 0),
+        Command::Bench(a) => cli_bench::run(a).map(|_| 0),
         Command::Inspect(a) => cli_inspect::run(a).map(|_| 0),
-        Command::Report(a) => umbrasweep::inspect::run_report(a).map(|_| 0),
+        Command::Report(a) => cli_report::run(a).map(|_| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code as u8),

@@ -3,38 +3,24 @@
 //! sub-cell rows take minutes even on tiny forests — a 4×2×4 cell in sub-cells of 0.5 is 256
 //! bakes — so its labels are checked by the unit tests in `bench::foliage` instead.)
 
-use clap::Parser;
-use umbrasweep::bench::BenchArgs;
 use umbrasweep::bench::foliage::{COLUMNS, FoliageBench, collect};
+use umbrasweep::bench::{BenchBackend, BenchOptions};
 
-#[derive(Parser)]
-struct Cli {
-    #[command(flatten)]
-    args: BenchArgs,
-}
-
+/// `bench --foliage --foliage-studies STUDIES --foliage-trees 3 --foliage-model-trees 1
+/// --foliage-paper-cells 2 --foliage-subcell-cells 1 --cells 1 --rays 2000 --backend cpu`.
 fn run(studies: &str) -> FoliageBench {
-    let cli = Cli::parse_from([
-        "bench",
-        "--foliage",
-        "--foliage-studies",
-        studies,
-        "--foliage-trees",
-        "3",
-        "--foliage-model-trees",
-        "1",
-        "--foliage-paper-cells",
-        "2",
-        "--foliage-subcell-cells",
-        "1",
-        "--cells",
-        "1",
-        "--rays",
-        "2000",
-        "--backend",
-        "cpu",
-    ]);
-    collect(&cli.args).unwrap()
+    collect(&BenchOptions {
+        foliage_studies: Some(studies.split(',').map(String::from).collect()),
+        foliage_trees: Some(3),
+        foliage_model_trees: 1,
+        foliage_paper_cells: 2,
+        foliage_subcell_cells: 1,
+        cells: Some(1),
+        rays: Some(2000),
+        backend: BenchBackend::Cpu,
+        ..BenchOptions::default()
+    })
+    .unwrap()
 }
 
 fn labels(bench: &FoliageBench, study: &str) -> Vec<String> {

@@ -12,7 +12,8 @@ use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{BakeSettings, bake, to_document};
 use umbrasweep::geom::Aabb;
 use umbrasweep::hdm::Hdm;
-use umbrasweep::inspect::{DumpOptions, ReportArgs, dump_plane, file_stem, run_report};
+use umbrasweep::inspect::report::{self, ReportError, ReportOptions};
+use umbrasweep::inspect::{DumpOptions, dump_plane, file_stem};
 use umbrasweep::plane::{DepthMap, PlaneJob, depth_up};
 use umbrasweep::scene::Scene;
 
@@ -382,17 +383,31 @@ fn scene_and_pvs(dir: &Path) -> (PathBuf, PathBuf) {
     (scene_path, pvs)
 }
 
+/// What `umbrasweep report SCENE PVS -o OUT --cell N [--no-previews]` does: reads both files,
+/// renders the page and writes `OUT/index.html`.
+fn run_report(
+    scene: &Path,
+    pvs: &Path,
+    out: &Path,
+    cell: usize,
+    no_previews: bool,
+) -> Result<(), ReportError> {
+    let s = umbrasweep::scene::load(scene).unwrap();
+    let doc = umbrasweep::pvs::json::read(pvs).unwrap();
+    let opts = ReportOptions {
+        scene_file: scene.to_path_buf(),
+        pvs_file: pvs.to_path_buf(),
+        cell,
+        no_previews,
+    };
+    let html = report::render(&s, &doc, &opts)?;
+    report::write_page(out, &html)
+}
+
 fn report(dir: &Path) -> PathBuf {
     let (scene, pvs) = scene_and_pvs(dir);
     let out = dir.join("report");
-    run_report(&ReportArgs {
-        scene,
-        pvs,
-        output: out.clone(),
-        cell: 0,
-        no_previews: false,
-    })
-    .unwrap();
+    run_report(&scene, &pvs, &out, 0, false).unwrap();
     out.join("index.html")
 }
 
@@ -421,19 +436,17 @@ fn report_refuses_a_pvs_of_another_scene_and_a_missing_cell() {
     let (scene, pvs) = scene_and_pvs(dir.path());
     let other = dir.path().join("other.obj");
     write_obj(&other, &wall_scene()[..2]);
-    let args = |scene: &Path, cell| ReportArgs {
-        scene: scene.to_path_buf(),
-        pvs: pvs.clone(),
-        output: dir.path().join("r"),
-        cell,
-        no_previews: true,
-    };
-    let e = run_report(&args(&other, 0)).unwrap_err().to_string();
+    let out = dir.path().join("r");
+    let e = run_report(&other, &pvs, &out, 0, true).unwrap_err();
+    assert!(matches!(e, ReportError::ObjectCount { .. }), "{e:?}");
+    let e = e.to_string();
     assert!(e.contains("2 objects") && e.contains("lists 3"), "{e}");
-    let e = run_report(&args(&scene, 7)).unwrap_err().to_string();
+    let e = run_report(&scene, &pvs, &out, 7, true).unwrap_err();
+    assert!(matches!(e, ReportError::NoSuchCell { .. }), "{e:?}");
+    let e = e.to_string();
     assert!(e.contains("--cell 7"), "{e}");
     assert!(!dir.path().join("r/index.html").exists());
-    run_report(&args(&scene, 1)).unwrap();
+    run_report(&scene, &pvs, &out, 1, true).unwrap();
     assert!(dir.path().join("r/index.html").is_file());
 }
 

@@ -2,7 +2,7 @@
 //! which forest, which cells and which bake settings make each row — running them on one
 //! backend (the CPU unless `--backend gpu`), the peak memory of each bake, and the study's
 //! tables and `--json` document. Validation and the table layout are shared with the scene
-//! bench ([`super::sample`], [`super::score`], [`super::markdown_table`]).
+//! bench (`sample`, `score`, `markdown_table` of [`super`]).
 //!
 //! The studies, in the order they run and print (each a list of rows, a row being one
 //! variant of the bake settings on one forest; all forests generated in memory from `--seed`
@@ -36,8 +36,8 @@
 //! memory plus what the bake needs.
 
 use super::{
-    BenchArgs, BenchBackend, BenchRow, Sampled, markdown_table, panic_message, sample, score,
-    shared_file, shared_folder,
+    BenchBackend, BenchError, BenchOptions, BenchRow, Sampled, markdown_table, panic_message,
+    sample, say, score, shared_file, shared_folder,
 };
 use crate::backend::RasterBackend;
 use crate::backend::cpu::CpuBackend;
@@ -48,7 +48,6 @@ use crate::geom::Aabb;
 use crate::project::planes::{Placement, Spacing};
 use crate::scene::Scene;
 use crate::validate::SceneRays;
-use anyhow::Context as _;
 use glam::Vec3;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -341,15 +340,12 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(args: &BenchArgs) -> anyhow::Result<Plan> {
+    fn new(args: &BenchOptions) -> Result<Plan, BenchError> {
         let studies = match &args.foliage_studies {
             None => STUDIES.to_vec(),
             Some(list) => {
                 if let Some(bad) = list.iter().find(|s| !STUDIES.contains(&s.as_str())) {
-                    anyhow::bail!(
-                        "--foliage-studies {bad}: unknown study (one of {})",
-                        STUDIES.join(", ")
-                    );
+                    return Err(BenchError::UnknownStudy(bad.clone()));
                 }
                 STUDIES
                     .into_iter()
@@ -374,7 +370,7 @@ impl Plan {
             ("--foliage-trees", args.foliage_trees.unwrap_or(1) as u64),
         ];
         if let Some((flag, _)) = counts.iter().find(|c| c.1 == 0) {
-            anyhow::bail!("{flag} must be at least 1");
+            return Err(BenchError::Zero(flag));
         }
         Ok(plan)
     }
@@ -392,9 +388,9 @@ struct ForestScene {
 /// Generates forest `which`; `Ok(Err(reason))` when it needs a shared file that is absent.
 fn build(
     which: Forest,
-    args: &BenchArgs,
+    args: &BenchOptions,
     plan: &Plan,
-) -> anyhow::Result<Result<ForestScene, String>> {
+) -> Result<Result<ForestScene, String>, BenchError> {
     let trees = |n: u32| args.foliage_trees.unwrap_or(n);
     let seed = args.seed;
     let cells = Some(plan.cells);
@@ -457,9 +453,12 @@ fn build(
                 Ok(p) => p,
                 Err(why) => return Ok(Err(why)),
             };
-            let model = TreeModel::from_scene(
-                &crate::scene::load(&path).with_context(|| format!("{}", path.display()))?,
-            );
+            let model = TreeModel::from_scene(&crate::scene::load(&path).map_err(|source| {
+                BenchError::Scene {
+                    path: path.clone(),
+                    source,
+                }
+            })?);
             // `gen forest --preset coarse --tree-model FILE --trees N --model-split 8`: one
             // object per tree would leave nothing to cull (every tree is seen from every cell),
             // so each tree is 8 objects, like the procedural crowns' sectors.
@@ -525,19 +524,20 @@ fn peak_mib() -> Option<f64> {
     Some(kib / 1024.0)
 }
 
-/// Runs the foliage study and returns its rows (progress on stderr). A row whose bake fails
+/// Runs the foliage study and returns its rows (progress lines to
+/// [`BenchOptions::progress`]). A row whose bake fails
 /// or panics is reported in `skipped` and the study goes on.
 ///
 /// # Errors
 /// Bad options, `--backend gpu` without an adapter, a forest that cannot be generated, or a
 /// jacaranda model that exists but cannot be loaded.
-pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
+pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
     let start = Instant::now();
     let plan = Plan::new(args)?;
     let cpu;
     let gpu;
     let backend: &dyn RasterBackend = if args.backend == BenchBackend::Gpu {
-        gpu = GpuBackend::new().context("--backend gpu")?;
+        gpu = GpuBackend::new().map_err(BenchError::Gpu)?;
         &gpu
     } else {
         cpu = CpuBackend::new();
@@ -555,10 +555,15 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
         forests.retain(|f| plan.studies[k..].iter().any(|s| Forest::of(s) == f.which));
         if !forests.iter().any(|f| f.which == which) {
             let t = Instant::now();
-            eprintln!("bench: foliage {study}: generating {}", which.name());
+            say!(
+                args.progress,
+                "bench: foliage {study}: generating {}",
+                which.name()
+            );
             match build(which, args, &plan)? {
                 Ok(f) => {
-                    eprintln!(
+                    say!(
+                        args.progress,
                         "bench: foliage {study}: {}: {} triangles, {} objects, {} cells ({:.1} s)",
                         which.name(),
                         f.scene.triangles.len(),
@@ -569,7 +574,7 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
                     forests.push(f);
                 }
                 Err(why) => {
-                    eprintln!("bench: {why}");
+                    say!(args.progress, "bench: {why}");
                     skipped.push(why);
                     continue;
                 }
@@ -585,7 +590,7 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
         });
         if f.cells.is_empty() {
             let why = format!("{study}: skipped, no cell on the path of {}", which.name());
-            eprintln!("bench: {why}");
+            say!(args.progress, "bench: {why}");
             skipped.push(why);
             continue;
         }
@@ -601,7 +606,8 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
         ids.dedup();
         if !ids.is_empty() {
             let t = Instant::now();
-            eprintln!(
+            say!(
+                args.progress,
                 "bench: foliage {study}: sampling {} cells with {} rays each",
                 ids.len(),
                 plan.rays
@@ -612,7 +618,8 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
                     &index, &f.scene, f.cells[i], plan.rays, args.seed, i,
                 ));
             }
-            eprintln!(
+            say!(
+                args.progress,
                 "bench: foliage {study}: sampled in {:.1} s",
                 t.elapsed().as_secs_f64()
             );
@@ -630,7 +637,16 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
                 let result = bake(&f.scene, &cells, &v.settings, backend, None);
                 let peak = peak_mib();
                 result.map(|r| {
-                    let row = score(which.name(), &f.scene, &cells, &ids, &r, &truth, plan.rays);
+                    let row = score(
+                        which.name(),
+                        &f.scene,
+                        &cells,
+                        &ids,
+                        &r,
+                        &truth,
+                        plan.rays,
+                        args.progress,
+                    );
                     (row, peak)
                 })
             }));
@@ -638,7 +654,7 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
                 Ok(Ok(r)) => r,
                 Ok(Err(e)) => {
                     let why = format!("{study} [{}]: FAILED, {e}", v.label);
-                    eprintln!("bench: {why}");
+                    say!(args.progress, "bench: {why}");
                     skipped.push(why);
                     continue;
                 }
@@ -648,12 +664,13 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<FoliageBench> {
                         v.label,
                         panic_message(&*panic)
                     );
-                    eprintln!("bench: {why}");
+                    say!(args.progress, "bench: {why}");
                     skipped.push(why);
                     continue;
                 }
             };
-            eprintln!(
+            say!(
+                args.progress,
                 "bench: foliage {study} [{}]: {} cells, median {:.1} ms/cell, {:.1} % culled, \
                  PVS/VS {}, {} false culls, {:.1} planes/cell, peak {} ({:.1} s)",
                 v.label,
@@ -785,27 +802,9 @@ impl FoliageBench {
     }
 }
 
-/// Runs `umbrasweep bench --foliage`: progress on stderr, the tables on stdout, `--json` if
-/// asked.
-///
-/// # Errors
-/// See [`collect`]; or a `--json` file that cannot be written.
-pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
-    let bench = collect(args)?;
-    let false_culls = bench.rows.iter().map(|r| r.row.false_culls).sum();
-    super::report(&bench.tables(), false_culls, &bench, args.json.as_deref())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: BenchArgs,
-    }
 
     #[test]
     fn every_study_has_its_variants() {
@@ -922,13 +921,19 @@ mod tests {
 
     #[test]
     fn bad_foliage_options_are_refused() {
-        let cli = Cli::parse_from(["bench", "--foliage", "--foliage-studies", "moon"]);
-        let err = collect(&cli.args).unwrap_err().to_string();
-        assert!(err.contains("moon"), "{err}");
-        let cli = Cli::parse_from(["bench", "--foliage", "--foliage-paper-cells", "0"]);
-        let err = collect(&cli.args).unwrap_err().to_string();
+        let err = collect(&BenchOptions {
+            foliage_studies: Some(vec!["moon".into()]),
+            ..BenchOptions::default()
+        })
+        .unwrap_err();
+        assert!(matches!(err, BenchError::UnknownStudy(_)), "{err:?}");
+        assert!(err.to_string().contains("moon"), "{err}");
+        let err = collect(&BenchOptions {
+            foliage_paper_cells: 0,
+            ..BenchOptions::default()
+        })
+        .unwrap_err()
+        .to_string();
         assert!(err.contains("--foliage-paper-cells"), "{err}");
-        assert!(Cli::try_parse_from(["bench", "--foliage", "--quick"]).is_err());
-        assert!(Cli::try_parse_from(["bench", "--foliage-studies", "coarse"]).is_err());
     }
 }

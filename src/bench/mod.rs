@@ -11,11 +11,12 @@
 //!
 //! Every backend bakes the same cells (the GPU backend the first `--gpu-cells` of them); the
 //! sampled visible set of a cell is computed once and compared with each backend's PVS.
-//! Progress goes to stderr, the table to stdout, the rows to `--json` if asked. Benchmarks are
+//! Progress lines go to [`BenchOptions::progress`] (the command prints them on stderr, the
+//! table on stdout and the rows to `--json` if asked: `src/cli_bench.rs`). Benchmarks are
 //! measurements, not tests: nothing here asserts a timing.
 //!
 //! `--foliage` runs the foliage study instead ([`foliage`]); it shares this module's
-//! validation ([`sample`], [`score`]) and table layout ([`markdown_table`]).
+//! validation (`sample`, `score`) and table layout (`markdown_table`).
 
 pub mod foliage;
 
@@ -32,103 +33,157 @@ use crate::geom::Aabb;
 use crate::pvs::PvsCell;
 use crate::scene::Scene;
 use crate::validate::{CellSample, SceneRays, cell_report, sample_cell};
-use anyhow::Context as _;
 use glam::Vec3;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Which backends `umbrasweep bench` runs.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+/// Which backends the benchmark runs (`umbrasweep bench --backend`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BenchBackend {
     /// The CPU backend only.
     Cpu,
     /// The GPU backend only (an error when no adapter exists).
     Gpu,
     /// The CPU backend, and the GPU backend when an adapter exists.
+    #[default]
     All,
 }
 
-/// Options of `umbrasweep bench`.
-#[derive(clap::Args, Debug, Clone)]
-#[command(after_help = "Examples:
-  umbrasweep bench --quick
-  umbrasweep bench --backend cpu --json bench.json
-  umbrasweep bench --quick --scenes city,boxfield --cells 2 --rays 10000
-  umbrasweep bench --foliage --json foliage.json
-  umbrasweep bench --foliage --foliage-studies coarse,params --cells 1 --rays 2000")]
-pub struct BenchArgs {
+/// A progress line receiver: every line the benchmark reports while it runs (`bench: …`,
+/// false culls with their witness rays). `umbrasweep bench` prints them on stderr.
+pub type ProgressLog = fn(&str);
+
+/// Options of the benchmark ([`collect`]) and of the foliage study ([`foliage::collect`]):
+/// the settings of `umbrasweep bench` without its output (`--json`) and its choice of study
+/// (`--foliage`). [`Default`] gives the command's defaults.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
     /// A small version that runs in a few minutes: 10 cells per scene, 3 on the GPU, a forest
-    /// of 300 trees and 6 model trees.
-    #[arg(long)]
+    /// of 300 trees and 6 model trees (scene bench only).
     pub quick: bool,
-    /// Cells per scene (default 50, 10 with --quick or --foliage).
-    #[arg(long, value_name = "N")]
+    /// Cells per scene (default 50, 10 with `quick` or in the foliage study).
     pub cells: Option<usize>,
     /// Cells per scene on the GPU backend, the first of the CPU's (default 10, 3 with
-    /// --quick: software rasterisers such as lavapipe are slow).
-    #[arg(long, value_name = "N")]
+    /// `quick`).
     pub gpu_cells: Option<usize>,
-    /// Validation rays per cell (default 1,000,000; 200,000 with --foliage).
-    #[arg(long, value_name = "N")]
+    /// Validation rays per cell (default 1,000,000; 200,000 in the foliage study).
     pub rays: Option<u64>,
-    /// Seed of the generated scenes, of the free-space cells and of the validation rays.
-    #[arg(long, default_value_t = 1)]
+    /// Seed of the generated scenes, of the free-space cells and of the validation rays
+    /// (default 1).
     pub seed: u64,
-    /// Backends to run.
-    #[arg(long, value_enum, default_value_t = BenchBackend::All)]
+    /// Backends to run (the foliage study: the CPU unless [`BenchBackend::Gpu`]).
     pub backend: BenchBackend,
-    /// The shared scene folder (default: ../shared/scenes when it exists).
-    #[arg(long, value_name = "DIR")]
+    /// The shared scene folder (default: `../shared/scenes` when it exists).
     pub shared: Option<PathBuf>,
-    /// Only these scenes (comma-separated): city, forest, boxfield, munich, etoile, zdm2,
-    /// poinciana.
-    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    /// Only these scenes: city, forest, boxfield, munich, etoile, zdm2, poinciana (all when
+    /// `None`; scene bench only).
     pub scenes: Option<Vec<String>>,
-    /// Also write the rows as JSON to this file.
-    #[arg(long, value_name = "OUT.json")]
-    pub json: Option<PathBuf>,
-    /// Also write every bake's PVS document to DIR/SCENE-BACKEND.json (created if needed), to
-    /// compare two builds cell for cell (`cargo run --example pvs_diff -- A.json B.json`).
-    #[arg(long, value_name = "DIR")]
+    /// Also write every bake's PVS document to `DIR/SCENE-BACKEND.json` (the folder is
+    /// created if needed; scene bench only).
     pub pvs_out: Option<PathBuf>,
-    /// Run the foliage study instead of the scene table: forests baked with and without the
-    /// sweep, with sub-cells and with other sweep settings, one table per study (on the CPU
-    /// backend unless --backend gpu; see docs/bench.md).
-    #[arg(long, conflicts_with_all = ["quick", "gpu_cells", "scenes"])]
-    pub foliage: bool,
-    /// Only these foliage studies (comma-separated): coarse, ellipsoid, fine, params, paper, jacaranda.
-    #[arg(long, value_name = "LIST", value_delimiter = ',', requires = "foliage")]
+    /// Only these foliage studies ([`foliage::STUDIES`]; all when `None`).
     pub foliage_studies: Option<Vec<String>>,
-    /// Cells baked by the fine forest's sub-cell variants (spread over its --cells).
-    #[arg(
-        long,
-        value_name = "N",
-        default_value_t = foliage::DEFAULT_SUBCELL_CELLS,
-        requires = "foliage"
-    )]
+    /// Cells baked by the fine forest's sub-cell variants (spread over its cells).
     pub foliage_subcell_cells: usize,
-    /// Cells of the paper's forest (7,750 trees, 7.8 M triangles).
-    #[arg(
-        long,
-        value_name = "N",
-        default_value_t = foliage::DEFAULT_PAPER_CELLS,
-        requires = "foliage"
-    )]
+    /// Cells of the paper's forest.
     pub foliage_paper_cells: usize,
-    /// Jacaranda trees in the jacaranda study (55 k triangles each; gen's coarse 1,500
-    /// would make 82 M triangles).
-    #[arg(
-        long,
-        value_name = "N",
-        default_value_t = foliage::DEFAULT_MODEL_TREES,
-        requires = "foliage"
-    )]
+    /// Jacaranda trees in the jacaranda study.
     pub foliage_model_trees: u32,
-    /// Tests only: trees of every procedural foliage forest (instead of 1,500 and 7,750).
-    #[arg(long, value_name = "N", hide = true, requires = "foliage")]
+    /// Trees of every procedural foliage forest (instead of 1,500 and 7,750), for tests.
     pub foliage_trees: Option<u32>,
+    /// Receives the progress lines; none are reported when `None`.
+    pub progress: Option<ProgressLog>,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        BenchOptions {
+            quick: false,
+            cells: None,
+            gpu_cells: None,
+            rays: None,
+            seed: 1,
+            backend: BenchBackend::All,
+            shared: None,
+            scenes: None,
+            pvs_out: None,
+            foliage_studies: None,
+            foliage_subcell_cells: foliage::DEFAULT_SUBCELL_CELLS,
+            foliage_paper_cells: foliage::DEFAULT_PAPER_CELLS,
+            foliage_model_trees: foliage::DEFAULT_MODEL_TREES,
+            foliage_trees: None,
+            progress: None,
+        }
+    }
+}
+
+/// Reports one progress line to [`BenchOptions::progress`], formatted like `format!`.
+macro_rules! say {
+    ($log:expr, $($arg:tt)*) => {
+        if let Some(log) = $log {
+            log(&format!($($arg)*));
+        }
+    };
+}
+pub(crate) use say;
+
+/// Errors of the benchmark and of the foliage study. Each names the option or the file at
+/// fault.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// A count option is 0 (`flag` names it, e.g. `--cells and --rays`, `--foliage-paper-cells`):
+    /// give at least 1.
+    #[error("{0} must be at least 1")]
+    Zero(&'static str),
+    /// [`BenchOptions::scenes`] names a scene the benchmark does not have.
+    #[error("--scenes {}: unknown scene (one of {})", .0, SCENES.join(", "))]
+    UnknownScene(String),
+    /// [`BenchOptions::foliage_studies`] names a study that does not exist.
+    #[error("--foliage-studies {}: unknown study (one of {})", .0, foliage::STUDIES.join(", "))]
+    UnknownStudy(String),
+    /// [`BenchOptions::shared`] is not a folder.
+    #[error("--shared {}: not a directory", .0.display())]
+    NotADirectory(PathBuf),
+    /// The [`BenchOptions::pvs_out`] folder cannot be created.
+    #[error("--pvs-out {}: cannot create the folder", path.display())]
+    PvsOut {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A PVS document cannot be written into the [`BenchOptions::pvs_out`] folder.
+    #[error("{0}")]
+    WritePvs(crate::pvs::PvsWriteError),
+    /// [`BenchBackend::Gpu`] was asked but no GPU backend could be made.
+    #[error("--backend gpu")]
+    Gpu(#[source] crate::backend::BackendError),
+    /// A scene file of the shared folder exists but cannot be loaded.
+    #[error("{}", path.display())]
+    Scene {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: crate::scene::SceneError,
+    },
+    /// A generated scene or forest cannot be made.
+    #[error(transparent)]
+    Generate(#[from] crate::generate::GenError),
+    /// A bake failed (the scene bench stops; the foliage study reports it and goes on).
+    #[error("{scene}: bake on {backend}")]
+    Bake {
+        /// The scene.
+        scene: String,
+        /// The backend's name.
+        backend: String,
+        /// Why.
+        #[source]
+        source: crate::bake::BakeError,
+    },
 }
 
 /// One row of the table: one scene baked by one backend.
@@ -217,26 +272,24 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(args: &BenchArgs) -> anyhow::Result<Plan> {
+    fn new(args: &BenchOptions) -> Result<Plan, BenchError> {
         let q = args.quick;
         let cells = args.cells.unwrap_or(if q { 10 } else { 50 });
         let gpu_cells = args.gpu_cells.unwrap_or(if q { 3 } else { 10 }).min(cells);
         let rays = args.rays.unwrap_or(1_000_000);
         if cells == 0 || rays == 0 {
-            anyhow::bail!("--cells and --rays must be at least 1");
+            return Err(BenchError::Zero("--cells and --rays"));
         }
         let shared = shared_folder(args)?;
         if let Some(list) = &args.scenes
             && let Some(bad) = list.iter().find(|s| !SCENES.contains(&s.as_str()))
         {
-            anyhow::bail!(
-                "--scenes {bad}: unknown scene (one of {})",
-                SCENES.join(", ")
-            );
+            return Err(BenchError::UnknownScene(bad.clone()));
         }
         if let Some(dir) = &args.pvs_out {
-            std::fs::create_dir_all(dir).with_context(|| {
-                format!("--pvs-out {}: cannot create the folder", dir.display())
+            std::fs::create_dir_all(dir).map_err(|source| BenchError::PvsOut {
+                path: dir.clone(),
+                source,
             })?;
         }
         Ok(Plan {
@@ -254,17 +307,17 @@ impl Plan {
 ///
 /// # Errors
 /// `--shared` naming something that is not a folder.
-fn shared_folder(args: &BenchArgs) -> anyhow::Result<Option<PathBuf>> {
+pub(crate) fn shared_folder(args: &BenchOptions) -> Result<Option<PathBuf>, BenchError> {
     Ok(match &args.shared {
         Some(d) if d.is_dir() => Some(d.clone()),
-        Some(d) => anyhow::bail!("--shared {}: not a directory", d.display()),
+        Some(d) => return Err(BenchError::NotADirectory(d.clone())),
         None => Some(PathBuf::from("../shared/scenes")).filter(|d| d.is_dir()),
     })
 }
 
 /// The file `rel` of the shared scene folder `shared`; `Err(reason)` (naming `name`) when
 /// there is no folder or no such file.
-fn shared_file(shared: Option<&Path>, name: &str, rel: &str) -> Result<PathBuf, String> {
+pub(crate) fn shared_file(shared: Option<&Path>, name: &str, rel: &str) -> Result<PathBuf, String> {
     match shared {
         None => Err(format!(
             "{name}: skipped, no shared scene folder (../shared/scenes or --shared DIR)"
@@ -281,7 +334,7 @@ fn shared_file(shared: Option<&Path>, name: &str, rel: &str) -> Result<PathBuf, 
 }
 
 /// The message of a caught panic.
-fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
     panic
         .downcast_ref::<&str>()
         .map(|s| s.to_string())
@@ -291,7 +344,11 @@ fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
 
 /// Builds scene `name`; `Ok(Err(reason))` when it needs the shared folder or a file in it
 /// that is absent.
-fn build(name: &str, args: &BenchArgs, plan: &Plan) -> anyhow::Result<Result<BenchScene, String>> {
+fn build(
+    name: &str,
+    args: &BenchOptions,
+    plan: &Plan,
+) -> Result<Result<BenchScene, String>, BenchError> {
     let n = plan.cells;
     let seed = args.seed;
     let generated = |g: crate::generate::Generated, name: &str| BenchScene {
@@ -300,7 +357,12 @@ fn build(name: &str, args: &BenchArgs, plan: &Plan) -> anyhow::Result<Result<Ben
         cells: g.cells,
     };
     let shared_file = |rel: &str| shared_file(plan.shared.as_deref(), name, rel);
-    let load = |p: &Path| crate::scene::load(p).with_context(|| format!("{}", p.display()));
+    let load = |p: &Path| {
+        crate::scene::load(p).map_err(|source| BenchError::Scene {
+            path: p.to_path_buf(),
+            source,
+        })
+    };
     let free = |scene: &Scene, size: Vec3, height: f32| {
         let bounds: Vec<Aabb> = scene.objects.iter().map(|o| o.bounds).collect();
         free_cells(&bounds, n, size, height, seed)
@@ -377,16 +439,17 @@ fn build(name: &str, args: &BenchArgs, plan: &Plan) -> anyhow::Result<Result<Ben
             )?;
             generated(g, "poinciana_forest")
         }
-        other => anyhow::bail!("unknown scene {other}"),
+        other => return Err(BenchError::UnknownScene(other.into())),
     }))
 }
 
-/// Runs the benchmark and returns its rows (progress on stderr).
+/// Runs the benchmark and returns its rows (progress lines to [`BenchOptions::progress`]).
 ///
 /// # Errors
-/// Bad options, a shared scene that exists but cannot be loaded, `--backend gpu` without an
-/// adapter, or a backend failure.
-pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
+/// Bad options, a `pvs_out` folder that cannot be created or written, a shared scene that
+/// exists but cannot be loaded, [`BenchBackend::Gpu`] without an adapter, or a backend
+/// failure.
+pub fn collect(args: &BenchOptions) -> Result<Bench, BenchError> {
     let start = Instant::now();
     let plan = Plan::new(args)?;
     let settings = BakeSettings::default();
@@ -395,12 +458,12 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
     let cpu = CpuBackend::new();
     let gpu = match args.backend {
         BenchBackend::Cpu => None,
-        BenchBackend::Gpu => Some(GpuBackend::new().context("--backend gpu")?),
+        BenchBackend::Gpu => Some(GpuBackend::new().map_err(BenchError::Gpu)?),
         BenchBackend::All => match GpuBackend::new() {
             Ok(g) => Some(g),
             Err(e) => {
                 skipped.push(format!("gpu: skipped, {e}"));
-                eprintln!("bench: gpu skipped: {e}");
+                say!(args.progress, "bench: gpu skipped: {e}");
                 None
             }
         },
@@ -421,17 +484,18 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
             continue;
         }
         let t = Instant::now();
-        eprintln!("bench: {name}: preparing");
+        say!(args.progress, "bench: {name}: preparing");
         let bs = match build(name, args, &plan)? {
             Ok(s) => s,
             Err(why) => {
-                eprintln!("bench: {why}");
+                say!(args.progress, "bench: {why}");
                 skipped.push(why);
                 continue;
             }
         };
         let scene = &bs.scene;
-        eprintln!(
+        say!(
+            args.progress,
             "bench: {}: {} triangles, {} objects, {} cells ({:.1} s)",
             bs.name,
             scene.triangles.len(),
@@ -441,12 +505,12 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
         );
         if bs.cells.is_empty() {
             let why = format!("{}: skipped, no free cell found", bs.name);
-            eprintln!("bench: {why}");
+            say!(args.progress, "bench: {why}");
             skipped.push(why);
             continue;
         }
         let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            bench_scene(&bs, &backends, &settings, &plan, args.seed)
+            bench_scene(&bs, &backends, &settings, &plan, args)
         }));
         match run {
             Ok(r) => rows.extend(r?),
@@ -456,11 +520,12 @@ pub fn collect(args: &BenchArgs) -> anyhow::Result<Bench> {
                     "{}: FAILED, the bake or validation panicked: {msg}",
                     bs.name
                 );
-                eprintln!("bench: {why}");
+                say!(args.progress, "bench: {why}");
                 skipped.push(why);
             }
         }
-        eprintln!(
+        say!(
+            args.progress,
             "bench: {}: done in {:.1} s",
             bs.name,
             t.elapsed().as_secs_f64()
@@ -489,8 +554,9 @@ fn bench_scene(
     backends: &[(&dyn RasterBackend, usize)],
     settings: &BakeSettings,
     plan: &Plan,
-    seed: u64,
-) -> anyhow::Result<Vec<BenchRow>> {
+    args: &BenchOptions,
+) -> Result<Vec<BenchRow>, BenchError> {
+    let seed = args.seed;
     let scene = &bs.scene;
     let mut out = Vec::new();
     let index = SceneRays::new(scene);
@@ -499,15 +565,21 @@ fn bench_scene(
     for &(backend, max_cells) in backends {
         let cells = &bs.cells[..max_cells.min(bs.cells.len())];
         let t = Instant::now();
-        eprintln!(
+        say!(
+            args.progress,
             "bench: {}: baking {} cells on {}",
             bs.name,
             cells.len(),
             backend.name()
         );
-        let result = bake(scene, cells, settings, backend, None)
-            .with_context(|| format!("{}: bake on {}", bs.name, backend.name()))?;
-        eprintln!(
+        let result =
+            bake(scene, cells, settings, backend, None).map_err(|source| BenchError::Bake {
+                scene: bs.name.clone(),
+                backend: backend.name().into(),
+                source,
+            })?;
+        say!(
+            args.progress,
             "bench: {}: baked in {:.1} s; validating with {} rays per cell",
             bs.name,
             t.elapsed().as_secs_f64(),
@@ -516,7 +588,7 @@ fn bench_scene(
         if let Some(dir) = &plan.pvs_out {
             let path = dir.join(format!("{}-{}.json", bs.name, backend.name()));
             let doc = crate::bake::to_document(scene, cells, &result, settings);
-            crate::pvs::json::write(&path, &doc).map_err(anyhow::Error::msg)?;
+            crate::pvs::json::write(&path, &doc).map_err(BenchError::WritePvs)?;
         }
         for (i, cell) in cells.iter().enumerate() {
             if samples[i].is_none() {
@@ -526,7 +598,14 @@ fn bench_scene(
         let truth: Vec<&Sampled> = samples[..cells.len()].iter().flatten().collect();
         let ids: Vec<usize> = (0..cells.len()).collect();
         out.push(score(
-            &bs.name, scene, cells, &ids, &result, &truth, plan.rays,
+            &bs.name,
+            scene,
+            cells,
+            &ids,
+            &result,
+            &truth,
+            plan.rays,
+            args.progress,
         ));
     }
     Ok(out)
@@ -553,8 +632,12 @@ pub(crate) fn sample(
 }
 
 /// Scores one bake of `cells` (scene cell numbers `ids`) against their sampled visible sets
-/// `truth`: every false cull is printed on stderr with its witness ray, and the row holds the
+/// `truth`: every false cull is reported to `log` with its witness ray, and the row holds the
 /// means over the cells.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the bake, its cells and their truth, plus the ray count and the progress log"
+)]
 pub(crate) fn score(
     name: &str,
     scene: &Scene,
@@ -563,6 +646,7 @@ pub(crate) fn score(
     result: &BakeResult,
     truth: &[&Sampled],
     rays: u64,
+    log: Option<ProgressLog>,
 ) -> BenchRow {
     assert!(cells.len() == result.cells.len() && cells.len() == truth.len());
     let mut reports = Vec::new();
@@ -580,10 +664,17 @@ pub(crate) fn score(
     let false_culls = reports.iter().map(|r| r.false_culls.len()).sum();
     for (&i, r) in ids.iter().zip(&reports) {
         for f in &r.false_culls {
-            eprintln!(
+            say!(
+                log,
                 "bench: FALSE CULL {name} [{}] cell {i} {:?}–{:?}: object {} {:?}, ray \
                  origin {:?} direction {:?}",
-                result.backend, r.min, r.max, f.object, f.name, f.origin, f.direction
+                result.backend,
+                r.min,
+                r.max,
+                f.object,
+                f.name,
+                f.origin,
+                f.direction
             );
         }
     }
@@ -740,63 +831,21 @@ impl Bench {
     }
 }
 
-/// Runs `umbrasweep bench`: progress on stderr, the table on stdout, `--json` if asked.
-///
-/// # Errors
-/// See [`collect`]; or a `--json` file that cannot be written.
-pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
-    if args.foliage {
-        return foliage::run(args);
-    }
-    let bench = collect(args)?;
-    let false_culls = bench.rows.iter().map(|r| r.false_culls).sum();
-    report(&bench.table(), false_culls, &bench, args.json.as_deref())
-}
-
-/// Prints a bench's tables, warns about false culls, and writes `--json` if asked.
-pub(crate) fn report(
-    tables: &str,
-    false_culls: usize,
-    doc: &impl Serialize,
-    json: Option<&Path>,
-) -> anyhow::Result<()> {
-    print!("{tables}");
-    if false_culls > 0 {
-        eprintln!("bench: {false_culls} FALSE CULLS (see above): the PVS is not conservative");
-    }
-    if let Some(path) = json {
-        let bytes = serde_json::to_vec_pretty(doc)?;
-        crate::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: BenchArgs,
-    }
 
     #[test]
     fn a_tiny_bench_prints_every_column() {
-        let cli = Cli::parse_from([
-            "bench",
-            "--quick",
-            "--scenes",
-            "boxfield,city",
-            "--cells",
-            "1",
-            "--rays",
-            "1000",
-            "--backend",
-            "cpu",
-        ]);
-        let bench = collect(&cli.args).unwrap();
+        let bench = collect(&BenchOptions {
+            quick: true,
+            scenes: Some(vec!["boxfield".into(), "city".into()]),
+            cells: Some(1),
+            rays: Some(1000),
+            backend: BenchBackend::Cpu,
+            ..BenchOptions::default()
+        })
+        .unwrap();
         assert_eq!(bench.rows.len(), 2);
         assert!(
             bench
@@ -823,8 +872,12 @@ mod tests {
 
     #[test]
     fn unknown_scenes_are_refused() {
-        let cli = Cli::parse_from(["bench", "--scenes", "moon"]);
-        let err = collect(&cli.args).unwrap_err().to_string();
-        assert!(err.contains("moon"), "{err}");
+        let err = collect(&BenchOptions {
+            scenes: Some(vec!["moon".into()]),
+            ..BenchOptions::default()
+        })
+        .unwrap_err();
+        assert!(matches!(err, BenchError::UnknownScene(_)), "{err:?}");
+        assert!(err.to_string().contains("moon"), "{err}");
     }
 }

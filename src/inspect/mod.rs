@@ -4,9 +4,9 @@
 //!   channels `depth` and `mask`, the Hierarchical Depth Map's levels as further layers,
 //!   the plane's frame as header attributes) and as 8-bit PNG previews ([`preview`]: a fixed
 //!   colour ramp for Depth, white/black for the mask, a `legend.png` beside them).
-//! - [`run_report`] (`umbrasweep report`) writes a self-contained static HTML page
+//! - [`report::render`] makes the self-contained static HTML page of `umbrasweep report`
 //!   ([`report`]): a top-down picture of the scene, a per-cell table and the plane previews of
-//!   one cell.
+//!   one cell; [`report::write_page`] writes it as `DIR/index.html`.
 //!
 //! File names, channels and colours are documented in `docs/inspect.md`.
 
@@ -18,7 +18,7 @@ use crate::hdm::Hdm;
 use crate::plane::{DepthMap, PlaneJob};
 use std::path::{Path, PathBuf};
 
-pub use report::{ReportArgs, run_report};
+pub use report::{ReportError, ReportOptions};
 
 /// Where `bake --dump-exr/--dump-png` write, and which cells.
 #[derive(Clone, Debug, Default)]

@@ -1,5 +1,6 @@
-//! `umbrasweep report SCENE PVS.json -o DIR`: a self-contained static HTML page,
-//! `DIR/index.html`, with every image inlined as a `data:` URI (no network resources):
+//! The page of `umbrasweep report SCENE PVS.json -o DIR`: a self-contained static HTML page
+//! ([`render`], written as `DIR/index.html` by [`write_page`]), with every image inlined as a
+//! `data:` URI (no network resources):
 //!
 //! - a top-down picture of the scene (x to the right, z downward, seen from +y) drawn with
 //!   tiny-skia: each object's footprint (its bounds in x–z) green when in the chosen cell's
@@ -18,31 +19,104 @@ use crate::geom::Aabb;
 use crate::plane::{DepthMap, PlaneFrame};
 use crate::pvs::PvsDocument;
 use crate::scene::Scene;
-use anyhow::{Context, bail};
 use glam::Vec3;
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-/// Options of `umbrasweep report`.
-#[derive(clap::Args, Debug, Clone)]
-#[command(
-    after_help = "Examples:\n  umbrasweep report data/demo_city.obj demo.json -o report/\n  umbrasweep report data/demo_city.obj demo.json -o report/ --cell 5"
-)]
-pub struct ReportArgs {
-    /// The scene the PVS was baked from (.obj, .gltf, .glb).
-    pub scene: PathBuf,
-    /// The PVS document (.json) written by `umbrasweep bake`.
-    pub pvs: PathBuf,
-    /// Output folder (created when missing); the page is DIR/index.html.
-    #[arg(short, long, value_name = "DIR")]
-    pub output: PathBuf,
+/// What the page shows, and the files it names (`umbrasweep report`'s options without the
+/// output folder).
+#[derive(Clone, Debug, Default)]
+pub struct ReportOptions {
+    /// The scene's file: named in errors (the scene itself is given to [`render`]).
+    pub scene_file: PathBuf,
+    /// The PVS document's file: named in errors and in the page's title.
+    pub pvs_file: PathBuf,
     /// The cell whose PVS colours the picture and whose planes are previewed.
-    #[arg(long, default_value_t = 0)]
     pub cell: usize,
     /// Do not re-bake the chosen cell for the plane previews.
-    #[arg(long)]
     pub no_previews: bool,
+}
+
+/// Errors of the report. Each names the file at fault or what could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// The scene has another number of objects than the PVS: give the scene the PVS was
+    /// baked from.
+    #[error(
+        "{} has {scene_objects} objects but {} lists {pvs_objects}: not the scene this PVS \
+         was baked from",
+        scene_file.display(),
+        pvs_file.display()
+    )]
+    ObjectCount {
+        /// The scene's file.
+        scene_file: PathBuf,
+        /// Objects in the scene.
+        scene_objects: usize,
+        /// The PVS document's file.
+        pvs_file: PathBuf,
+        /// Objects the PVS lists.
+        pvs_objects: usize,
+    },
+    /// Object `index` has another name in the scene than in the PVS: give the scene the PVS
+    /// was baked from.
+    #[error(
+        "object {index} is {scene_name:?} in {} but {pvs_name:?} in {}: not the scene this \
+         PVS was baked from",
+        scene_file.display(),
+        pvs_file.display()
+    )]
+    ObjectName {
+        /// The object's index.
+        index: usize,
+        /// Its name in the scene.
+        scene_name: String,
+        /// The scene's file.
+        scene_file: PathBuf,
+        /// Its name in the PVS.
+        pvs_name: String,
+        /// The PVS document's file.
+        pvs_file: PathBuf,
+    },
+    /// The chosen cell is not in the PVS: choose one of `0 … cells - 1`.
+    #[error(
+        "--cell {cell}: {} has {cells} cells (0 … {})",
+        pvs_file.display(),
+        cells.saturating_sub(1)
+    )]
+    NoSuchCell {
+        /// The chosen cell.
+        cell: usize,
+        /// The PVS document's file.
+        pvs_file: PathBuf,
+        /// Cells in the PVS.
+        cells: usize,
+    },
+    /// The bake settings the PVS document records are refused by the baker.
+    #[error("the PVS document's settings: {0}")]
+    Settings(#[source] crate::settings::SettingsError),
+    /// Re-baking the chosen cell for the previews failed.
+    #[error(transparent)]
+    Bake(#[from] crate::bake::BakeError),
+    /// A picture could not be made or encoded (`what: why`).
+    #[error("{0}")]
+    Image(String),
+    /// Formatting the page failed.
+    #[error("cannot format the page")]
+    Format(#[from] std::fmt::Error),
+    /// The output folder cannot be created.
+    #[error("{}: cannot create", path.display())]
+    CreateDir {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The page cannot be written (`PATH: why`).
+    #[error("{0}")]
+    Write(String),
 }
 
 /// One plane preview of the report.
@@ -55,49 +129,58 @@ struct PlanePreview {
     mask_png: Vec<u8>,
 }
 
-/// Runs `umbrasweep report`.
+/// The whole page for `scene` and its PVS document `doc` (see the module docs): checks that
+/// they match and that the cell exists, draws the top-down picture and, unless
+/// `opts.no_previews`, re-bakes the chosen cell on the CPU for its plane previews.
 ///
 /// # Errors
-/// Unreadable or mismatching scene and PVS, a cell index out of range, invalid recorded
-/// settings, or I/O errors writing the page (nothing is written then).
-pub fn run_report(args: &ReportArgs) -> anyhow::Result<()> {
-    let scene = crate::scene::load(&args.scene)?;
-    let doc = crate::pvs::json::read(&args.pvs).map_err(anyhow::Error::msg)?;
-    check_match(&scene, &doc, args)?;
-    if args.cell >= doc.cells.len() {
-        bail!(
-            "--cell {}: {} has {} cells (0 … {})",
-            args.cell,
-            args.pvs.display(),
-            doc.cells.len(),
-            doc.cells.len().saturating_sub(1)
-        );
+/// A scene that is not the one the PVS was baked from, a cell index out of range, invalid
+/// recorded settings, a failed re-bake or picture.
+pub fn render(
+    scene: &Scene,
+    doc: &PvsDocument,
+    opts: &ReportOptions,
+) -> Result<String, ReportError> {
+    check_match(scene, doc, opts)?;
+    if opts.cell >= doc.cells.len() {
+        return Err(ReportError::NoSuchCell {
+            cell: opts.cell,
+            pvs_file: opts.pvs_file.clone(),
+            cells: doc.cells.len(),
+        });
     }
-    let topdown = draw_topdown(&scene, &doc, args.cell)?;
-    let (previews, rebaked) = if args.no_previews {
+    let topdown = draw_topdown(scene, doc, opts.cell)?;
+    let (previews, rebaked) = if opts.no_previews {
         (Vec::new(), None)
     } else {
-        let (p, v) = rebake_cell(&scene, &doc, args.cell)?;
+        let (p, v) = rebake_cell(scene, doc, opts.cell)?;
         (p, Some(v))
     };
-    let html = page(args, &doc, &topdown, &previews, rebaked.as_deref())?;
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("{}: cannot create", args.output.display()))?;
-    crate::util::write_atomic(&args.output.join("index.html"), html.as_bytes())
-        .map_err(anyhow::Error::msg)?;
-    Ok(())
+    page(opts, doc, &topdown, &previews, rebaked.as_deref())
 }
 
-/// The scene and the PVS must number the same objects.
-fn check_match(scene: &Scene, doc: &PvsDocument, args: &ReportArgs) -> anyhow::Result<()> {
+/// Writes the page `html` as `dir/index.html` (atomically: temporary file, then rename),
+/// creating `dir` when missing.
+///
+/// # Errors
+/// The folder cannot be created or the file cannot be written.
+pub fn write_page(dir: &Path, html: &str) -> Result<(), ReportError> {
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::CreateDir {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    crate::util::write_atomic(&dir.join("index.html"), html.as_bytes()).map_err(ReportError::Write)
+}
+
+/// Refuses a PVS baked from another scene: the same number of objects, with the same names.
+fn check_match(scene: &Scene, doc: &PvsDocument, opts: &ReportOptions) -> Result<(), ReportError> {
     if scene.objects.len() != doc.objects.len() {
-        bail!(
-            "{} has {} objects but {} lists {}: not the scene this PVS was baked from",
-            args.scene.display(),
-            scene.objects.len(),
-            args.pvs.display(),
-            doc.objects.len()
-        );
+        return Err(ReportError::ObjectCount {
+            scene_file: opts.scene_file.clone(),
+            scene_objects: scene.objects.len(),
+            pvs_file: opts.pvs_file.clone(),
+            pvs_objects: doc.objects.len(),
+        });
     }
     if let Some((i, (a, b))) = scene
         .objects
@@ -106,13 +189,13 @@ fn check_match(scene: &Scene, doc: &PvsDocument, args: &ReportArgs) -> anyhow::R
         .enumerate()
         .find(|(_, (a, b))| a.name != b.name)
     {
-        bail!(
-            "object {i} is {:?} in {} but {:?} in {}: not the scene this PVS was baked from",
-            a.name,
-            args.scene.display(),
-            b.name,
-            args.pvs.display()
-        );
+        return Err(ReportError::ObjectName {
+            index: i,
+            scene_name: a.name.clone(),
+            scene_file: opts.scene_file.clone(),
+            pvs_name: b.name.clone(),
+            pvs_file: opts.pvs_file.clone(),
+        });
     }
     Ok(())
 }
@@ -125,11 +208,9 @@ fn cell_box(c: &crate::pvs::PvsCell) -> Aabb {
 ///
 /// # Errors
 /// An unknown placement or settings the baker refuses.
-pub fn recorded_settings(doc: &PvsDocument) -> anyhow::Result<BakeSettings> {
+pub fn recorded_settings(doc: &PvsDocument) -> Result<BakeSettings, ReportError> {
     let settings = doc.settings.bake.clone();
-    settings
-        .check()
-        .map_err(|e| anyhow::anyhow!("the PVS document's settings: {e}"))?;
+    settings.check().map_err(ReportError::Settings)?;
     Ok(settings)
 }
 
@@ -139,7 +220,7 @@ fn rebake_cell(
     scene: &Scene,
     doc: &PvsDocument,
     cell: usize,
-) -> anyhow::Result<(Vec<PlanePreview>, Vec<u32>)> {
+) -> Result<(Vec<PlanePreview>, Vec<u32>), ReportError> {
     let settings = recorded_settings(doc)?;
     let cells = [cell_box(&doc.cells[cell])];
     let out: Mutex<Vec<Result<PlanePreview, String>>> = Mutex::new(Vec::new());
@@ -170,7 +251,7 @@ fn rebake_cell(
         .expect("not poisoned")
         .into_iter()
         .collect::<Result<Vec<_>, _>>()
-        .map_err(anyhow::Error::msg)?;
+        .map_err(ReportError::Image)?;
     previews.sort_by_key(|p| p.index);
     let visible = result
         .cells
@@ -182,7 +263,7 @@ fn rebake_cell(
 }
 
 /// The top-down picture as PNG bytes (see the module docs).
-fn draw_topdown(scene: &Scene, doc: &PvsDocument, cell: usize) -> anyhow::Result<Vec<u8>> {
+fn draw_topdown(scene: &Scene, doc: &PvsDocument, cell: usize) -> Result<Vec<u8>, ReportError> {
     use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform};
     let mut bounds = scene.bounds();
     for c in &doc.cells {
@@ -207,7 +288,8 @@ fn draw_topdown(scene: &Scene, doc: &PvsDocument, cell: usize) -> anyhow::Result
         (w_world * scale + 2.0 * MARGIN).ceil() as u32,
         (h_world * scale + 2.0 * MARGIN).ceil() as u32,
     );
-    let mut pm = Pixmap::new(w.max(1), h.max(1)).context("top-down picture: bad size")?;
+    let mut pm = Pixmap::new(w.max(1), h.max(1))
+        .ok_or_else(|| ReportError::Image("top-down picture: bad size".into()))?;
     pm.fill(Color::from_rgba8(250, 250, 247, 255));
     // World box → pixel rectangle, at least one pixel wide and tall.
     let rect = |b: &Aabb| {
@@ -288,7 +370,7 @@ fn draw_topdown(scene: &Scene, doc: &PvsDocument, cell: usize) -> anyhow::Result
         }
     }
     pm.encode_png()
-        .map_err(|e| anyhow::anyhow!("top-down picture: cannot encode PNG: {e}"))
+        .map_err(|e| ReportError::Image(format!("top-down picture: cannot encode PNG: {e}")))
 }
 
 /// Escapes text for HTML.
@@ -309,18 +391,21 @@ fn fmt_v3(v: [f32; 3]) -> String {
 
 /// The whole page.
 fn page(
-    args: &ReportArgs,
+    args: &ReportOptions,
     doc: &PvsDocument,
     topdown: &[u8],
     previews: &[PlanePreview],
     rebaked: Option<&[u32]>,
-) -> anyhow::Result<String> {
+) -> Result<String, ReportError> {
     let n_obj = doc.objects.len().max(1);
     let chosen = &doc.cells[args.cell];
     let mut h = String::new();
     let title = format!(
         "umbrasweep report: {}",
-        args.pvs.file_name().unwrap_or_default().to_string_lossy()
+        args.pvs_file
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
     );
     write!(
         h,
@@ -443,7 +528,7 @@ fn page(
              x = i, y = j (v grows downward). Colour of Depth d: ramp(d / (d + D)), D the \
              plane's distance from the cell's face.</p>\n\
              <img class=\"legend\" alt=\"colour legend\" src=\"{}\">\n<div class=\"planes\">\n",
-            data_uri(&preview::encode_png(&preview::legend_image()).map_err(anyhow::Error::msg)?)
+            data_uri(&preview::encode_png(&preview::legend_image()).map_err(ReportError::Image)?)
         )?;
         let names = ["x", "y", "z"];
         for p in previews {

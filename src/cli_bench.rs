@@ -1,0 +1,235 @@
+//! `umbrasweep bench`: argument parsing, progress lines on stderr, the tables on stdout and
+//! the `--json` document. The measurements are [`umbrasweep::bench`] (the scene bench) and
+//! [`umbrasweep::bench::foliage`] (the foliage study).
+
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use umbrasweep::bench::{self, BenchOptions, foliage};
+
+/// Which backends `umbrasweep bench` runs.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BenchBackend {
+    /// The CPU backend only.
+    Cpu,
+    /// The GPU backend only (an error when no adapter exists).
+    Gpu,
+    /// The CPU backend, and the GPU backend when an adapter exists.
+    All,
+}
+
+impl From<BenchBackend> for bench::BenchBackend {
+    fn from(b: BenchBackend) -> Self {
+        match b {
+            BenchBackend::Cpu => bench::BenchBackend::Cpu,
+            BenchBackend::Gpu => bench::BenchBackend::Gpu,
+            BenchBackend::All => bench::BenchBackend::All,
+        }
+    }
+}
+
+/// Options of `umbrasweep bench`.
+#[derive(clap::Args, Debug, Clone)]
+#[command(after_help = "Examples:
+  umbrasweep bench --quick
+  umbrasweep bench --backend cpu --json bench.json
+  umbrasweep bench --quick --scenes city,boxfield --cells 2 --rays 10000
+  umbrasweep bench --foliage --json foliage.json
+  umbrasweep bench --foliage --foliage-studies coarse,params --cells 1 --rays 2000")]
+pub struct BenchArgs {
+    /// A small version that runs in a few minutes: 10 cells per scene, 3 on the GPU, a forest
+    /// of 300 trees and 6 model trees.
+    #[arg(long)]
+    pub quick: bool,
+    /// Cells per scene (default 50, 10 with --quick or --foliage).
+    #[arg(long, value_name = "N")]
+    pub cells: Option<usize>,
+    /// Cells per scene on the GPU backend, the first of the CPU's (default 10, 3 with
+    /// --quick: software rasterisers such as lavapipe are slow).
+    #[arg(long, value_name = "N")]
+    pub gpu_cells: Option<usize>,
+    /// Validation rays per cell (default 1,000,000; 200,000 with --foliage).
+    #[arg(long, value_name = "N")]
+    pub rays: Option<u64>,
+    /// Seed of the generated scenes, of the free-space cells and of the validation rays.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Backends to run.
+    #[arg(long, value_enum, default_value_t = BenchBackend::All)]
+    pub backend: BenchBackend,
+    /// The shared scene folder (default: ../shared/scenes when it exists).
+    #[arg(long, value_name = "DIR")]
+    pub shared: Option<PathBuf>,
+    /// Only these scenes (comma-separated): city, forest, boxfield, munich, etoile, zdm2,
+    /// poinciana.
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    pub scenes: Option<Vec<String>>,
+    /// Also write the rows as JSON to this file.
+    #[arg(long, value_name = "OUT.json")]
+    pub json: Option<PathBuf>,
+    /// Also write every bake's PVS document to DIR/SCENE-BACKEND.json (created if needed), to
+    /// compare two builds cell for cell (`cargo run --example pvs_diff -- A.json B.json`).
+    #[arg(long, value_name = "DIR")]
+    pub pvs_out: Option<PathBuf>,
+    /// Run the foliage study instead of the scene table: forests baked with and without the
+    /// sweep, with sub-cells and with other sweep settings, one table per study (on the CPU
+    /// backend unless --backend gpu; see docs/bench.md).
+    #[arg(long, conflicts_with_all = ["quick", "gpu_cells", "scenes"])]
+    pub foliage: bool,
+    /// Only these foliage studies (comma-separated): coarse, ellipsoid, fine, params, paper, jacaranda.
+    #[arg(long, value_name = "LIST", value_delimiter = ',', requires = "foliage")]
+    pub foliage_studies: Option<Vec<String>>,
+    /// Cells baked by the fine forest's sub-cell variants (spread over its --cells).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = foliage::DEFAULT_SUBCELL_CELLS,
+        requires = "foliage"
+    )]
+    pub foliage_subcell_cells: usize,
+    /// Cells of the paper's forest (7,750 trees, 7.8 M triangles).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = foliage::DEFAULT_PAPER_CELLS,
+        requires = "foliage"
+    )]
+    pub foliage_paper_cells: usize,
+    /// Jacaranda trees in the jacaranda study (55 k triangles each; gen's coarse 1,500
+    /// would make 82 M triangles).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = foliage::DEFAULT_MODEL_TREES,
+        requires = "foliage"
+    )]
+    pub foliage_model_trees: u32,
+    /// Tests only: trees of every procedural foliage forest (instead of 1,500 and 7,750).
+    #[arg(long, value_name = "N", hide = true, requires = "foliage")]
+    pub foliage_trees: Option<u32>,
+}
+
+/// Prints a progress line on stderr.
+fn progress(line: &str) {
+    eprintln!("{line}");
+}
+
+impl From<&BenchArgs> for BenchOptions {
+    fn from(a: &BenchArgs) -> Self {
+        BenchOptions {
+            quick: a.quick,
+            cells: a.cells,
+            gpu_cells: a.gpu_cells,
+            rays: a.rays,
+            seed: a.seed,
+            backend: a.backend.into(),
+            shared: a.shared.clone(),
+            scenes: a.scenes.clone(),
+            pvs_out: a.pvs_out.clone(),
+            foliage_studies: a.foliage_studies.clone(),
+            foliage_subcell_cells: a.foliage_subcell_cells,
+            foliage_paper_cells: a.foliage_paper_cells,
+            foliage_model_trees: a.foliage_model_trees,
+            foliage_trees: a.foliage_trees,
+            progress: Some(progress),
+        }
+    }
+}
+
+/// Runs `umbrasweep bench` (or, with `--foliage`, the foliage study): progress on stderr,
+/// the table(s) on stdout, `--json` if asked.
+///
+/// # Errors
+/// See [`bench::collect`] and [`foliage::collect`]; or a `--json` file that cannot be
+/// written.
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let opts = BenchOptions::from(args);
+    if args.foliage {
+        let bench = foliage::collect(&opts)?;
+        let false_culls = bench.rows.iter().map(|r| r.row.false_culls).sum();
+        return report(&bench.tables(), false_culls, &bench, args.json.as_deref());
+    }
+    let bench = bench::collect(&opts)?;
+    let false_culls = bench.rows.iter().map(|r| r.false_culls).sum();
+    report(&bench.table(), false_culls, &bench, args.json.as_deref())
+}
+
+/// Prints a bench's tables, warns about false culls, and writes `--json` if asked.
+fn report(
+    tables: &str,
+    false_culls: usize,
+    doc: &impl Serialize,
+    json: Option<&Path>,
+) -> anyhow::Result<()> {
+    print!("{tables}");
+    if false_culls > 0 {
+        eprintln!("bench: {false_culls} FALSE CULLS (see above): the PVS is not conservative");
+    }
+    if let Some(path) = json {
+        let bytes = serde_json::to_vec_pretty(doc)?;
+        umbrasweep::util::write_atomic(path, &bytes).map_err(anyhow::Error::msg)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: BenchArgs,
+    }
+
+    #[test]
+    fn flags_map_to_the_library_options() {
+        let cli = Cli::parse_from([
+            "bench",
+            "--quick",
+            "--scenes",
+            "boxfield,city",
+            "--cells",
+            "1",
+            "--rays",
+            "1000",
+            "--backend",
+            "cpu",
+        ]);
+        let o = BenchOptions::from(&cli.args);
+        assert!(o.quick);
+        assert_eq!(o.scenes, Some(vec!["boxfield".into(), "city".into()]));
+        assert_eq!((o.cells, o.rays, o.seed), (Some(1), Some(1000), 1));
+        assert_eq!(o.backend, bench::BenchBackend::Cpu);
+        // The defaults of the flags are the library's.
+        let d = BenchOptions::default();
+        let o = BenchOptions::from(&Cli::parse_from(["bench"]).args);
+        assert_eq!(
+            (o.seed, o.backend, o.cells, o.rays, o.gpu_cells),
+            (d.seed, d.backend, d.cells, d.rays, d.gpu_cells)
+        );
+        assert_eq!(
+            (
+                o.foliage_subcell_cells,
+                o.foliage_paper_cells,
+                o.foliage_model_trees
+            ),
+            (
+                d.foliage_subcell_cells,
+                d.foliage_paper_cells,
+                d.foliage_model_trees
+            )
+        );
+    }
+
+    #[test]
+    fn foliage_flags_need_foliage_and_exclude_the_scene_bench() {
+        assert!(Cli::try_parse_from(["bench", "--foliage", "--quick"]).is_err());
+        assert!(Cli::try_parse_from(["bench", "--foliage-studies", "coarse"]).is_err());
+        let cli = Cli::parse_from(["bench", "--foliage", "--foliage-studies", "moon"]);
+        let err = foliage::collect(&BenchOptions::from(&cli.args))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("moon"), "{err}");
+    }
+}
