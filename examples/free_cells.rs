@@ -16,7 +16,7 @@ fn main() -> Result<(), String> {
     let bounds: Vec<_> = scene.objects.iter().map(|o| o.bounds).collect();
     let cells =
         umbrasweep::cells::free_cells(&bounds, count, Vec3::new(size, 2.0, size), height, seed);
-    umbrasweep::cells::save_json(Path::new(&a[5]), &cells)?;
+    umbrasweep::cells::save_json(Path::new(&a[5]), &cells).map_err(|e| e.to_string())?;
     println!("{} cells written to {}", cells.len(), a[5]);
     Ok(())
 }

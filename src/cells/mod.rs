@@ -41,6 +41,9 @@ pub enum CellError {
     /// A cell grid option is invalid (the message names the option and the fault).
     #[error("{0}")]
     BadGrid(String),
+    /// A cells file could not be written (the message names it).
+    #[error(transparent)]
+    Write(#[from] crate::util::WriteError),
 }
 
 /// The cells file.
@@ -129,12 +132,13 @@ pub fn load_json(path: &Path) -> Result<Vec<Aabb>, CellError> {
 ///
 /// # Errors
 /// I/O errors, with the path.
-pub fn save_json(path: &Path, cells: &[Aabb]) -> Result<(), String> {
+pub fn save_json(path: &Path, cells: &[Aabb]) -> Result<(), CellError> {
     let file = CellsFile {
         cells: cells.iter().map(|&c| c.into()).collect(),
     };
-    let text = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?;
-    crate::util::write_atomic(path, text.as_bytes())
+    // Plain numbers and lists: serialising cannot fail.
+    let text = serde_json::to_string_pretty(&file).unwrap_or_default();
+    Ok(crate::util::write_atomic(path, text.as_bytes())?)
 }
 
 /// A regular grid of `n[0] × n[1] × n[2]` cells filling `bounds`, x fastest, then y, then z.

@@ -74,7 +74,7 @@ pub fn write_obj(path: &Path, g: &Generated) -> Result<(), GenError> {
         }
         Ok(())
     })
-    .map_err(GenError::Write)?;
+    .map_err(|e| GenError::Write(e.to_string()))?;
     if materials {
         let text = format!(
             "# umbrasweep gen materials: translucent faces were not opaque in the source model\n\
@@ -82,7 +82,7 @@ pub fn write_obj(path: &Path, g: &Generated) -> Result<(), GenError> {
         );
         if let Err(e) = crate::util::write_atomic(&mtl, text.as_bytes()) {
             let _ = std::fs::remove_file(path);
-            return Err(GenError::Write(e));
+            return Err(GenError::Write(e.to_string()));
         }
     }
     Ok(())

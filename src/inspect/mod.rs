@@ -67,7 +67,7 @@ pub fn dump_plane(
         let path = dir.join(format!("{stem}.exr"));
         let bytes = exr_dump::encode(cell, plane, job, map, hdm)
             .map_err(|e| format!("{}: {e}", path.display()))?;
-        crate::util::write_atomic(&path, &bytes)?;
+        crate::util::write_atomic(&path, &bytes).map_err(|e| e.to_string())?;
     }
     if let Some(dir) = &opts.png {
         ensure_dir(dir)?;
@@ -81,14 +81,14 @@ pub fn dump_plane(
             let path = dir.join(format!("{stem}_{what}.png"));
             let bytes =
                 preview::encode_png(&img).map_err(|e| format!("{}: {e}", path.display()))?;
-            crate::util::write_atomic(&path, &bytes)?;
+            crate::util::write_atomic(&path, &bytes).map_err(|e| e.to_string())?;
         }
         // Identical content from every call: a concurrent duplicate write is harmless.
         let legend = dir.join("legend.png");
         if !legend.is_file() {
             let bytes = preview::encode_png(&preview::legend_image())
                 .map_err(|e| format!("{}: {e}", legend.display()))?;
-            crate::util::write_atomic(&legend, &bytes)?;
+            crate::util::write_atomic(&legend, &bytes).map_err(|e| e.to_string())?;
         }
     }
     Ok(())

@@ -169,7 +169,8 @@ pub fn write_page(dir: &Path, html: &str) -> Result<(), ReportError> {
         path: dir.to_path_buf(),
         source,
     })?;
-    crate::util::write_atomic(&dir.join("index.html"), html.as_bytes()).map_err(ReportError::Write)
+    crate::util::write_atomic(&dir.join("index.html"), html.as_bytes())
+        .map_err(|e| ReportError::Write(e.to_string()))
 }
 
 /// Refuses a PVS baked from another scene: the same number of objects, with the same names.

@@ -419,7 +419,7 @@ pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), PvsWriteError> {
         path: path.to_path_buf(),
         kind: PvsWriteErrorKind::Encode(e),
     })?;
-    crate::util::write_atomic(path, &bytes).map_err(|m| PvsWriteError::io(path, m))
+    crate::util::write_atomic(path, &bytes).map_err(|m| PvsWriteError::io(path, m.to_string()))
 }
 
 /// Reads a `.pvs` file back into the document `bake -o OUT.json` would have written.

@@ -46,5 +46,5 @@ pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), PvsWriteError> {
         path: path.to_path_buf(),
         kind: PvsWriteErrorKind::Serialize(e),
     })?;
-    crate::util::write_atomic(path, &text).map_err(|m| PvsWriteError::io(path, m))
+    crate::util::write_atomic(path, &text).map_err(|m| PvsWriteError::io(path, m.to_string()))
 }
