@@ -136,21 +136,26 @@ fn object_in_plain_view_is_found() {
     assert!(on_object(&s, 0, w.hit), "hit {:?}", w.hit);
 }
 
-#[test]
-fn object_behind_a_big_closed_wall_is_never_found() {
+/// A closed slab (two faces subdivided into 16 × 16 quads plus the rim of a box) at z 4–5 and
+/// a box behind it that no ray from the cell can reach.
+fn closed_slab_and_hidden_box() -> Vec<Obj> {
     let xs = breaks(-50.0, 50.0, 17);
-    // A closed slab (two subdivided faces plus the rim of a box) in front of the target.
     let mut wall = grid_wall(4.0, &xs, &xs, |_, _| false);
     wall.extend(grid_wall(5.0, &xs, &xs, |_, _| false));
     wall.extend(cuboid(vec3(-50.0, -50.0, 4.0), vec3(50.0, 50.0, 5.0)));
-    let s = scene(vec![
+    vec![
         ("wall".into(), wall, true),
         (
             "hidden".into(),
             cuboid(vec3(-1.0, -1.0, 10.0), vec3(1.0, 1.0, 12.0)),
             true,
         ),
-    ]);
+    ]
+}
+
+#[test]
+fn object_behind_a_big_closed_wall_is_never_found() {
+    let s = scene(closed_slab_and_hidden_box());
     let rays = SceneRays::new(&s);
     let vs = sample_cell(&rays, &s, cell(), 300_000, 3, 0, false);
     assert_eq!(
@@ -710,18 +715,7 @@ fn hunt_reports_no_false_cull_for_a_correct_pvs() {
 
     // A single hidden box behind a closed, subdivided slab gets all 100,000 rays, many of them
     // aimed at its edges and corners through the slab's shared edges: none leaks.
-    let xs = breaks(-50.0, 50.0, 17);
-    let mut wall = grid_wall(4.0, &xs, &xs, |_, _| false);
-    wall.extend(grid_wall(5.0, &xs, &xs, |_, _| false));
-    wall.extend(cuboid(vec3(-50.0, -50.0, 4.0), vec3(50.0, 50.0, 5.0)));
-    let s = scene(vec![
-        ("wall".into(), wall, true),
-        (
-            "hidden".into(),
-            cuboid(vec3(-1.0, -1.0, 10.0), vec3(1.0, 1.0, 12.0)),
-            true,
-        ),
-    ]);
+    let s = scene(closed_slab_and_hidden_box());
     let r = check(&s, &doc(&s, vec![0], false), &hunt_opts(100_000)).unwrap();
     assert_eq!(r.false_culls, 0, "{}", r.table());
     assert_eq!(r.cells[0].rays_per_culled_object, Some(100_000));

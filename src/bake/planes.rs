@@ -407,7 +407,7 @@ impl Prepared<'_> {
             return standard;
         }
         // Either improved Projection, covered, proves the box hidden (each is sound alone).
-        let hidden = improved_rects(frame, b).into_iter().any(|(lo, hi)| {
+        let hidden = improved_rects(frame, b).any(|(lo, hi)| {
             pixel_rect(frame, lo, hi)
                 .is_some_and(|[i0, j0, i1, j1]| hdm.test(i0, j0, i1, j1, depth) == Coverage::Hidden)
         });

@@ -144,14 +144,17 @@ pub fn improved_rect_at(frame: &PlaneFrame, b: &DAabb, eye: f64) -> (DVec2, DVec
 /// 2D construction with a segment for the cell (the supporting lines above). Since
 /// `E ⊂ cell`, each cone from `R` to `E` lies in the cone from `R` to the cell, and Property 2
 /// holds. Any depth gives a valid rectangle; the face is tightest along axes where the box is
-/// narrower than the cell, the back face where it is wider, so both are offered.
-pub fn improved_rects(frame: &PlaneFrame, b: &DAabb) -> [(DVec2, DVec2); 2] {
+/// narrower than the cell, the back face where it is wider, so both are offered, computed
+/// lazily (a box the first one hides never needs the second).
+pub fn improved_rects<'a>(
+    frame: &'a PlaneFrame,
+    b: &'a DAabb,
+) -> impl Iterator<Item = (DVec2, DVec2)> + 'a {
     let a = frame.axis;
     let depth = frame.cell.max[a] - frame.cell.min[a];
-    [
-        improved_rect_at(frame, b, 0.0),
-        improved_rect_at(frame, b, depth),
-    ]
+    [0.0, depth]
+        .into_iter()
+        .map(move |eye| improved_rect_at(frame, b, eye))
 }
 
 /// The pixels `[i0, i1] × [j0, j1]` a world rectangle overlaps (rounded outward; a pixel that
@@ -507,7 +510,7 @@ mod tests {
         let mut r = Rng(22);
         for case in 0..3000 {
             let (f, b) = config(&mut r, case, true);
-            for (k, (lo, hi)) in improved_rects(&f, &b).into_iter().enumerate() {
+            for (k, (lo, hi)) in improved_rects(&f, &b).enumerate() {
                 if let Some((e, q)) = unblocked_ray(&mut r, &f, &b, lo, hi, 200) {
                     panic!(
                         "case {case}, rectangle {k}: the segment {e:?} → {q:?} from the cell \
