@@ -61,6 +61,7 @@ fn synthetic(n: usize, objects: usize) -> PvsDocument {
                 max: [x as f32 + 1.0, 2.0, z as f32 + 1.0],
                 visible,
                 ms: 0.0,
+                cullers: Vec::new(),
             });
         }
     }

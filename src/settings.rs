@@ -66,6 +66,78 @@ pub struct BakeSettings {
     /// Bake each cell as the union of the PVS of sub-cells no larger than this along any axis
     /// (exact, and conservative: a point of the cell lies in one of its sub-cells). Default none.
     pub subcell: Option<f64>,
+    /// The shrunk-occluder sampler (fine foliage, `bake::sampling`): on, off, or chosen per
+    /// scene ([`SweepChoice::Auto`], the default: off for now, as it does not yet pay for its
+    /// time; see `bake::SAMPLING_AUTO_NOTE`). A PVS document records what the bake chose
+    /// (`true` or `false`); documents from before the sampler read as `false`.
+    #[serde(default = "sampling_of_old_documents")]
+    pub sampling: SamplingChoice,
+    /// The sampler's finest ε, budget, resolution and certification rays (recorded as
+    /// `sampling_eps`, `sampling_levels`, `sampling_budget_points`, `sampling_budget_seconds`,
+    /// `sampling_resolution`, `sampling_rays`).
+    #[serde(flatten)]
+    pub sampling_settings: SamplingSettings,
+}
+
+fn sampling_of_old_documents() -> SamplingChoice {
+    SweepChoice::Off
+}
+
+/// Whether a bake runs the shrunk-occluder sampler: the same three choices as the sweep.
+pub type SamplingChoice = SweepChoice;
+
+/// The shrunk-occluder sampler's parameters (see `bake::sampling`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SamplingSettings {
+    /// The finest ε: the radius of the balls that sample points stand for. `None` (the
+    /// default) chooses it from the occluders: [`SamplingSettings::EPS_PER_INRADIUS`] × the
+    /// median in-plane inradius of the occluder polygons.
+    #[serde(rename = "sampling_eps")]
+    pub eps: Option<f64>,
+    /// Refinement levels: faces are first sampled with balls `2^levels` times the finest ε
+    /// and a ball is split in four only where some object is still undecided. Default 2.
+    #[serde(rename = "sampling_levels")]
+    pub levels: u32,
+    /// At most this many sample points per cell; objects still undecided then stay visible.
+    /// Default 50,000.
+    #[serde(rename = "sampling_budget_points")]
+    pub budget_points: u64,
+    /// At most this many seconds of sampling per cell (wall clock; none by default). Makes the
+    /// result depend on the machine's speed.
+    #[serde(rename = "sampling_budget_seconds")]
+    pub budget_seconds: Option<f64>,
+    /// Pixels across each 90° view of the hemicube rendered per sample point. Default 256 (on
+    /// the coarse forest's 1-unit cells 512 proves 2.6× as much as 256 for 2× the time).
+    #[serde(rename = "sampling_resolution")]
+    pub resolution: u32,
+    /// Rays cast from the cell before sampling (the validator's sampler): objects they see are
+    /// visible for sure and are not sampled. Default 100,000.
+    #[serde(rename = "sampling_rays")]
+    pub rays: u64,
+}
+
+impl SamplingSettings {
+    /// The default finest ε is this × the median inradius of the occluder polygons.
+    pub const EPS_PER_INRADIUS: f64 = 0.35;
+
+    /// The defaults, as a `const fn` for presets.
+    pub const fn default_settings() -> Self {
+        SamplingSettings {
+            eps: None,
+            levels: 2,
+            budget_points: 50_000,
+            budget_seconds: None,
+            resolution: 256,
+            rays: 100_000,
+        }
+    }
+}
+
+impl Default for SamplingSettings {
+    fn default() -> Self {
+        Self::default_settings()
+    }
 }
 
 fn square_maps() -> u32 {
@@ -120,7 +192,7 @@ impl<'de> Deserialize<'de> for SweepChoice {
                 "on" => Ok(SweepChoice::On),
                 "off" => Ok(SweepChoice::Off),
                 other => Err(serde::de::Error::custom(format!(
-                    "sweep {other:?}: expected true, false or \"auto\""
+                    "{other:?}: expected true, false or \"auto\""
                 ))),
             },
         }
@@ -224,6 +296,8 @@ impl BakeSettings {
             sweep: SweepChoice::Auto,
             sweep_settings: SweepSettings::default_settings(),
             subcell: None,
+            sampling: SweepChoice::Auto,
+            sampling_settings: SamplingSettings::default_settings(),
         }
     }
 
@@ -282,6 +356,46 @@ impl BakeSettings {
                 "subcell",
                 s,
                 "must be a positive size in scene units (e.g. 1)",
+            ));
+        }
+        let sa = &self.sampling_settings;
+        if let Some(e) = sa.eps
+            && !(e.is_finite() && e > 0.0)
+        {
+            return Err(SettingsError::new(
+                "sampling-eps",
+                e,
+                "must be a positive distance in scene units (e.g. 0.05 for leaves 0.5 across)",
+            ));
+        }
+        if sa.levels > 12 {
+            return Err(SettingsError::new(
+                "sampling-levels",
+                sa.levels,
+                "must be between 0 and 12",
+            ));
+        }
+        if let Some(t) = sa.budget_seconds
+            && !(t.is_finite() && t > 0.0)
+        {
+            return Err(SettingsError::new(
+                "sampling-budget",
+                format!("{t}s"),
+                "must be a positive number of points (e.g. 50000) or seconds (e.g. 30s)",
+            ));
+        }
+        if sa.budget_points == 0 {
+            return Err(SettingsError::new(
+                "sampling-budget",
+                0,
+                "must be a positive number of points (e.g. 50000) or seconds (e.g. 30s)",
+            ));
+        }
+        if !(16..=2048).contains(&sa.resolution) {
+            return Err(SettingsError::new(
+                "sampling-resolution",
+                sa.resolution,
+                "must be between 16 and 2048 pixels per 90° view (e.g. 128)",
             ));
         }
         if self.slice_planes > 16 {

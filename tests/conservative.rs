@@ -298,17 +298,40 @@ fn run_placed(build: impl Fn(Xf) -> Case) {
             sweep: SweepChoice::On,
             ..BakeSettings::default()
         };
-        let runs = [(BakeSettings::default(), true), (sweep, false)];
+        // The shrunk-occluder sampler after the planes, on the CPU (it has no GPU half yet):
+        // no certifying rays, so that it tests every object the planes left, a small budget.
+        let sampling = BakeSettings {
+            sampling: SweepChoice::On,
+            sampling_settings: umbrasweep::settings::SamplingSettings {
+                rays: 0,
+                budget_points: 3000,
+                resolution: 64,
+                ..Default::default()
+            },
+            ..BakeSettings::default()
+        };
+        let runs = [
+            (BakeSettings::default(), true),
+            (sweep, false),
+            (sampling, false),
+        ];
         for (backend, (settings, tight)) in backends()
             .into_iter()
             .flat_map(|b| runs.iter().map(move |r| (b, r)))
+            .filter(|(b, r)| r.0.sampling != SweepChoice::On || b.name() == "cpu")
         {
             let r = bake(scene, &placed.cells, settings, backend, None)
                 .unwrap_or_else(|e| panic!("{at}: bake on {} failed: {e}", backend.name()));
             let who = format!(
                 "{at} [{}{}]",
                 backend.name(),
-                if *tight { "" } else { ", sweep" }
+                if *tight {
+                    ""
+                } else if settings.sampling == SweepChoice::On {
+                    ", sampling"
+                } else {
+                    ", sweep"
+                }
             );
             for (ci, (cell, sample)) in r.cells.iter().zip(&samples).enumerate() {
                 let pvs = &cell.visible;

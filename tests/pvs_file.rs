@@ -96,6 +96,7 @@ fn synthetic(nx: usize, nz: usize, objects: usize, seed: u64) -> PvsDocument {
                 max: [x as f32 + 1.0, 2.0, z as f32 + 1.0],
                 visible,
                 ms: rng.unit() as f64,
+                cullers: Vec::new(),
             });
         }
     }

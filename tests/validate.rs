@@ -89,6 +89,7 @@ fn doc_cells(scene: &Scene, cells: Vec<(Aabb, Vec<u32>)>, alpha_occluders: bool)
                 max: c.max.to_array(),
                 visible,
                 ms: 0.0,
+                cullers: Vec::new(),
             })
             .collect(),
         summary: None,

@@ -7,11 +7,14 @@
 mod pipeline;
 mod planes;
 mod prepare;
+mod sampling;
 
 pub use pipeline::{CullState, Culler, CullerStats, CullerWork, cullers};
 pub use planes::{PlaneCuller, SWEEP_TEST_REACH};
+pub use sampling::{SamplerData, SamplingCuller};
 pub use prepare::{
-    PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared, SMALL_OCCLUDER_CELLS, SMALL_OCCLUDER_SHARE,
+    PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared, SAMPLING_AUTO_NOTE, SMALL_OCCLUDER_CELLS,
+    SMALL_OCCLUDER_SHARE,
     choose_sweep, split_cell,
 };
 
@@ -73,6 +76,10 @@ pub struct BakeResult {
     pub sweep: bool,
     /// Why the bake swept or not, one human-readable line.
     pub sweep_reason: String,
+    /// Whether cells ran the shrunk-occluder sampler.
+    pub sampling: bool,
+    /// Why the sampler ran or not, and its finest ε.
+    pub sampling_reason: String,
     /// The names of the cullers every cell ran, in order.
     pub cullers: Vec<&'static str>,
 }
@@ -140,6 +147,8 @@ pub fn bake_observed(
         seconds: start.elapsed().as_secs_f64(),
         sweep: prepared.sweep,
         sweep_reason: prepared.sweep_reason.clone(),
+        sampling: prepared.sampling,
+        sampling_reason: prepared.sampling_reason.clone(),
         cullers: prepared.culler_names(),
     })
 }
@@ -207,6 +216,11 @@ pub fn to_document(
                 } else {
                     SweepChoice::Off
                 },
+                sampling: if result.sampling {
+                    SweepChoice::On
+                } else {
+                    SweepChoice::Off
+                },
                 ..settings.clone()
             },
         },
@@ -219,6 +233,22 @@ pub fn to_document(
                 max: b.max.to_array(),
                 visible: c.visible.clone(),
                 ms: c.ms,
+                cullers: if result.cullers.contains(&"shrunk_sampling") {
+                    result
+                        .cullers
+                        .iter()
+                        .zip(&c.cullers)
+                        .map(|(name, s)| crate::pvs::PvsCellCuller {
+                            name: (*name).to_string(),
+                            hidden: s.hidden,
+                            ms: s.ms,
+                            points: s.work.points,
+                            finest_eps: s.work.finest_eps,
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                },
             })
             .collect(),
         summary: Some(PvsSummary {
@@ -258,6 +288,12 @@ pub fn culler_summary(result: &BakeResult) -> Vec<PvsCullerSummary> {
                 only: sum(&|s| s.only as f64),
                 ms: sum(&|s| s.ms),
                 planes: sum(&|s| s.work.planes as f64),
+                points: sum(&|s| s.work.points as f64),
+                finest_eps: result
+                    .cells
+                    .iter()
+                    .filter_map(|c| c.cullers.get(k).and_then(|s| s.work.finest_eps))
+                    .reduce(f64::min),
             }
         })
         .collect()

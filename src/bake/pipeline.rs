@@ -29,12 +29,32 @@ pub struct CullState<'k> {
 }
 
 /// What one culler did in one (sub-)cell, besides hiding objects.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CullerWork {
     /// Planes rasterised.
     pub planes: usize,
     /// Occluder Projections sent to the backend.
     pub occluders_projected: usize,
+    /// Sample points rendered (the shrunk-occluder sampler).
+    pub points: u64,
+    /// Occluder polygons drawn, summed over the sample points (the sampler).
+    pub polygons: u64,
+    /// The finest ε rendered (the sampler; `None` when it rendered nothing).
+    pub finest_eps: Option<f64>,
+}
+
+impl CullerWork {
+    /// Adds `o`'s work (the finest ε is the smaller).
+    pub fn add(&mut self, o: &CullerWork) {
+        self.planes += o.planes;
+        self.occluders_projected += o.occluders_projected;
+        self.points += o.points;
+        self.polygons += o.polygons;
+        self.finest_eps = match (self.finest_eps, o.finest_eps) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
+    }
 }
 
 /// One culler's account for one cell.
@@ -77,9 +97,13 @@ pub trait Culler: Send + Sync {
 
 /// The cullers of a bake, in order: the occlusion sweep where `sweep` (what
 /// [`super::SweepChoice`] and the automatic rule chose), else extended projections on separate
-/// planes.
-pub fn cullers(_settings: &BakeSettings, sweep: bool) -> Vec<Box<dyn Culler>> {
-    vec![Box::new(super::planes::PlaneCuller { sweep })]
+/// planes; then the shrunk-occluder sampler where `sampling` (on what is still visible).
+pub fn cullers(_settings: &BakeSettings, sweep: bool, sampling: bool) -> Vec<Box<dyn Culler>> {
+    let mut out: Vec<Box<dyn Culler>> = vec![Box::new(super::planes::PlaneCuller { sweep })];
+    if sampling {
+        out.push(Box::new(super::sampling::SamplingCuller));
+    }
+    out
 }
 
 /// A cell's accounting while its sub-cells run: per culler its stats, per object the set of
@@ -145,8 +169,7 @@ pub(super) fn run(
         let work = culler.cull(prepared, cell, backend, &mut state, observe)?;
         let s = &mut account.stats[k];
         s.ms += start.elapsed().as_secs_f64() * 1e3;
-        s.work.planes += work.planes;
-        s.work.occluders_projected += work.occluders_projected;
+        s.work.add(&work);
         for (o, (&now, &was)) in state.hidden.iter().zip(&before).enumerate() {
             debug_assert!(now || !was, "{} unmarked object {o}", culler.name());
             if now && !was {

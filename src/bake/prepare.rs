@@ -31,6 +31,12 @@ pub struct Prepared<'a> {
     pub sweep: bool,
     /// Why cells are swept or not, one human-readable line.
     pub sweep_reason: String,
+    /// Whether cells run the shrunk-occluder sampler.
+    pub sampling: bool,
+    /// Why the sampler runs or not (and its ε), one human-readable line.
+    pub sampling_reason: String,
+    /// The sampler's per-scene data (with `sampling`).
+    pub(super) sampler: Option<super::sampling::SamplerData>,
     /// Per object, its pieces in `piece_boxes` (empty for small objects): boxes around parts of
     /// its triangles, tested when the object's own box is not hidden.
     pub(super) pieces: Vec<std::ops::Range<u32>>,
@@ -97,6 +103,10 @@ fn split_pieces(tris: &mut [(glam::DVec3, DAabb)], levels: u32, out: &mut Vec<DA
     split_pieces(lo, levels - 1, out);
     split_pieces(hi, levels - 1, out);
 }
+
+/// Why [`SweepChoice::Auto`] leaves the shrunk-occluder sampler off for now (issue 16: the
+/// intended rule is "on where the sweep's rule picks the sweep", once it pays for its time).
+pub const SAMPLING_AUTO_NOTE: &str = "it is not yet worth its time: +0.7 % culled for 60× the sweep's time on the coarse forest's 1-unit cells";
 
 /// Small occluders: parts whose largest side is under this many times the median cell's
 /// largest side.
@@ -203,11 +213,22 @@ impl<'a> Prepared<'a> {
                 &mut t,
             ))
         };
+        let rule = choose_sweep(&occluders, cells);
         let (sweep, sweep_reason) = match settings.sweep {
             SweepChoice::On => (true, "--sweep".to_string()),
             SweepChoice::Off => (false, "--no-sweep".to_string()),
-            SweepChoice::Auto => choose_sweep(&occluders, cells),
+            SweepChoice::Auto => rule.clone(),
         };
+        let (sampling, mut sampling_reason) = match settings.sampling {
+            SweepChoice::On => (true, "--sampling".to_string()),
+            SweepChoice::Off => (false, "--no-sampling".to_string()),
+            SweepChoice::Auto => (false, format!("off by default ({SAMPLING_AUTO_NOTE}; --sampling turns it on)")),
+        };
+        let sampler = sampling.then(|| {
+            let d = super::sampling::SamplerData::new(&occluders, scene, settings);
+            sampling_reason = format!("{sampling_reason}; finest ε {:.4} ({})", d.eps, d.eps_reason);
+            d
+        });
         let (pieces, piece_boxes) = object_pieces(scene);
         let mut object_parts = vec![Vec::new(); scene.objects.len()];
         for (i, p) in occluders.parts.iter().enumerate() {
@@ -220,7 +241,10 @@ impl<'a> Prepared<'a> {
             .fold(Aabb::EMPTY, |b, o| b.union(&o.bounds))
             .to_f64();
         Ok(Prepared {
-            cullers: pipeline::cullers(settings, sweep),
+            cullers: pipeline::cullers(settings, sweep, sampling),
+            sampling,
+            sampling_reason,
+            sampler,
             bounds,
             scene,
             occluders,

@@ -656,6 +656,7 @@ pub(crate) fn score(
             max: cell.max.to_array(),
             visible: r.visible.clone(),
             ms: r.ms,
+            cullers: Vec::new(),
         };
         reports.push(cell_report(scene, &pvs, &sample.0));
     }

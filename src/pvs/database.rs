@@ -17,7 +17,7 @@
 //!     id, name: name.into(), triangles: 12, min: [0.0; 3], max: [1.0; 3],
 //! };
 //! let cell = |x: f32, visible: Vec<u32>| PvsCell {
-//!     min: [x, 0.0, 0.0], max: [x + 1.0, 1.0, 1.0], visible, ms: 0.0,
+//!     min: [x, 0.0, 0.0], max: [x + 1.0, 1.0, 1.0], visible, ms: 0.0, cullers: Vec::new(),
 //! };
 //! let doc = PvsDocument {
 //!     format: umbrasweep::pvs::FORMAT.into(), version: umbrasweep::pvs::VERSION,
@@ -636,9 +636,20 @@ impl PvsDatabase {
                     only: r.f64("summary.cullers only")?,
                     ms: r.f64("summary.cullers ms")?,
                     planes: r.f64("summary.cullers planes")?,
+                    ..Default::default()
                 });
             }
         }
+        // The sampler's switch and parameters are not stored: it ran when the cullers'
+        // accounts name it (its parameters read as the defaults).
+        settings.bake.sampling = if summary
+            .as_ref()
+            .is_some_and(|s| s.cullers.iter().any(|c| c.name == "shrunk_sampling"))
+        {
+            SweepChoice::On
+        } else {
+            SweepChoice::Off
+        };
         // Check sizes before allocating from counts.
         let left = payload.len() - r.pos;
         if (objects as usize).saturating_mul(OBJECT_RECORD_LEN + 4) > left {
@@ -979,6 +990,7 @@ impl PvsDatabase {
                         max: c.max,
                         visible: cur.visible(self, CellId(i as u32)).collect(),
                         ms: self.ms[i],
+                        cullers: Vec::new(),
                     }
                 })
                 .collect(),

@@ -61,6 +61,31 @@ pub struct PvsCell {
     /// Milliseconds spent baking this cell.
     #[serde(default)]
     pub ms: f64,
+    /// Per culler, what it did in this cell (JSON documents from bakes that ran the
+    /// shrunk-occluder sampler; absent otherwise and in `.pvs` files).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cullers: Vec<PvsCellCuller>,
+}
+
+/// One culler's account for one cell of a PVS document.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PvsCellCuller {
+    /// The culler's name, as in `summary.cullers`.
+    pub name: String,
+    /// Objects culled from the cell that this culler proved hidden.
+    pub hidden: u32,
+    /// Milliseconds it ran in the cell.
+    pub ms: f64,
+    /// Sample points it rendered (the shrunk-occluder sampler).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub points: u64,
+    /// The finest ε it rendered (the sampler), in scene units.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub finest_eps: Option<f64>,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 /// Totals over all cells.
@@ -109,6 +134,17 @@ pub struct PvsCullerSummary {
     /// Planes it rasterised, mean per cell.
     #[serde(default)]
     pub planes: f64,
+    /// Sample points it rendered, mean per cell (the shrunk-occluder sampler; not kept in
+    /// `.pvs` files).
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub points: f64,
+    /// The finest ε it rendered in any cell (the sampler; not kept in `.pvs` files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub finest_eps: Option<f64>,
+}
+
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// The bake settings recorded in a PVS document: the backend that ran and the

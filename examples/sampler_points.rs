@@ -1,0 +1,103 @@
+//! For one cell: renders N random sample points on its faces and reports, per object, at how
+//! many points it is open (box and triangles tested). `cargo run --release --example
+//! sampler_points -- SCENE CELLS CELL EPS RES N`.
+
+use glam::DVec3;
+use std::time::Instant;
+use umbrasweep::bake::{BakeSettings, SamplerData};
+use umbrasweep::geom::DAabb;
+use umbrasweep::sampler::{BoxTest, Hemicube};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
+    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
+    let ci: usize = args[3].parse().unwrap();
+    let eps: f64 = args[4].parse().unwrap();
+    let res: u32 = args[5].parse().unwrap();
+    let n: usize = args[6].parse().unwrap();
+    let occ = umbrasweep::project::occluders::prepare(&scene, &vec![true; scene.objects.len()], false);
+    let data = SamplerData::new(&occ, &scene, &BakeSettings::default());
+    let cell = cells[ci].to_f64();
+    let mut open = vec![0u32; scene.objects.len()];
+    let mut seen_from = vec![0u32; scene.objects.len()];
+    let mut hc = Hemicube::new(res);
+    let mut seed = 7u64;
+    let mut rnd = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let t = Instant::now();
+    for k in 0..n {
+        let face = k % 6;
+        let (axis, sign) = (face / 2, if face % 2 == 0 { -1.0 } else { 1.0 });
+        let mut eye = DVec3::ZERO;
+        for a in 0..3 {
+            eye[a] = cell.min[a] + rnd() * (cell.max[a] - cell.min[a]);
+        }
+        eye[axis] = if sign > 0.0 { cell.max[axis] } else { cell.min[axis] };
+        let ids: Vec<usize> = (0..scene.objects.len())
+            .filter(|&o| {
+                let b = scene.objects[o].bounds;
+                !b.is_empty() && !b.to_f64().overlaps(&cell) && {
+                    let b = b.to_f64();
+                    if sign > 0.0 { b.max[axis] >= eye[axis] } else { b.min[axis] <= eye[axis] }
+                }
+            })
+            .collect();
+        let boxes: Vec<DAabb> = ids.iter().map(|&o| scene.objects[o].bounds.to_f64()).collect();
+        hc.begin(eye, axis, sign, eps, &boxes);
+        hc.draw(&data.occluders);
+        let mut opened = 0;
+        for (&o, b) in ids.iter().zip(&boxes) {
+            seen_from[o] += 1;
+            let tb = hc.test_box(b);
+            if tb == BoxTest::Hidden {
+                continue;
+            }
+            if let BoxTest::Open { direction } = tb
+                && k < 12 && opened < 3
+            {
+                let hits = data.rays.trace(eye.as_vec3(), direction.normalize().as_vec3(), false);
+                let d = direction.normalize();
+                let desc: Vec<String> = hits.iter().map(|h| {
+                    let [a, bb, c] = scene.triangle(h.triangle as usize).map(|p| p.as_dvec3());
+                    let n = (bb - a).cross(c - a).normalize();
+                    let pd = n.dot(a - eye).abs();
+                    format!("obj {} t {:.2} plane-dist {:.2} edge {:.2}", h.object, h.t, pd, (bb - a).length())
+                }).collect();
+                let bb = b;
+                let near = (bb.min - eye).max(eye - bb.max).max(DVec3::ZERO).length();
+                println!("   open obj {o} (box dist {near:.2}) dir {:.3?}: {:?}", d, desc);
+            }
+            let ob = &scene.objects[o];
+            let all = ob.triangles.clone().all(|t| {
+                let [a, bb, c] = scene.triangle(t as usize).map(|p| p.as_dvec3());
+                hc.test_box(&DAabb { min: a.min(bb).min(c), max: a.max(bb).max(c) }) == BoxTest::Hidden
+            });
+            if !all {
+                open[o] += 1;
+                opened += 1;
+            }
+        }
+        if k < 36 {
+            println!("face {axis}{sign:+} eye {:.2?} (rel {:.2?}): {opened} open of {}", eye, (eye - cell.min) / (cell.max - cell.min), ids.len());
+        }
+    }
+    println!("{n} points in {:.1} s", t.elapsed().as_secs_f64());
+    let mut hist = [0usize; 8];
+    let mut never = 0;
+    for o in 0..scene.objects.len() {
+        if seen_from[o] == 0 {
+            continue;
+        }
+        if open[o] == 0 {
+            never += 1;
+            continue;
+        }
+        let f = open[o] as f64 / seen_from[o] as f64;
+        let b = if f < 0.01 { 0 } else if f < 0.02 { 1 } else if f < 0.05 { 2 } else if f < 0.1 { 3 } else if f < 0.2 { 4 } else if f < 0.5 { 5 } else if f < 1.0 { 6 } else { 7 };
+        hist[b] += 1;
+    }
+    println!("never open: {never}; open at <1%: {}, 1-2%: {}, 2-5%: {}, 5-10%: {}, 10-20%: {}, 20-50%: {}, 50-99%: {}, all: {}", hist[0], hist[1], hist[2], hist[3], hist[4], hist[5], hist[6], hist[7]);
+}

@@ -1,0 +1,421 @@
+//! The shrunk-occluder sampling culler (fine foliage; Wonka, Wimmer, Schmalstieg 2000,
+//! generalised to thin leaves as `../shared/notes/shrunk-occluder-sampling.md` describes):
+//! sample points on the cell's faces, each standing for a ball of radius ε, render the outward
+//! hemisphere with every occluder shrunk for that ball (`crate::sampler`), and an object hidden
+//! from every ball of every face is hidden from the cell.
+//!
+//! # Why it is conservative
+//!
+//! 1. **The boundary suffices.** An object whose box meets the closed cell is never tested
+//!    (it stays visible). Otherwise, if a point `p0` of the cell sees a point `q` of the object,
+//!    the segment `p0 q` leaves the cell at a point `b` of some face `F`, with `q` on the outer
+//!    side of `F`'s plane (closed half-space), and `b` sees `q` along the rest of the segment.
+//! 2. **Balls cover each face.** A face is cut into rectangles (a grid, then quadrants); each
+//!    rectangle is sampled at its centre with ε = its half diagonal (rounded up), so the ball
+//!    holds the rectangle. Children split a rectangle exactly at its midpoints, so the
+//!    rectangles of any refinement still cover the face.
+//! 3. **One render per ball** (`crate::sampler`, whose docs carry the proof): an object whose
+//!    every box direction in the outer hemisphere of `F` is covered by a shrunk occluder nearer
+//!    than the box is hidden from every point of the ball, hence from every point of the
+//!    rectangle looking out through `F`. Its pieces may be tested instead of its box (their
+//!    union holds all its triangles).
+//! 4. **Refinement only decides more.** An object still undecided at a ball is re-tested in
+//!    the ball's four children; an object undecided at the finest ε, or when the budget runs
+//!    out, stays visible. An object is culled only when every leaf rectangle of every face
+//!    proved it hidden.
+//! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
+//!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
+//!    candidate list; that can only keep objects in the PVS.
+//!
+//! Occluders are every exactly planar convex polygon of the scene's occluder objects, including
+//! objects earlier cullers hid (they are real geometry: blocking rays with them is sound).
+
+use super::BakeError;
+use super::pipeline::{CullState, Culler, CullerWork};
+use super::prepare::Prepared;
+use crate::backend::RasterBackend;
+use crate::geom::{Aabb, DAabb};
+use crate::hdm::Hdm;
+use crate::plane::{DepthMap, PlaneJob};
+use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
+use crate::settings::SamplingSettings;
+use crate::validate::SceneRays;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Instant;
+
+/// The per-scene data of the sampler, built once by [`super::Prepared`].
+pub struct SamplerData {
+    /// The occluder polygons and their BVH.
+    pub occluders: SampleOccluders,
+    /// The ray caster used to certify visible objects.
+    pub rays: SceneRays,
+    /// The finest ε in use (given, or chosen from the occluders).
+    pub eps: f64,
+    /// Where `eps` came from, one line for the summary.
+    pub eps_reason: String,
+    /// The sampler's settings.
+    pub settings: SamplingSettings,
+}
+
+impl std::fmt::Debug for SamplerData {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SamplerData")
+            .field("occluders", &self.occluders)
+            .field("eps", &self.eps)
+            .finish()
+    }
+}
+
+impl SamplerData {
+    /// Builds the sampler's occluders and ray caster for a prepared scene.
+    pub fn new(prepared_occ: &crate::project::occluders::Occluders, scene: &crate::scene::Scene, settings: &super::BakeSettings) -> Self {
+        let occluders = SampleOccluders::new(scene, prepared_occ, settings.alpha_occluders);
+        let s = settings.sampling_settings;
+        let (eps, eps_reason) = match s.eps {
+            Some(e) => (e, format!("--sampling-eps {e}")),
+            None if occluders.median_inradius > 0.0 => {
+                let e = SamplingSettings::EPS_PER_INRADIUS * occluders.median_inradius;
+                (
+                    e,
+                    format!(
+                        "{} × the occluders' median inradius {:.4}",
+                        SamplingSettings::EPS_PER_INRADIUS,
+                        occluders.median_inradius
+                    ),
+                )
+            }
+            None => (1.0, "no occluder polygons".into()),
+        };
+        SamplerData {
+            occluders,
+            rays: SceneRays::new(scene),
+            eps,
+            eps_reason,
+            settings: s,
+        }
+    }
+}
+
+/// The culler: see the module docs.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SamplingCuller;
+
+/// Certifying rays per undecided object and sample point at most.
+const CERTIFY_PER_OBJECT: usize = 2;
+/// Certifying rays per sample point at most.
+const CERTIFY_PER_POINT: usize = 64;
+
+/// One rectangle of a face: `[b0, b1] × [c0, c1]` on the face's plane.
+#[derive(Clone, Copy, Debug)]
+struct Patch {
+    face: usize,
+    b: [f64; 2],
+    c: [f64; 2],
+}
+
+/// One face of the cell: outward normal `sign × e_axis`, its plane coordinate.
+#[derive(Clone, Copy, Debug)]
+struct Face {
+    axis: usize,
+    sign: f64,
+    plane: f64,
+}
+
+/// What one cell's sampling shares between threads.
+struct Shared<'a> {
+    data: &'a SamplerData,
+    prepared: &'a Prepared<'a>,
+    faces: [Face; 6],
+    /// Per object: known visible (certified, given up, or out of budget).
+    done: Vec<AtomicBool>,
+    points: AtomicU64,
+    polygons: AtomicU64,
+    /// The smallest ε rendered, as f64 bits (positive floats order like their bits).
+    finest: AtomicU64,
+    start: Instant,
+    eps_min: f64,
+    alpha: bool,
+}
+
+impl Culler for SamplingCuller {
+    fn name(&self) -> &'static str {
+        "shrunk_sampling"
+    }
+
+    fn cull(
+        &self,
+        prepared: &Prepared,
+        cell: &Aabb,
+        _backend: &dyn RasterBackend,
+        state: &mut CullState,
+        _observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    ) -> Result<CullerWork, BakeError> {
+        let Some(data) = prepared.sampler.as_ref() else {
+            return Ok(CullerWork::default());
+        };
+        let scene = prepared.scene;
+        let n = scene.objects.len();
+        let cb = cell.to_f64();
+        let known = state.known_visible;
+        let mut candidates: Vec<u32> = (0..n as u32)
+            .filter(|&o| {
+                let ob = &scene.objects[o as usize];
+                !state.hidden[o as usize]
+                    && !known.is_some_and(|k| k[o as usize])
+                    && !ob.bounds.is_empty()
+                    && !ob.bounds.to_f64().overlaps(&cb)
+            })
+            .collect();
+        if candidates.is_empty() {
+            return Ok(CullerWork::default());
+        }
+        let done: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
+        if data.settings.rays > 0 {
+            let seed = cell_seed(cell);
+            let sample = crate::validate::sample_cell(
+                &data.rays,
+                scene,
+                *cell,
+                data.settings.rays,
+                seed,
+                0,
+                prepared.settings.alpha_occluders,
+            );
+            for &o in &sample.visible {
+                done[o as usize].store(true, Ordering::Relaxed);
+            }
+            candidates.retain(|&o| !done[o as usize].load(Ordering::Relaxed));
+        }
+        let mut faces = [Face {
+            axis: 0,
+            sign: 1.0,
+            plane: 0.0,
+        }; 6];
+        for (k, f) in faces.iter_mut().enumerate() {
+            let axis = k / 2;
+            let sign = if k % 2 == 0 { -1.0 } else { 1.0 };
+            *f = Face {
+                axis,
+                sign,
+                plane: if sign > 0.0 { cb.max[axis] } else { cb.min[axis] },
+            };
+        }
+        let s = data.settings;
+        let eps_min = data.eps;
+        let eps0 = eps_min * f64::from(1u32 << s.levels.min(20));
+        let shared = Shared {
+            data,
+            prepared,
+            faces,
+            done,
+            points: AtomicU64::new(0),
+            polygons: AtomicU64::new(0),
+            finest: AtomicU64::new(f64::INFINITY.to_bits()),
+            start: Instant::now(),
+            eps_min,
+            alpha: prepared.settings.alpha_occluders,
+        };
+        // Top-level patches: a grid per face whose rectangles' half diagonals are at most eps0.
+        let mut top: Vec<(Patch, Arc<Vec<u32>>)> = Vec::new();
+        for (k, f) in faces.iter().enumerate() {
+            let (b, c) = ((f.axis + 1) % 3, (f.axis + 2) % 3);
+            let list: Vec<u32> = candidates
+                .iter()
+                .copied()
+                .filter(|&o| {
+                    let ob = scene.objects[o as usize].bounds.to_f64();
+                    if f.sign > 0.0 {
+                        ob.max[f.axis] >= f.plane
+                    } else {
+                        ob.min[f.axis] <= f.plane
+                    }
+                })
+                .collect();
+            if list.is_empty() {
+                continue;
+            }
+            let list = Arc::new(list);
+            let (wb, wc) = (cb.max[b] - cb.min[b], cb.max[c] - cb.min[c]);
+            let side = eps0 * std::f64::consts::SQRT_2;
+            let nb = (wb / side).ceil().max(1.0) as usize;
+            let nc = (wc / side).ceil().max(1.0) as usize;
+            let at = |lo: f64, w: f64, i: usize, m: usize| {
+                if i == m { lo + w } else { lo + w * i as f64 / m as f64 }
+            };
+            for i in 0..nb {
+                for j in 0..nc {
+                    top.push((
+                        Patch {
+                            face: k,
+                            b: [at(cb.min[b], wb, i, nb), at(cb.min[b], wb, i + 1, nb)],
+                            c: [at(cb.min[c], wc, j, nc), at(cb.min[c], wc, j + 1, nc)],
+                        },
+                        list.clone(),
+                    ));
+                }
+            }
+        }
+        top.par_iter().for_each_init(
+            || Hemicube::new(s.resolution),
+            |hc, (patch, list)| shared.patch(hc, *patch, list),
+        );
+        for &o in &candidates {
+            if !shared.done[o as usize].load(Ordering::Relaxed) {
+                state.hidden[o as usize] = true;
+            }
+        }
+        let finest = f64::from_bits(shared.finest.load(Ordering::Relaxed));
+        Ok(CullerWork {
+            points: shared.points.load(Ordering::Relaxed),
+            polygons: shared.polygons.load(Ordering::Relaxed),
+            finest_eps: finest.is_finite().then_some(finest),
+            ..CullerWork::default()
+        })
+    }
+}
+
+/// A seed for the cell's certifying rays, from its coordinates (same cell, same rays).
+fn cell_seed(cell: &Aabb) -> u64 {
+    let mut h: u64 = 0x9e37_79b9_7f4a_7c15;
+    for v in cell.min.to_array().into_iter().chain(cell.max.to_array()) {
+        h = (h ^ u64::from(v.to_bits())).wrapping_mul(0x0100_0000_01b3);
+        h ^= h >> 29;
+    }
+    h
+}
+
+impl Shared<'_> {
+    fn budget_left(&self) -> bool {
+        let s = &self.data.settings;
+        if self.points.load(Ordering::Relaxed) >= s.budget_points {
+            return false;
+        }
+        s.budget_seconds
+            .is_none_or(|t| self.start.elapsed().as_secs_f64() < t)
+    }
+
+    fn give_up(&self, list: &[u32]) {
+        for &o in list {
+            self.done[o as usize].store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// Samples one patch and, where objects stay undecided, its quadrants.
+    fn patch(&self, hc: &mut Hemicube, patch: Patch, list: &[u32]) {
+        let list: Vec<u32> = list
+            .iter()
+            .copied()
+            .filter(|&o| !self.done[o as usize].load(Ordering::Relaxed))
+            .collect();
+        if list.is_empty() {
+            return;
+        }
+        if !self.budget_left() {
+            self.give_up(&list);
+            return;
+        }
+        self.points.fetch_add(1, Ordering::Relaxed);
+        let f = self.faces[patch.face];
+        let (b, c) = ((f.axis + 1) % 3, (f.axis + 2) % 3);
+        let mut eye = DVec3::ZERO;
+        eye[f.axis] = f.plane;
+        eye[b] = 0.5 * (patch.b[0] + patch.b[1]);
+        eye[c] = 0.5 * (patch.c[0] + patch.c[1]);
+        let hb = 0.5 * (patch.b[1] - patch.b[0]);
+        let hcx = 0.5 * (patch.c[1] - patch.c[0]);
+        let eps = (hb * hb + hcx * hcx).sqrt() * (1.0 + 1e-9);
+        self.finest.fetch_min(eps.to_bits(), Ordering::Relaxed);
+        let scene = self.prepared.scene;
+        let boxes: Vec<DAabb> = list
+            .iter()
+            .map(|&o| scene.objects[o as usize].bounds.to_f64())
+            .collect();
+        hc.begin(eye, f.axis, f.sign, eps, &boxes);
+        let st = hc.draw(&self.data.occluders);
+        self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
+        let mut open: Vec<u32> = Vec::new();
+        let mut rays = 0usize;
+        for (&o, bx) in list.iter().zip(&boxes) {
+            let test = match hc.test_box(bx) {
+                BoxTest::Hidden => continue,
+                BoxTest::Open { direction } => {
+                    let pieces = self.prepared.pieces[o as usize].clone();
+                    let mut first = None;
+                    for k in pieces.clone() {
+                        if let BoxTest::Open { direction } =
+                            hc.test_box(&self.prepared.piece_boxes[k as usize])
+                        {
+                            first = Some(direction);
+                            break;
+                        }
+                    }
+                    if pieces.is_empty() { Some(direction) } else { first }
+                }
+            };
+            let Some(direction) = test else { continue };
+            // Undecided here: try to certify it with real rays from the eye.
+            if rays < CERTIFY_PER_POINT {
+                rays += self.certify(eye, o, direction);
+            }
+            if !self.done[o as usize].load(Ordering::Relaxed) {
+                open.push(o);
+            }
+        }
+        if open.is_empty() {
+            return;
+        }
+        if eps <= self.eps_min * (1.0 + 1e-6) {
+            self.give_up(&open);
+            return;
+        }
+        let bm = 0.5 * (patch.b[0] + patch.b[1]);
+        let cm = 0.5 * (patch.c[0] + patch.c[1]);
+        for (b, c) in [
+            ([patch.b[0], bm], [patch.c[0], cm]),
+            ([bm, patch.b[1]], [patch.c[0], cm]),
+            ([patch.b[0], bm], [cm, patch.c[1]]),
+            ([bm, patch.b[1]], [cm, patch.c[1]]),
+        ] {
+            self.patch(
+                hc,
+                Patch {
+                    face: patch.face,
+                    b,
+                    c,
+                },
+                &open,
+            );
+        }
+    }
+
+    /// Casts up to [`CERTIFY_PER_OBJECT`] rays from `eye`: through the open pixel, and at a
+    /// point of the object's surface. Marks every candidate object they reach as visible.
+    /// Returns the rays cast.
+    fn certify(&self, eye: DVec3, o: u32, direction: DVec3) -> usize {
+        let rays = &self.data.rays;
+        let origin = eye.as_vec3();
+        let mut dirs = vec![direction];
+        let h = (eye.x.to_bits() ^ eye.y.to_bits().rotate_left(21) ^ eye.z.to_bits().rotate_left(42))
+            .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            ^ u64::from(o);
+        let r = |k: u32| ((h.rotate_left(k * 17).wrapping_mul(0xd1b5_4a32_d192_ed03)) >> 11) as f64 / (1u64 << 53) as f64;
+        if let Some(s) = rays.surface_point(o, r(1), r(2), r(3)) {
+            dirs.push(s - eye);
+        }
+        let mut cast = 0;
+        for d in dirs.into_iter().take(CERTIFY_PER_OBJECT) {
+            let d = d.as_vec3();
+            if !(d.length_squared() > 0.0 && d.is_finite()) {
+                continue;
+            }
+            cast += 1;
+            for hit in rays.trace(origin, d, self.alpha) {
+                self.done[hit.object as usize].store(true, Ordering::Relaxed);
+            }
+        }
+        cast
+    }
+}

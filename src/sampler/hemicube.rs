@@ -1,0 +1,655 @@
+//! The CPU hemicube rasteriser of the sampler: five axis-aligned views from a sample point
+//! (the front view along the face's outward normal and the outer halves of the four side
+//! views), polygons drawn with shrunk silhouettes and inner-conservative coverage at their
+//! farthest depth (a pixel is covered when its four corners pass every edge's test), a
+//! per-tile maximum for hierarchical tests, the BVH traversed front to back with whole
+//! clusters skipped when they can no longer lower a pixel that matters, and occludee boxes
+//! tested with outer-conservative rectangles at their nearest depth. The argument is in the
+//! parent module's docs.
+
+use super::SampleOccluders;
+use crate::geom::DAabb;
+use glam::DVec3;
+
+/// Pixels per tile side (tiles keep the largest depth of their pixels).
+const TILE: usize = 8;
+/// Margin of the `f32` corner test (its rounding error is below 1e-6: unit normals,
+/// `|u|, |v| ≤ 1`, `√(u²+v²+1) ≤ √3`).
+const CORNER_MARGIN: f32 = 4e-6;
+
+/// `z` rounded up to `f32` with a relative margin of 1e-6 (far above the rounding of the
+/// depth computations); infinity stays infinity.
+fn round_up(z: f64) -> f32 {
+    let m = z * (1.0 + 1e-6);
+    let f = m as f32;
+    if f64::from(f) < m { f.next_up() } else { f }
+}
+
+/// What [`Hemicube::test_box`] found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BoxTest {
+    /// Every direction of the box's part in front of the face is covered nearer than it.
+    Hidden,
+    /// Some pixel is not covered nearer than the box: its view and centre direction (world
+    /// space, not normalised), for a certifying ray.
+    Open {
+        /// The direction through the open pixel's centre.
+        direction: DVec3,
+    },
+}
+
+/// Work done by one render.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderStats {
+    /// BVH nodes visited.
+    pub nodes: u64,
+    /// Polygons rasterised (in at least one view).
+    pub polygons: u64,
+    /// Polygons reached by the traversal.
+    pub reached: u64,
+}
+
+/// One view: which scene axes give its coordinates, its pixels and depths.
+#[derive(Clone, Debug)]
+struct View {
+    /// `X`, `Y`, `Z` of the view are `sign × q[axis]` of the point `q` relative to the eye.
+    map: [(usize, f64); 3],
+    /// Pixel rows (`R` for the front view, `R/2` for the side views).
+    h: usize,
+    /// `v` at the bottom edge of row 0 (−1 front, 0 sides).
+    vmin: f64,
+    depth: Vec<f32>,
+    tile_max: Vec<f32>,
+    /// The pixels that matter this render: `[i0, i1) × [j0, j1)` (empty when `i0 ≥ i1`).
+    need: [usize; 4],
+}
+
+/// A pixel rectangle `[i0, i1) × [j0, j1)` and the nearest view depth of what it bounds.
+#[derive(Clone, Copy, Debug)]
+struct Rect {
+    i: [usize; 2],
+    j: [usize; 2],
+    z: f64,
+}
+
+/// A reusable hemicube: one per thread, rendered again for every sample point.
+#[derive(Clone, Debug)]
+pub struct Hemicube {
+    res: usize,
+    views: Vec<View>,
+    /// `√(u²+v²+1)` at the corners of the front view, `(R+1)²`, and of the side views,
+    /// `(R+1)·(R/2+1)`.
+    norm_front: Vec<f32>,
+    norm_side: Vec<f32>,
+    eye: DVec3,
+    axis: usize,
+    sign: f64,
+    eps: f64,
+    max_dist: f64,
+    stack: Vec<u32>,
+    pass: Vec<u8>,
+    prev: Vec<u8>,
+}
+
+impl Hemicube {
+    /// A hemicube of `res` pixels across each 90° view (rounded up to a multiple of 16).
+    pub fn new(res: u32) -> Self {
+        let res = (res.max(16) as usize).div_ceil(16) * 16;
+        let ps = 2.0 / res as f64;
+        let norms = |rows: usize, vmin: f64| -> Vec<f32> {
+            let mut out = Vec::with_capacity((res + 1) * (rows + 1));
+            for j in 0..=rows {
+                let v = vmin + j as f64 * ps;
+                for i in 0..=res {
+                    let u = -1.0 + i as f64 * ps;
+                    out.push((u * u + v * v + 1.0).sqrt() as f32);
+                }
+            }
+            out
+        };
+        Hemicube {
+            res,
+            views: Vec::new(),
+            norm_front: norms(res, -1.0),
+            norm_side: norms(res / 2, 0.0),
+            eye: DVec3::ZERO,
+            axis: 0,
+            sign: 1.0,
+            eps: 0.0,
+            max_dist: 0.0,
+            stack: Vec::new(),
+            pass: vec![0; res + 1],
+            prev: vec![0; res + 1],
+        }
+    }
+
+    /// Pixels across each view.
+    pub fn resolution(&self) -> usize {
+        self.res
+    }
+
+    /// Sets up the views for the eye `eye` on a face with outward normal `sign × e_axis`,
+    /// balls of radius `eps`, clears the depths and restricts drawing to the pixels that the
+    /// boxes `boxes` (the occludees to test) can reach.
+    pub fn begin(&mut self, eye: DVec3, axis: usize, sign: f64, eps: f64, boxes: &[DAabb]) {
+        let (a, b, c) = (axis, (axis + 1) % 3, (axis + 2) % 3);
+        let maps = [
+            [(b, 1.0), (c, 1.0), (a, sign)],
+            [(c, 1.0), (a, sign), (b, 1.0)],
+            [(c, 1.0), (a, sign), (b, -1.0)],
+            [(b, 1.0), (a, sign), (c, 1.0)],
+            [(b, 1.0), (a, sign), (c, -1.0)],
+        ];
+        let res = self.res;
+        if self.views.is_empty() {
+            self.views = maps
+                .iter()
+                .enumerate()
+                .map(|(k, &map)| {
+                    let h = if k == 0 { res } else { res / 2 };
+                    View {
+                        map,
+                        h,
+                        vmin: if k == 0 { -1.0 } else { 0.0 },
+                        depth: vec![f32::INFINITY; res * h],
+                        tile_max: vec![f32::INFINITY; (res / TILE) * (h / TILE)],
+                        need: [0; 4],
+                    }
+                })
+                .collect();
+        }
+        self.eye = eye;
+        self.axis = axis;
+        self.sign = sign;
+        self.eps = eps;
+        self.max_dist = 0.0;
+        for (k, v) in self.views.iter_mut().enumerate() {
+            v.map = maps[k];
+            v.need = [usize::MAX, 0, usize::MAX, 0];
+        }
+        for bx in boxes {
+            let far = (bx.min - eye).abs().max((bx.max - eye).abs()).length();
+            self.max_dist = self.max_dist.max(far);
+            for k in 0..5 {
+                if let Some(r) = self.rect(k, bx) {
+                    let n = &mut self.views[k].need;
+                    n[0] = n[0].min(r.i[0]);
+                    n[1] = n[1].max(r.i[1]);
+                    n[2] = n[2].min(r.j[0]);
+                    n[3] = n[3].max(r.j[1]);
+                }
+            }
+        }
+        for v in &mut self.views {
+            if v.need[0] >= v.need[1] {
+                v.need = [0; 4];
+            }
+            // Clear the needed pixels (and their tiles, rounded out to whole tiles).
+            let [i0, i1, j0, j1] = v.need;
+            let (ti0, ti1, tj0, tj1) = (i0 / TILE, i1.div_ceil(TILE), j0 / TILE, j1.div_ceil(TILE));
+            for tj in tj0..tj1 {
+                for row in tj * TILE..(tj + 1) * TILE {
+                    v.depth[row * res + ti0 * TILE..row * res + ti1 * TILE].fill(f32::INFINITY);
+                }
+                v.tile_max[tj * (res / TILE) + ti0..tj * (res / TILE) + ti1].fill(f32::INFINITY);
+            }
+        }
+    }
+
+    /// The view coordinates' ranges of a box relative to the eye, per view axis.
+    fn view_box(&self, k: usize, bx: &DAabb) -> [[f64; 2]; 3] {
+        let lo = bx.min - self.eye;
+        let hi = bx.max - self.eye;
+        self.views[k].map.map(|(ax, s)| {
+            if s > 0.0 {
+                [lo[ax], hi[ax]]
+            } else {
+                [-hi[ax], -lo[ax]]
+            }
+        })
+    }
+
+    /// The pixels the box's directions can reach in view `k` (outward rounding), with the
+    /// nearest view depth of its part inside the view's frustum; None when no part of it is.
+    fn rect(&self, k: usize, bx: &DAabb) -> Option<Rect> {
+        let [[x0, x1], [mut y0, y1], [z0, z1]] = self.view_box(k, bx);
+        let dist = (bx.min - self.eye)
+            .max(self.eye - bx.max)
+            .max(DVec3::ZERO)
+            .length();
+        // Inside the frustum Z ≥ |X|, |Y|, so |P| ≤ √3·Z: the box's part there has Z ≥ this.
+        let z_lo = dist / 3f64.sqrt() * (1.0 - 1e-12);
+        let zl = z0.max(z_lo);
+        if z1 < zl || z1 <= 0.0 {
+            return None;
+        }
+        let view = &self.views[k];
+        if view.vmin >= 0.0 {
+            y0 = y0.max(0.0);
+            if y1 < y0 {
+                return None;
+            }
+        }
+        if zl <= 0.0 {
+            // The box reaches the eye: every pixel.
+            return Some(Rect {
+                i: [0, self.res],
+                j: [0, view.h],
+                z: 0.0,
+            });
+        }
+        let lo = |a: f64| if a >= 0.0 { a / z1 } else { a / zl };
+        let hi = |a: f64| if a >= 0.0 { a / zl } else { a / z1 };
+        let (u0, u1) = (lo(x0) - 1e-9, hi(x1) + 1e-9);
+        let (v0, v1) = (lo(y0) - 1e-9, hi(y1) + 1e-9);
+        let half = self.res as f64 / 2.0;
+        if u0 > 1.0 || u1 < -1.0 || v0 > view.vmin + view.h as f64 / half || v1 < view.vmin {
+            return None;
+        }
+        let to_px = |t: f64, min: f64, n: usize| -> f64 { ((t - min) * half).clamp(0.0, n as f64) };
+        let i0 = to_px(u0, -1.0, self.res).floor() as usize;
+        let i1 = (to_px(u1, -1.0, self.res).floor() as usize + 1).min(self.res);
+        let j0 = to_px(v0, view.vmin, view.h).floor() as usize;
+        let j1 = (to_px(v1, view.vmin, view.h).floor() as usize + 1).min(view.h);
+        (i0 < i1 && j0 < j1).then_some(Rect {
+            i: [i0, i1],
+            j: [j0, j1],
+            z: zl,
+        })
+    }
+
+    /// Draws every useful polygon of `occ`, front to back.
+    pub fn draw(&mut self, occ: &SampleOccluders) -> RenderStats {
+        let mut st = RenderStats::default();
+        let Some(bvh) = occ.bvh.as_ref() else {
+            return st;
+        };
+        if self.views.iter().all(|v| v.need[0] >= v.need[1]) || bvh.nodes.is_empty() {
+            return st;
+        }
+        let mut stack = std::mem::take(&mut self.stack);
+        stack.clear();
+        stack.push(0);
+        while let Some(id) = stack.pop() {
+            let node = &bvh.nodes[id as usize];
+            st.nodes += 1;
+            let bx = DAabb {
+                min: glam::Vec3::from(node.aabb.min).as_dvec3(),
+                max: glam::Vec3::from(node.aabb.max).as_dvec3(),
+            };
+            if !self.useful(&bx) {
+                continue;
+            }
+            if node.is_leaf() {
+                for k in node.first_index..node.first_index + node.prim_count {
+                    let poly = bvh.primitive_indices[k as usize] as usize;
+                    st.reached += 1;
+                    if self.draw_poly(occ, poly) {
+                        st.polygons += 1;
+                    }
+                }
+            } else {
+                let (l, r) = (node.first_index, node.first_index + 1);
+                let d = |n: u32| {
+                    let b = &bvh.nodes[n as usize].aabb;
+                    let c = glam::Vec3::from((b.min + b.max) * 0.5).as_dvec3();
+                    (c - self.eye).length_squared()
+                };
+                if d(l) <= d(r) {
+                    stack.push(r);
+                    stack.push(l);
+                } else {
+                    stack.push(l);
+                    stack.push(r);
+                }
+            }
+        }
+        self.stack = stack;
+        st
+    }
+
+    /// Whether anything in `bx` could still lower a needed pixel.
+    fn useful(&self, bx: &DAabb) -> bool {
+        let (a, s) = (self.axis, self.sign);
+        // Entirely behind the face's plane.
+        if (s > 0.0 && bx.max[a] < self.eye[a]) || (s < 0.0 && bx.min[a] > self.eye[a]) {
+            return false;
+        }
+        let dist = (bx.min - self.eye)
+            .max(self.eye - bx.max)
+            .max(DVec3::ZERO)
+            .length();
+        if dist > self.max_dist {
+            return false;
+        }
+        let tw = self.res / TILE;
+        for k in 0..5 {
+            let v = &self.views[k];
+            if v.need[0] >= v.need[1] {
+                continue;
+            }
+            let Some(r) = self.rect(k, bx) else { continue };
+            let i0 = r.i[0].max(v.need[0]);
+            let i1 = r.i[1].min(v.need[1]);
+            let j0 = r.j[0].max(v.need[2]);
+            let j1 = r.j[1].min(v.need[3]);
+            if i0 >= i1 || j0 >= j1 {
+                continue;
+            }
+            let z = r.z as f32;
+            for tj in j0 / TILE..j1.div_ceil(TILE) {
+                for ti in i0 / TILE..i1.div_ceil(TILE) {
+                    if v.tile_max[tj * tw + ti] > z {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    /// Draws polygon `poly` into every view it reaches; false when it was left out or
+    /// covered no pixel.
+    fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize) -> bool {
+        let pts = occ.poly_points(poly);
+        let n = pts.len();
+        if n < 3 || n > 64 {
+            return false;
+        }
+        let eps = self.eps;
+        let mut q = [DVec3::ZERO; 64];
+        let mut centroid = DVec3::ZERO;
+        for (k, &pt) in pts.iter().enumerate() {
+            q[k] = pt - self.eye;
+            centroid += q[k];
+        }
+        centroid /= n as f64;
+        // Plane distance (Newell normal; the polygon is exactly planar).
+        let mut normal = DVec3::ZERO;
+        for k in 0..n {
+            normal += q[k].cross(q[(k + 1) % n]);
+        }
+        let nl = normal.length();
+        if !(nl > 0.0 && nl.is_finite()) {
+            return false;
+        }
+        let plane_dist = (normal / nl).dot(centroid).abs();
+        if !(plane_dist > eps * (1.0 + 1e-6) + 1e-12 * centroid.length()) {
+            return false;
+        }
+        // Edge planes through the eye, and the shrink per edge.
+        let mut edges = [(DVec3::ZERO, 0.0f64); 64];
+        for k in 0..n {
+            let (a, b) = (q[k], q[(k + 1) % n]);
+            let cr = a.cross(b);
+            let cl = cr.length();
+            let el = (b - a).length();
+            if !(cl > 0.0 && el > 0.0 && cl.is_finite()) {
+                return false;
+            }
+            let mut m = cr / cl;
+            if m.dot(centroid) < 0.0 {
+                m = -m;
+            }
+            let r = cl / el;
+            edges[k] = (m, eps / r * (1.0 + 1e-6));
+        }
+        let mut drawn = false;
+        for k in 0..5 {
+            if self.views[k].need[0] >= self.views[k].need[1] {
+                continue;
+            }
+            drawn |= self.draw_in_view(k, &q[..n], &edges[..n], normal / nl);
+        }
+        drawn
+    }
+
+    fn draw_in_view(
+        &mut self,
+        k: usize,
+        q: &[DVec3],
+        edges: &[(DVec3, f64)],
+        normal: DVec3,
+    ) -> bool {
+        let res = self.res;
+        let ps = 2.0 / res as f64;
+        let view = &self.views[k];
+        let map = view.map;
+        let to_view = |p: DVec3| DVec3::new(map[0].1 * p[map[0].0], map[1].1 * p[map[1].0], map[2].1 * p[map[2].0]);
+        let zc = 0.5 * self.eps;
+        // Clip at Z ≥ zc (the polygon's part with smaller Z is outside the frustum: all its
+        // points are farther than ε from the eye) and bound the projection.
+        let mut zmax = f64::NEG_INFINITY;
+        let mut zmin = f64::INFINITY;
+        let (mut umin, mut umax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let n = q.len();
+        let mut any = false;
+        for i in 0..n {
+            let a = to_view(q[i]);
+            let b = to_view(q[(i + 1) % n]);
+            zmax = zmax.max(a.z);
+            zmin = zmin.min(a.z);
+            let mut add = |p: DVec3| {
+                let (u, v) = (p.x / p.z, p.y / p.z);
+                umin = umin.min(u);
+                umax = umax.max(u);
+                vmin = vmin.min(v);
+                vmax = vmax.max(v);
+                any = true;
+            };
+            if a.z >= zc {
+                add(a);
+            }
+            if (a.z >= zc) != (b.z >= zc) {
+                let t = (zc - a.z) / (b.z - a.z);
+                let mut p = a + (b - a) * t;
+                p.z = zc;
+                add(p);
+            }
+        }
+        if !any {
+            return false;
+        }
+        let half = res as f64 / 2.0;
+        let [ni0, ni1, nj0, nj1] = view.need;
+        // Corner indices strictly needed: corners of needed pixels inside the bound.
+        let ci0 = (((umin + 1.0) * half).ceil().max(0.0) as usize).max(ni0);
+        let ci1 = (((umax + 1.0) * half).floor().min(res as f64).max(-1.0) as isize).min(ni1 as isize);
+        let cj0 = (((vmin - view.vmin) * half).ceil().max(0.0) as usize).max(nj0);
+        let cj1 = (((vmax - view.vmin) * half).floor().min(view.h as f64).max(-1.0) as isize).min(nj1 as isize);
+        if ci1 < ci0 as isize + 1 || cj1 < cj0 as isize + 1 {
+            return false;
+        }
+        let (ci1, cj1) = (ci1 as usize, cj1 as usize);
+        let mut ev = [[0f32; 4]; 64];
+        for (e, &(m, s)) in edges.iter().enumerate() {
+            let mv = to_view(m);
+            ev[e] = [mv.x as f32, mv.y as f32, mv.z as f32, s as f32 * (1.0 + 1e-6)];
+        }
+        let ev = &ev[..edges.len()];
+        let z = round_up(zmax);
+        // A polygon deep in this view (the ground, a wall seen at a slant) takes its plane's
+        // depth per pixel instead: the largest of the pixel's corners (1/Z is affine over the
+        // pixel, which lies inside the silhouette, so Z is largest at a corner).
+        let plane = if zmax - zmin > 0.05 * zmax {
+            let nv = to_view(normal);
+            Some((nv, nv.dot(to_view(q[0]))))
+        } else {
+            None
+        };
+        let plane_depth = |u: f64, v: f64| -> f64 {
+            let (nv, d) = plane.expect("plane");
+            let w = nv.x * u + nv.y * v + nv.z;
+            let z = d / w;
+            if z > 0.0 && z.is_finite() { z } else { f64::INFINITY }
+        };
+        let norms = if view.vmin < 0.0 { &self.norm_front } else { &self.norm_side };
+        let mut pass = std::mem::take(&mut self.pass);
+        let mut prev = std::mem::take(&mut self.prev);
+        let view = &mut self.views[k];
+        let mut wrote = false;
+        let mut seen = false;
+        let (mut wi0, mut wi1, mut wj0, mut wj1) = (usize::MAX, 0, usize::MAX, 0);
+        for cj in cj0..=cj1 {
+            let v = (view.vmin + cj as f64 * ps) as f32;
+            let row = &norms[cj * (res + 1)..];
+            let mut any_pass = false;
+            for ci in ci0..=ci1 {
+                let u = (-1.0 + ci as f64 * ps) as f32;
+                let l = row[ci];
+                let ok = ev
+                    .iter()
+                    .all(|e| e[0] * u + e[1] * v + e[2] - e[3] * l >= CORNER_MARGIN);
+                pass[ci] = ok as u8;
+                any_pass |= ok;
+            }
+            if cj > cj0 {
+                let pj = cj - 1;
+                for ci in ci0..ci1 {
+                    if prev[ci] & prev[ci + 1] & pass[ci] & pass[ci + 1] != 0 {
+                        let z = if plane.is_some() {
+                            let (u0, u1) = (-1.0 + ci as f64 * ps, -1.0 + (ci + 1) as f64 * ps);
+                            let (v0, v1) = (view.vmin + pj as f64 * ps, view.vmin + cj as f64 * ps);
+                            let m = plane_depth(u0, v0)
+                                .max(plane_depth(u1, v0))
+                                .max(plane_depth(u0, v1))
+                                .max(plane_depth(u1, v1));
+                            round_up(m).min(z)
+                        } else {
+                            z
+                        };
+                        let d = &mut view.depth[pj * res + ci];
+                        if z < *d {
+                            *d = z;
+                            wrote = true;
+                            wi0 = wi0.min(ci);
+                            wi1 = wi1.max(ci + 1);
+                            wj0 = wj0.min(pj);
+                            wj1 = wj1.max(pj + 1);
+                        }
+                    }
+                }
+            }
+            if !any_pass && seen {
+                // The passing corners are the lattice points of a convex set: none later.
+                break;
+            }
+            seen |= any_pass;
+            std::mem::swap(&mut pass, &mut prev);
+        }
+        if wrote {
+            let tw = res / TILE;
+            for tj in wj0 / TILE..wj1.div_ceil(TILE) {
+                for ti in wi0 / TILE..wi1.div_ceil(TILE) {
+                    let mut m = 0f32;
+                    for r in tj * TILE..(tj + 1) * TILE {
+                        for &d in &view.depth[r * res + ti * TILE..r * res + (ti + 1) * TILE] {
+                            m = m.max(d);
+                        }
+                    }
+                    view.tile_max[tj * tw + ti] = m;
+                }
+            }
+        }
+        self.pass = pass;
+        self.prev = prev;
+        wrote
+    }
+
+    /// The share of the needed pixels that some polygon covers, and the median depth of the
+    /// covered ones (for probes and tuning).
+    pub fn coverage(&self) -> (f64, f64) {
+        let (mut n, mut c) = (0usize, 0usize);
+        let mut depths = Vec::new();
+        for v in &self.views {
+            let [i0, i1, j0, j1] = v.need;
+            for j in j0..j1 {
+                for i in i0..i1 {
+                    n += 1;
+                    let d = v.depth[j * self.res + i];
+                    if d.is_finite() {
+                        c += 1;
+                        depths.push(d);
+                    }
+                }
+            }
+        }
+        depths.sort_by(f32::total_cmp);
+        let med = depths.get(depths.len() / 2).copied().unwrap_or(f32::INFINITY);
+        (c as f64 / n.max(1) as f64, f64::from(med))
+    }
+
+    /// Tests a box (an occludee) against what was drawn. Only boxes given to
+    /// [`Hemicube::begin`] (or inside their union of pixels) may be tested.
+    pub fn test_box(&self, bx: &DAabb) -> BoxTest {
+        let res = self.res;
+        let tw = res / TILE;
+        let ps = 2.0 / res as f64;
+        for k in 0..5 {
+            let Some(r) = self.rect(k, bx) else { continue };
+            let v = &self.views[k];
+            let z = r.z * (1.0 - 1e-9);
+            let open = |i: usize, j: usize| {
+                let map = v.map;
+                let (u, vv) = (-1.0 + (i as f64 + 0.5) * ps, v.vmin + (j as f64 + 0.5) * ps);
+                let mut d = DVec3::ZERO;
+                d[map[0].0] += map[0].1 * u;
+                d[map[1].0] += map[1].1 * vv;
+                d[map[2].0] += map[2].1;
+                BoxTest::Open { direction: d }
+            };
+            if r.z <= 0.0 || r.i[0] < v.need[0] || r.i[1] > v.need[1] || r.j[0] < v.need[2] || r.j[1] > v.need[3] {
+                return open(r.i[0], r.j[0]);
+            }
+            for tj in r.j[0] / TILE..r.j[1].div_ceil(TILE) {
+                for ti in r.i[0] / TILE..r.i[1].div_ceil(TILE) {
+                    if (v.tile_max[tj * tw + ti] as f64) < z {
+                        continue;
+                    }
+                    for j in (tj * TILE).max(r.j[0])..((tj + 1) * TILE).min(r.j[1]) {
+                        for i in (ti * TILE).max(r.i[0])..((ti + 1) * TILE).min(r.i[1]) {
+                            if !((v.depth[j * res + i] as f64) < z) {
+                                return open(i, j);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        BoxTest::Hidden
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampler::SampleOccluders;
+
+    fn wall(z: f64, half: f64) -> Vec<DVec3> {
+        vec![
+            DVec3::new(-half, -half, z),
+            DVec3::new(half, -half, z),
+            DVec3::new(half, half, z),
+            DVec3::new(-half, half, z),
+        ]
+    }
+
+    #[test]
+    fn a_wall_hides_a_box_behind_it_and_not_one_beside_it() {
+        let occ = SampleOccluders::from_polygons(&[(wall(2.0, 3.0), 0)]);
+        let behind = DAabb {
+            min: DVec3::new(-0.5, -0.5, 5.0),
+            max: DVec3::new(0.5, 0.5, 6.0),
+        };
+        let beside = DAabb {
+            min: DVec3::new(10.0, -0.5, 5.0),
+            max: DVec3::new(11.0, 0.5, 6.0),
+        };
+        let mut hc = Hemicube::new(64);
+        hc.begin(DVec3::ZERO, 2, 1.0, 0.1, &[behind, beside]);
+        let st = hc.draw(&occ);
+        assert_eq!(st.polygons, 1);
+        assert_eq!(hc.test_box(&behind), BoxTest::Hidden);
+        assert!(matches!(hc.test_box(&beside), BoxTest::Open { .. }));
+    }
+}

@@ -1,0 +1,260 @@
+//! Shrunk-occluder point sampling (the fine-foliage culler's raster work): the occluders as
+//! convex planar polygons with a BVH over them ([`SampleOccluders`]), and the hemicube
+//! rasteriser that renders them from one sample point with every polygon's silhouette shrunk
+//! for an ε-ball, then tests occludee boxes against the result ([`Hemicube`]). The per-cell
+//! driver (sample points on the cell's faces, adaptive ε, certification, budget) is
+//! `bake::sampling`.
+//!
+//! # Why it is conservative
+//!
+//! Let `p` be a sample point, `B` the closed ball of radius `ε` about it, `L` a convex planar
+//! polygon with `dist(p, plane(L)) > ε` (polygons nearer than that are left out), and for each
+//! edge `e` of `L`: `ℓ_e` its line, `r_e = dist(p, ℓ_e)` (≥ the plane distance, so `> ε`),
+//! `m_e` the unit normal of the plane through `p` and `ℓ_e`, oriented toward `L`'s inside. The
+//! **shrunk silhouette** of `L` from `p` is the set of directions `d` with
+//! `d·m_e ≥ (ε / r_e)·|d|` for every edge (the silhouette moved inward by `asin(ε/r_e)` per
+//! edge). Claim: if `d` lies in the shrunk silhouette and `q = p + t·d` lies beyond `plane(L)`,
+//! then every segment from a point of `B` to `q` crosses `L`.
+//!
+//! *Proof.* The points `b` whose segment to `q` crosses `L` (with `q` beyond `L`) are those on
+//! the other side of `plane(L)` from `q` and, for every edge, on `L`'s side of the plane
+//! `Q_e` through `q` and `ℓ_e` (the shadow pyramid of `L` from `q`). `p` is such a point (its
+//! ray to `q` crosses `L` inside `L`, as `d` is in the silhouette). All of `B` is on `p`'s side
+//! of `plane(L)` (distance `> ε`). It remains to show `dist(p, Q_e) ≥ ε` for every edge. Look
+//! along `ℓ_e` (project orthogonally onto a plane normal to it; distances to planes holding
+//! `ℓ_e` are kept): `ℓ_e` becomes a point `E`, `|pE| = r_e`, the ray becomes a ray from `p`
+//! making an angle `θ` with the line `pE` where `sin θ ≥ d·m_e/|d| ≥ ε/r_e` (projection keeps
+//! `d·m_e` and shortens `d`). `dist(p, Q_e) = r_e·sin φ` where `φ` is the angle at `E` between
+//! `p` and `q`. As a point moves along the ray from `p` to infinity this angle grows
+//! monotonically from 0 to `π − θ`; `q` lies beyond the crossing `x` of `plane(L)`, so
+//! `φ ∈ [φ_x, π − θ]` with `r_e·sin φ_x = dist(p, plane(L)) > ε`. `sin` is concave on
+//! `[0, π]`, so on that interval it is at least `min(sin φ_x, sin θ)`, and
+//! `r_e·sin φ ≥ min(dist(p, plane(L)), r_e·sin θ) ≥ ε`. ∎
+//!
+//! **Pixels.** A pixel of a hemicube view is the set of directions `(u, v, 1)` (view
+//! coordinates) over a closed square of the image plane. For one edge, the directions
+//! satisfying its condition meet the image plane in `{(u, v) : a·u + b·v + c ≥ s·√(u²+v²+1)}`,
+//! a linear function minus a convex one: a convex set. So a pixel lies inside the shrunk
+//! silhouette iff its four corners do (tested in `f32` with a margin far above the rounding
+//! error). Such a pixel is covered by `L` at depth `z_max(L)`, the largest view depth of its
+//! vertices rounded up: every ray in the pixel crosses `L` no deeper. A pixel keeps the nearest
+//! depth of the polygons covering it, so different polygons cover different pixels: fusion.
+//!
+//! **Occludees.** A box is tested with every pixel its directions can reach (the box cut to
+//! the half-space `Z ≥ dist(p, box)/√3`, which holds the box's part inside the view's
+//! frustum, then its exact `u`/`v` range, rounded outward to whole pixels) and its nearest view
+//! depth there; it is hidden in a view when every such pixel holds a depth strictly nearer.
+//! Then every point `q` of the box seen through that view lies beyond a polygon whose shrunk
+//! silhouette holds the direction of `q`, and the claim hides `q` from all of `B`.
+//!
+//! **The hemisphere.** A sample point lies on a face `F` of the cell with outward normal `n`;
+//! the five views (front, and the halves `v ≥ 0` of the four side views, `v` along `n`) cover
+//! every direction `d` with `d·n ≥ 0`, and a box is tested only with its part on the outer side
+//! of `F`'s plane. `bake::sampling` covers each face with balls and argues why that suffices.
+//!
+//! Everything else only makes fewer pixels covered or more pixels tested: polygons left out
+//! (near `p`, not planar, skipped by the BVH traversal because they can no longer lower any
+//! pixel that matters), bounding rectangles, `f32` rounding with margins.
+
+mod hemicube;
+
+pub use hemicube::{BoxTest, Hemicube, RenderStats};
+
+use crate::geom::DAabb;
+use crate::project::occluders::{Occluders, PartKind};
+use crate::scene::{Scene, is_degenerate};
+use glam::{DVec3, Vec3};
+use obvhs::bvh2::Bvh2;
+
+/// One convex planar occluder polygon of the sampler.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SamplePoly {
+    /// Start of its vertices in [`SampleOccluders::points`].
+    pub start: u32,
+    /// End (exclusive) of its vertices.
+    pub end: u32,
+    /// The scene object it belongs to.
+    pub object: u32,
+}
+
+/// The sampler's occluders: exactly planar convex polygons (a leaf triangle, coplanar
+/// triangles merged by [`crate::project::occluders`]) with a BVH over their boxes.
+#[derive(Default)]
+pub struct SampleOccluders {
+    /// Vertices of all polygons (scene coordinates; each an exact `f32` scene vertex).
+    pub points: Vec<DVec3>,
+    /// The polygons.
+    pub polys: Vec<SamplePoly>,
+    /// Bounds per polygon.
+    pub bounds: Vec<DAabb>,
+    /// The BVH over `bounds` (None without polygons).
+    pub(crate) bvh: Option<Bvh2>,
+    /// Median in-plane inradius of the polygons about their centroids (for the default ε).
+    pub median_inradius: f64,
+}
+
+impl std::fmt::Debug for SampleOccluders {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SampleOccluders")
+            .field("polys", &self.polys.len())
+            .field("median_inradius", &self.median_inradius)
+            .finish()
+    }
+}
+
+struct PolyBox(obvhs::aabb::Aabb);
+impl obvhs::Boundable for PolyBox {
+    fn aabb(&self) -> obvhs::aabb::Aabb {
+        self.0
+    }
+}
+
+impl SampleOccluders {
+    /// The sampler's polygons from a scene's occluder parts: exactly planar polygon parts as
+    /// they are; for objects with a solid part or a polygon that is not exactly planar, their
+    /// usable triangles instead (each planar; `opaque` unless `alpha_occluders`).
+    pub fn new(scene: &Scene, occ: &Occluders, alpha_occluders: bool) -> Self {
+        let mut raw = vec![false; scene.objects.len()];
+        for p in &occ.parts {
+            match p.kind {
+                PartKind::Solid { .. } => raw[p.object as usize] = true,
+                PartKind::Polygon { .. } if p.deviation > 0.0 => raw[p.object as usize] = true,
+                PartKind::Polygon { .. } => {}
+            }
+        }
+        let mut out = SampleOccluders::default();
+        let mut inradii = Vec::new();
+        for (k, p) in occ.parts.iter().enumerate() {
+            if raw[p.object as usize] || !matches!(p.kind, PartKind::Polygon { .. }) {
+                continue;
+            }
+            out.push(occ.part_points(k), p.object);
+            inradii.push(p.inradius);
+        }
+        for (o, obj) in scene.objects.iter().enumerate() {
+            if !raw[o] {
+                continue;
+            }
+            for t in obj.triangles.clone() {
+                let t = t as usize;
+                let tri = scene.triangle(t);
+                if (!scene.opaque[t] && !alpha_occluders) || is_degenerate(tri) {
+                    continue;
+                }
+                out.push(&tri.map(Vec3::as_dvec3), o as u32);
+            }
+        }
+        // Triangles merged alone have no inradius recorded: take it from the geometry.
+        for (i, r) in inradii.iter_mut().enumerate() {
+            if *r <= 0.0 {
+                *r = inradius(out.poly_points(i));
+            }
+        }
+        if !inradii.is_empty() {
+            let m = inradii.len() / 2;
+            inradii.select_nth_unstable_by(m, f64::total_cmp);
+            out.median_inradius = inradii[m];
+        } else if !out.polys.is_empty() {
+            let mut r: Vec<f64> = (0..out.polys.len())
+                .map(|i| inradius(out.poly_points(i)))
+                .collect();
+            let m = r.len() / 2;
+            r.select_nth_unstable_by(m, f64::total_cmp);
+            out.median_inradius = r[m];
+        }
+        if !out.polys.is_empty() {
+            let boxes: Vec<PolyBox> = out
+                .bounds
+                .iter()
+                .map(|b| {
+                    PolyBox(obvhs::aabb::Aabb::new(
+                        b.min.as_vec3().into(),
+                        b.max.as_vec3().into(),
+                    ))
+                })
+                .collect();
+            let mut t = std::time::Duration::ZERO;
+            out.bvh = Some(obvhs::bvh2::builder::build_bvh2(
+                &boxes,
+                obvhs::BvhBuildParams::fast_build(),
+                &mut t,
+            ));
+        }
+        out
+    }
+
+    /// A set of polygons given directly (tests, tools). Each must be convex and exactly
+    /// planar; degenerate ones are dropped.
+    pub fn from_polygons(polys: &[(Vec<DVec3>, u32)]) -> Self {
+        let scene = Scene::default();
+        let mut out = Self::new(&scene, &Occluders::default(), false);
+        for (pts, object) in polys {
+            out.push(pts, *object);
+        }
+        let boxes: Vec<PolyBox> = out
+            .bounds
+            .iter()
+            .map(|b| {
+                PolyBox(obvhs::aabb::Aabb::new(
+                    b.min.as_vec3().into(),
+                    b.max.as_vec3().into(),
+                ))
+            })
+            .collect();
+        if !boxes.is_empty() {
+            let mut t = std::time::Duration::ZERO;
+            out.bvh = Some(obvhs::bvh2::builder::build_bvh2(
+                &boxes,
+                obvhs::BvhBuildParams::fast_build(),
+                &mut t,
+            ));
+        }
+        out
+    }
+
+    fn push(&mut self, pts: &[DVec3], object: u32) {
+        if pts.len() < 3 {
+            return;
+        }
+        let start = self.points.len() as u32;
+        let mut b = DAabb::EMPTY;
+        for &q in pts {
+            self.points.push(q);
+            b.grow(q);
+        }
+        self.polys.push(SamplePoly {
+            start,
+            end: self.points.len() as u32,
+            object,
+        });
+        // The BVH boxes are f32: round outward so every polygon lies inside its box.
+        let lo = b.min.as_vec3().as_dvec3();
+        let hi = b.max.as_vec3().as_dvec3();
+        self.bounds.push(DAabb {
+            min: DVec3::select(lo.cmpgt(b.min), b.min - b.min.abs() * 1e-7, lo),
+            max: DVec3::select(hi.cmplt(b.max), b.max + b.max.abs() * 1e-7, hi),
+        });
+    }
+
+    /// The vertices of polygon `i`.
+    pub fn poly_points(&self, i: usize) -> &[DVec3] {
+        let p = self.polys[i];
+        &self.points[p.start as usize..p.end as usize]
+    }
+}
+
+/// Distance from the vertex centroid of a convex polygon to its nearest edge line.
+fn inradius(pts: &[DVec3]) -> f64 {
+    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    let mut r = f64::INFINITY;
+    for i in 0..pts.len() {
+        let a = pts[i];
+        let b = pts[(i + 1) % pts.len()];
+        let e = b - a;
+        let l = e.length();
+        if l > 0.0 {
+            r = r.min((c - a).cross(e).length() / l);
+        }
+    }
+    if r.is_finite() { r } else { 0.0 }
+}

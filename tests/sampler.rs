@@ -1,0 +1,188 @@
+//! The shrunk-occluder sampling culler on scenes built for it: a layer of small leaves that
+//! hides a target only together (fusion), the same layer with a hole (the target must stay),
+//! an object in the open (must stay), and the culler's accounting in the PVS document. Every
+//! culled object is also checked by brute force: random segments from the cell to the
+//! object's surface must all be blocked.
+
+use glam::{DVec3, Vec3};
+use std::fmt::Write as _;
+use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::bake::{self, BakeSettings, CullState, Culler, Prepared, SamplingCuller, SweepChoice};
+use umbrasweep::geom::Aabb;
+use umbrasweep::settings::SamplingSettings;
+use umbrasweep::validate::SceneRays;
+
+/// A small deterministic generator (splitmix64).
+struct Rng(u64);
+impl Rng {
+    fn f(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn cube(obj: &mut String, nv: &mut usize, name: &str, min: DVec3, max: DVec3) {
+    writeln!(obj, "o {name}").unwrap();
+    for t in umbrasweep::geom::box_triangles(min.as_vec3(), max.as_vec3()) {
+        for p in t {
+            writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
+        }
+        writeln!(obj, "f {} {} {}", *nv + 1, *nv + 2, *nv + 3).unwrap();
+        *nv += 3;
+    }
+}
+
+/// The cell `[-0.5, 0.5]³`, a layer of 3,000 leaves (~1 across) at z ∈ [3, 3.4] over
+/// x, y ∈ [-3, 3] (with a hole of radius `hole` around the z axis when given), a target cube
+/// behind it, a cube in the open beside the cell.
+fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
+    let mut obj = String::new();
+    let mut nv = 0;
+    cube(&mut obj, &mut nv, "target", DVec3::new(-0.5, -0.5, 8.0), DVec3::new(0.5, 0.5, 9.0));
+    cube(&mut obj, &mut nv, "open", DVec3::new(8.0, -0.5, -0.5), DVec3::new(9.0, 0.5, 0.5));
+    writeln!(obj, "o leaves").unwrap();
+    let mut rng = Rng(3);
+    let mut n = 0;
+    while n < 3000 {
+        let c = DVec3::new(rng.f() * 6.0 - 3.0, rng.f() * 6.0 - 3.0, 3.0 + rng.f() * 0.4);
+        if hole.is_some_and(|r| c.x.hypot(c.y) < r + 0.6) {
+            continue;
+        }
+        let tilt = DVec3::new(rng.f() - 0.5, rng.f() - 0.5, 0.0) * 0.6;
+        for k in 0..3 {
+            let a = std::f64::consts::TAU * (k as f64 / 3.0 + rng.f() * 0.1);
+            let p = c + DVec3::new(a.cos(), a.sin(), 0.0) * 0.55 + tilt * a.sin();
+            writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
+        }
+        writeln!(obj, "f {} {} {}", nv + 1, nv + 2, nv + 3).unwrap();
+        nv += 3;
+        n += 1;
+    }
+    let dir = std::env::temp_dir().join(format!("umbrasweep-sampler-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("leaves-{}.obj", hole.is_some()));
+    std::fs::write(&path, obj).unwrap();
+    let scene = umbrasweep::scene::load(&path).unwrap();
+    (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
+}
+
+fn settings() -> BakeSettings {
+    BakeSettings {
+        sampling: SweepChoice::On,
+        sampling_settings: SamplingSettings {
+            eps: Some(0.1),
+            levels: 1,
+            resolution: 64,
+            rays: 0,
+            ..SamplingSettings::default()
+        },
+        ..BakeSettings::default()
+    }
+}
+
+/// Runs the sampler alone on the cell (nothing hidden before it).
+fn sampler_hides(scene: &umbrasweep::Scene, cell: &Aabb) -> Vec<bool> {
+    let prepared = Prepared::new(scene, &settings(), &[*cell]).unwrap();
+    let mut state = CullState {
+        hidden: vec![false; scene.objects.len()],
+        known_visible: None,
+    };
+    let work = SamplingCuller
+        .cull(&prepared, cell, &CpuBackend::new(), &mut state, &mut |_, _, _| {})
+        .unwrap();
+    assert!(work.points > 0, "the sampler rendered no point");
+    if state.hidden[0] {
+        // Hiding the target takes the finest balls.
+        assert!(work.finest_eps.is_some_and(|e| e <= 0.1 * (1.0 + 1e-6)));
+    }
+    state.hidden
+}
+
+/// Every segment from random points of the cell to random points of the object's triangles
+/// is blocked by another object.
+fn brute_force_hidden(scene: &umbrasweep::Scene, cell: &Aabb, object: u32) {
+    let rays = SceneRays::new(scene);
+    let mut rng = Rng(11);
+    let o = &scene.objects[object as usize];
+    for _ in 0..20_000 {
+        let from = cell.min.as_dvec3()
+            + (cell.max - cell.min).as_dvec3() * DVec3::new(rng.f(), rng.f(), rng.f());
+        let t = o.triangles.start as usize
+            + (rng.f() * o.triangles.len() as f64) as usize % o.triangles.len();
+        let [a, b, c] = scene.triangle(t).map(|p| p.as_dvec3());
+        let (u, v) = (rng.f(), rng.f());
+        let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+        let to = a + (b - a) * u + (c - a) * v;
+        let hits = rays.trace(from.as_vec3(), (to - from).as_vec3(), false);
+        let first = hits.first().expect("the ray reaches the object at least");
+        assert_ne!(
+            first.object, object,
+            "the segment {from:?} → {to:?} sees object {object}: a false cull"
+        );
+    }
+}
+
+#[test]
+fn a_layer_of_small_leaves_hides_the_target_only_together() {
+    let (scene, cell) = scene(None);
+    let hidden = sampler_hides(&scene, &cell);
+    assert!(hidden[0], "the fused leaves must hide the target");
+    assert!(!hidden[1], "the cube in the open is visible");
+    assert!(!hidden[2], "the leaves are visible");
+    brute_force_hidden(&scene, &cell, 0);
+}
+
+#[test]
+fn a_hole_in_the_layer_keeps_the_target() {
+    let (scene, cell) = scene(Some(0.3));
+    let hidden = sampler_hides(&scene, &cell);
+    assert!(!hidden[0], "the target is seen through the hole");
+    assert!(!hidden[1]);
+}
+
+#[test]
+fn the_document_records_the_sampler_per_cell_and_in_the_summary() {
+    let (scene, cell) = scene(None);
+    let s = BakeSettings {
+        sweep: SweepChoice::Off,
+        ..settings()
+    };
+    let r = bake::bake(&scene, &[cell], &s, &CpuBackend::new(), None).unwrap();
+    assert_eq!(r.cullers, vec!["extended_projections", "shrunk_sampling"]);
+    assert!(r.sampling);
+    let doc = bake::to_document(&scene, &[cell], &r, &s);
+    let json = serde_json::to_value(&doc).unwrap();
+    assert_eq!(json["settings"]["sampling"], serde_json::json!(true));
+    let cell_cullers = json["cells"][0]["cullers"].as_array().unwrap();
+    assert_eq!(cell_cullers[1]["name"], "shrunk_sampling");
+    assert!(cell_cullers[1]["points"].as_u64().unwrap() > 0);
+    assert!(cell_cullers[1]["finest_eps"].as_f64().unwrap() > 0.0);
+    let summary = &json["summary"]["cullers"][1];
+    assert_eq!(summary["name"], "shrunk_sampling");
+    assert!(summary["points"].as_f64().unwrap() > 0.0);
+    // The target is culled (by one culler or the other), the open cube kept.
+    assert!(!doc.cells[0].visible.contains(&0));
+    assert!(doc.cells[0].visible.contains(&1));
+    // Without the sampler the document has no per-cell accounts.
+    let off = BakeSettings {
+        sampling: SweepChoice::Off,
+        ..s
+    };
+    let r = bake::bake(&scene, &[cell], &off, &CpuBackend::new(), None).unwrap();
+    let json = serde_json::to_value(bake::to_document(&scene, &[cell], &r, &off)).unwrap();
+    assert!(json["cells"][0].get("cullers").is_none());
+    assert_eq!(json["settings"]["sampling"], serde_json::json!(false));
+}
+
+#[test]
+fn the_default_leaves_the_sampler_off_and_says_why() {
+    let (scene, cell) = scene(None);
+    let p = Prepared::new(&scene, &BakeSettings::default(), &[cell]).unwrap();
+    assert!(!p.sampling);
+    assert!(p.sampling_reason.contains("--sampling"), "{}", p.sampling_reason);
+    let p = Prepared::new(&scene, &settings(), &[cell]).unwrap();
+    assert!(p.sampling && p.sampling_reason.contains("0.1"), "{}", p.sampling_reason);
+}

@@ -1,0 +1,1465 @@
+//! Brute-force check of the sampler's conservativeness claim (this file owns
+//! `tests/sampler_proof.rs`: the claim's random and adversarial checks, nothing else).
+//!
+//! `umbrasweep::sampler` claims: after `Hemicube::begin(eye, axis, sign, eps, boxes)` and
+//! `draw(occ)`, when `test_box(bx)` answers `Hidden`, then for every point `b` of the closed
+//! ball of radius `eps` about the eye and every point `q` of `bx` on the outer side of the face
+//! plane (`sign·(q[axis] − eye[axis]) ≥ 0`), the segment `b → q` crosses one of the polygons.
+//!
+//! Each family below generates random configurations (a deterministic splitmix64 generator):
+//! an eye, a face axis and sign, `eps`, convex exactly planar polygons (triangles, and quads
+//! that are extruded segments along a coordinate axis, so they stay exactly planar under every
+//! per-coordinate scaling and offset) and occludee boxes. For every box reported hidden it
+//! samples points `b` (the eye, the ball's surface, its inside, the disc in the face plane,
+//! and for every `q` the points of the ball farthest outside the shadow pyramids of the
+//! polygons the eye's ray to `q` crosses) and points `q` (corners, edges, faces, inside, the
+//! nearest point of the box's part on the outer side) and checks each segment against the
+//! polygons in plain `f64`, strictly: a crossing counts only when the segment's end points are
+//! on opposite sides of the polygon's plane and it passes inside every edge, each by more than
+//! `TOL` (far above the rounding error of the test) relative to the magnitudes involved. All
+//! checks are made in coordinates relative to the eye, which are exact (the eye is the frame's
+//! offset, and every coordinate is either unshifted or within a factor of two of the offset).
+//!
+//! Every family asserts that it hid enough boxes (so it cannot pass vacuously), and
+//! `shrink_matters` asserts that a box hidden from the eye alone but seen from a point of the
+//! ball is reported open (and hidden when the ball is tiny). On a violation the configuration
+//! is reduced (polygons removed while the box stays hidden) and printed in full.
+#![cfg(feature = "bake")]
+
+use glam::DVec3;
+use std::f64::consts::{PI, TAU};
+use umbrasweep::geom::DAabb;
+use umbrasweep::sampler::{BoxTest, Hemicube, SampleOccluders};
+
+/// Relative margin of the strict crossing test (about 450 units of rounding of `f64`).
+const TOL: f64 = 1e-13;
+
+/// Configurations per family: fewer in debug builds (`cargo test`).
+fn count(release: usize) -> usize {
+    if cfg!(debug_assertions) {
+        release.div_ceil(5)
+    } else {
+        release
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Random numbers.
+
+/// splitmix64.
+struct Rng(u64);
+
+impl Rng {
+    fn u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    fn f(&mut self) -> f64 {
+        (self.u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn u(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * self.f()
+    }
+    /// Log-uniform in [a, b].
+    fn log_u(&mut self, a: f64, b: f64) -> f64 {
+        self.u(a.ln(), b.ln()).exp()
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.u64() % n as u64) as usize
+    }
+    fn chance(&mut self, p: f64) -> bool {
+        self.f() < p
+    }
+    fn sign(&mut self) -> f64 {
+        if self.chance(0.5) { 1.0 } else { -1.0 }
+    }
+    fn pick<T: Copy>(&mut self, xs: &[T]) -> T {
+        xs[self.below(xs.len())]
+    }
+    fn in_ball(&mut self) -> DVec3 {
+        loop {
+            let p = DVec3::new(self.u(-1.0, 1.0), self.u(-1.0, 1.0), self.u(-1.0, 1.0));
+            if p.length_squared() <= 1.0 {
+                return p;
+            }
+        }
+    }
+    fn unit(&mut self) -> DVec3 {
+        loop {
+            let p = self.in_ball();
+            let l = p.length();
+            if l > 1e-3 {
+                return p / l;
+            }
+        }
+    }
+    /// A unit vector on the outer side of the face (local `z ≥ zmin`).
+    fn unit_up(&mut self, zmin: f64) -> DVec3 {
+        let mut d = self.unit();
+        d.z = d.z.abs().max(zmin);
+        d.normalize()
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shapes, in the local frame: the eye at the origin, the face's outward normal `+z`.
+
+/// A configuration in the local frame.
+#[derive(Clone, Default)]
+struct Local {
+    eps: f64,
+    res: u32,
+    polys: Vec<Vec<DVec3>>,
+    boxes: Vec<[DVec3; 2]>,
+}
+
+/// A triangle about `c` in the plane with normal `n`, circumradius about `s`.
+fn tri_in_plane(rng: &mut Rng, c: DVec3, n: DVec3, s: f64) -> Vec<DVec3> {
+    let (e1, e2) = n.normalize().any_orthonormal_pair();
+    let t0 = rng.u(0.0, TAU);
+    (0..3)
+        .map(|k| {
+            let t = t0 + k as f64 * TAU / 3.0 + rng.u(-0.5, 0.5);
+            c + s * rng.u(0.5, 1.0) * (t.cos() * e1 + t.sin() * e2)
+        })
+        .collect()
+}
+
+/// A leaf: a randomly oriented triangle.
+fn leaf(rng: &mut Rng, c: DVec3, s: f64) -> Vec<DVec3> {
+    let n = rng.unit();
+    tri_in_plane(rng, c, n, s)
+}
+
+/// The segment `a–b` (read in the two coordinates other than `ax`) extruded along axis `ax`
+/// over `[lo, hi]`: a rectangle, exactly planar in floating point (its four vertices have two
+/// distinct projections along `ax`), and still so after any per-coordinate map.
+fn strip(ax: usize, a: DVec3, b: DVec3, lo: f64, hi: f64) -> Vec<DVec3> {
+    let with = |p: DVec3, t: f64| {
+        let mut p = p;
+        p[ax] = t;
+        p
+    };
+    vec![with(a, lo), with(b, lo), with(b, hi), with(a, hi)]
+}
+
+/// A random strip about `c` of size about `s`.
+fn random_strip(rng: &mut Rng, c: DVec3, s: f64) -> Vec<DVec3> {
+    let ax = rng.below(3);
+    let (b1, b2) = ((ax + 1) % 3, (ax + 2) % 3);
+    let phi = rng.u(0.0, TAU);
+    let hp = s * rng.u(0.3, 1.0);
+    let ha = s * rng.u(0.3, 1.0);
+    let mut d = DVec3::ZERO;
+    d[b1] = phi.cos() * hp;
+    d[b2] = phi.sin() * hp;
+    strip(ax, c - d, c + d, c[ax] - ha, c[ax] + ha)
+}
+
+fn leaf_or_strip(rng: &mut Rng, c: DVec3, s: f64, p_strip: f64) -> Vec<DVec3> {
+    if rng.chance(p_strip) {
+        random_strip(rng, c, s)
+    } else {
+        leaf(rng, c, s)
+    }
+}
+
+/// A box about `c` with half sizes `h`.
+fn cube(c: DVec3, h: DVec3) -> [DVec3; 2] {
+    [c - h, c + h]
+}
+
+fn jitter_half(rng: &mut Rng, h: f64) -> DVec3 {
+    DVec3::new(
+        h * rng.u(0.5, 1.5),
+        h * rng.u(0.5, 1.5),
+        h * rng.u(0.5, 1.5),
+    )
+}
+
+/// The number of leaves and their size for a cluster of radius `r` with optical depth `tau`.
+fn leaves_for(rng: &mut Rng, r: f64, tau: f64) -> (usize, f64) {
+    let n = 200 + rng.below(1801);
+    // A leaf of circumradius s has an area of about 0.7 s².
+    let s = (tau * PI * r * r / n as f64 / 0.7).sqrt();
+    (n, s)
+}
+
+/// A foliage cluster: `n` leaves in a ball (or a slab across `dir`) about `c`.
+fn cluster(
+    rng: &mut Rng,
+    out: &mut Vec<Vec<DVec3>>,
+    c: DVec3,
+    dir: DVec3,
+    r: f64,
+    n: usize,
+    s: f64,
+) {
+    let slab = rng.chance(0.4);
+    for _ in 0..n {
+        let mut p = rng.in_ball() * r;
+        if slab {
+            p -= dir * (p.dot(dir) * 0.7);
+        }
+        let poly = leaf_or_strip(rng, c + p, s, 0.15);
+        out.push(poly);
+    }
+}
+
+/// A random box in the outer half-space.
+fn random_box(rng: &mut Rng, dist: f64, size: f64) -> [DVec3; 2] {
+    let c = rng.unit_up(0.0) * dist;
+    let h = jitter_half(rng, size);
+    cube(c, h)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Families (generators of local configurations).
+
+/// Dense foliage: 200–2000 small leaves in a cluster, boxes behind it.
+fn gen_foliage(rng: &mut Rng) -> Local {
+    let d = rng.u(1.5, 8.0);
+    let dir = rng.unit_up(0.15);
+    let c = dir * d;
+    let res = rng.pick(&[64, 128, 256, 256]);
+    // Leaves of 5–16 pixels (so that they cover whole pixels and fuse), clusters of 4–9
+    // leaves across, 200–2000 leaves.
+    let s = rng.u(5.0, 16.0) * 2.0 / res as f64 * d / 2.0;
+    let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
+    let tau = rng.u(3.0, 12.0);
+    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(200, 2000);
+    let mut l = Local {
+        eps: s * rng.log_u(0.005, 0.2),
+        res,
+        ..Local::default()
+    };
+    cluster(rng, &mut l.polys, c, dir, r, n, s);
+    for _ in 0..5 {
+        let t = r * rng.u(1.2, 4.0);
+        let lat = rng.in_ball() * r * 0.4;
+        let lat = lat - dir * lat.dot(dir);
+        let h = r * rng.u(0.03, 0.3);
+        let hv = jitter_half(rng, h);
+        l.boxes.push(cube(c + dir * t + lat, hv));
+    }
+    let dist = d * rng.u(0.5, 2.5);
+    let size = rng.u(0.05, 0.5);
+    l.boxes.push(random_box(rng, dist, size));
+    l
+}
+
+/// Grazing angles: "blinds" (overlapping slats seen 0.5°–20° from edge-on) and leaves and
+/// strips whose planes pass just beyond ε from the eye.
+fn gen_grazing(rng: &mut Rng) -> Local {
+    let d = rng.u(2.0, 8.0);
+    let long = rng.below(2);
+    let o = 1 - long;
+    let beta: f64 = rng.u(-1.35, 1.35);
+    // Profile coordinates (o, z).
+    let f2 = (beta.sin(), beta.cos());
+    let n2 = (f2.1, -f2.0);
+    let gamma = rng.log_u(0.5f64.to_radians(), 20f64.to_radians()) * rng.sign();
+    let w = d * rng.u(0.15, 0.6);
+    let band = w * gamma.abs().sin();
+    let spacing = band * rng.u(0.35, 1.05);
+    let half_span = d * rng.u(0.04, 0.2);
+    let k = ((2.0 * half_span / spacing).ceil() as usize).clamp(1, 250);
+    let along_c = d * rng.u(-0.2, 0.2);
+    let ha = d * rng.u(0.1, 0.4);
+    let mut l = Local {
+        eps: band * rng.log_u(0.01, 0.5),
+        res: rng.pick(&[64, 128, 256, 256]),
+        ..Local::default()
+    };
+    let to3 = |p: (f64, f64)| {
+        let mut v = DVec3::ZERO;
+        v[o] = p.0;
+        v[2] = p.1;
+        v
+    };
+    for i in 0..k {
+        let y = -half_span + i as f64 * spacing;
+        let p = (f2.0 * d + n2.0 * y, f2.1 * d + n2.1 * y);
+        let pl = (p.0 * p.0 + p.1 * p.1).sqrt();
+        let (ux, uz) = (p.0 / pl, p.1 / pl);
+        let (sg, cg) = gamma.sin_cos();
+        let t = (ux * cg - uz * sg, ux * sg + uz * cg);
+        let a = to3((p.0 - t.0 * w / 2.0, p.1 - t.1 * w / 2.0));
+        let b = to3((p.0 + t.0 * w / 2.0, p.1 + t.1 * w / 2.0));
+        l.polys.push(strip(long, a, b, along_c - ha, along_c + ha));
+    }
+    // Polygons whose planes pass just beyond ε from the eye.
+    let m = rng.below(60);
+    for _ in 0..m {
+        let c = rng.unit_up(0.0) * d * rng.u(0.2, 1.5);
+        let pd = l.eps * rng.log_u(1.0 + 1e-5, 5.0);
+        if rng.chance(0.5) {
+            let cl = c.length();
+            let t = rng.unit();
+            let t = (t - c * (t.dot(c) / (cl * cl))).normalize();
+            let sin = (pd / cl).min(1.0);
+            let nrm = t * (1.0 - sin * sin).sqrt() + c / cl * sin;
+            let s = d * rng.u(0.05, 0.4);
+            l.polys.push(tri_in_plane(rng, c, nrm, s));
+        } else {
+            // A strip along `ax` whose line (in the other two coordinates) passes at `pd`.
+            let ax = rng.below(3);
+            let (b1, b2) = ((ax + 1) % 3, (ax + 2) % 3);
+            let (c1, c2) = (c[b1], c[b2]);
+            let cl = (c1 * c1 + c2 * c2).sqrt();
+            if cl <= pd {
+                continue;
+            }
+            let g = (pd / cl).asin() * rng.sign();
+            let (ux, uy) = (c1 / cl, c2 / cl);
+            let (sg, cg) = g.sin_cos();
+            let t = (ux * cg - uy * sg, ux * sg + uy * cg);
+            let len = d * rng.u(0.05, 0.5);
+            let along = rng.u(-0.5, 0.5) * len;
+            let mut a = DVec3::ZERO;
+            a[b1] = c1 + t.0 * along;
+            a[b2] = c2 + t.1 * along;
+            let mut b = DVec3::ZERO;
+            b[b1] = c1 + t.0 * (along + len);
+            b[b2] = c2 + t.1 * (along + len);
+            let h = d * rng.u(0.05, 0.4);
+            l.polys.push(strip(ax, a, b, c[ax] - h, c[ax] + h));
+        }
+    }
+    for _ in 0..4 {
+        let y = rng.u(-0.7, 0.7) * half_span;
+        let t = rng.u(1.2, 2.5);
+        let p = ((f2.0 * d + n2.0 * y) * t, (f2.1 * d + n2.1 * y) * t);
+        let mut c = to3(p);
+        c[long] = along_c + rng.u(-0.5, 0.5) * ha * t;
+        let hp = half_span * t * rng.u(0.02, 0.3);
+        let mut h = DVec3::splat(hp);
+        h[long] = ha * t * rng.u(0.05, 0.4);
+        l.boxes.push(cube(c, h));
+    }
+    let dist = d * rng.u(0.5, 2.0);
+    let size = rng.u(0.05, 0.5);
+    l.boxes.push(random_box(rng, dist, size));
+    l
+}
+
+/// Polygons near the sample point: plane distance just above ε (by a relative 1e-7 to 1),
+/// edges just beyond ε, some huge near walls; a few leaves a little farther for fusion.
+fn gen_near(rng: &mut Rng) -> Local {
+    let eps = rng.u(0.01, 0.1);
+    let mut l = Local {
+        eps,
+        res: rng.pick(&[32, 48, 64, 128, 256]),
+        ..Local::default()
+    };
+    let kn = 1 + rng.below(5);
+    for _ in 0..kn {
+        let as_strip = rng.chance(0.4);
+        let big = rng.chance(0.3);
+        let (mut n, ax) = if as_strip {
+            let ax = rng.below(3);
+            let mut t = rng.unit();
+            t[ax] = 0.0;
+            (t.normalize(), ax)
+        } else {
+            (rng.unit(), 0)
+        };
+        if n.z < -0.3 {
+            n = -n;
+        }
+        let (e1, e2) = if as_strip {
+            let mut e2 = DVec3::ZERO;
+            e2[ax] = 1.0;
+            (n.cross(e2), e2)
+        } else {
+            n.any_orthonormal_pair()
+        };
+        let pd = eps * (1.0 + rng.log_u(1e-7, 1.0));
+        let foot = n * pd;
+        let (h, l1, l2, l3) = if big {
+            (
+                eps * rng.u(5.0, 50.0),
+                eps * rng.u(20.0, 200.0),
+                eps * rng.u(20.0, 200.0),
+                eps * rng.u(60.0, 300.0),
+            )
+        } else {
+            (
+                eps * rng.u(-0.5, 0.8),
+                eps * rng.log_u(0.5, 50.0),
+                eps * rng.log_u(0.5, 50.0),
+                eps * rng.log_u(0.5, 50.0),
+            )
+        };
+        if as_strip {
+            let a = foot + e1 * h;
+            let b = foot + e1 * (h - l3);
+            l.polys.push(strip(ax, a, b, -l1, l2));
+        } else {
+            let y3 = rng.u(-l1, l2);
+            l.polys.push(vec![
+                foot + e1 * h - e2 * l1,
+                foot + e1 * h + e2 * l2,
+                foot + e1 * (h - l3) + e2 * y3,
+            ]);
+        }
+    }
+    let m = rng.below(30);
+    for _ in 0..m {
+        let c = rng.unit_up(0.0) * eps * rng.u(3.0, 30.0);
+        let s = eps * rng.u(1.0, 10.0);
+        let p = leaf_or_strip(rng, c, s, 0.3);
+        l.polys.push(p);
+    }
+    for _ in 0..5 {
+        let k = rng.below(l.polys.len());
+        let cen = l.polys[k].iter().copied().sum::<DVec3>() / l.polys[k].len() as f64;
+        let dir = cen.normalize();
+        let c = dir * cen.length() * rng.log_u(1.2, 20.0) + rng.in_ball() * eps;
+        let hs = eps * rng.log_u(0.05, 10.0);
+        let h = jitter_half(rng, hs);
+        l.boxes.push(cube(c, h));
+    }
+    let dist = rng.u(0.1, 2.0);
+    let size = rng.u(0.01, 0.3);
+    l.boxes.push(random_box(rng, dist, size));
+    l
+}
+
+/// Leaves and walls crossing the face plane (some vertices behind it), boxes near the plane.
+fn gen_crossing(rng: &mut Rng) -> Local {
+    let mut l = Local {
+        eps: rng.u(0.005, 0.08),
+        res: rng.pick(&[48, 64, 128, 256]),
+        ..Local::default()
+    };
+    let mut anchors = Vec::new();
+    let walls = 1 + rng.below(4);
+    for _ in 0..walls {
+        let phi = rng.u(0.0, TAU);
+        let rho = rng.u(0.3, 4.0);
+        let p = DVec3::new(rho * phi.cos(), rho * phi.sin(), 0.0);
+        let a = phi + PI / 2.0 + rng.u(-0.6, 0.6);
+        let hl = rng.u(0.2, 2.0);
+        let dir = DVec3::new(a.cos(), a.sin(), 0.0) * hl;
+        if rng.chance(0.6) {
+            // Vertical: extruded along z across the face plane.
+            l.polys.push(strip(
+                2,
+                p - dir,
+                p + dir,
+                -rng.u(0.0, 2.0),
+                rng.u(0.3, 3.0),
+            ));
+        } else {
+            // Tilted, extruded along x or y, its profile crossing z = 0.
+            let ax = rng.below(2);
+            let ot = 1 - ax;
+            let mut a3 = DVec3::ZERO;
+            a3[ot] = p[ot] + rng.u(-0.5, 0.5);
+            a3.z = -rng.u(0.05, 1.5);
+            let mut b3 = DVec3::ZERO;
+            b3[ot] = p[ot] + rng.u(-0.5, 0.5);
+            b3.z = rng.u(0.1, 2.5);
+            l.polys.push(strip(ax, a3, b3, p[ax] - hl, p[ax] + hl));
+        }
+        anchors.push(p);
+    }
+    let nl = 100 + rng.below(700);
+    for _ in 0..nl {
+        let phi = rng.u(0.0, TAU);
+        let rho = rng.u(3.0 * l.eps, 4.0);
+        let s = rng.u(0.05, 0.5);
+        let c = DVec3::new(rho * phi.cos(), rho * phi.sin(), rng.u(-1.2, 1.2) * s);
+        let p = leaf_or_strip(rng, c, s, 0.25);
+        l.polys.push(p);
+    }
+    if rng.chance(0.5) {
+        let phi = rng.u(0.0, TAU);
+        let rho = rng.u(1.5, 5.0);
+        let r = rng.u(0.3, 1.0);
+        let c = DVec3::new(rho * phi.cos(), rho * phi.sin(), rng.u(-0.3, 0.3) * r);
+        let tau = rng.u(3.0, 10.0);
+        let (n, s) = leaves_for(rng, r, tau);
+        let dir = c.normalize();
+        cluster(rng, &mut l.polys, c, dir, r, n.min(1200), s);
+        anchors.push(c);
+    }
+    for _ in 0..6 {
+        let a = rng.pick(&anchors);
+        let t = rng.u(1.2, 3.0);
+        let mut c = a * t;
+        c.z = 0.0;
+        let z0 = -rng.u(0.0, 1.0);
+        let z1 = if rng.chance(0.2) {
+            0.0
+        } else {
+            rng.u(0.0, 1.5)
+        };
+        let h = rng.u(0.05, 0.6);
+        l.boxes.push([
+            DVec3::new(c.x - h, c.y - h * rng.u(0.5, 1.5), z0),
+            DVec3::new(c.x + h, c.y + h * rng.u(0.5, 1.5), z1),
+        ]);
+    }
+    l
+}
+
+/// Boxes partly behind the face plane (or touching it, or just behind it), some near the eye,
+/// behind overlapping fences, low walls and leaves.
+fn gen_partly_behind(rng: &mut Rng) -> Local {
+    let mut l = Local {
+        eps: rng.u(0.01, 0.1),
+        res: rng.pick(&[32, 64, 128, 256]),
+        ..Local::default()
+    };
+    // A fence of overlapping vertical walls tangent to a circle about the eye.
+    let rho = rng.u(0.5, 3.0);
+    let k = 5 + rng.below(8);
+    let over = rng.u(1.05, 1.6);
+    let half_side = rho * (PI / k as f64).tan() * over;
+    let (z0, z1) = (-rng.u(0.1, 2.0), rng.u(0.2, 3.0));
+    let phase = rng.u(0.0, TAU);
+    for i in 0..k {
+        if rng.chance(0.1) {
+            continue;
+        }
+        let phi = phase + i as f64 * TAU / k as f64;
+        let r = rho * rng.u(1.0, 1.15);
+        let p = DVec3::new(r * phi.cos(), r * phi.sin(), 0.0);
+        let t = DVec3::new(-phi.sin(), phi.cos(), 0.0) * half_side;
+        l.polys.push(strip(2, p - t, p + t, z0, z1));
+    }
+    // A few leaves across the plane.
+    let nl = rng.below(200);
+    for _ in 0..nl {
+        let phi = rng.u(0.0, TAU);
+        let s = rng.u(0.05, 0.4);
+        let c = DVec3::new(
+            rho * 0.8 * rng.u(0.2, 1.2) * phi.cos(),
+            rho * 0.8 * rng.u(0.2, 1.2) * phi.sin(),
+            rng.u(-1.0, 1.0) * s,
+        );
+        let p = leaf_or_strip(rng, c, s, 0.3);
+        l.polys.push(p);
+    }
+    for i in 0..7 {
+        let phi = rng.u(0.0, TAU);
+        let (c, h) = if i == 6 {
+            // Near the eye.
+            let c = DVec3::new(phi.cos(), phi.sin(), 0.0) * l.eps * rng.u(1.0, 6.0);
+            (c, l.eps * rng.u(0.2, 1.5))
+        } else {
+            let r = rho * rng.u(1.3, 3.0);
+            (
+                DVec3::new(r * phi.cos(), r * phi.sin(), 0.0),
+                rng.u(0.05, 0.5),
+            )
+        };
+        let top = match rng.below(5) {
+            0 => 0.0,
+            1 => -rng.log_u(1e-9, 0.1),
+            _ => rng.u(0.0, (z1 * 1.2).min(2.0)),
+        };
+        let bottom = -rng.u(0.0, 1.0) + top.min(0.0);
+        l.boxes.push([
+            DVec3::new(c.x - h, c.y - h, bottom),
+            DVec3::new(c.x + h, c.y + h, top),
+        ]);
+    }
+    l
+}
+
+/// A generic mix: walls, leaves, small clusters, boxes anywhere.
+fn gen_general(rng: &mut Rng) -> Local {
+    let mut l = Local {
+        eps: rng.log_u(0.003, 0.2),
+        res: rng.pick(&[16, 32, 48, 64, 128, 256]),
+        ..Local::default()
+    };
+    let walls = rng.below(6);
+    for _ in 0..walls {
+        let c = rng.unit_up(0.0) * rng.u(0.3, 6.0);
+        let s = rng.u(0.5, 4.0);
+        let p = leaf_or_strip(rng, c, s, 0.7);
+        l.polys.push(p);
+    }
+    let nl = rng.below(400);
+    for _ in 0..nl {
+        let c = rng.unit_up(0.0) * rng.u(0.05, 6.0);
+        let s = rng.log_u(0.02, 1.0);
+        let p = leaf_or_strip(rng, c, s, 0.2);
+        l.polys.push(p);
+    }
+    if rng.chance(0.5) {
+        let d = rng.u(1.0, 5.0);
+        let dir = rng.unit_up(0.0);
+        let r = d * rng.u(0.1, 0.3);
+        let tau = rng.u(3.0, 10.0);
+        let (n, s) = leaves_for(rng, r, tau);
+        cluster(rng, &mut l.polys, dir * d, dir, r, n.min(800), s);
+    }
+    for _ in 0..6 {
+        let dist = rng.u(0.2, 12.0);
+        let size = rng.log_u(0.01, 1.5);
+        l.boxes.push(random_box(rng, dist, size));
+    }
+    l
+}
+
+// ---------------------------------------------------------------------------------------------
+// World frame.
+
+/// The map from the local frame to the world: local `z` to `axis` (times `sign`), local `x`
+/// and `y` to the two other axes (with signs), then `offset + scale × ·` per coordinate. The
+/// eye is the offset (local origin).
+struct Frame {
+    axis: usize,
+    sign: f64,
+    map: [(usize, f64); 3],
+    offset: DVec3,
+    scale: f64,
+}
+
+impl Frame {
+    /// `extent`: the largest local coordinate magnitude; `scaled`: 1e-3 scale, 1e5 offset.
+    fn random(rng: &mut Rng, extent: f64, scaled: bool) -> Frame {
+        let axis = rng.below(3);
+        let sign = rng.sign();
+        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+        let (xa, ya) = if rng.chance(0.5) { (b, c) } else { (c, b) };
+        let map = [(xa, rng.sign()), (ya, rng.sign()), (axis, sign)];
+        let mut offset = DVec3::ZERO;
+        let scale = if scaled { 1e-3 } else { 1.0 };
+        for k in 0..3 {
+            offset[k] = if scaled {
+                rng.sign() * (1e5 + rng.u(0.0, 1.0))
+            } else if rng.chance(0.5) {
+                0.0
+            } else {
+                // Differences to the offset stay exact (Sterbenz).
+                rng.sign() * extent * rng.u(2.5, 100.0)
+            };
+        }
+        Frame {
+            axis,
+            sign,
+            map,
+            offset,
+            scale,
+        }
+    }
+    fn point(&self, p: DVec3) -> DVec3 {
+        let mut w = self.offset;
+        for k in 0..3 {
+            let (ax, s) = self.map[k];
+            w[ax] = self.offset[ax] + self.scale * (s * p[k]);
+        }
+        w
+    }
+    fn aabb(&self, b: &[DVec3; 2]) -> DAabb {
+        let (p, q) = (self.point(b[0]), self.point(b[1]));
+        DAabb {
+            min: p.min(q),
+            max: p.max(q),
+        }
+    }
+}
+
+/// A configuration in world coordinates, as given to the sampler.
+#[derive(Clone)]
+struct Config {
+    family: &'static str,
+    index: usize,
+    seed: u64,
+    eye: DVec3,
+    axis: usize,
+    sign: f64,
+    eps: f64,
+    res: u32,
+    polys: Vec<(Vec<DVec3>, u32)>,
+    boxes: Vec<DAabb>,
+}
+
+fn to_world(
+    family: &'static str,
+    index: usize,
+    seed: u64,
+    l: &Local,
+    rng: &mut Rng,
+    scaled: bool,
+) -> Config {
+    let mut extent: f64 = 0.0;
+    for p in l.polys.iter().flatten().chain(l.boxes.iter().flatten()) {
+        extent = extent.max(p.abs().max_element());
+    }
+    let f = Frame::random(rng, extent, scaled);
+    Config {
+        family,
+        index,
+        seed,
+        eye: f.offset,
+        axis: f.axis,
+        sign: f.sign,
+        eps: l.eps * f.scale,
+        res: l.res,
+        polys: l
+            .polys
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (p.iter().map(|&v| f.point(v)).collect(), i as u32))
+            .collect(),
+        boxes: l.boxes.iter().map(|b| f.aabb(b)).collect(),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The brute-force check, in coordinates relative to the eye.
+
+/// A polygon relative to the eye, with its Newell normal and bounds.
+struct RelPoly {
+    v: Vec<DVec3>,
+    n: DVec3,
+    centroid: DVec3,
+    lo: DVec3,
+    hi: DVec3,
+}
+
+impl RelPoly {
+    fn new(pts: &[DVec3], eye: DVec3) -> Option<RelPoly> {
+        let v: Vec<DVec3> = pts.iter().map(|&p| p - eye).collect();
+        let m = v.len();
+        let mut n = DVec3::ZERO;
+        for i in 0..m {
+            n += v[i].cross(v[(i + 1) % m]);
+        }
+        if !(n.length() > 0.0) {
+            return None;
+        }
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for &p in &v {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        let pad = (hi - lo).max_element() * 1e-9 + lo.abs().max(hi.abs()).max_element() * 1e-12;
+        Some(RelPoly {
+            centroid: v.iter().copied().sum::<DVec3>() / m as f64,
+            n,
+            lo: lo - DVec3::splat(pad),
+            hi: hi + DVec3::splat(pad),
+            v,
+        })
+    }
+}
+
+/// Whether the segment `b → q` clearly crosses the polygon: its end points clearly on opposite
+/// sides of the plane and the segment clearly inside every edge (each sign test by more than
+/// `TOL` times the product of the magnitudes it is computed from).
+fn crosses(b: DVec3, q: DVec3, p: &RelPoly) -> bool {
+    let v0 = p.v[0];
+    let nl = p.n.length();
+    let sb = p.n.dot(b - v0);
+    let sq = p.n.dot(q - v0);
+    let tb = TOL * nl * (b.length() + v0.length());
+    let tq = TOL * nl * (q.length() + v0.length());
+    // sigma = sign(n · (q − b)).
+    let sigma = if sb >= tb && sq <= -tq {
+        -1.0
+    } else if sb <= -tb && sq >= tq {
+        1.0
+    } else {
+        return false;
+    };
+    let d = q - b;
+    let md = q.length() + b.length();
+    let bl = b.length();
+    let m = p.v.len();
+    for i in 0..m {
+        let (va, vc) = (p.v[i], p.v[(i + 1) % m]);
+        let vol = (va - b).cross(vc - b).dot(d);
+        let t = TOL * (va.length() + bl) * (vc.length() + bl) * md;
+        if sigma * vol < t {
+            return false;
+        }
+    }
+    true
+}
+
+/// Whether the segment `b → q` can meet the box `[lo, hi]` (slab test).
+fn seg_meets_box(b: DVec3, q: DVec3, lo: DVec3, hi: DVec3) -> bool {
+    let d = q - b;
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for k in 0..3 {
+        if d[k] == 0.0 {
+            if b[k] < lo[k] || b[k] > hi[k] {
+                return false;
+            }
+        } else {
+            let ta = (lo[k] - b[k]) / d[k];
+            let tb = (hi[k] - b[k]) / d[k];
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+            if t0 > t1 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Points of the closed ball of radius `eps` (relative to the eye): the eye, the six axis
+/// points, the eight diagonal points, random points on the sphere and inside, and points of
+/// the disc in the face plane (on its rim and inside).
+fn ball_points(rng: &mut Rng, eps: f64, axis: usize) -> Vec<DVec3> {
+    let r = eps * (1.0 - 1e-12);
+    let mut out = vec![DVec3::ZERO];
+    for k in 0..3 {
+        for s in [-1.0, 1.0] {
+            let mut p = DVec3::ZERO;
+            p[k] = s * r;
+            out.push(p);
+        }
+    }
+    for i in 0..8 {
+        let s = |b: usize| if i & b != 0 { 1.0 } else { -1.0 };
+        out.push(DVec3::new(s(1), s(2), s(4)) * (r / 3f64.sqrt()));
+    }
+    for _ in 0..12 {
+        out.push(rng.unit() * r);
+    }
+    for _ in 0..4 {
+        out.push(rng.in_ball() * r);
+    }
+    for i in 0..10 {
+        let mut u = rng.unit();
+        u[axis] = 0.0;
+        if u.length() < 1e-3 {
+            continue;
+        }
+        let f = if i < 7 { 1.0 } else { rng.f() };
+        out.push(u.normalize() * r * f);
+    }
+    out
+}
+
+/// Points of the box `[lo, hi]` (relative to the eye, already cut to the outer side).
+fn box_points(rng: &mut Rng, lo: DVec3, hi: DVec3) -> Vec<DVec3> {
+    let at = |t: DVec3| (lo + (hi - lo) * t).clamp(lo, hi);
+    let mut out = Vec::new();
+    for i in 0..8 {
+        out.push(DVec3::new(
+            if i & 1 != 0 { hi.x } else { lo.x },
+            if i & 2 != 0 { hi.y } else { lo.y },
+            if i & 4 != 0 { hi.z } else { lo.z },
+        ));
+    }
+    // The nearest point to the eye.
+    out.push(DVec3::ZERO.clamp(lo, hi));
+    // Edges: along axis k, the others at 0 or 1.
+    for k in 0..3 {
+        for c in 0..4 {
+            for _ in 0..2 {
+                let mut t = DVec3::ZERO;
+                t[k] = rng.f();
+                t[(k + 1) % 3] = (c & 1) as f64;
+                t[(k + 2) % 3] = (c >> 1) as f64;
+                out.push(at(t));
+            }
+        }
+    }
+    // Faces.
+    for k in 0..3 {
+        for s in 0..2 {
+            for j in 0..3 {
+                let mut t = if j == 0 {
+                    DVec3::splat(0.5)
+                } else {
+                    DVec3::new(rng.f(), rng.f(), rng.f())
+                };
+                t[k] = s as f64;
+                out.push(at(t));
+            }
+        }
+    }
+    for _ in 0..8 {
+        out.push(at(DVec3::new(rng.f(), rng.f(), rng.f())));
+    }
+    out
+}
+
+/// For `q`: the points of the ball farthest outside the shadow pyramid from `q` of each of
+/// (up to four of) the polygons that the eye's ray to `q` crosses: past each edge's plane
+/// through `q`, past each vertex (two edges at once), and nearest the polygon's plane.
+fn targeted_points(q: DVec3, eps: f64, cand: &[usize], polys: &[RelPoly], out: &mut Vec<DVec3>) {
+    out.clear();
+    let r = eps * (1.0 - 1e-12);
+    let mut found = 0;
+    for &k in cand {
+        let p = &polys[k];
+        if !seg_meets_box(DVec3::ZERO, q, p.lo, p.hi) || !crosses(DVec3::ZERO, q, p) {
+            continue;
+        }
+        found += 1;
+        let m = p.v.len();
+        let mut outs = Vec::with_capacity(m);
+        for i in 0..m {
+            let ne = (p.v[i] - q).cross(p.v[(i + 1) % m] - q);
+            let ne = if ne.dot(p.centroid - q) > 0.0 {
+                -ne
+            } else {
+                ne
+            };
+            let o = ne.normalize_or_zero();
+            outs.push(o);
+            out.push(o * r);
+        }
+        for i in 0..m {
+            let o = (outs[i] + outs[(i + 1) % m]).normalize_or_zero();
+            out.push(o * r);
+        }
+        let nn = p.n.normalize();
+        let toward = if nn.dot(p.v[0]) > 0.0 { nn } else { -nn };
+        out.push(toward * r);
+        if found == 4 {
+            break;
+        }
+    }
+}
+
+/// A segment not crossing any polygon although its box was reported hidden.
+#[derive(Debug)]
+struct Violation {
+    bx: usize,
+    b: DVec3,
+    q: DVec3,
+}
+
+#[derive(Default, Debug, Clone, Copy)]
+struct Stats {
+    configs: usize,
+    polygons: usize,
+    boxes: usize,
+    hidden: usize,
+    /// Hidden boxes with no part on the outer side of the face plane (nothing to check).
+    vacuous: usize,
+    segments: u64,
+    /// Hidden boxes with a segment not blocked (only counted when rendering with a smaller
+    /// ball than the one checked).
+    violations: usize,
+}
+
+/// Checks every segment for the hidden box `bi` of `cfg`.
+fn check_box(
+    rng: &mut Rng,
+    cfg: &Config,
+    polys: &[RelPoly],
+    bi: usize,
+    st: &mut Stats,
+) -> Result<bool, Violation> {
+    let bx = cfg.boxes[bi];
+    let (mut lo, mut hi) = (bx.min - cfg.eye, bx.max - cfg.eye);
+    let a = cfg.axis;
+    if cfg.sign > 0.0 {
+        lo[a] = lo[a].max(0.0);
+    } else {
+        hi[a] = hi[a].min(0.0);
+    }
+    if lo[a] > hi[a] {
+        return Ok(false);
+    }
+    // Polygons that can meet a segment from the ball to the box part.
+    let (ulo, uhi) = (
+        lo.min(DVec3::splat(-cfg.eps)),
+        hi.max(DVec3::splat(cfg.eps)),
+    );
+    let mut cand: Vec<usize> = (0..polys.len())
+        .filter(|&k| {
+            let p = &polys[k];
+            p.lo.cmple(uhi).all() && p.hi.cmpge(ulo).all()
+        })
+        .collect();
+    // Nearer polygons first (they block most segments).
+    cand.sort_by(|&i, &j| {
+        let d = |k: usize| polys[k].centroid.length_squared();
+        d(i).total_cmp(&d(j))
+    });
+    let bs = ball_points(rng, cfg.eps, a);
+    let qs = box_points(rng, lo, hi);
+    let mut targeted = Vec::new();
+    let mut last = usize::MAX;
+    for &q in &qs {
+        targeted_points(q, cfg.eps, &cand, polys, &mut targeted);
+        for &b in bs.iter().chain(targeted.iter()) {
+            st.segments += 1;
+            if last != usize::MAX && crosses(b, q, &polys[last]) {
+                continue;
+            }
+            let hit = cand.iter().copied().find(|&k| {
+                seg_meets_box(b, q, polys[k].lo, polys[k].hi) && crosses(b, q, &polys[k])
+            });
+            match hit {
+                Some(k) => last = k,
+                None => return Err(Violation { bx: bi, b, q }),
+            }
+        }
+    }
+    Ok(true)
+}
+
+/// Renders `cfg` with `hc` and tests its boxes.
+/// Renders `cfg` (with the ball radius `eps`) and tests its boxes.
+fn render(hc: &mut Hemicube, cfg: &Config, polys: &[(Vec<DVec3>, u32)], eps: f64) -> Vec<BoxTest> {
+    let occ = SampleOccluders::from_polygons(polys);
+    hc.begin(cfg.eye, cfg.axis, cfg.sign, eps, &cfg.boxes);
+    hc.draw(&occ);
+    cfg.boxes.iter().map(|b| hc.test_box(b)).collect()
+}
+
+fn hidden_with(cfg: &Config, polys: &[(Vec<DVec3>, u32)], bi: usize) -> bool {
+    let mut hc = Hemicube::new(cfg.res);
+    render(&mut hc, cfg, polys, cfg.eps)[bi] == BoxTest::Hidden
+}
+
+fn fmt_v(v: DVec3) -> String {
+    format!("DVec3::new({:?}, {:?}, {:?})", v.x, v.y, v.z)
+}
+
+/// Reduces the polygons of a failing configuration (the box staying hidden; removing
+/// polygons cannot block the violating segment) and describes the result.
+fn report(cfg: &Config, v: &Violation, reused_state: bool) -> String {
+    let mut msg = format!(
+        "VIOLATION in family `{}`, configuration {} (seed {:#x}): box {} reported Hidden but the \
+         segment b -> q is not blocked.\n  b - eye = {}, |b - eye| / eps = {:?}\n  q - eye = {}\n",
+        cfg.family,
+        cfg.index,
+        cfg.seed,
+        v.bx,
+        fmt_v(v.b),
+        v.b.length() / cfg.eps,
+        fmt_v(v.q)
+    );
+    let mut cur = cfg.polys.clone();
+    if !hidden_with(cfg, &cur, v.bx) {
+        msg += &format!(
+            "  NOTE: a fresh Hemicube reports this box Open: the failure depends on the state left \
+             by earlier renders with the reused Hemicube (reused: {reused_state}).\n"
+        );
+    } else {
+        // ddmin over the polygons.
+        let mut n = 2usize;
+        while cur.len() >= 2 {
+            let chunk = cur.len().div_ceil(n);
+            let mut reduced = false;
+            for start in (0..cur.len()).step_by(chunk) {
+                let rest: Vec<_> = cur
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| *i < start || *i >= start + chunk)
+                    .map(|(_, p)| p.clone())
+                    .collect();
+                if hidden_with(cfg, &rest, v.bx) {
+                    cur = rest;
+                    n = (n - 1).max(2);
+                    reduced = true;
+                    break;
+                }
+            }
+            if !reduced {
+                if n >= cur.len() {
+                    break;
+                }
+                n = (2 * n).min(cur.len());
+            }
+        }
+    }
+    let b = cfg.boxes[v.bx];
+    msg += &format!(
+        "  eye = {}, axis = {}, sign = {:?}, eps = {:?}, res = {}\n  boxes given to begin: {} \
+         (the failing one: min {}, max {})\n  {} of {} polygons needed:\n",
+        fmt_v(cfg.eye),
+        cfg.axis,
+        cfg.sign,
+        cfg.eps,
+        cfg.res,
+        cfg.boxes.len(),
+        fmt_v(b.min),
+        fmt_v(b.max),
+        cur.len(),
+        cfg.polys.len()
+    );
+    for (pts, id) in cur.iter().take(40) {
+        let vs: Vec<String> = pts.iter().map(|&p| fmt_v(p)).collect();
+        msg += &format!("    ({id}) vec![{}],\n", vs.join(", "));
+    }
+    if cur.len() > 40 {
+        msg += "    ...\n";
+    }
+    msg
+}
+
+/// Runs `n` configurations of a family and checks every hidden box.
+fn run_family(
+    name: &'static str,
+    seed: u64,
+    n: usize,
+    scaled: bool,
+    generate: &dyn Fn(&mut Rng) -> Local,
+    render_eps: f64,
+) -> Stats {
+    let start = std::time::Instant::now();
+    let mut st = Stats::default();
+    let mut cubes: Vec<Hemicube> = Vec::new();
+    for index in 0..n {
+        let cseed = seed.wrapping_mul(1_000_003).wrapping_add(index as u64);
+        let mut rng = Rng(cseed);
+        let local = generate(&mut rng);
+        let cfg = to_world(name, index, cseed, &local, &mut rng, scaled);
+        // Hemicubes are reused across configurations (as the baker does).
+        let res = (cfg.res.max(16) as usize).div_ceil(16) * 16;
+        let k = match cubes.iter().position(|h| h.resolution() == res) {
+            Some(k) => k,
+            None => {
+                cubes.push(Hemicube::new(cfg.res));
+                cubes.len() - 1
+            }
+        };
+        let results = render(&mut cubes[k], &cfg, &cfg.polys, cfg.eps * render_eps);
+        let rel: Vec<RelPoly> = cfg
+            .polys
+            .iter()
+            .filter_map(|(p, _)| RelPoly::new(p, cfg.eye))
+            .collect();
+        st.configs += 1;
+        st.polygons += cfg.polys.len();
+        for (bi, r) in results.iter().enumerate() {
+            st.boxes += 1;
+            if *r != BoxTest::Hidden {
+                continue;
+            }
+            match check_box(&mut rng, &cfg, &rel, bi, &mut st) {
+                Ok(true) => st.hidden += 1,
+                Ok(false) => st.vacuous += 1,
+                Err(_) if render_eps < 1.0 => st.violations += 1,
+                Err(v) => panic!("{}", report(&cfg, &v, true)),
+            }
+        }
+    }
+    eprintln!(
+        "sampler_proof family {name} (rendered with eps x {render_eps}): {} configurations, {} \
+         polygons, {} boxes, {} hidden (+{} with nothing on the outer side), {} segments checked, \
+         {} violations, {:.2} s",
+        st.configs,
+        st.polygons,
+        st.boxes,
+        st.hidden,
+        st.vacuous,
+        st.segments,
+        st.violations,
+        start.elapsed().as_secs_f64()
+    );
+    st
+}
+
+/// Asserts that a family hid at least `min_share` of its boxes (with something to check).
+fn assert_meaningful(name: &str, st: &Stats, min_share: f64) {
+    let share = st.hidden as f64 / st.boxes.max(1) as f64;
+    assert!(
+        st.hidden >= 3 && share >= min_share,
+        "family {name} hid only {} of {} boxes (share {share:.3} < {min_share}): the check is too weak",
+        st.hidden,
+        st.boxes
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tests.
+
+/// A family: its generator, seed, configurations (release), whether scaled by 1e-3 and offset
+/// by 1e5, and the least share of its boxes it must hide.
+struct Family {
+    name: &'static str,
+    seed: u64,
+    configs: usize,
+    scaled: bool,
+    generate: fn(&mut Rng) -> Local,
+    min_hidden: f64,
+}
+
+/// Any family's generator, chosen at random (for the scaled family).
+fn gen_any(rng: &mut Rng) -> Local {
+    let gens: [fn(&mut Rng) -> Local; 6] = [
+        gen_foliage,
+        gen_grazing,
+        gen_near,
+        gen_crossing,
+        gen_partly_behind,
+        gen_general,
+    ];
+    let g = rng.pick(&gens);
+    g(rng)
+}
+
+const FAMILIES: [Family; 7] = [
+    Family {
+        name: "foliage",
+        seed: 0xF011_A6E,
+        configs: 160,
+        scaled: false,
+        generate: gen_foliage,
+        min_hidden: 0.15,
+    },
+    Family {
+        name: "grazing",
+        seed: 0x6A2_1A6,
+        configs: 200,
+        scaled: false,
+        generate: gen_grazing,
+        min_hidden: 0.05,
+    },
+    Family {
+        name: "near",
+        seed: 0x4EA2,
+        configs: 600,
+        scaled: false,
+        generate: gen_near,
+        min_hidden: 0.05,
+    },
+    Family {
+        name: "crossing",
+        seed: 0xC2055,
+        configs: 160,
+        scaled: false,
+        generate: gen_crossing,
+        min_hidden: 0.05,
+    },
+    Family {
+        name: "partly_behind",
+        seed: 0xBE41D,
+        configs: 400,
+        scaled: false,
+        generate: gen_partly_behind,
+        min_hidden: 0.05,
+    },
+    Family {
+        name: "general",
+        seed: 0x6E4E2A1,
+        configs: 300,
+        scaled: false,
+        generate: gen_general,
+        min_hidden: 0.02,
+    },
+    Family {
+        name: "scaled",
+        seed: 0x5CA1ED,
+        configs: 300,
+        scaled: true,
+        generate: gen_any,
+        min_hidden: 0.05,
+    },
+];
+
+/// Runs family `name` with the true ball and asserts it hid enough boxes.
+fn family(name: &str) {
+    let f = FAMILIES.iter().find(|f| f.name == name).expect("family");
+    let st = run_family(f.name, f.seed, count(f.configs), f.scaled, &f.generate, 1.0);
+    assert_meaningful(f.name, &st, f.min_hidden);
+}
+
+#[test]
+fn foliage_hidden_boxes_are_hidden_from_the_whole_ball() {
+    family("foliage");
+}
+
+#[test]
+fn grazing_angles() {
+    family("grazing");
+}
+
+#[test]
+fn leaves_near_the_sample_point() {
+    family("near");
+}
+
+#[test]
+fn leaves_crossing_the_face_plane() {
+    family("crossing");
+}
+
+#[test]
+fn boxes_partly_behind_the_face_plane() {
+    family("partly_behind");
+}
+
+#[test]
+fn general_mix() {
+    family("general");
+}
+
+#[test]
+fn scaled_by_1e_3_and_offset_by_1e5() {
+    family("scaled");
+}
+
+/// The check is sharp: rendering with a smaller ball than the one checked (no shrink at all,
+/// or half of it) must produce boxes that the check finds visible from some point of the ball.
+#[test]
+fn check_catches_a_render_with_less_shrink() {
+    for factor in [0.0, 0.5] {
+        let mut total = 0;
+        for f in &FAMILIES {
+            let st = run_family(
+                f.name,
+                f.seed ^ 0x5A5A,
+                count(f.configs / 4),
+                f.scaled,
+                &f.generate,
+                factor,
+            );
+            total += st.violations;
+        }
+        assert!(
+            total > 0,
+            "no violation found with the render's eps x {factor}"
+        );
+    }
+}
+
+/// The checker itself: strict on edges and planes, and finds a crossing through the inside.
+#[test]
+fn checker_is_strict() {
+    let sq = [
+        DVec3::new(-1.0, -1.0, 2.0),
+        DVec3::new(1.0, -1.0, 2.0),
+        DVec3::new(1.0, 1.0, 2.0),
+        DVec3::new(-1.0, 1.0, 2.0),
+    ];
+    let p = RelPoly::new(&sq, DVec3::ZERO).unwrap();
+    let mut rev = sq;
+    rev.reverse();
+    let pr = RelPoly::new(&rev, DVec3::ZERO).unwrap();
+    for p in [&p, &pr] {
+        assert!(crosses(DVec3::ZERO, DVec3::new(0.5, -0.3, 5.0), p));
+        assert!(crosses(DVec3::new(0.5, -0.3, 5.0), DVec3::ZERO, p));
+        // Through an edge, through a vertex, ending on the plane, short of the plane: no.
+        assert!(!crosses(DVec3::ZERO, DVec3::new(2.0, 0.0, 4.0), p));
+        assert!(!crosses(DVec3::ZERO, DVec3::new(2.0, 2.0, 4.0), p));
+        assert!(!crosses(DVec3::ZERO, DVec3::new(0.0, 0.0, 2.0), p));
+        assert!(!crosses(DVec3::ZERO, DVec3::new(0.0, 0.0, 1.9), p));
+        assert!(!crosses(DVec3::ZERO, DVec3::new(2.2, 0.0, 4.0), p));
+        // Just inside an edge, by far more than the tolerance: yes.
+        assert!(crosses(DVec3::ZERO, DVec3::new(2.0 - 1e-9, 0.0, 4.0), p));
+    }
+}
+
+/// A box hidden from the eye point alone but seen from a point of the ball must be reported
+/// open (the test fails if the shrink is removed), and hidden for a tiny ball.
+#[test]
+fn shrink_matters() {
+    let wall = vec![
+        DVec3::new(-1.0, -1.0, 2.0),
+        DVec3::new(1.0, -1.0, 2.0),
+        DVec3::new(1.0, 1.0, 2.0),
+        DVec3::new(-1.0, 1.0, 2.0),
+    ];
+    let bx = DAabb {
+        min: DVec3::new(-2.42, -2.42, 5.0),
+        max: DVec3::new(2.42, 2.42, 6.0),
+    };
+    let polys = vec![(wall.clone(), 0)];
+    let rel = vec![RelPoly::new(&wall, DVec3::ZERO).unwrap()];
+    let corner = DVec3::new(2.42, 0.0, 5.0);
+    // From the eye every point of the box is behind the wall ...
+    let mut rng = Rng(7);
+    for q in box_points(&mut rng, bx.min, bx.max) {
+        assert!(
+            crosses(DVec3::ZERO, q, &rel[0]),
+            "eye to {q} must be blocked"
+        );
+    }
+    // ... but not from a point of the ball of radius 0.1.
+    assert!(!crosses(
+        DVec3::new(0.1 * (1.0 - 1e-12), 0.0, 0.0),
+        corner,
+        &rel[0]
+    ));
+    for (eye_off, axis, sign) in [(DVec3::ZERO, 2, 1.0), (DVec3::new(3.0, -7.0, 1e5), 2, 1.0)] {
+        let shift = |v: DVec3| v + eye_off;
+        let cfg = |eps: f64| Config {
+            family: "shrink_matters",
+            index: 0,
+            seed: 0,
+            eye: eye_off,
+            axis,
+            sign,
+            eps,
+            res: 256,
+            polys: polys
+                .iter()
+                .map(|(p, i)| (p.iter().map(|&v| shift(v)).collect(), *i))
+                .collect(),
+            boxes: vec![DAabb {
+                min: shift(bx.min),
+                max: shift(bx.max),
+            }],
+        };
+        for res in [128, 256] {
+            let mut c = cfg(1e-6);
+            c.res = res;
+            let mut hc = Hemicube::new(res);
+            assert_eq!(
+                render(&mut hc, &c, &c.polys, c.eps)[0],
+                BoxTest::Hidden,
+                "tiny ball, res {res}"
+            );
+            let mut c = cfg(0.1);
+            c.res = res;
+            // The same Hemicube, reused.
+            let r = render(&mut hc, &c, &c.polys, c.eps)[0];
+            assert!(
+                matches!(r, BoxTest::Open { .. }),
+                "ball of radius 0.1, res {res}: {r:?}"
+            );
+        }
+    }
+}
+
+/// A polygon nearer than ε (plane distance) is left out even where it would hide everything.
+#[test]
+fn polygon_within_eps_is_left_out() {
+    let eps = 0.1;
+    for d in [0.05, 0.1, 0.1 * (1.0 + 1e-9)] {
+        let wall = vec![
+            DVec3::new(-100.0, -100.0, d),
+            DVec3::new(100.0, -100.0, d),
+            DVec3::new(100.0, 100.0, d),
+            DVec3::new(-100.0, 100.0, d),
+        ];
+        let cfg = Config {
+            family: "within_eps",
+            index: 0,
+            seed: 0,
+            eye: DVec3::ZERO,
+            axis: 2,
+            sign: 1.0,
+            eps,
+            res: 64,
+            polys: vec![(wall, 0)],
+            boxes: vec![DAabb {
+                min: DVec3::new(-0.5, -0.5, 3.0),
+                max: DVec3::new(0.5, 0.5, 4.0),
+            }],
+        };
+        let mut hc = Hemicube::new(64);
+        assert!(
+            matches!(
+                render(&mut hc, &cfg, &cfg.polys, cfg.eps)[0],
+                BoxTest::Open { .. }
+            ),
+            "d = {d}"
+        );
+    }
+}
