@@ -78,7 +78,8 @@ pub struct BenchArgs {
     /// Only these foliage studies (comma-separated): coarse, ellipsoid, fine, params, paper, jacaranda.
     #[arg(long, value_name = "LIST", value_delimiter = ',', requires = "foliage")]
     pub foliage_studies: Option<Vec<String>>,
-    /// Cells baked by the fine forest's sub-cell variants (spread over its --cells).
+    /// Cells baked by the fine forest's sub-cell variants and by the sampler rows (spread over
+    /// their forest's --cells).
     #[arg(
         long,
         value_name = "N",

@@ -172,4 +172,54 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
         "--no-such-option",
     );
     refuses(&scene, &["--cells", c, "--occluders", "[x"], "--occluders");
+    // The sampler's options.
+    for (args, needle) in [
+        (&["--sampling-budget", "lots"][..], "--sampling-budget \"lots\""),
+        (&["--sampling-budget", "0"][..], "--sampling-budget \"0\""),
+        (&["--sampling-budget", "0s"][..], "seconds"),
+        (&["--sampling-eps", "0"][..], "--sampling-eps 0"),
+        (&["--sampling-eps", "nan"][..], "--sampling-eps"),
+        (&["--sampling-resolution", "8"][..], "--sampling-resolution 8"),
+        (&["--sampling-levels", "40"][..], "--sampling-levels 40"),
+        (&["--sampling", "--no-sampling"][..], "--no-sampling"),
+    ] {
+        let mut a = vec!["--cells", c];
+        a.extend_from_slice(args);
+        refuses(&scene, &a, needle);
+    }
+}
+
+#[test]
+fn the_sampler_runs_with_a_budget_and_reports_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = write(d, "s.obj", SCENE);
+    let cells = write(d, "c.json", CELLS);
+    let out = d.join("out.json");
+    let r = bin()
+        .arg("bake")
+        .arg(&scene)
+        .args(["--cells", cells.to_str().unwrap(), "--backend", "cpu"])
+        .args(["--sampling", "--sampling-budget", "40,60s", "--sampling-eps", "0.5"])
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{stderr}");
+    assert!(stderr.contains("sampling    yes — --sampling; finest ε 0.5"), "{stderr}");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let s = &doc["settings"];
+    assert_eq!(s["sampling"], serde_json::json!(true));
+    assert_eq!(s["sampling_budget_points"], serde_json::json!(40));
+    assert_eq!(s["sampling_budget_seconds"], serde_json::json!(60.0));
+    assert_eq!(s["sampling_eps"], serde_json::json!(0.5));
+    for cell in doc["cells"].as_array().unwrap() {
+        let sampler = &cell["cullers"][1];
+        assert_eq!(sampler["name"], "shrunk_sampling");
+        assert!(sampler["points"].as_u64().unwrap_or(0) <= 40, "{sampler}");
+    }
+    // The target behind the wall stays culled, the triangle beside it visible from cell 1.
+    assert!(!doc["cells"][0]["visible"].as_array().unwrap().contains(&serde_json::json!(1)));
 }

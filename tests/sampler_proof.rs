@@ -6,24 +6,38 @@
 //! ball of radius `eps` about the eye and every point `q` of `bx` on the outer side of the face
 //! plane (`sign·(q[axis] − eye[axis]) ≥ 0`), the segment `b → q` crosses one of the polygons.
 //!
-//! Each family below generates random configurations (a deterministic splitmix64 generator):
-//! an eye, a face axis and sign, `eps`, convex exactly planar polygons (triangles, and quads
-//! that are extruded segments along a coordinate axis, so they stay exactly planar under every
-//! per-coordinate scaling and offset) and occludee boxes. For every box reported hidden it
-//! samples points `b` (the eye, the ball's surface, its inside, the disc in the face plane,
-//! and for every `q` the points of the ball farthest outside the shadow pyramids of the
-//! polygons the eye's ray to `q` crosses) and points `q` (corners, edges, faces, inside, the
-//! nearest point of the box's part on the outer side) and checks each segment against the
-//! polygons in plain `f64`, strictly: a crossing counts only when the segment's end points are
-//! on opposite sides of the polygon's plane and it passes inside every edge, each by more than
-//! `TOL` (far above the rounding error of the test) relative to the magnitudes involved. All
-//! checks are made in coordinates relative to the eye, which are exact (the eye is the frame's
-//! offset, and every coordinate is either unshifted or within a factor of two of the offset).
+//! Each family generates random configurations (a deterministic splitmix64 generator): an
+//! eye, a face axis and sign, `eps`, convex exactly planar polygons (triangles, quads that are
+//! extruded segments along a coordinate axis and convex polygons of up to 70 vertices in
+//! planes normal to an axis, all of which stay exactly planar under every per-coordinate scale
+//! and offset) and occludee boxes. The families: `foliage` (clusters of 200–2000 small leaves,
+//! fusion), `grazing` (overlapping slats seen 0.5°–20° from edge-on, polygons whose planes
+//! pass just beyond `eps`), `near` (plane distances `eps·(1 + 1e-7…1)`, edges just beyond
+//! `eps`, huge near walls), `crossing` (leaves and walls crossing the face plane), `partly_behind`
+//! (boxes across, touching or just behind the face plane, boxes at the ball), `ground` (a
+//! slanted, tiled ground drawn with per-pixel plane depths, boxes just under, on and over it,
+//! boxes glued behind walls), `general` (a mix, with `eps = 0`, many-vertex and degenerate
+//! polygons, flat and point boxes) and `scaled` (any of them scaled by 1e-3 and offset by 1e5).
+//! Hemicubes are reused across configurations.
 //!
-//! Every family asserts that it hid enough boxes (so it cannot pass vacuously), and
-//! `shrink_matters` asserts that a box hidden from the eye alone but seen from a point of the
-//! ball is reported open (and hidden when the ball is tiny). On a violation the configuration
-//! is reduced (polygons removed while the box stays hidden) and printed in full.
+//! For every box reported hidden, the check samples points `b` (the eye, the ball's axis and
+//! diagonal points, random points on its sphere and inside, points of the disc in the face
+//! plane, and for every `q` the points of the ball farthest outside the shadow pyramid from
+//! `q` of each polygon the eye's ray to `q` crosses) and points `q` (the corners, edges, faces
+//! and inside of the box's part on the outer side, and its point nearest the eye) and tests
+//! each segment against the polygons in plain `f64`, strictly: a crossing counts only when the
+//! segment's end points are on opposite sides of the polygon's plane and it passes inside every
+//! edge, each by more than `TOL` (far above the rounding error of the test) relative to the
+//! magnitudes involved. All of this is in coordinates relative to the eye, which are exact (the
+//! eye is the frame's offset, and every coordinate is either unshifted or within a factor of
+//! two of the offset).
+//!
+//! Every family asserts that it hid a share of its boxes (so it cannot pass vacuously);
+//! `check_catches_a_render_with_less_shrink` renders with no shrink and with half of it and
+//! asserts that the check then finds unblocked segments; `shrink_matters` asserts that a box
+//! hidden from the eye alone but seen from a point of the ball is reported open (and hidden for
+//! a tiny ball) in many frames. On a violation the configuration is reduced (polygons removed
+//! while the box stays hidden) and printed in full. Counts are halved in debug builds.
 #![cfg(feature = "bake")]
 
 use glam::DVec3;
@@ -37,7 +51,7 @@ const TOL: f64 = 1e-13;
 /// Configurations per family: fewer in debug builds (`cargo test`).
 fn count(release: usize) -> usize {
     if cfg!(debug_assertions) {
-        release.div_ceil(5)
+        release.div_ceil(2)
     } else {
         release
     }
@@ -230,19 +244,26 @@ fn gen_foliage(rng: &mut Rng) -> Local {
     // leaves across, 200–2000 leaves.
     let s = rng.u(5.0, 16.0) * 2.0 / res as f64 * d / 2.0;
     let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
-    let tau = rng.u(3.0, 12.0);
+    let tau = rng.u(1.0, 10.0);
     let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(200, 2000);
     let mut l = Local {
-        eps: s * rng.log_u(0.005, 0.2),
+        // The shrink from a twentieth of a pixel to six pixels.
+        eps: d * 2.0 / res as f64 * rng.log_u(0.05, 6.0),
         res,
         ..Local::default()
     };
     cluster(rng, &mut l.polys, c, dir, r, n, s);
     for _ in 0..5 {
-        let t = r * rng.u(1.2, 4.0);
-        let lat = rng.in_ball() * r * 0.4;
+        // Just behind the cluster, or far behind it (large parallax across the ball).
+        let t = if rng.chance(0.5) {
+            r * rng.u(1.2, 4.0)
+        } else {
+            d * rng.u(0.5, 3.0)
+        };
+        let k = (d + t) / d;
+        let lat = rng.in_ball() * r * 0.4 * k;
         let lat = lat - dir * lat.dot(dir);
-        let h = r * rng.u(0.03, 0.3);
+        let h = r * rng.u(0.03, 0.3) * k;
         let hv = jitter_half(rng, h);
         l.boxes.push(cube(c + dir * t + lat, hv));
     }
@@ -576,8 +597,13 @@ fn gen_partly_behind(rng: &mut Rng) -> Local {
 
 /// A generic mix: walls, leaves, small clusters, boxes anywhere.
 fn gen_general(rng: &mut Rng) -> Local {
+    let eps = match rng.below(20) {
+        0 => 0.0,
+        1 => 1e-9,
+        _ => rng.log_u(0.003, 0.2),
+    };
     let mut l = Local {
-        eps: rng.log_u(0.003, 0.2),
+        eps,
         res: rng.pick(&[16, 32, 48, 64, 128, 256]),
         ..Local::default()
     };
@@ -587,6 +613,35 @@ fn gen_general(rng: &mut Rng) -> Local {
         let s = rng.u(0.5, 4.0);
         let p = leaf_or_strip(rng, c, s, 0.7);
         l.polys.push(p);
+    }
+    // Convex polygons of many vertices (over 64 are left out by the sampler) in planes normal
+    // to an axis, so exactly planar.
+    let discs = rng.below(4);
+    for _ in 0..discs {
+        let c = rng.unit_up(0.0) * rng.u(0.3, 6.0);
+        let ax = rng.below(3);
+        let m = rng.pick(&[5, 8, 17, 40, 64, 65, 70]);
+        let rad = rng.u(0.2, 2.0);
+        let t0 = rng.u(0.0, TAU);
+        let p: Vec<DVec3> = (0..m)
+            .map(|i| {
+                let t = t0 + i as f64 * TAU / m as f64;
+                let mut v = c;
+                v[(ax + 1) % 3] += rad * t.cos();
+                v[(ax + 2) % 3] += rad * t.sin();
+                v
+            })
+            .collect();
+        l.polys.push(p);
+    }
+    // Degenerate polygons: a repeated vertex, collinear vertices.
+    if rng.chance(0.2) {
+        let c = rng.unit_up(0.0) * rng.u(0.5, 4.0);
+        let mut p = leaf(rng, c, 1.0);
+        p.insert(1, p[1]);
+        l.polys.push(p);
+        let e = rng.unit();
+        l.polys.push(vec![c, c + e, c + e * 2.0]);
     }
     let nl = rng.below(400);
     for _ in 0..nl {
@@ -606,7 +661,117 @@ fn gen_general(rng: &mut Rng) -> Local {
     for _ in 0..6 {
         let dist = rng.u(0.2, 12.0);
         let size = rng.log_u(0.01, 1.5);
-        l.boxes.push(random_box(rng, dist, size));
+        let mut b = random_box(rng, dist, size);
+        // Some flat boxes and points.
+        match rng.below(8) {
+            0 => {
+                let k = rng.below(3);
+                b[1][k] = b[0][k];
+            }
+            1 => b[1] = b[0],
+            _ => {}
+        }
+        l.boxes.push(b);
+    }
+    l
+}
+
+/// A ground (a large, possibly slanted, possibly tiled plane under the eye, drawn with the
+/// per-pixel plane depth) and boxes just under it, on it, through it and just above it, at
+/// gaps from 0 to 1e-1 relative (the depth margins), plus axis-aligned walls with boxes
+/// glued right behind them.
+fn gen_ground(rng: &mut Rng) -> Local {
+    let eps = rng.u(0.005, 0.1);
+    let mut l = Local {
+        eps,
+        res: rng.pick(&[32, 64, 128, 256]),
+        ..Local::default()
+    };
+    // The ground y = −h + σ·z, z ∈ [−zb, zf], extruded along x over [−L, L].
+    let sigma = if rng.chance(0.3) {
+        0.0
+    } else {
+        rng.u(-0.3, 0.3)
+    };
+    let h = eps * (1.0 + sigma * sigma).sqrt() * rng.log_u(1.0 + 1e-6, 40.0);
+    let (zb, zf, big_l) = (rng.u(0.0, 5.0), rng.u(5.0, 30.0), rng.u(5.0, 30.0));
+    let at = |z: f64| DVec3::new(0.0, -h + sigma * z, z);
+    let tiles = if rng.chance(0.5) { 1 } else { 2 + rng.below(6) };
+    let overlap = if rng.chance(0.5) {
+        0.0
+    } else {
+        rng.u(0.0, 0.5)
+    };
+    let along_z = rng.chance(0.5);
+    for i in 0..tiles {
+        let f0 = i as f64 / tiles as f64;
+        let f1 = (i + 1) as f64 / tiles as f64;
+        if along_z {
+            let z0 = -zb + (zf + zb) * f0 - overlap;
+            let z1 = -zb + (zf + zb) * f1;
+            l.polys.push(strip(0, at(z0), at(z1), -big_l, big_l));
+        } else {
+            let x0 = -big_l + 2.0 * big_l * f0 - overlap;
+            let x1 = -big_l + 2.0 * big_l * f1;
+            l.polys.push(strip(0, at(-zb), at(zf), x0, x1));
+        }
+    }
+    for _ in 0..6 {
+        let z = rng.u(0.3, zf * 0.8);
+        let x = rng.u(-0.6, 0.6) * big_l * 0.8;
+        let yg = -h + sigma * z;
+        let gap = if rng.chance(0.2) {
+            0.0
+        } else {
+            z * rng.log_u(1e-12, 0.1)
+        };
+        let size = rng.log_u(0.01, 1.0);
+        let hx = size * rng.u(0.5, 1.5);
+        let hz = size * rng.u(0.5, 1.5);
+        let (y0, y1) = match rng.below(4) {
+            0 => (yg - gap - size, yg - gap),
+            1 => (yg + gap, yg + gap + size),
+            2 => (yg - size, yg + size),
+            _ => (yg - gap - size, yg - gap - size * rng.f()),
+        };
+        // A slanted ground crosses the box's z range: keep the box under (or over) it all.
+        let slope = sigma.abs() * hz;
+        let (y0, y1) = if y1 <= yg {
+            (y0 - slope, y1 - slope)
+        } else {
+            (y0 + slope, y1 + slope)
+        };
+        l.boxes.push([
+            DVec3::new(x - hx, y0, z - hz),
+            DVec3::new(x + hx, y1, z + hz),
+        ]);
+    }
+    // Axis-aligned walls facing the eye with boxes right behind them.
+    let walls = rng.below(3);
+    for _ in 0..walls {
+        let z = rng.u(0.5, 5.0);
+        let (cx, cy) = (rng.u(-2.0, 2.0), rng.u(-0.5, 2.0));
+        let (wx, wy) = (rng.u(0.5, 3.0), rng.u(0.5, 3.0));
+        l.polys.push(strip(
+            0,
+            DVec3::new(0.0, cy - wy, z),
+            DVec3::new(0.0, cy + wy, z),
+            cx - wx,
+            cx + wx,
+        ));
+        let gap = if rng.chance(0.3) {
+            0.0
+        } else {
+            z * rng.log_u(1e-12, 0.1)
+        };
+        let f = rng.u(0.05, 0.5);
+        let zb = z + gap;
+        let zb1 = zb + rng.u(0.0, 2.0);
+        let k = zb / z;
+        l.boxes.push([
+            DVec3::new(cx - wx * f * k, cy - wy * f * k, zb),
+            DVec3::new(cx + wx * f * k, cy + wy * f * k, zb1),
+        ]);
     }
     l
 }
@@ -737,7 +902,7 @@ impl RelPoly {
         for i in 0..m {
             n += v[i].cross(v[(i + 1) % m]);
         }
-        if !(n.length() > 0.0) {
+        if n.length().is_nan() || n.length() <= 0.0 {
             return None;
         }
         let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
@@ -1191,31 +1356,40 @@ struct Family {
 
 /// Any family's generator, chosen at random (for the scaled family).
 fn gen_any(rng: &mut Rng) -> Local {
-    let gens: [fn(&mut Rng) -> Local; 6] = [
+    let gens: [fn(&mut Rng) -> Local; 7] = [
         gen_foliage,
         gen_grazing,
         gen_near,
         gen_crossing,
         gen_partly_behind,
         gen_general,
+        gen_ground,
     ];
     let g = rng.pick(&gens);
     g(rng)
 }
 
-const FAMILIES: [Family; 7] = [
+const FAMILIES: [Family; 8] = [
+    Family {
+        name: "ground",
+        seed: 0x62_0ED,
+        configs: 1000,
+        scaled: false,
+        generate: gen_ground,
+        min_hidden: 0.05,
+    },
     Family {
         name: "foliage",
-        seed: 0xF011_A6E,
-        configs: 160,
+        seed: 0x0F01_1A6E,
+        configs: 2000,
         scaled: false,
         generate: gen_foliage,
-        min_hidden: 0.15,
+        min_hidden: 0.05,
     },
     Family {
         name: "grazing",
-        seed: 0x6A2_1A6,
-        configs: 200,
+        seed: 0x006A_21A6,
+        configs: 600,
         scaled: false,
         generate: gen_grazing,
         min_hidden: 0.05,
@@ -1223,7 +1397,7 @@ const FAMILIES: [Family; 7] = [
     Family {
         name: "near",
         seed: 0x4EA2,
-        configs: 600,
+        configs: 1500,
         scaled: false,
         generate: gen_near,
         min_hidden: 0.05,
@@ -1231,7 +1405,7 @@ const FAMILIES: [Family; 7] = [
     Family {
         name: "crossing",
         seed: 0xC2055,
-        configs: 160,
+        configs: 400,
         scaled: false,
         generate: gen_crossing,
         min_hidden: 0.05,
@@ -1239,7 +1413,7 @@ const FAMILIES: [Family; 7] = [
     Family {
         name: "partly_behind",
         seed: 0xBE41D,
-        configs: 400,
+        configs: 1000,
         scaled: false,
         generate: gen_partly_behind,
         min_hidden: 0.05,
@@ -1247,7 +1421,7 @@ const FAMILIES: [Family; 7] = [
     Family {
         name: "general",
         seed: 0x6E4E2A1,
-        configs: 300,
+        configs: 750,
         scaled: false,
         generate: gen_general,
         min_hidden: 0.02,
@@ -1255,7 +1429,7 @@ const FAMILIES: [Family; 7] = [
     Family {
         name: "scaled",
         seed: 0x5CA1ED,
-        configs: 300,
+        configs: 750,
         scaled: true,
         generate: gen_any,
         min_hidden: 0.05,
@@ -1295,6 +1469,11 @@ fn boxes_partly_behind_the_face_plane() {
 }
 
 #[test]
+fn ground_and_glued_boxes() {
+    family("ground");
+}
+
+#[test]
 fn general_mix() {
     family("general");
 }
@@ -1320,6 +1499,13 @@ fn check_catches_a_render_with_less_shrink() {
                 factor,
             );
             total += st.violations;
+            if ["near", "general"].contains(&f.name) {
+                assert!(
+                    st.violations > 0,
+                    "family {}: no violation found with the render's eps x {factor}",
+                    f.name
+                );
+            }
         }
         assert!(
             total > 0,
@@ -1356,7 +1542,8 @@ fn checker_is_strict() {
 }
 
 /// A box hidden from the eye point alone but seen from a point of the ball must be reported
-/// open (the test fails if the shrink is removed), and hidden for a tiny ball.
+/// open (the test fails if the shrink is removed), and hidden for a tiny ball; the check must
+/// find the segment that is not blocked, in every frame (axes, signs, offsets, 1e-3 scale).
 #[test]
 fn shrink_matters() {
     let wall = vec![
@@ -1365,65 +1552,89 @@ fn shrink_matters() {
         DVec3::new(1.0, 1.0, 2.0),
         DVec3::new(-1.0, 1.0, 2.0),
     ];
-    let bx = DAabb {
-        min: DVec3::new(-2.42, -2.42, 5.0),
-        max: DVec3::new(2.42, 2.42, 6.0),
-    };
-    let polys = vec![(wall.clone(), 0)];
-    let rel = vec![RelPoly::new(&wall, DVec3::ZERO).unwrap()];
-    let corner = DVec3::new(2.42, 0.0, 5.0);
+    let bx = [DVec3::new(-2.42, -2.42, 5.0), DVec3::new(2.42, 2.42, 6.0)];
+    let rel = RelPoly::new(&wall, DVec3::ZERO).unwrap();
     // From the eye every point of the box is behind the wall ...
     let mut rng = Rng(7);
-    for q in box_points(&mut rng, bx.min, bx.max) {
-        assert!(
-            crosses(DVec3::ZERO, q, &rel[0]),
-            "eye to {q} must be blocked"
-        );
+    for q in box_points(&mut rng, bx[0], bx[1]) {
+        assert!(crosses(DVec3::ZERO, q, &rel), "eye to {q} must be blocked");
     }
-    // ... but not from a point of the ball of radius 0.1.
+    // ... but not from a point of the ball of radius 0.1 (x = +0.1 sees past the wall's edge
+    // at x = 1 to the box's corner at x = 2.42, z = 5), which the targeted points find.
+    let corner = DVec3::new(2.42, 0.0, 5.0);
     assert!(!crosses(
         DVec3::new(0.1 * (1.0 - 1e-12), 0.0, 0.0),
         corner,
-        &rel[0]
+        &rel
     ));
-    for (eye_off, axis, sign) in [(DVec3::ZERO, 2, 1.0), (DVec3::new(3.0, -7.0, 1e5), 2, 1.0)] {
-        let shift = |v: DVec3| v + eye_off;
-        let cfg = |eps: f64| Config {
-            family: "shrink_matters",
-            index: 0,
-            seed: 0,
-            eye: eye_off,
-            axis,
-            sign,
+    let mut targeted = Vec::new();
+    targeted_points(corner, 0.1, &[0], std::slice::from_ref(&rel), &mut targeted);
+    assert!(targeted.iter().any(|&b| !crosses(b, corner, &rel)));
+    for case in 0..12 {
+        let scaled = case >= 8;
+        let mut rng = Rng(0x5412 + case);
+        let local = |eps: f64| Local {
             eps,
             res: 256,
-            polys: polys
-                .iter()
-                .map(|(p, i)| (p.iter().map(|&v| shift(v)).collect(), *i))
-                .collect(),
-            boxes: vec![DAabb {
-                min: shift(bx.min),
-                max: shift(bx.max),
-            }],
+            polys: vec![wall.clone()],
+            boxes: vec![bx],
         };
+        let tiny = to_world(
+            "shrink_matters",
+            case as usize,
+            0,
+            &local(1e-6),
+            &mut Rng(case),
+            scaled,
+        );
+        let cfg = to_world(
+            "shrink_matters",
+            case as usize,
+            0,
+            &local(0.1),
+            &mut Rng(case),
+            scaled,
+        );
+        let what = format!(
+            "case {case}: eye {}, axis {}, sign {}",
+            cfg.eye, cfg.axis, cfg.sign
+        );
         for res in [128, 256] {
-            let mut c = cfg(1e-6);
-            c.res = res;
             let mut hc = Hemicube::new(res);
+            let mut t = tiny.clone();
+            t.res = res;
             assert_eq!(
-                render(&mut hc, &c, &c.polys, c.eps)[0],
+                render(&mut hc, &t, &t.polys, t.eps)[0],
                 BoxTest::Hidden,
-                "tiny ball, res {res}"
+                "tiny ball, res {res}, {what}"
             );
-            let mut c = cfg(0.1);
-            c.res = res;
             // The same Hemicube, reused.
-            let r = render(&mut hc, &c, &c.polys, c.eps)[0];
+            let r = render(&mut hc, &cfg, &cfg.polys, cfg.eps)[0];
             assert!(
                 matches!(r, BoxTest::Open { .. }),
-                "ball of radius 0.1, res {res}: {r:?}"
+                "ball of radius 0.1, res {res}: {r:?}, {what}"
             );
         }
+        // The check run on it as if it had been reported hidden finds a violation.
+        let rel: Vec<RelPoly> = cfg
+            .polys
+            .iter()
+            .filter_map(|(p, _)| RelPoly::new(p, cfg.eye))
+            .collect();
+        let mut st = Stats::default();
+        assert!(
+            check_box(&mut rng, &cfg, &rel, 0, &mut st).is_err(),
+            "the check misses the gap, {what}"
+        );
+        let rel: Vec<RelPoly> = tiny
+            .polys
+            .iter()
+            .filter_map(|(p, _)| RelPoly::new(p, tiny.eye))
+            .collect();
+        assert!(
+            check_box(&mut rng, &tiny, &rel, 0, &mut st).is_ok(),
+            "tiny ball: the check must pass, {what}"
+        );
     }
 }
 

@@ -14,10 +14,12 @@
 //!    rectangle is sampled at its centre with ε = its half diagonal (rounded up), so the ball
 //!    holds the rectangle. Children split a rectangle exactly at its midpoints, so the
 //!    rectangles of any refinement still cover the face.
-//! 3. **One render per ball** (`crate::sampler`, whose docs carry the proof): an object whose
-//!    every box direction in the outer hemisphere of `F` is covered by a shrunk occluder nearer
-//!    than the box is hidden from every point of the ball, hence from every point of the
-//!    rectangle looking out through `F`. Its pieces may be tested instead of its box (their
+//! 3. **One render per rectangle** (`crate::sampler`, whose docs carry the proof, for balls and
+//!    for rectangles of the face's plane): an object whose every box direction in the outer
+//!    hemisphere of `F` is covered by a shrunk occluder nearer than the box is hidden from
+//!    every point of the rectangle looking out through `F`. The reported ε of a rectangle is
+//!    its half diagonal (the ball holding it); each edge is shrunk for the rectangle's extent
+//!    across it, at most that. Its pieces may be tested instead of its box (their
 //!    union holds all its triangles).
 //! 4. **Refinement only decides more.** An object still undecided at a ball is re-tested in
 //!    the ball's four children; an object undecided at the finest ε, or when the budget runs
@@ -288,13 +290,20 @@ fn cell_seed(cell: &Aabb) -> u64 {
 }
 
 impl Shared<'_> {
-    fn budget_left(&self) -> bool {
+    /// Takes one sample point from the budget; false (and nothing taken) when it is spent.
+    fn take_point(&self) -> bool {
         let s = &self.data.settings;
-        if self.points.load(Ordering::Relaxed) >= s.budget_points {
+        let in_time = s
+            .budget_seconds
+            .is_none_or(|t| self.start.elapsed().as_secs_f64() < t);
+        if !in_time {
             return false;
         }
-        s.budget_seconds
-            .is_none_or(|t| self.start.elapsed().as_secs_f64() < t)
+        if self.points.fetch_add(1, Ordering::Relaxed) >= s.budget_points {
+            self.points.fetch_sub(1, Ordering::Relaxed);
+            return false;
+        }
+        true
     }
 
     fn give_up(&self, list: &[u32]) {
@@ -313,11 +322,10 @@ impl Shared<'_> {
         if list.is_empty() {
             return;
         }
-        if !self.budget_left() {
+        if !self.take_point() {
             self.give_up(&list);
             return;
         }
-        self.points.fetch_add(1, Ordering::Relaxed);
         let f = self.faces[patch.face];
         let (b, c) = ((f.axis + 1) % 3, (f.axis + 2) % 3);
         let mut eye = DVec3::ZERO;
@@ -333,7 +341,13 @@ impl Shared<'_> {
             .iter()
             .map(|&o| scene.objects[o as usize].bounds.to_f64())
             .collect();
-        hc.begin(eye, f.axis, f.sign, eps, &boxes);
+        hc.begin_patch(
+            eye,
+            f.axis,
+            f.sign,
+            [hb * (1.0 + 1e-9), hcx * (1.0 + 1e-9)],
+            &boxes,
+        );
         let st = hc.draw(&self.data.occluders);
         self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
         let mut open: Vec<u32> = Vec::new();

@@ -18,7 +18,9 @@
 //! * `fine`: [`ForestOptions::fine`] (leaves ~0.5 across) with 4×2×4 cells (and an 8-unit
 //!   path, the least round width such cells fit in, as `gen forest --path-width` would need),
 //!   `--sweep`, `--sweep --subcell 2|1|0.5` (on `--foliage-subcell-cells` of the cells, spread
-//!   evenly) and `--no-sweep`.
+//!   evenly), `--no-sweep` and the shrunk-occluder sampler after the sweep (`--sweep --sampling
+//!   --sampling-budget 2000`, on `--foliage-subcell-cells` cells; the coarse study has this row
+//!   too).
 //! * `params`: the coarse forest with the sweep, one row per single change from the default
 //!   settings: kernel spacing with K = 3, 5, 9 (at most 256 planes, so K decides), 12, 24, 48,
 //!   96 geometric sweep planes, resolution 128, 512, 1024, extend 1.0, 1.2, 2.0.
@@ -153,7 +155,25 @@ fn swept(sweep: SweepChoice) -> BakeSettings {
     }
 }
 
-/// The rows of `study` (one of [`STUDIES`]); the sub-cell variants bake `subcell_cells` cells.
+/// Sample points per cell of the sampler rows ([`sampled`]): about ten minutes per cell on two
+/// cores.
+pub const SAMPLING_BENCH_POINTS: u64 = 2000;
+
+/// The sampler row of a study: the sweep, then the shrunk-occluder sampler with at most
+/// [`SAMPLING_BENCH_POINTS`] points per cell, on `cells` cells.
+fn sampled(cells: usize) -> Variant {
+    let mut s = swept(SweepChoice::On);
+    s.sampling = SweepChoice::On;
+    s.sampling_settings.budget_points = SAMPLING_BENCH_POINTS;
+    Variant {
+        label: format!("--sweep --sampling --sampling-budget {SAMPLING_BENCH_POINTS}"),
+        settings: s,
+        max_cells: Some(cells),
+    }
+}
+
+/// The rows of `study` (one of [`STUDIES`]); the sub-cell and sampler variants bake
+/// `subcell_cells` cells.
 pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
     let on = || swept(SweepChoice::On);
     let off = || swept(SweepChoice::Off);
@@ -171,6 +191,7 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
                     ),
                     fine_grained,
                 ),
+                sampled(subcell_cells),
             ]
         }
         "ellipsoid" | "jacaranda" => {
@@ -189,6 +210,7 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
                 });
             }
             v.push(variant("--no-sweep", off()));
+            v.push(sampled(subcell_cells));
             v
         }
         "params" => {
@@ -261,6 +283,15 @@ pub fn describe(s: &BakeSettings) -> String {
     }
     if let Some(x) = s.subcell {
         let _ = write!(out, ", subcell {x}");
+    }
+    if s.sampling == SweepChoice::On {
+        let sa = &s.sampling_settings;
+        let _ = write!(
+            out,
+            ", sampling ε {}, ≤{} points",
+            sa.eps.map_or("auto".to_string(), |e| e.to_string()),
+            sa.budget_points
+        );
     }
     out
 }
@@ -814,7 +845,8 @@ mod tests {
             [
                 "--sweep",
                 "--no-sweep",
-                "--sweep --resolution 1024 --sweep-planes 32"
+                "--sweep --resolution 1024 --sweep-planes 32",
+                "--sweep --sampling --sampling-budget 2000"
             ]
         );
         let goal = &variants("coarse", 3)[2].settings;
@@ -830,7 +862,8 @@ mod tests {
                 "--sweep --subcell 2",
                 "--sweep --subcell 1",
                 "--sweep --subcell 0.5",
-                "--no-sweep"
+                "--no-sweep",
+                "--sweep --sampling --sampling-budget 2000"
             ]
         );
         let params = variants("params", 3);
@@ -868,6 +901,15 @@ mod tests {
         assert_eq!(fine[3].settings.subcell, Some(0.5));
         assert_eq!(fine[3].max_cells, Some(3));
         assert_eq!(fine[4].settings.sweep, SweepChoice::Off);
+        assert_eq!(fine[5].settings.sampling, SweepChoice::On);
+        assert_eq!(fine[5].max_cells, Some(3));
+        assert_eq!(
+            describe(&fine[5].settings),
+            format!(
+                "sweep ≤{} geometric, res 256, extend 1.5, sampling ε auto, ≤2000 points",
+                default.sweep_settings.planes
+            )
+        );
         assert_eq!(
             describe(&params[0].settings),
             "sweep ≤256 kernel K=3, res 256, extend 1.5"

@@ -85,6 +85,11 @@ pub struct Hemicube {
     axis: usize,
     sign: f64,
     eps: f64,
+    /// With [`Hemicube::begin_patch`]: the half sides of the face rectangle the render stands
+    /// for, along the face's axes `(axis+1) % 3` and `(axis+2) % 3`.
+    patch: Option<[f64; 2]>,
+    /// The polygon being drawn is farther than this from the eye (set per polygon).
+    near: f64,
     max_dist: f64,
     stack: Vec<u32>,
     pass: Vec<u8>,
@@ -116,6 +121,8 @@ impl Hemicube {
             axis: 0,
             sign: 1.0,
             eps: 0.0,
+            patch: None,
+            near: 0.0,
             max_dist: 0.0,
             stack: Vec::new(),
             pass: vec![0; res + 1],
@@ -132,6 +139,28 @@ impl Hemicube {
     /// balls of radius `eps`, clears the depths and restricts drawing to the pixels that the
     /// boxes `boxes` (the occludees to test) can reach.
     pub fn begin(&mut self, eye: DVec3, axis: usize, sign: f64, eps: f64, boxes: &[DAabb]) {
+        self.patch = None;
+        self.setup(eye, axis, sign, eps, boxes);
+    }
+
+    /// [`Hemicube::begin`] for the rectangle of the face's plane centred on `eye` with half
+    /// sides `half` (along the axes `(axis+1) % 3` and `(axis+2) % 3`) instead of a ball: a box
+    /// found hidden is hidden from every point of that rectangle (looking out through the
+    /// face), not from the whole ball. Each edge is shrunk for the rectangle's extent seen
+    /// along the edge (see the module docs), never more than for the ball around it.
+    pub fn begin_patch(
+        &mut self,
+        eye: DVec3,
+        axis: usize,
+        sign: f64,
+        half: [f64; 2],
+        boxes: &[DAabb],
+    ) {
+        self.patch = Some(half);
+        self.setup(eye, axis, sign, half[0].hypot(half[1]), boxes);
+    }
+
+    fn setup(&mut self, eye: DVec3, axis: usize, sign: f64, eps: f64, boxes: &[DAabb]) {
         let (a, b, c) = (axis, (axis + 1) % 3, (axis + 2) % 3);
         let maps = [
             [(b, 1.0), (c, 1.0), (a, sign)],
@@ -374,9 +403,26 @@ impl Hemicube {
             return false;
         }
         let plane_dist = (normal / nl).dot(centroid).abs();
-        if !(plane_dist > eps * (1.0 + 1e-6) + 1e-12 * centroid.length()) {
+        // Per edge: the radius of the region sampled, seen along the edge (the ball: ε; the
+        // rectangle: its largest distance from the eye across the edge's direction).
+        let (b_ax, c_ax) = ((self.axis + 1) % 3, (self.axis + 2) % 3);
+        let mut reach = [0f64; 64];
+        let mut most = 0f64;
+        for k in 0..n {
+            reach[k] = match self.patch {
+                None => eps,
+                Some([hb, hc]) => {
+                    let t = (q[(k + 1) % n] - q[k]).normalize_or_zero();
+                    let d = hb * t[b_ax].abs() - hc * t[c_ax].abs();
+                    (hb * hb + hc * hc - d * d).max(0.0).sqrt().min(eps)
+                }
+            } * (1.0 + 1e-9);
+            most = most.max(reach[k]);
+        }
+        if !(plane_dist > most * (1.0 + 1e-6) + 1e-12 * centroid.length()) {
             return false;
         }
+        self.near = plane_dist;
         // Edge planes through the eye, and the shrink per edge.
         let mut edges = [(DVec3::ZERO, 0.0f64); 64];
         for k in 0..n {
@@ -392,7 +438,7 @@ impl Hemicube {
                 m = -m;
             }
             let r = cl / el;
-            edges[k] = (m, eps / r * (1.0 + 1e-6));
+            edges[k] = (m, reach[k] / r * (1.0 + 1e-6));
         }
         let mut drawn = false;
         for k in 0..5 {
@@ -416,9 +462,9 @@ impl Hemicube {
         let view = &self.views[k];
         let map = view.map;
         let to_view = |p: DVec3| DVec3::new(map[0].1 * p[map[0].0], map[1].1 * p[map[1].0], map[2].1 * p[map[2].0]);
-        let zc = 0.5 * self.eps;
-        // Clip at Z ≥ zc (the polygon's part with smaller Z is outside the frustum: all its
-        // points are farther than ε from the eye) and bound the projection.
+        let zc = 0.5 * self.near;
+        // Clip at Z ≥ zc (the polygon's part with smaller Z is outside the frustum, where
+        // |P| ≤ √3·Z: all its points are at least `near` from the eye) and bound the projection.
         let mut zmax = f64::NEG_INFINITY;
         let mut zmin = f64::INFINITY;
         let (mut umin, mut umax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
@@ -651,5 +697,76 @@ mod tests {
         assert_eq!(st.polygons, 1);
         assert_eq!(hc.test_box(&behind), BoxTest::Hidden);
         assert!(matches!(hc.test_box(&beside), BoxTest::Open { .. }));
+    }
+}
+
+#[cfg(test)]
+mod depth_tests {
+    use super::*;
+    use crate::sampler::SampleOccluders;
+
+    /// A ground far wider than deep: its farthest vertex is 50 away, but below the eye it is
+    /// 1 away, and a box under it is hidden there only with the per-pixel plane depth.
+    #[test]
+    fn a_large_ground_hides_what_lies_under_it_near_the_eye() {
+        let ground = vec![
+            DVec3::new(-50.0, 0.0, -50.0),
+            DVec3::new(50.0, 0.0, -50.0),
+            DVec3::new(50.0, 0.0, 50.0),
+            DVec3::new(-50.0, 0.0, 50.0),
+        ];
+        let occ = SampleOccluders::from_polygons(&[(ground, 0)]);
+        let under = DAabb {
+            min: DVec3::new(-0.2, -3.0, -0.2),
+            max: DVec3::new(0.2, -2.0, 0.2),
+        };
+        let above = DAabb {
+            min: DVec3::new(3.0, 0.2, -0.2),
+            max: DVec3::new(3.4, 0.5, 0.2),
+        };
+        let mut hc = Hemicube::new(64);
+        // The eye 1 above the ground on a face looking down (−y).
+        hc.begin(DVec3::new(0.0, 1.0, 0.0), 1, -1.0, 0.05, &[under, above]);
+        hc.draw(&occ);
+        assert_eq!(hc.test_box(&under), BoxTest::Hidden);
+        assert!(matches!(hc.test_box(&above), BoxTest::Open { .. }));
+    }
+
+    /// With the rectangle of the face instead of the ball around it, an edge along the face
+    /// shrinks less: a box just hidden behind a slit-free pair of walls meeting at a seam
+    /// parallel to the face is hidden for the rectangle but not for the ball.
+    #[test]
+    fn a_rectangle_shrinks_edges_along_the_face_less_than_its_ball() {
+        // Two walls overlapping by 0.16 at z = 2 (seen from the eye: a seam along x).
+        let w1 = vec![
+            DVec3::new(-3.0, -3.0, 2.0),
+            DVec3::new(3.0, -3.0, 2.0),
+            DVec3::new(3.0, 0.08, 2.0),
+            DVec3::new(-3.0, 0.08, 2.0),
+        ];
+        let w2 = vec![
+            DVec3::new(-3.0, -0.08, 2.1),
+            DVec3::new(3.0, -0.08, 2.1),
+            DVec3::new(3.0, 3.0, 2.1),
+            DVec3::new(-3.0, 3.0, 2.1),
+        ];
+        let occ = SampleOccluders::from_polygons(&[(w1, 0), (w2, 0)]);
+        let target = DAabb {
+            min: DVec3::new(-0.3, -0.3, 6.0),
+            max: DVec3::new(0.3, 0.3, 6.5),
+        };
+        // A rectangle 0.04 along y (across the seam) and 0.2 along x (along it).
+        let (hx, hy) = (0.1, 0.02);
+        let mut hc = Hemicube::new(256);
+        hc.begin_patch(DVec3::ZERO, 2, 1.0, [hx, hy], &[target]);
+        hc.draw(&occ);
+        assert_eq!(hc.test_box(&target), BoxTest::Hidden, "rectangle");
+        hc.begin(DVec3::ZERO, 2, 1.0, hx.hypot(hy), &[target]);
+        hc.draw(&occ);
+        assert!(
+            matches!(hc.test_box(&target), BoxTest::Open { .. }),
+            "the ball of radius {} shrinks the seam open",
+            hx.hypot(hy)
+        );
     }
 }

@@ -31,6 +31,18 @@
 //! `[0, π]`, so on that interval it is at least `min(sin φ_x, sin θ)`, and
 //! `r_e·sin φ ≥ min(dist(p, plane(L)), r_e·sin θ) ≥ ε`. ∎
 //!
+//! **Rectangles instead of balls** ([`Hemicube::begin_patch`]). Only the points of a face
+//! matter, and the sampler covers a face with rectangles, so the region `R` a render stands
+//! for is a rectangle of the face's plane centred on `p`. The proof above only uses, per edge,
+//! that the region seen along `ℓ_e` (projected onto the plane normal to it) lies within the
+//! disc of radius `ε` about `p`'s projection, and that `dist(p, plane(L))` exceeds that radius.
+//! For the rectangle with half sides `h_b, h_c` (axes in the face's plane) and an edge of unit
+//! direction `t`, the projected corners `w − (w·t)·t` are at most
+//! `ε_e = √(h_b² + h_c² − (h_b·|t_b| − h_c·|t_c|)²)` from it (the largest of the four corners
+//! `w = ±h_b·e_b ± h_c·e_c`), never more than the ball's `√(h_b² + h_c²)`. So each edge is
+//! shrunk by `ε_e / r_e` instead, and a polygon is left out unless its plane is farther than
+//! every `ε_e`; then every segment from a point of `R` to `q` crosses `L`.
+//!
 //! **Pixels.** A pixel of a hemicube view is the set of directions `(u, v, 1)` (view
 //! coordinates) over a closed square of the image plane. For one edge, the directions
 //! satisfying its condition meet the image plane in `{(u, v) : a·u + b·v + c ≥ s·√(u²+v²+1)}`,
