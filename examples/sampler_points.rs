@@ -16,7 +16,8 @@ fn main() {
     let eps: f64 = args[4].parse().unwrap();
     let res: u32 = args[5].parse().unwrap();
     let n: usize = args[6].parse().unwrap();
-    let occ = umbrasweep::project::occluders::prepare(&scene, &vec![true; scene.objects.len()], false);
+    let occ =
+        umbrasweep::project::occluders::prepare(&scene, &vec![true; scene.objects.len()], false);
     let data = SamplerData::new(&occ, &scene, &BakeSettings::default());
     let cell = cells[ci].to_f64();
     let mut open = vec![0u32; scene.objects.len()];
@@ -24,7 +25,9 @@ fn main() {
     let mut hc = Hemicube::new(res);
     let mut seed = 7u64;
     let mut rnd = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (seed >> 11) as f64 / (1u64 << 53) as f64
     };
     let t = Instant::now();
@@ -35,17 +38,28 @@ fn main() {
         for a in 0..3 {
             eye[a] = cell.min[a] + rnd() * (cell.max[a] - cell.min[a]);
         }
-        eye[axis] = if sign > 0.0 { cell.max[axis] } else { cell.min[axis] };
+        eye[axis] = if sign > 0.0 {
+            cell.max[axis]
+        } else {
+            cell.min[axis]
+        };
         let ids: Vec<usize> = (0..scene.objects.len())
             .filter(|&o| {
                 let b = scene.objects[o].bounds;
                 !b.is_empty() && !b.to_f64().overlaps(&cell) && {
                     let b = b.to_f64();
-                    if sign > 0.0 { b.max[axis] >= eye[axis] } else { b.min[axis] <= eye[axis] }
+                    if sign > 0.0 {
+                        b.max[axis] >= eye[axis]
+                    } else {
+                        b.min[axis] <= eye[axis]
+                    }
                 }
             })
             .collect();
-        let boxes: Vec<DAabb> = ids.iter().map(|&o| scene.objects[o].bounds.to_f64()).collect();
+        let boxes: Vec<DAabb> = ids
+            .iter()
+            .map(|&o| scene.objects[o].bounds.to_f64())
+            .collect();
         hc.begin(eye, axis, sign, eps, &boxes);
         hc.draw(&data.occluders);
         let mut opened = 0;
@@ -56,24 +70,42 @@ fn main() {
                 continue;
             }
             if let BoxTest::Open { direction } = tb
-                && k < 12 && opened < 3
+                && k < 12
+                && opened < 3
             {
-                let hits = data.rays.trace(eye.as_vec3(), direction.normalize().as_vec3(), false);
+                let hits = data
+                    .rays
+                    .trace(eye.as_vec3(), direction.normalize().as_vec3(), false);
                 let d = direction.normalize();
-                let desc: Vec<String> = hits.iter().map(|h| {
-                    let [a, bb, c] = scene.triangle(h.triangle as usize).map(|p| p.as_dvec3());
-                    let n = (bb - a).cross(c - a).normalize();
-                    let pd = n.dot(a - eye).abs();
-                    format!("obj {} t {:.2} plane-dist {:.2} edge {:.2}", h.object, h.t, pd, (bb - a).length())
-                }).collect();
+                let desc: Vec<String> = hits
+                    .iter()
+                    .map(|h| {
+                        let [a, bb, c] = scene.triangle(h.triangle as usize).map(|p| p.as_dvec3());
+                        let n = (bb - a).cross(c - a).normalize();
+                        let pd = n.dot(a - eye).abs();
+                        format!(
+                            "obj {} t {:.2} plane-dist {:.2} edge {:.2}",
+                            h.object,
+                            h.t,
+                            pd,
+                            (bb - a).length()
+                        )
+                    })
+                    .collect();
                 let bb = b;
                 let near = (bb.min - eye).max(eye - bb.max).max(DVec3::ZERO).length();
-                println!("   open obj {o} (box dist {near:.2}) dir {:.3?}: {:?}", d, desc);
+                println!(
+                    "   open obj {o} (box dist {near:.2}) dir {:.3?}: {:?}",
+                    d, desc
+                );
             }
             let ob = &scene.objects[o];
             let all = ob.triangles.clone().all(|t| {
                 let [a, bb, c] = scene.triangle(t as usize).map(|p| p.as_dvec3());
-                hc.test_box(&DAabb { min: a.min(bb).min(c), max: a.max(bb).max(c) }) == BoxTest::Hidden
+                hc.test_box(&DAabb {
+                    min: a.min(bb).min(c),
+                    max: a.max(bb).max(c),
+                }) == BoxTest::Hidden
             });
             if !all {
                 open[o] += 1;
@@ -81,7 +113,12 @@ fn main() {
             }
         }
         if k < 36 {
-            println!("face {axis}{sign:+} eye {:.2?} (rel {:.2?}): {opened} open of {}", eye, (eye - cell.min) / (cell.max - cell.min), ids.len());
+            println!(
+                "face {axis}{sign:+} eye {:.2?} (rel {:.2?}): {opened} open of {}",
+                eye,
+                (eye - cell.min) / (cell.max - cell.min),
+                ids.len()
+            );
         }
     }
     println!("{n} points in {:.1} s", t.elapsed().as_secs_f64());
@@ -96,8 +133,27 @@ fn main() {
             continue;
         }
         let f = open[o] as f64 / seen_from[o] as f64;
-        let b = if f < 0.01 { 0 } else if f < 0.02 { 1 } else if f < 0.05 { 2 } else if f < 0.1 { 3 } else if f < 0.2 { 4 } else if f < 0.5 { 5 } else if f < 1.0 { 6 } else { 7 };
+        let b = if f < 0.01 {
+            0
+        } else if f < 0.02 {
+            1
+        } else if f < 0.05 {
+            2
+        } else if f < 0.1 {
+            3
+        } else if f < 0.2 {
+            4
+        } else if f < 0.5 {
+            5
+        } else if f < 1.0 {
+            6
+        } else {
+            7
+        };
         hist[b] += 1;
     }
-    println!("never open: {never}; open at <1%: {}, 1-2%: {}, 2-5%: {}, 5-10%: {}, 10-20%: {}, 20-50%: {}, 50-99%: {}, all: {}", hist[0], hist[1], hist[2], hist[3], hist[4], hist[5], hist[6], hist[7]);
+    println!(
+        "never open: {never}; open at <1%: {}, 1-2%: {}, 2-5%: {}, 5-10%: {}, 10-20%: {}, 20-50%: {}, 50-99%: {}, all: {}",
+        hist[0], hist[1], hist[2], hist[3], hist[4], hist[5], hist[6], hist[7]
+    );
 }

@@ -216,7 +216,9 @@ pub fn parse_budget(
         if let Some(t) = v.strip_suffix('s') {
             match t.trim().parse::<f64>() {
                 Ok(t) if t.is_finite() && t > 0.0 => s.budget_seconds = Some(t),
-                _ => bail!("--sampling-budget {v:?}: expected a positive number of seconds such as 30s"),
+                _ => bail!(
+                    "--sampling-budget {v:?}: expected a positive number of seconds such as 30s"
+                ),
             }
         } else {
             match v.parse::<u64>() {

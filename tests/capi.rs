@@ -27,6 +27,7 @@ fn document() -> PvsDocument {
                 .filter(|&o| (o + c) % 4 != 0 || o == 60 + c)
                 .collect(),
             ms: 1.0,
+            cullers: Vec::new(),
         })
         .collect();
     PvsDocument {

@@ -174,12 +174,18 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
     refuses(&scene, &["--cells", c, "--occluders", "[x"], "--occluders");
     // The sampler's options.
     for (args, needle) in [
-        (&["--sampling-budget", "lots"][..], "--sampling-budget \"lots\""),
+        (
+            &["--sampling-budget", "lots"][..],
+            "--sampling-budget \"lots\"",
+        ),
         (&["--sampling-budget", "0"][..], "--sampling-budget \"0\""),
         (&["--sampling-budget", "0s"][..], "seconds"),
         (&["--sampling-eps", "0"][..], "--sampling-eps 0"),
         (&["--sampling-eps", "nan"][..], "--sampling-eps"),
-        (&["--sampling-resolution", "8"][..], "--sampling-resolution 8"),
+        (
+            &["--sampling-resolution", "8"][..],
+            "--sampling-resolution 8",
+        ),
         (&["--sampling-levels", "40"][..], "--sampling-levels 40"),
         (&["--sampling", "--no-sampling"][..], "--no-sampling"),
     ] {
@@ -200,14 +206,23 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
         .arg("bake")
         .arg(&scene)
         .args(["--cells", cells.to_str().unwrap(), "--backend", "cpu"])
-        .args(["--sampling", "--sampling-budget", "40,60s", "--sampling-eps", "0.5"])
+        .args([
+            "--sampling",
+            "--sampling-budget",
+            "40,60s",
+            "--sampling-eps",
+            "0.5",
+        ])
         .arg("-o")
         .arg(&out)
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{stderr}");
-    assert!(stderr.contains("sampling    yes — --sampling; finest ε 0.5"), "{stderr}");
+    assert!(
+        stderr.contains("sampling    yes — --sampling; finest ε 0.5"),
+        "{stderr}"
+    );
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let s = &doc["settings"];
@@ -221,5 +236,10 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
         assert!(sampler["points"].as_u64().unwrap_or(0) <= 40, "{sampler}");
     }
     // The target behind the wall stays culled, the triangle beside it visible from cell 1.
-    assert!(!doc["cells"][0]["visible"].as_array().unwrap().contains(&serde_json::json!(1)));
+    assert!(
+        !doc["cells"][0]["visible"]
+            .as_array()
+            .unwrap()
+            .contains(&serde_json::json!(1))
+    );
 }

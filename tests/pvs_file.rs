@@ -621,18 +621,38 @@ fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read
     s.sweep_settings.spacing = Spacing::Kernel;
     s.subcell = Some(2.0);
     s.max_stretch = 4;
+    // A bake records the sampler as it ran (true or false).
+    s.sampling = SweepChoice::Off;
     let culler = umbrasweep::pvs::PvsCullerSummary {
         name: "occlusion_sweep".into(),
         hidden: 12.5,
         only: 11.5,
         ms: 3.25,
         planes: 7.0,
+        ..Default::default()
     };
     doc.summary.as_mut().unwrap().cullers = vec![culler.clone()];
     let v4 = binary::encode(&doc).unwrap();
     assert_eq!(&v4[8..12], &4u32.to_le_bytes());
     let back = PvsDatabase::from_bytes(&v4).unwrap().to_document();
     assert_eq!(json(&back), json(&doc));
+    // The sampler's switch is read back from the cullers' accounts.
+    let mut sampled = doc.clone();
+    sampled.settings.bake.sampling = SweepChoice::On;
+    sampled
+        .summary
+        .as_mut()
+        .unwrap()
+        .cullers
+        .push(umbrasweep::pvs::PvsCullerSummary {
+            name: "shrunk_sampling".into(),
+            hidden: 1.0,
+            ..Default::default()
+        });
+    let back = PvsDatabase::from_bytes(&binary::encode(&sampled).unwrap())
+        .unwrap()
+        .to_document();
+    assert_eq!(json(&back), json(&sampled));
     assert_eq!(back.summary.unwrap().cullers, vec![culler]);
 
     // Rewrites `file`'s payload without `cut` (found in it), as version `version`.

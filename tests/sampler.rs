@@ -7,7 +7,9 @@
 use glam::{DVec3, Vec3};
 use std::fmt::Write as _;
 use umbrasweep::backend::cpu::CpuBackend;
-use umbrasweep::bake::{self, BakeSettings, CullState, Culler, Prepared, SamplingCuller, SweepChoice};
+use umbrasweep::bake::{
+    self, BakeSettings, CullState, Culler, Prepared, SamplingCuller, SweepChoice,
+};
 use umbrasweep::geom::Aabb;
 use umbrasweep::settings::SamplingSettings;
 use umbrasweep::validate::SceneRays;
@@ -41,13 +43,29 @@ fn cube(obj: &mut String, nv: &mut usize, name: &str, min: DVec3, max: DVec3) {
 fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
     let mut obj = String::new();
     let mut nv = 0;
-    cube(&mut obj, &mut nv, "target", DVec3::new(-0.5, -0.5, 8.0), DVec3::new(0.5, 0.5, 9.0));
-    cube(&mut obj, &mut nv, "open", DVec3::new(8.0, -0.5, -0.5), DVec3::new(9.0, 0.5, 0.5));
+    cube(
+        &mut obj,
+        &mut nv,
+        "target",
+        DVec3::new(-0.5, -0.5, 8.0),
+        DVec3::new(0.5, 0.5, 9.0),
+    );
+    cube(
+        &mut obj,
+        &mut nv,
+        "open",
+        DVec3::new(8.0, -0.5, -0.5),
+        DVec3::new(9.0, 0.5, 0.5),
+    );
     writeln!(obj, "o leaves").unwrap();
     let mut rng = Rng(3);
     let mut n = 0;
     while n < 3000 {
-        let c = DVec3::new(rng.f() * 6.0 - 3.0, rng.f() * 6.0 - 3.0, 3.0 + rng.f() * 0.4);
+        let c = DVec3::new(
+            rng.f() * 6.0 - 3.0,
+            rng.f() * 6.0 - 3.0,
+            3.0 + rng.f() * 0.4,
+        );
         if hole.is_some_and(|r| c.x.hypot(c.y) < r + 0.6) {
             continue;
         }
@@ -91,7 +109,13 @@ fn sampler_hides(scene: &umbrasweep::Scene, cell: &Aabb) -> Vec<bool> {
         known_visible: None,
     };
     let work = SamplingCuller
-        .cull(&prepared, cell, &CpuBackend::new(), &mut state, &mut |_, _, _| {})
+        .cull(
+            &prepared,
+            cell,
+            &CpuBackend::new(),
+            &mut state,
+            &mut |_, _, _| {},
+        )
         .unwrap();
     assert!(work.points > 0, "the sampler rendered no point");
     if state.hidden[0] {
@@ -114,7 +138,11 @@ fn brute_force_hidden(scene: &umbrasweep::Scene, cell: &Aabb, object: u32) {
             + (rng.f() * o.triangles.len() as f64) as usize % o.triangles.len();
         let [a, b, c] = scene.triangle(t).map(|p| p.as_dvec3());
         let (u, v) = (rng.f(), rng.f());
-        let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+        let (u, v) = if u + v > 1.0 {
+            (1.0 - u, 1.0 - v)
+        } else {
+            (u, v)
+        };
         let to = a + (b - a) * u + (c - a) * v;
         let hits = rays.trace(from.as_vec3(), (to - from).as_vec3(), false);
         let first = hits.first().expect("the ray reaches the object at least");
@@ -182,7 +210,15 @@ fn the_default_leaves_the_sampler_off_and_says_why() {
     let (scene, cell) = scene(None);
     let p = Prepared::new(&scene, &BakeSettings::default(), &[cell]).unwrap();
     assert!(!p.sampling);
-    assert!(p.sampling_reason.contains("--sampling"), "{}", p.sampling_reason);
+    assert!(
+        p.sampling_reason.contains("--sampling"),
+        "{}",
+        p.sampling_reason
+    );
     let p = Prepared::new(&scene, &settings(), &[cell]).unwrap();
-    assert!(p.sampling && p.sampling_reason.contains("0.1"), "{}", p.sampling_reason);
+    assert!(
+        p.sampling && p.sampling_reason.contains("0.1"),
+        "{}",
+        p.sampling_reason
+    );
 }

@@ -18,7 +18,9 @@
 //! slanted, tiled ground drawn with per-pixel plane depths, boxes just under, on and over it,
 //! boxes glued behind walls), `general` (a mix, with `eps = 0`, many-vertex and degenerate
 //! polygons, flat and point boxes) and `scaled` (any of them scaled by 1e-3 and offset by 1e5).
-//! Hemicubes are reused across configurations.
+//! `patch` and `patch_scaled` check `Hemicube::begin_patch` the same way, from the points of a
+//! rectangle of the face (half diagonal `eps`, some flat) instead of the ball, with near
+//! polygons also nearer than `eps`. Hemicubes are reused across configurations.
 //!
 //! For every box reported hidden, the check samples points `b` (the eye, the ball's axis and
 //! diagonal points, random points on its sphere and inside, points of the disc in the face
@@ -371,6 +373,18 @@ fn gen_grazing(rng: &mut Rng) -> Local {
 /// Polygons near the sample point: plane distance just above ε (by a relative 1e-7 to 1),
 /// edges just beyond ε, some huge near walls; a few leaves a little farther for fusion.
 fn gen_near(rng: &mut Rng) -> Local {
+    gen_near_from(rng, 1.0)
+}
+
+/// [`gen_near`] with plane distances from `eps·(base + 1e-7…1)`, `base` in [0.1, 1]: for
+/// rectangles (`begin_patch`), whose edges may be shrunk by less than the half diagonal
+/// `eps`, so that polygons nearer than `eps` are drawn too.
+fn gen_near_patch(rng: &mut Rng) -> Local {
+    let base = rng.u(0.1, 1.0);
+    gen_near_from(rng, base)
+}
+
+fn gen_near_from(rng: &mut Rng, base: f64) -> Local {
     let eps = rng.u(0.01, 0.1);
     let mut l = Local {
         eps,
@@ -399,7 +413,7 @@ fn gen_near(rng: &mut Rng) -> Local {
         } else {
             n.any_orthonormal_pair()
         };
-        let pd = eps * (1.0 + rng.log_u(1e-7, 1.0));
+        let pd = eps * (base + rng.log_u(1e-7, 1.0));
         let foot = n * pd;
         let (h, l1, l2, l3) = if big {
             (
@@ -845,6 +859,9 @@ struct Config {
     axis: usize,
     sign: f64,
     eps: f64,
+    /// Rendered with `begin_patch` for this rectangle of the face's plane (half sides along
+    /// the axes `(axis+1) % 3` and `(axis+2) % 3`, `eps` its half diagonal) instead of the ball.
+    patch: Option<[f64; 2]>,
     res: u32,
     polys: Vec<(Vec<DVec3>, u32)>,
     boxes: Vec<DAabb>,
@@ -871,6 +888,7 @@ fn to_world(
         axis: f.axis,
         sign: f.sign,
         eps: l.eps * f.scale,
+        patch: None,
         res: l.res,
         polys: l
             .polys
@@ -1007,6 +1025,34 @@ fn ball_points(rng: &mut Rng, eps: f64, axis: usize) -> Vec<DVec3> {
         }
         let f = if i < 7 { 1.0 } else { rng.f() };
         out.push(u.normalize() * r * f);
+    }
+    out
+}
+
+/// Points of the rectangle of the face's plane with half sides `half` about the eye: its
+/// corners (for one polygon they suffice: the points whose segment to `q` crosses it form a
+/// convex set), points of its edges and inside, and its centre.
+fn rect_points(rng: &mut Rng, half: [f64; 2], axis: usize) -> Vec<DVec3> {
+    let (ba, ca) = ((axis + 1) % 3, (axis + 2) % 3);
+    let (hb, hc) = (half[0] * (1.0 - 1e-12), half[1] * (1.0 - 1e-12));
+    let at = |x: f64, y: f64| {
+        let mut p = DVec3::ZERO;
+        p[ba] = x * hb;
+        p[ca] = y * hc;
+        p
+    };
+    let mut out = vec![DVec3::ZERO];
+    for (x, y) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+        out.push(at(x, y));
+    }
+    for _ in 0..3 {
+        for s in [-1.0, 1.0] {
+            out.push(at(s, rng.u(-1.0, 1.0)));
+            out.push(at(rng.u(-1.0, 1.0), s));
+        }
+    }
+    for _ in 0..6 {
+        out.push(at(rng.u(-1.0, 1.0), rng.u(-1.0, 1.0)));
     }
     out
 }
@@ -1152,12 +1198,17 @@ fn check_box(
         let d = |k: usize| polys[k].centroid.length_squared();
         d(i).total_cmp(&d(j))
     });
-    let bs = ball_points(rng, cfg.eps, a);
+    let bs = match cfg.patch {
+        None => ball_points(rng, cfg.eps, a),
+        Some(half) => rect_points(rng, half, a),
+    };
     let qs = box_points(rng, lo, hi);
     let mut targeted = Vec::new();
     let mut last = usize::MAX;
     for &q in &qs {
-        targeted_points(q, cfg.eps, &cand, polys, &mut targeted);
+        if cfg.patch.is_none() {
+            targeted_points(q, cfg.eps, &cand, polys, &mut targeted);
+        }
         for &b in bs.iter().chain(targeted.iter()) {
             st.segments += 1;
             if last != usize::MAX && crosses(b, q, &polys[last]) {
@@ -1175,18 +1226,31 @@ fn check_box(
     Ok(true)
 }
 
-/// Renders `cfg` with `hc` and tests its boxes.
-/// Renders `cfg` (with the ball radius `eps`) and tests its boxes.
-fn render(hc: &mut Hemicube, cfg: &Config, polys: &[(Vec<DVec3>, u32)], eps: f64) -> Vec<BoxTest> {
+/// Renders `cfg` with its ball (or rectangle) scaled by `factor` and tests its boxes.
+fn render(
+    hc: &mut Hemicube,
+    cfg: &Config,
+    polys: &[(Vec<DVec3>, u32)],
+    factor: f64,
+) -> Vec<BoxTest> {
     let occ = SampleOccluders::from_polygons(polys);
-    hc.begin(cfg.eye, cfg.axis, cfg.sign, eps, &cfg.boxes);
+    match cfg.patch {
+        None => hc.begin(cfg.eye, cfg.axis, cfg.sign, cfg.eps * factor, &cfg.boxes),
+        Some([hb, hc_]) => hc.begin_patch(
+            cfg.eye,
+            cfg.axis,
+            cfg.sign,
+            [hb * factor, hc_ * factor],
+            &cfg.boxes,
+        ),
+    }
     hc.draw(&occ);
     cfg.boxes.iter().map(|b| hc.test_box(b)).collect()
 }
 
 fn hidden_with(cfg: &Config, polys: &[(Vec<DVec3>, u32)], bi: usize) -> bool {
     let mut hc = Hemicube::new(cfg.res);
-    render(&mut hc, cfg, polys, cfg.eps)[bi] == BoxTest::Hidden
+    render(&mut hc, cfg, polys, 1.0)[bi] == BoxTest::Hidden
 }
 
 fn fmt_v(v: DVec3) -> String {
@@ -1243,12 +1307,14 @@ fn report(cfg: &Config, v: &Violation, reused_state: bool) -> String {
     }
     let b = cfg.boxes[v.bx];
     msg += &format!(
-        "  eye = {}, axis = {}, sign = {:?}, eps = {:?}, res = {}\n  boxes given to begin: {} \
+        "  eye = {}, axis = {}, sign = {:?}, eps = {:?}, patch (begin_patch half sides) = {:?}, \
+         res = {}\n  boxes given to begin: {} \
          (the failing one: min {}, max {})\n  {} of {} polygons needed:\n",
         fmt_v(cfg.eye),
         cfg.axis,
         cfg.sign,
         cfg.eps,
+        cfg.patch,
         cfg.res,
         cfg.boxes.len(),
         fmt_v(b.min),
@@ -1272,6 +1338,7 @@ fn run_family(
     seed: u64,
     n: usize,
     scaled: bool,
+    patch: bool,
     generate: &dyn Fn(&mut Rng) -> Local,
     render_eps: f64,
 ) -> Stats {
@@ -1282,7 +1349,16 @@ fn run_family(
         let cseed = seed.wrapping_mul(1_000_003).wrapping_add(index as u64);
         let mut rng = Rng(cseed);
         let local = generate(&mut rng);
-        let cfg = to_world(name, index, cseed, &local, &mut rng, scaled);
+        let mut cfg = to_world(name, index, cseed, &local, &mut rng, scaled);
+        if patch {
+            // Half sides with the ball's radius as half diagonal; some flat (a segment).
+            let t = match rng.below(10) {
+                0 => 0.0,
+                1 => PI / 2.0,
+                _ => rng.u(0.0, PI / 2.0),
+            };
+            cfg.patch = Some([cfg.eps * t.cos(), cfg.eps * t.sin()]);
+        }
         // Hemicubes are reused across configurations (as the baker does).
         let res = (cfg.res.max(16) as usize).div_ceil(16) * 16;
         let k = match cubes.iter().position(|h| h.resolution() == res) {
@@ -1292,7 +1368,7 @@ fn run_family(
                 cubes.len() - 1
             }
         };
-        let results = render(&mut cubes[k], &cfg, &cfg.polys, cfg.eps * render_eps);
+        let results = render(&mut cubes[k], &cfg, &cfg.polys, render_eps);
         let rel: Vec<RelPoly> = cfg
             .polys
             .iter()
@@ -1350,8 +1426,19 @@ struct Family {
     seed: u64,
     configs: usize,
     scaled: bool,
+    /// Rendered with `begin_patch` (a rectangle of the face) and checked from its points.
+    patch: bool,
     generate: fn(&mut Rng) -> Local,
     min_hidden: f64,
+}
+
+/// For rectangles: near polygons (nearer than the half diagonal too), or any family.
+fn gen_patch(rng: &mut Rng) -> Local {
+    if rng.chance(0.4) {
+        gen_near_patch(rng)
+    } else {
+        gen_any(rng)
+    }
 }
 
 /// Any family's generator, chosen at random (for the scaled family).
@@ -1369,12 +1456,13 @@ fn gen_any(rng: &mut Rng) -> Local {
     g(rng)
 }
 
-const FAMILIES: [Family; 8] = [
+const FAMILIES: [Family; 10] = [
     Family {
         name: "ground",
         seed: 0x62_0ED,
         configs: 1000,
         scaled: false,
+        patch: false,
         generate: gen_ground,
         min_hidden: 0.05,
     },
@@ -1383,6 +1471,7 @@ const FAMILIES: [Family; 8] = [
         seed: 0x0F01_1A6E,
         configs: 2000,
         scaled: false,
+        patch: false,
         generate: gen_foliage,
         min_hidden: 0.05,
     },
@@ -1391,6 +1480,7 @@ const FAMILIES: [Family; 8] = [
         seed: 0x006A_21A6,
         configs: 600,
         scaled: false,
+        patch: false,
         generate: gen_grazing,
         min_hidden: 0.05,
     },
@@ -1399,6 +1489,7 @@ const FAMILIES: [Family; 8] = [
         seed: 0x4EA2,
         configs: 1500,
         scaled: false,
+        patch: false,
         generate: gen_near,
         min_hidden: 0.05,
     },
@@ -1407,6 +1498,7 @@ const FAMILIES: [Family; 8] = [
         seed: 0xC2055,
         configs: 400,
         scaled: false,
+        patch: false,
         generate: gen_crossing,
         min_hidden: 0.05,
     },
@@ -1415,6 +1507,7 @@ const FAMILIES: [Family; 8] = [
         seed: 0xBE41D,
         configs: 1000,
         scaled: false,
+        patch: false,
         generate: gen_partly_behind,
         min_hidden: 0.05,
     },
@@ -1423,6 +1516,7 @@ const FAMILIES: [Family; 8] = [
         seed: 0x6E4E2A1,
         configs: 750,
         scaled: false,
+        patch: false,
         generate: gen_general,
         min_hidden: 0.02,
     },
@@ -1431,7 +1525,26 @@ const FAMILIES: [Family; 8] = [
         seed: 0x5CA1ED,
         configs: 750,
         scaled: true,
+        patch: false,
         generate: gen_any,
+        min_hidden: 0.05,
+    },
+    Family {
+        name: "patch",
+        seed: 0x9A7C,
+        configs: 1000,
+        scaled: false,
+        patch: true,
+        generate: gen_patch,
+        min_hidden: 0.05,
+    },
+    Family {
+        name: "patch_scaled",
+        seed: 0x9A7C_5CA1,
+        configs: 400,
+        scaled: true,
+        patch: true,
+        generate: gen_patch,
         min_hidden: 0.05,
     },
 ];
@@ -1439,7 +1552,15 @@ const FAMILIES: [Family; 8] = [
 /// Runs family `name` with the true ball and asserts it hid enough boxes.
 fn family(name: &str) {
     let f = FAMILIES.iter().find(|f| f.name == name).expect("family");
-    let st = run_family(f.name, f.seed, count(f.configs), f.scaled, &f.generate, 1.0);
+    let st = run_family(
+        f.name,
+        f.seed,
+        count(f.configs),
+        f.scaled,
+        f.patch,
+        &f.generate,
+        1.0,
+    );
     assert_meaningful(f.name, &st, f.min_hidden);
 }
 
@@ -1473,6 +1594,14 @@ fn ground_and_glued_boxes() {
     family("ground");
 }
 
+/// `Hemicube::begin_patch`: hidden from every point of a rectangle of the face (half
+/// diagonal `eps`; some flat), any family, unscaled and scaled.
+#[test]
+fn patches_instead_of_balls() {
+    family("patch");
+    family("patch_scaled");
+}
+
 #[test]
 fn general_mix() {
     family("general");
@@ -1495,11 +1624,12 @@ fn check_catches_a_render_with_less_shrink() {
                 f.seed ^ 0x5A5A,
                 count(f.configs / 4),
                 f.scaled,
+                f.patch,
                 &f.generate,
                 factor,
             );
             total += st.violations;
-            if ["near", "general"].contains(&f.name) {
+            if ["near", "general", "patch"].contains(&f.name) {
                 assert!(
                     st.violations > 0,
                     "family {}: no violation found with the render's eps x {factor}",
@@ -1604,12 +1734,12 @@ fn shrink_matters() {
             let mut t = tiny.clone();
             t.res = res;
             assert_eq!(
-                render(&mut hc, &t, &t.polys, t.eps)[0],
+                render(&mut hc, &t, &t.polys, 1.0)[0],
                 BoxTest::Hidden,
                 "tiny ball, res {res}, {what}"
             );
             // The same Hemicube, reused.
-            let r = render(&mut hc, &cfg, &cfg.polys, cfg.eps)[0];
+            let r = render(&mut hc, &cfg, &cfg.polys, 1.0)[0];
             assert!(
                 matches!(r, BoxTest::Open { .. }),
                 "ball of radius 0.1, res {res}: {r:?}, {what}"
@@ -1657,6 +1787,7 @@ fn polygon_within_eps_is_left_out() {
             axis: 2,
             sign: 1.0,
             eps,
+            patch: None,
             res: 64,
             polys: vec![(wall, 0)],
             boxes: vec![DAabb {
@@ -1667,7 +1798,7 @@ fn polygon_within_eps_is_left_out() {
         let mut hc = Hemicube::new(64);
         assert!(
             matches!(
-                render(&mut hc, &cfg, &cfg.polys, cfg.eps)[0],
+                render(&mut hc, &cfg, &cfg.polys, 1.0)[0],
                 BoxTest::Open { .. }
             ),
             "d = {d}"

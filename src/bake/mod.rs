@@ -11,12 +11,11 @@ mod sampling;
 
 pub use pipeline::{CullState, Culler, CullerStats, CullerWork, cullers};
 pub use planes::{PlaneCuller, SWEEP_TEST_REACH};
-pub use sampling::{SamplerData, SamplingCuller};
 pub use prepare::{
     PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared, SAMPLING_AUTO_NOTE, SMALL_OCCLUDER_CELLS,
-    SMALL_OCCLUDER_SHARE,
-    choose_sweep, split_cell,
+    SMALL_OCCLUDER_SHARE, choose_sweep, split_cell,
 };
+pub use sampling::{SamplerData, SamplingCuller};
 
 use crate::backend::{BackendError, RasterBackend};
 use crate::geom::Aabb;

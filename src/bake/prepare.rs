@@ -222,11 +222,17 @@ impl<'a> Prepared<'a> {
         let (sampling, mut sampling_reason) = match settings.sampling {
             SweepChoice::On => (true, "--sampling".to_string()),
             SweepChoice::Off => (false, "--no-sampling".to_string()),
-            SweepChoice::Auto => (false, format!("off by default ({SAMPLING_AUTO_NOTE}; --sampling turns it on)")),
+            SweepChoice::Auto => (
+                false,
+                format!("off by default ({SAMPLING_AUTO_NOTE}; --sampling turns it on)"),
+            ),
         };
         let sampler = sampling.then(|| {
             let d = super::sampling::SamplerData::new(&occluders, scene, settings);
-            sampling_reason = format!("{sampling_reason}; finest ε {:.4} ({})", d.eps, d.eps_reason);
+            sampling_reason = format!(
+                "{sampling_reason}; finest ε {:.4} ({})",
+                d.eps, d.eps_reason
+            );
             d
         });
         let (pieces, piece_boxes) = object_pieces(scene);

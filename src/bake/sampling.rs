@@ -73,7 +73,11 @@ impl std::fmt::Debug for SamplerData {
 
 impl SamplerData {
     /// Builds the sampler's occluders and ray caster for a prepared scene.
-    pub fn new(prepared_occ: &crate::project::occluders::Occluders, scene: &crate::scene::Scene, settings: &super::BakeSettings) -> Self {
+    pub fn new(
+        prepared_occ: &crate::project::occluders::Occluders,
+        scene: &crate::scene::Scene,
+        settings: &super::BakeSettings,
+    ) -> Self {
         let occluders = SampleOccluders::new(scene, prepared_occ, settings.alpha_occluders);
         let s = settings.sampling_settings;
         let (eps, eps_reason) = match s.eps {
@@ -202,7 +206,11 @@ impl Culler for SamplingCuller {
             *f = Face {
                 axis,
                 sign,
-                plane: if sign > 0.0 { cb.max[axis] } else { cb.min[axis] },
+                plane: if sign > 0.0 {
+                    cb.max[axis]
+                } else {
+                    cb.min[axis]
+                },
             };
         }
         let s = data.settings;
@@ -245,7 +253,11 @@ impl Culler for SamplingCuller {
             let nb = (wb / side).ceil().max(1.0) as usize;
             let nc = (wc / side).ceil().max(1.0) as usize;
             let at = |lo: f64, w: f64, i: usize, m: usize| {
-                if i == m { lo + w } else { lo + w * i as f64 / m as f64 }
+                if i == m {
+                    lo + w
+                } else {
+                    lo + w * i as f64 / m as f64
+                }
             };
             for i in 0..nb {
                 for j in 0..nc {
@@ -366,7 +378,11 @@ impl Shared<'_> {
                             break;
                         }
                     }
-                    if pieces.is_empty() { Some(direction) } else { first }
+                    if pieces.is_empty() {
+                        Some(direction)
+                    } else {
+                        first
+                    }
                 }
             };
             let Some(direction) = test else { continue };
@@ -412,10 +428,14 @@ impl Shared<'_> {
         let rays = &self.data.rays;
         let origin = eye.as_vec3();
         let mut dirs = vec![direction];
-        let h = (eye.x.to_bits() ^ eye.y.to_bits().rotate_left(21) ^ eye.z.to_bits().rotate_left(42))
-            .wrapping_mul(0x9e37_79b9_7f4a_7c15)
-            ^ u64::from(o);
-        let r = |k: u32| ((h.rotate_left(k * 17).wrapping_mul(0xd1b5_4a32_d192_ed03)) >> 11) as f64 / (1u64 << 53) as f64;
+        let h =
+            (eye.x.to_bits() ^ eye.y.to_bits().rotate_left(21) ^ eye.z.to_bits().rotate_left(42))
+                .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                ^ u64::from(o);
+        let r = |k: u32| {
+            ((h.rotate_left(k * 17).wrapping_mul(0xd1b5_4a32_d192_ed03)) >> 11) as f64
+                / (1u64 << 53) as f64
+        };
         if let Some(s) = rays.surface_point(o, r(1), r(2), r(3)) {
             dirs.push(s - eye);
         }

@@ -382,7 +382,7 @@ impl Hemicube {
     fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize) -> bool {
         let pts = occ.poly_points(poly);
         let n = pts.len();
-        if n < 3 || n > 64 {
+        if !(3..=64).contains(&n) {
             return false;
         }
         let eps = self.eps;
@@ -419,7 +419,9 @@ impl Hemicube {
             } * (1.0 + 1e-9);
             most = most.max(reach[k]);
         }
-        if !(plane_dist > most * (1.0 + 1e-6) + 1e-12 * centroid.length()) {
+        if plane_dist.partial_cmp(&(most * (1.0 + 1e-6) + 1e-12 * centroid.length()))
+            != Some(std::cmp::Ordering::Greater)
+        {
             return false;
         }
         self.near = plane_dist;
@@ -461,13 +463,24 @@ impl Hemicube {
         let ps = 2.0 / res as f64;
         let view = &self.views[k];
         let map = view.map;
-        let to_view = |p: DVec3| DVec3::new(map[0].1 * p[map[0].0], map[1].1 * p[map[1].0], map[2].1 * p[map[2].0]);
+        let to_view = |p: DVec3| {
+            DVec3::new(
+                map[0].1 * p[map[0].0],
+                map[1].1 * p[map[1].0],
+                map[2].1 * p[map[2].0],
+            )
+        };
         let zc = 0.5 * self.near;
         // Clip at Z ≥ zc (the polygon's part with smaller Z is outside the frustum, where
         // |P| ≤ √3·Z: all its points are at least `near` from the eye) and bound the projection.
         let mut zmax = f64::NEG_INFINITY;
         let mut zmin = f64::INFINITY;
-        let (mut umin, mut umax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let (mut umin, mut umax, mut vmin, mut vmax) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
         let n = q.len();
         let mut any = false;
         for i in 0..n {
@@ -500,9 +513,14 @@ impl Hemicube {
         let [ni0, ni1, nj0, nj1] = view.need;
         // Corner indices strictly needed: corners of needed pixels inside the bound.
         let ci0 = (((umin + 1.0) * half).ceil().max(0.0) as usize).max(ni0);
-        let ci1 = (((umax + 1.0) * half).floor().min(res as f64).max(-1.0) as isize).min(ni1 as isize);
+        let ci1 =
+            (((umax + 1.0) * half).floor().min(res as f64).max(-1.0) as isize).min(ni1 as isize);
         let cj0 = (((vmin - view.vmin) * half).ceil().max(0.0) as usize).max(nj0);
-        let cj1 = (((vmax - view.vmin) * half).floor().min(view.h as f64).max(-1.0) as isize).min(nj1 as isize);
+        let cj1 = (((vmax - view.vmin) * half)
+            .floor()
+            .min(view.h as f64)
+            .max(-1.0) as isize)
+            .min(nj1 as isize);
         if ci1 < ci0 as isize + 1 || cj1 < cj0 as isize + 1 {
             return false;
         }
@@ -510,7 +528,12 @@ impl Hemicube {
         let mut ev = [[0f32; 4]; 64];
         for (e, &(m, s)) in edges.iter().enumerate() {
             let mv = to_view(m);
-            ev[e] = [mv.x as f32, mv.y as f32, mv.z as f32, s as f32 * (1.0 + 1e-6)];
+            ev[e] = [
+                mv.x as f32,
+                mv.y as f32,
+                mv.z as f32,
+                s as f32 * (1.0 + 1e-6),
+            ];
         }
         let ev = &ev[..edges.len()];
         let z = round_up(zmax);
@@ -527,9 +550,17 @@ impl Hemicube {
             let (nv, d) = plane.expect("plane");
             let w = nv.x * u + nv.y * v + nv.z;
             let z = d / w;
-            if z > 0.0 && z.is_finite() { z } else { f64::INFINITY }
+            if z > 0.0 && z.is_finite() {
+                z
+            } else {
+                f64::INFINITY
+            }
         };
-        let norms = if view.vmin < 0.0 { &self.norm_front } else { &self.norm_side };
+        let norms = if view.vmin < 0.0 {
+            &self.norm_front
+        } else {
+            &self.norm_side
+        };
         let mut pass = std::mem::take(&mut self.pass);
         let mut prev = std::mem::take(&mut self.prev);
         let view = &mut self.views[k];
@@ -540,14 +571,22 @@ impl Hemicube {
             let v = (view.vmin + cj as f64 * ps) as f32;
             let row = &norms[cj * (res + 1)..];
             let mut any_pass = false;
-            for ci in ci0..=ci1 {
+            // The passing corners of a row are a run (a convex set meets a line in an
+            // interval): stop at the first failure after it.
+            let mut ci = ci0;
+            while ci <= ci1 {
                 let u = (-1.0 + ci as f64 * ps) as f32;
                 let l = row[ci];
                 let ok = ev
                     .iter()
                     .all(|e| e[0] * u + e[1] * v + e[2] - e[3] * l >= CORNER_MARGIN);
                 pass[ci] = ok as u8;
+                if !ok && any_pass {
+                    pass[ci + 1..=ci1].fill(0);
+                    break;
+                }
                 any_pass |= ok;
+                ci += 1;
             }
             if cj > cj0 {
                 let pj = cj - 1;
@@ -621,7 +660,10 @@ impl Hemicube {
             }
         }
         depths.sort_by(f32::total_cmp);
-        let med = depths.get(depths.len() / 2).copied().unwrap_or(f32::INFINITY);
+        let med = depths
+            .get(depths.len() / 2)
+            .copied()
+            .unwrap_or(f32::INFINITY);
         (c as f64 / n.max(1) as f64, f64::from(med))
     }
 
@@ -644,7 +686,12 @@ impl Hemicube {
                 d[map[2].0] += map[2].1;
                 BoxTest::Open { direction: d }
             };
-            if r.z <= 0.0 || r.i[0] < v.need[0] || r.i[1] > v.need[1] || r.j[0] < v.need[2] || r.j[1] > v.need[3] {
+            if r.z <= 0.0
+                || r.i[0] < v.need[0]
+                || r.i[1] > v.need[1]
+                || r.j[0] < v.need[2]
+                || r.j[1] > v.need[3]
+            {
                 return open(r.i[0], r.j[0]);
             }
             for tj in r.j[0] / TILE..r.j[1].div_ceil(TILE) {
@@ -654,7 +701,9 @@ impl Hemicube {
                     }
                     for j in (tj * TILE).max(r.j[0])..((tj + 1) * TILE).min(r.j[1]) {
                         for i in (ti * TILE).max(r.i[0])..((ti + 1) * TILE).min(r.i[1]) {
-                            if !((v.depth[j * res + i] as f64) < z) {
+                            if (v.depth[j * res + i] as f64).partial_cmp(&z)
+                                != Some(std::cmp::Ordering::Less)
+                            {
                                 return open(i, j);
                             }
                         }
