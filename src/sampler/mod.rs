@@ -174,24 +174,7 @@ impl SampleOccluders {
             r.select_nth_unstable_by(m, f64::total_cmp);
             out.median_inradius = r[m];
         }
-        if !out.polys.is_empty() {
-            let boxes: Vec<PolyBox> = out
-                .bounds
-                .iter()
-                .map(|b| {
-                    PolyBox(obvhs::aabb::Aabb::new(
-                        b.min.as_vec3().into(),
-                        b.max.as_vec3().into(),
-                    ))
-                })
-                .collect();
-            let mut t = std::time::Duration::ZERO;
-            out.bvh = Some(obvhs::bvh2::builder::build_bvh2(
-                &boxes,
-                obvhs::BvhBuildParams::fast_build(),
-                &mut t,
-            ));
-        }
+        out.build_bvh();
         out
     }
 
@@ -203,7 +186,17 @@ impl SampleOccluders {
         for (pts, object) in polys {
             out.push(pts, *object);
         }
-        let boxes: Vec<PolyBox> = out
+        out.build_bvh();
+        out
+    }
+
+    /// Builds the BVH over the polygons' boxes (none without polygons).
+    fn build_bvh(&mut self) {
+        if self.bounds.is_empty() {
+            self.bvh = None;
+            return;
+        }
+        let boxes: Vec<PolyBox> = self
             .bounds
             .iter()
             .map(|b| {
@@ -213,15 +206,12 @@ impl SampleOccluders {
                 ))
             })
             .collect();
-        if !boxes.is_empty() {
-            let mut t = std::time::Duration::ZERO;
-            out.bvh = Some(obvhs::bvh2::builder::build_bvh2(
-                &boxes,
-                obvhs::BvhBuildParams::fast_build(),
-                &mut t,
-            ));
-        }
-        out
+        let mut t = std::time::Duration::ZERO;
+        self.bvh = Some(obvhs::bvh2::builder::build_bvh2(
+            &boxes,
+            obvhs::BvhBuildParams::fast_build(),
+            &mut t,
+        ));
     }
 
     fn push(&mut self, pts: &[DVec3], object: u32) {
