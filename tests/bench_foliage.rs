@@ -42,7 +42,8 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
         [
             "--sweep",
             "--no-sweep",
-            "--sweep --resolution 1024 --sweep-planes 32"
+            "--sweep --resolution 1024 --sweep-planes 32",
+            "--sweep --sampling --sampling-budget 2000"
         ]
     );
     assert_eq!(labels(&bench, "paper"), ["--sweep"]);
