@@ -649,10 +649,10 @@ fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read
             hidden: 1.0,
             ..Default::default()
         });
-    let back = PvsDatabase::from_bytes(&binary::encode(&sampled).unwrap())
+    let back_sampled = PvsDatabase::from_bytes(&binary::encode(&sampled).unwrap())
         .unwrap()
         .to_document();
-    assert_eq!(json(&back), json(&sampled));
+    assert_eq!(json(&back_sampled), json(&sampled));
     assert_eq!(back.summary.unwrap().cullers, vec![culler]);
 
     // Rewrites `file`'s payload without `cut` (found in it), as version `version`.
