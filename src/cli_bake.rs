@@ -389,9 +389,14 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             );
         }
         eprintln!(
-            "sampling    {} — {}",
+            "sampling    {} — {}{}",
             if result.sampling { "yes" } else { "no" },
-            result.sampling_reason
+            result.sampling_reason,
+            if result.sampling && result.backend != "cpu" {
+                " (on the CPU: the sampler has no GPU half yet)"
+            } else {
+                ""
+            }
         );
         if let Some(line) = backend.stats_summary(s.cells) {
             eprintln!("gpu         {line}");
