@@ -94,6 +94,11 @@ pub struct Hemicube {
     stack: Vec<u32>,
     pass: Vec<u8>,
     prev: Vec<u8>,
+    /// Scratch per polygon: its vertices relative to the eye, its edges' planes and shrinks,
+    /// their view-space coefficients (kept to avoid clearing arrays per polygon).
+    scratch_q: Vec<DVec3>,
+    scratch_edges: Vec<(DVec3, f64)>,
+    scratch_ev: Vec<[f32; 4]>,
 }
 
 impl Hemicube {
@@ -127,6 +132,9 @@ impl Hemicube {
             stack: Vec::new(),
             pass: vec![0; res + 1],
             prev: vec![0; res + 1],
+            scratch_q: Vec::new(),
+            scratch_edges: Vec::new(),
+            scratch_ev: Vec::new(),
         }
     }
 
@@ -380,17 +388,32 @@ impl Hemicube {
     /// Draws polygon `poly` into every view it reaches; false when it was left out or
     /// covered no pixel.
     fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize) -> bool {
-        let pts = occ.poly_points(poly);
+        let mut q = std::mem::take(&mut self.scratch_q);
+        let mut edges = std::mem::take(&mut self.scratch_edges);
+        let drawn = self.draw_poly_with(occ.poly_points(poly), &mut q, &mut edges);
+        self.scratch_q = q;
+        self.scratch_edges = edges;
+        drawn
+    }
+
+    fn draw_poly_with(
+        &mut self,
+        pts: &[DVec3],
+        q: &mut Vec<DVec3>,
+        edges: &mut Vec<(DVec3, f64)>,
+    ) -> bool {
         let n = pts.len();
-        if !(3..=64).contains(&n) {
+        if n < 3 {
             return false;
         }
         let eps = self.eps;
-        let mut q = [DVec3::ZERO; 64];
+        q.clear();
+        edges.clear();
         let mut centroid = DVec3::ZERO;
-        for (k, &pt) in pts.iter().enumerate() {
-            q[k] = pt - self.eye;
-            centroid += q[k];
+        for &pt in pts {
+            let r = pt - self.eye;
+            q.push(r);
+            centroid += r;
         }
         centroid /= n as f64;
         // Plane distance (Newell normal; the polygon is exactly planar).
@@ -406,10 +429,9 @@ impl Hemicube {
         // Per edge: the radius of the region sampled, seen along the edge (the ball: ε; the
         // rectangle: its largest distance from the eye across the edge's direction).
         let (b_ax, c_ax) = ((self.axis + 1) % 3, (self.axis + 2) % 3);
-        let mut reach = [0f64; 64];
         let mut most = 0f64;
         for k in 0..n {
-            reach[k] = match self.patch {
+            let reach = match self.patch {
                 None => eps,
                 Some([hb, hc]) => {
                     let t = (q[(k + 1) % n] - q[k]).normalize_or_zero();
@@ -417,7 +439,8 @@ impl Hemicube {
                     (hb * hb + hc * hc - d * d).max(0.0).sqrt().min(eps)
                 }
             } * (1.0 + 1e-9);
-            most = most.max(reach[k]);
+            edges.push((DVec3::ZERO, reach));
+            most = most.max(reach);
         }
         if plane_dist.partial_cmp(&(most * (1.0 + 1e-6) + 1e-12 * centroid.length()))
             != Some(std::cmp::Ordering::Greater)
@@ -426,7 +449,6 @@ impl Hemicube {
         }
         self.near = plane_dist;
         // Edge planes through the eye, and the shrink per edge.
-        let mut edges = [(DVec3::ZERO, 0.0f64); 64];
         for k in 0..n {
             let (a, b) = (q[k], q[(k + 1) % n]);
             let cr = a.cross(b);
@@ -440,14 +462,14 @@ impl Hemicube {
                 m = -m;
             }
             let r = cl / el;
-            edges[k] = (m, reach[k] / r * (1.0 + 1e-6));
+            edges[k] = (m, edges[k].1 / r * (1.0 + 1e-6));
         }
         let mut drawn = false;
         for k in 0..5 {
             if self.views[k].need[0] >= self.views[k].need[1] {
                 continue;
             }
-            drawn |= self.draw_in_view(k, &q[..n], &edges[..n], normal / nl);
+            drawn |= self.draw_in_view(k, q, edges, normal / nl);
         }
         drawn
     }
@@ -525,17 +547,18 @@ impl Hemicube {
             return false;
         }
         let (ci1, cj1) = (ci1 as usize, cj1 as usize);
-        let mut ev = [[0f32; 4]; 64];
-        for (e, &(m, s)) in edges.iter().enumerate() {
+        let mut ev_buf = std::mem::take(&mut self.scratch_ev);
+        ev_buf.clear();
+        for &(m, s) in edges {
             let mv = to_view(m);
-            ev[e] = [
+            ev_buf.push([
                 mv.x as f32,
                 mv.y as f32,
                 mv.z as f32,
                 s as f32 * (1.0 + 1e-6),
-            ];
+            ]);
         }
-        let ev = &ev[..edges.len()];
+        let ev = &ev_buf[..];
         let z = round_up(zmax);
         // A polygon deep in this view (the ground, a wall seen at a slant) takes its plane's
         // depth per pixel instead: the largest of the pixel's corners (1/Z is affine over the
@@ -638,6 +661,7 @@ impl Hemicube {
         }
         self.pass = pass;
         self.prev = prev;
+        self.scratch_ev = ev_buf;
         wrote
     }
 

@@ -207,11 +207,29 @@ impl SampleOccluders {
             })
             .collect();
         let mut t = std::time::Duration::ZERO;
-        self.bvh = Some(obvhs::bvh2::builder::build_bvh2(
-            &boxes,
-            obvhs::BvhBuildParams::fast_build(),
-            &mut t,
-        ));
+        let mut bvh =
+            obvhs::bvh2::builder::build_bvh2(&boxes, obvhs::BvhBuildParams::fast_build(), &mut t);
+        // Store the polygons in the BVH's leaf order, so that a traversal reads them (and
+        // their points) from consecutive memory.
+        let mut points = Vec::with_capacity(self.points.len());
+        let mut polys = Vec::with_capacity(self.polys.len());
+        let mut bounds = Vec::with_capacity(self.bounds.len());
+        for slot in bvh.primitive_indices.iter_mut() {
+            let p = self.polys[*slot as usize];
+            let start = points.len() as u32;
+            points.extend_from_slice(&self.points[p.start as usize..p.end as usize]);
+            bounds.push(self.bounds[*slot as usize]);
+            *slot = polys.len() as u32;
+            polys.push(SamplePoly {
+                start,
+                end: points.len() as u32,
+                object: p.object,
+            });
+        }
+        self.points = points;
+        self.polys = polys;
+        self.bounds = bounds;
+        self.bvh = Some(bvh);
     }
 
     fn push(&mut self, pts: &[DVec3], object: u32) {
