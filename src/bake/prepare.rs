@@ -106,7 +106,7 @@ fn split_pieces(tris: &mut [(glam::DVec3, DAabb)], levels: u32, out: &mut Vec<DA
 
 /// Why [`SweepChoice::Auto`] leaves the shrunk-occluder sampler off for now (issue 16: the
 /// intended rule is "on where the sweep's rule picks the sweep", once it pays for its time).
-pub const SAMPLING_AUTO_NOTE: &str = "it is not yet worth its time: +0.7 % culled for 60× the sweep's time on the coarse forest's 1-unit cells";
+pub const SAMPLING_AUTO_NOTE: &str = "it is not yet worth its time: +1 % culled for 40× the sweep's time on the coarse forest's 1-unit cells";
 
 /// Small occluders: parts whose largest side is under this many times the median cell's
 /// largest side.
