@@ -232,7 +232,7 @@ pub fn to_document(
                 max: b.max.to_array(),
                 visible: c.visible.clone(),
                 ms: c.ms,
-                cullers: if result.cullers.contains(&"shrunk_sampling") {
+                cullers: if result.sampling {
                     result
                         .cullers
                         .iter()

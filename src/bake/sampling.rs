@@ -142,8 +142,6 @@ struct Shared<'a> {
     /// The smallest ε rendered, as f64 bits (positive floats order like their bits).
     finest: AtomicU64,
     start: Instant,
-    eps_min: f64,
-    alpha: bool,
 }
 
 impl Culler for SamplingCuller {
@@ -195,15 +193,10 @@ impl Culler for SamplingCuller {
             }
             candidates.retain(|&o| !done[o as usize].load(Ordering::Relaxed));
         }
-        let mut faces = [Face {
-            axis: 0,
-            sign: 1.0,
-            plane: 0.0,
-        }; 6];
-        for (k, f) in faces.iter_mut().enumerate() {
-            let axis = k / 2;
-            let sign = if k % 2 == 0 { -1.0 } else { 1.0 };
-            *f = Face {
+        // Faces in the order −x, +x, −y, +y, −z, +z.
+        let faces: [Face; 6] = std::array::from_fn(|k| {
+            let (axis, sign) = (k / 2, if k % 2 == 0 { -1.0 } else { 1.0 });
+            Face {
                 axis,
                 sign,
                 plane: if sign > 0.0 {
@@ -211,11 +204,10 @@ impl Culler for SamplingCuller {
                 } else {
                     cb.min[axis]
                 },
-            };
-        }
+            }
+        });
         let s = data.settings;
-        let eps_min = data.eps;
-        let eps0 = eps_min * f64::from(1u32 << s.levels.min(20));
+        let eps0 = data.eps * f64::from(1u32 << s.levels.min(20));
         let shared = Shared {
             data,
             prepared,
@@ -225,8 +217,6 @@ impl Culler for SamplingCuller {
             polygons: AtomicU64::new(0),
             finest: AtomicU64::new(f64::INFINITY.to_bits()),
             start: Instant::now(),
-            eps_min,
-            alpha: prepared.settings.alpha_occluders,
         };
         // Top-level patches: a grid per face whose rectangles' half diagonals are at most eps0.
         let mut top: Vec<(Patch, Arc<Vec<u32>>)> = Vec::new();
@@ -397,7 +387,7 @@ impl Shared<'_> {
         if open.is_empty() {
             return;
         }
-        if eps <= self.eps_min * (1.0 + 1e-6) {
+        if eps <= self.data.eps * (1.0 + 1e-6) {
             self.give_up(&open);
             return;
         }
@@ -427,7 +417,7 @@ impl Shared<'_> {
     fn certify(&self, eye: DVec3, o: u32, direction: DVec3) -> usize {
         let rays = &self.data.rays;
         let origin = eye.as_vec3();
-        let mut dirs = vec![direction];
+        let mut dirs = [Some(direction), None];
         let h =
             (eye.x.to_bits() ^ eye.y.to_bits().rotate_left(21) ^ eye.z.to_bits().rotate_left(42))
                 .wrapping_mul(0x9e37_79b9_7f4a_7c15)
@@ -436,17 +426,15 @@ impl Shared<'_> {
             ((h.rotate_left(k * 17).wrapping_mul(0xd1b5_4a32_d192_ed03)) >> 11) as f64
                 / (1u64 << 53) as f64
         };
-        if let Some(s) = rays.surface_point(o, r(1), r(2), r(3)) {
-            dirs.push(s - eye);
-        }
+        dirs[1] = rays.surface_point(o, r(1), r(2), r(3)).map(|s| s - eye);
         let mut cast = 0;
-        for d in dirs.into_iter().take(CERTIFY_PER_OBJECT) {
+        for d in dirs.into_iter().flatten().take(CERTIFY_PER_OBJECT) {
             let d = d.as_vec3();
             if !(d.length_squared() > 0.0 && d.is_finite()) {
                 continue;
             }
             cast += 1;
-            for hit in rays.trace(origin, d, self.alpha) {
+            for hit in rays.trace(origin, d, self.prepared.settings.alpha_occluders) {
                 self.done[hit.object as usize].store(true, Ordering::Relaxed);
             }
         }

@@ -207,8 +207,9 @@ impl Hemicube {
         for bx in boxes {
             let far = (bx.min - eye).abs().max((bx.max - eye).abs()).length();
             self.max_dist = self.max_dist.max(far);
+            let dist = self.dist(bx);
             for k in 0..5 {
-                if let Some(r) = self.rect(k, bx) {
+                if let Some(r) = self.rect(k, bx, dist) {
                     let n = &mut self.views[k].need;
                     n[0] = n[0].min(r.i[0]);
                     n[1] = n[1].max(r.i[1]);
@@ -246,14 +247,19 @@ impl Hemicube {
         })
     }
 
-    /// The pixels the box's directions can reach in view `k` (outward rounding), with the
-    /// nearest view depth of its part inside the view's frustum; None when no part of it is.
-    fn rect(&self, k: usize, bx: &DAabb) -> Option<Rect> {
-        let [[x0, x1], [mut y0, y1], [z0, z1]] = self.view_box(k, bx);
-        let dist = (bx.min - self.eye)
+    /// The distance from the eye to the box (0 when it holds the eye).
+    fn dist(&self, bx: &DAabb) -> f64 {
+        (bx.min - self.eye)
             .max(self.eye - bx.max)
             .max(DVec3::ZERO)
-            .length();
+            .length()
+    }
+
+    /// The pixels the box's directions can reach in view `k` (outward rounding), with the
+    /// nearest view depth of its part inside the view's frustum; None when no part of it is.
+    /// `dist` is [`Hemicube::dist`] of the box (the same for every view).
+    fn rect(&self, k: usize, bx: &DAabb, dist: f64) -> Option<Rect> {
+        let [[x0, x1], [mut y0, y1], [z0, z1]] = self.view_box(k, bx);
         // Inside the frustum Z ≥ |X|, |Y|, so |P| ≤ √3·Z: the box's part there has Z ≥ this.
         let z_lo = dist / 3f64.sqrt() * (1.0 - 1e-12);
         let zl = z0.max(z_lo);
@@ -352,10 +358,7 @@ impl Hemicube {
         if (s > 0.0 && bx.max[a] < self.eye[a]) || (s < 0.0 && bx.min[a] > self.eye[a]) {
             return false;
         }
-        let dist = (bx.min - self.eye)
-            .max(self.eye - bx.max)
-            .max(DVec3::ZERO)
-            .length();
+        let dist = self.dist(bx);
         if dist > self.max_dist {
             return false;
         }
@@ -365,7 +368,9 @@ impl Hemicube {
             if v.need[0] >= v.need[1] {
                 continue;
             }
-            let Some(r) = self.rect(k, bx) else { continue };
+            let Some(r) = self.rect(k, bx, dist) else {
+                continue;
+            };
             let i0 = r.i[0].max(v.need[0]);
             let i1 = r.i[1].min(v.need[1]);
             let j0 = r.j[0].max(v.need[2]);
@@ -416,42 +421,43 @@ impl Hemicube {
             centroid += r;
         }
         centroid /= n as f64;
-        // Plane distance (Newell normal; the polygon is exactly planar).
+        // Per edge, the normal of the plane through the eye and the edge (their sum is the
+        // Newell normal: the polygon is exactly planar) and the radius of the region sampled
+        // seen along the edge (the ball: ε; the rectangle: its largest distance from the eye
+        // across the edge's direction).
+        let (b_ax, c_ax) = ((self.axis + 1) % 3, (self.axis + 2) % 3);
         let mut normal = DVec3::ZERO;
+        let mut most = 0f64;
         for k in 0..n {
-            normal += q[k].cross(q[(k + 1) % n]);
+            let (a, b) = (q[k], q[(k + 1) % n]);
+            let cr = a.cross(b);
+            normal += cr;
+            let reach = match self.patch {
+                None => eps,
+                Some([hb, hc]) => {
+                    let t = (b - a).normalize_or_zero();
+                    let d = hb * t[b_ax].abs() - hc * t[c_ax].abs();
+                    (hb * hb + hc * hc - d * d).max(0.0).sqrt().min(eps)
+                }
+            } * (1.0 + 1e-9);
+            edges.push((cr, reach));
+            most = most.max(reach);
         }
         let nl = normal.length();
         if !(nl > 0.0 && nl.is_finite()) {
             return false;
         }
         let plane_dist = (normal / nl).dot(centroid).abs();
-        // Per edge: the radius of the region sampled, seen along the edge (the ball: ε; the
-        // rectangle: its largest distance from the eye across the edge's direction).
-        let (b_ax, c_ax) = ((self.axis + 1) % 3, (self.axis + 2) % 3);
-        let mut most = 0f64;
-        for k in 0..n {
-            let reach = match self.patch {
-                None => eps,
-                Some([hb, hc]) => {
-                    let t = (q[(k + 1) % n] - q[k]).normalize_or_zero();
-                    let d = hb * t[b_ax].abs() - hc * t[c_ax].abs();
-                    (hb * hb + hc * hc - d * d).max(0.0).sqrt().min(eps)
-                }
-            } * (1.0 + 1e-9);
-            edges.push((DVec3::ZERO, reach));
-            most = most.max(reach);
-        }
         if plane_dist.partial_cmp(&(most * (1.0 + 1e-6) + 1e-12 * centroid.length()))
             != Some(std::cmp::Ordering::Greater)
         {
             return false;
         }
         self.near = plane_dist;
-        // Edge planes through the eye, and the shrink per edge.
+        // The edge planes' unit normals toward the inside, and the shrink per edge.
         for k in 0..n {
             let (a, b) = (q[k], q[(k + 1) % n]);
-            let cr = a.cross(b);
+            let cr = edges[k].0;
             let cl = cr.length();
             let el = (b - a).length();
             if !(cl > 0.0 && el > 0.0 && cl.is_finite()) {
@@ -697,8 +703,11 @@ impl Hemicube {
         let res = self.res;
         let tw = res / TILE;
         let ps = 2.0 / res as f64;
+        let dist = self.dist(bx);
         for k in 0..5 {
-            let Some(r) = self.rect(k, bx) else { continue };
+            let Some(r) = self.rect(k, bx, dist) else {
+                continue;
+            };
             let v = &self.views[k];
             let z = r.z * (1.0 - 1e-9);
             let open = |i: usize, j: usize| {

@@ -72,7 +72,7 @@ mod hemicube;
 
 pub use hemicube::{BoxTest, Hemicube, RenderStats};
 
-use crate::geom::DAabb;
+use crate::geom::{Aabb, DAabb};
 use crate::project::occluders::{Occluders, PartKind};
 use crate::scene::{Scene, is_degenerate};
 use glam::{DVec3, Vec3};
@@ -97,7 +97,7 @@ pub struct SampleOccluders {
     pub points: Vec<DVec3>,
     /// The polygons.
     pub polys: Vec<SamplePoly>,
-    /// Bounds per polygon.
+    /// Bounds per polygon (exact).
     pub bounds: Vec<DAabb>,
     /// The BVH over `bounds` (None without polygons).
     pub(crate) bvh: Option<Bvh2>,
@@ -162,17 +162,16 @@ impl SampleOccluders {
                 *r = inradius(out.poly_points(i));
             }
         }
+        if inradii.is_empty() {
+            // Only raw triangles: their inradii from the geometry.
+            inradii = (0..out.polys.len())
+                .map(|i| inradius(out.poly_points(i)))
+                .collect();
+        }
         if !inradii.is_empty() {
             let m = inradii.len() / 2;
             inradii.select_nth_unstable_by(m, f64::total_cmp);
             out.median_inradius = inradii[m];
-        } else if !out.polys.is_empty() {
-            let mut r: Vec<f64> = (0..out.polys.len())
-                .map(|i| inradius(out.poly_points(i)))
-                .collect();
-            let m = r.len() / 2;
-            r.select_nth_unstable_by(m, f64::total_cmp);
-            out.median_inradius = r[m];
         }
         out.build_bvh();
         out
@@ -181,8 +180,7 @@ impl SampleOccluders {
     /// A set of polygons given directly (tests, tools). Each must be convex and exactly
     /// planar; degenerate ones are dropped.
     pub fn from_polygons(polys: &[(Vec<DVec3>, u32)]) -> Self {
-        let scene = Scene::default();
-        let mut out = Self::new(&scene, &Occluders::default(), false);
+        let mut out = SampleOccluders::default();
         for (pts, object) in polys {
             out.push(pts, *object);
         }
@@ -200,10 +198,9 @@ impl SampleOccluders {
             .bounds
             .iter()
             .map(|b| {
-                PolyBox(obvhs::aabb::Aabb::new(
-                    b.min.as_vec3().into(),
-                    b.max.as_vec3().into(),
-                ))
+                // Rounded outward: every polygon lies inside its f32 box.
+                let f = Aabb::outward(b.min, b.max);
+                PolyBox(obvhs::aabb::Aabb::new(f.min.into(), f.max.into()))
             })
             .collect();
         let mut t = std::time::Duration::ZERO;
@@ -247,13 +244,7 @@ impl SampleOccluders {
             end: self.points.len() as u32,
             object,
         });
-        // The BVH boxes are f32: round outward so every polygon lies inside its box.
-        let lo = b.min.as_vec3().as_dvec3();
-        let hi = b.max.as_vec3().as_dvec3();
-        self.bounds.push(DAabb {
-            min: DVec3::select(lo.cmpgt(b.min), b.min - b.min.abs() * 1e-7, lo),
-            max: DVec3::select(hi.cmplt(b.max), b.max + b.max.abs() * 1e-7, hi),
-        });
+        self.bounds.push(b);
     }
 
     /// The vertices of polygon `i`.
