@@ -1,6 +1,6 @@
 //! For one cell: renders N random sample points on its faces and reports, per object, at how
 //! many points it is open (box and triangles tested). `cargo run --release --example
-//! sampler_points -- SCENE CELLS CELL EPS RES N`.
+//! sampler_points -- SCENE CELLS CELL EPS RES N [whole]`.
 
 use glam::DVec3;
 use std::time::Instant;
@@ -23,6 +23,8 @@ fn main() {
     let mut open = vec![0u32; scene.objects.len()];
     let mut seen_from = vec![0u32; scene.objects.len()];
     let mut hc = Hemicube::new(res);
+    // A seventh argument `whole` turns sub-pixel masks off.
+    hc.set_subpixel(args.get(7).map(String::as_str) != Some("whole"));
     let mut seed = 7u64;
     let mut rnd = || {
         seed = seed

@@ -14,7 +14,8 @@
 //! fusion), `grazing` (overlapping slats seen 0.5°–20° from edge-on, polygons whose planes
 //! pass just beyond `eps`), `near` (plane distances `eps·(1 + 1e-7…1)`, edges just beyond
 //! `eps`, huge near walls), `crossing` (leaves and walls crossing the face plane), `partly_behind`
-//! (boxes across, touching or just behind the face plane, boxes at the ball), `ground` (a
+//! (boxes across, touching or just behind the face plane, boxes at the ball), `fine_foliage`
+//! (leaves of 0.3–4 pixels, fused only by the sub-pixel masks), `ground` (a
 //! slanted, tiled ground drawn with per-pixel plane depths, boxes just under, on and over it,
 //! boxes glued behind walls), `general` (a mix, with `eps = 0`, many-vertex and degenerate
 //! polygons, flat and point boxes) and `scaled` (any of them scaled by 1e-3 and offset by 1e5).
@@ -272,6 +273,41 @@ fn gen_foliage(rng: &mut Rng) -> Local {
     let dist = d * rng.u(0.5, 2.5);
     let size = rng.u(0.05, 0.5);
     l.boxes.push(random_box(rng, dist, size));
+    l
+}
+
+/// Fine foliage: leaves of 0.3–4 pixels (far leaves, narrower than a pixel or a few), dense
+/// enough that only sub-pixel masks fuse them, boxes behind.
+fn gen_fine_foliage(rng: &mut Rng) -> Local {
+    let d = rng.u(2.0, 10.0);
+    let dir = rng.unit_up(0.15);
+    let c = dir * d;
+    let res = rng.pick(&[32, 64, 64, 128]);
+    let px = 2.0 / res as f64 * d;
+    let s = rng.log_u(0.3, 4.0) * px / 2.0;
+    let r = (px * rng.u(3.0, 8.0)).min(0.4 * d);
+    let tau = rng.u(5.0, 15.0);
+    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(300, 5000);
+    let mut l = Local {
+        // The shrink from a hundredth of a pixel to a third of a pixel at the cluster.
+        eps: px * rng.log_u(0.01, 0.3),
+        res,
+        ..Local::default()
+    };
+    cluster(rng, &mut l.polys, c, dir, r, n, s);
+    for _ in 0..6 {
+        let t = if rng.chance(0.5) {
+            r * rng.u(1.2, 4.0)
+        } else {
+            d * rng.u(0.5, 3.0)
+        };
+        let k = (d + t) / d;
+        let lat = rng.in_ball() * r * 0.4 * k;
+        let lat = lat - dir * lat.dot(dir);
+        let h = r * rng.u(0.03, 0.3) * k;
+        let hv = jitter_half(rng, h);
+        l.boxes.push(cube(c + dir * t + lat, hv));
+    }
     l
 }
 
@@ -1333,6 +1369,10 @@ fn report(cfg: &Config, v: &Violation, reused_state: bool) -> String {
 }
 
 /// Runs `n` configurations of a family and checks every hidden box.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the family's fields and the two render variants, all plain"
+)]
 fn run_family(
     name: &'static str,
     seed: u64,
@@ -1341,6 +1381,7 @@ fn run_family(
     patch: bool,
     generate: &dyn Fn(&mut Rng) -> Local,
     render_eps: f64,
+    subpixel: bool,
 ) -> Stats {
     let start = std::time::Instant::now();
     let mut st = Stats::default();
@@ -1368,6 +1409,7 @@ fn run_family(
                 cubes.len() - 1
             }
         };
+        cubes[k].set_subpixel(subpixel);
         let results = render(&mut cubes[k], &cfg, &cfg.polys, render_eps);
         let rel: Vec<RelPoly> = cfg
             .polys
@@ -1443,8 +1485,9 @@ fn gen_patch(rng: &mut Rng) -> Local {
 
 /// Any family's generator, chosen at random (for the scaled family).
 fn gen_any(rng: &mut Rng) -> Local {
-    let gens: [fn(&mut Rng) -> Local; 7] = [
+    let gens: [fn(&mut Rng) -> Local; 8] = [
         gen_foliage,
+        gen_fine_foliage,
         gen_grazing,
         gen_near,
         gen_crossing,
@@ -1456,7 +1499,16 @@ fn gen_any(rng: &mut Rng) -> Local {
     g(rng)
 }
 
-const FAMILIES: [Family; 10] = [
+const FAMILIES: [Family; 11] = [
+    Family {
+        name: "fine_foliage",
+        seed: 0xF1_0E1A6E,
+        configs: 600,
+        scaled: false,
+        patch: false,
+        generate: gen_fine_foliage,
+        min_hidden: 0.05,
+    },
     Family {
         name: "ground",
         seed: 0x62_0ED,
@@ -1560,6 +1612,7 @@ fn family(name: &str) {
         f.patch,
         &f.generate,
         1.0,
+        true,
     );
     assert_meaningful(f.name, &st, f.min_hidden);
 }
@@ -1567,6 +1620,42 @@ fn family(name: &str) {
 #[test]
 fn foliage_hidden_boxes_are_hidden_from_the_whole_ball() {
     family("foliage");
+}
+
+/// Leaves of a fraction of a pixel to a few pixels: sub-pixel masks fuse them.
+#[test]
+fn fine_foliage_fused_in_sub_pixels_is_hidden_from_the_whole_ball() {
+    family("fine_foliage");
+}
+
+/// Sub-pixel masks are what hides the fine foliage's boxes: without them (one polygon over a
+/// whole pixel) far fewer are hidden, from the same configurations.
+#[test]
+fn sub_pixel_masks_fuse_what_whole_pixels_cannot() {
+    let f = FAMILIES
+        .iter()
+        .find(|f| f.name == "fine_foliage")
+        .expect("family");
+    let n = count(f.configs / 3);
+    let run = |sub: bool| {
+        run_family(
+            f.name,
+            f.seed ^ 0x5B,
+            n,
+            false,
+            false,
+            &f.generate,
+            1.0,
+            sub,
+        )
+    };
+    let (with, without) = (run(true), run(false));
+    assert!(
+        with.hidden >= 2 * without.hidden + 10,
+        "sub-pixel masks hid {} boxes, whole pixels {}: masks must hide far more",
+        with.hidden,
+        without.hidden
+    );
 }
 
 #[test]
@@ -1627,6 +1716,7 @@ fn check_catches_a_render_with_less_shrink() {
                 f.patch,
                 &f.generate,
                 factor,
+                true,
             );
             total += st.violations;
             if ["near", "general", "patch"].contains(&f.name) {

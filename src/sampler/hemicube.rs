@@ -25,6 +25,50 @@ fn round_up(z: f64) -> f32 {
     if f64::from(f) < m { f.next_up() } else { f }
 }
 
+/// The sub-pixels (8 × 8, bit `8·b + a` for column `a`, row `b`) of the pixel
+/// `[u0, u0 + ps] × [v0, v0 + ps]` that lie entirely inside every edge's region `ev`
+/// (`e0·u + e1·v + e2 − s·√(u²+v²+1) ≥ margin`), where `lmax` is at least `√(u²+v²+1)` over
+/// the pixel (its largest corner value: the root is convex). With `s ≥ 0` the linear test
+/// `e0·u + e1·v + e2 − s·lmax ≥ margin` implies the exact one at every point of the pixel,
+/// and a sub-pixel passes a linear test everywhere iff its worst corner does.
+fn pixel_mask(ev: &[[f32; 4]], u0: f64, v0: f64, ps: f64, lmax: f64) -> u64 {
+    let margin = f64::from(CORNER_MARGIN);
+    let h = ps / 8.0;
+    let mut mask = u64::MAX;
+    for e in ev {
+        let (a, b, c, s) = (
+            f64::from(e[0]),
+            f64::from(e[1]),
+            f64::from(e[2]),
+            f64::from(e[3]),
+        );
+        let base = a * u0 + b * v0 + c - s * lmax;
+        let (du, dv) = (a * h, b * h);
+        // The worst corner of sub-pixel (0, 0); sub-pixel (a, b) adds a·du + b·dv.
+        let c0 = base + du.min(0.0) + dv.min(0.0);
+        if c0 + 7.0 * (du.min(0.0) + dv.min(0.0)) >= margin {
+            continue;
+        }
+        if c0 + 7.0 * (du.max(0.0) + dv.max(0.0)) < margin {
+            return 0;
+        }
+        let mut em = 0u64;
+        for bb in 0..8 {
+            let r = c0 + f64::from(bb) * dv;
+            for aa in 0..8 {
+                if r + f64::from(aa) * du >= margin {
+                    em |= 1 << (bb * 8 + aa);
+                }
+            }
+        }
+        mask &= em;
+        if mask == 0 {
+            return 0;
+        }
+    }
+    mask
+}
+
 /// What [`Hemicube::test_box`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum BoxTest {
@@ -59,6 +103,11 @@ struct View {
     /// `v` at the bottom edge of row 0 (−1 front, 0 sides).
     vmin: f64,
     depth: Vec<f32>,
+    /// Per pixel, the sub-pixels (8 × 8, bit `8·b + a`) covered by polygons drawn so far that
+    /// did not cover the whole pixel, and the largest depth of those polygons (`wz`, 0 when
+    /// the mask is empty). A full mask covers the pixel at `wz`.
+    mask: Vec<u64>,
+    wz: Vec<f32>,
     tile_max: Vec<f32>,
     /// The pixels that matter this render: `[i0, i1) × [j0, j1)` (empty when `i0 ≥ i1`).
     need: [usize; 4],
@@ -99,6 +148,8 @@ pub struct Hemicube {
     scratch_q: Vec<DVec3>,
     scratch_edges: Vec<(DVec3, f64)>,
     scratch_ev: Vec<[f32; 4]>,
+    /// Whether partly covered pixels keep sub-pixel masks ([`Hemicube::set_subpixel`]).
+    subpixel: bool,
 }
 
 impl Hemicube {
@@ -135,7 +186,17 @@ impl Hemicube {
             scratch_q: Vec::new(),
             scratch_edges: Vec::new(),
             scratch_ev: Vec::new(),
+            subpixel: true,
         }
+    }
+
+    /// Turns sub-pixel masks on (the default) or off. With them, a pixel that no single
+    /// polygon covers is still covered once polygons together cover its 8 × 8 sub-pixels
+    /// (at the largest of their depths): seams between leaves and leaves narrower than a
+    /// pixel fuse at eight times the resolution, for the cost of the pixels on polygons'
+    /// edges. Off, a pixel needs one polygon over all of it (for comparisons).
+    pub fn set_subpixel(&mut self, on: bool) {
+        self.subpixel = on;
     }
 
     /// Pixels across each view.
@@ -189,6 +250,8 @@ impl Hemicube {
                         h,
                         vmin: if k == 0 { -1.0 } else { 0.0 },
                         depth: vec![f32::INFINITY; res * h],
+                        mask: vec![0; res * h],
+                        wz: vec![0.0; res * h],
                         tile_max: vec![f32::INFINITY; (res / TILE) * (h / TILE)],
                         need: [0; 4],
                     }
@@ -227,7 +290,10 @@ impl Hemicube {
             let (ti0, ti1, tj0, tj1) = (i0 / TILE, i1.div_ceil(TILE), j0 / TILE, j1.div_ceil(TILE));
             for tj in tj0..tj1 {
                 for row in tj * TILE..(tj + 1) * TILE {
-                    v.depth[row * res + ti0 * TILE..row * res + ti1 * TILE].fill(f32::INFINITY);
+                    let span = row * res + ti0 * TILE..row * res + ti1 * TILE;
+                    v.depth[span.clone()].fill(f32::INFINITY);
+                    v.mask[span.clone()].fill(0);
+                    v.wz[span].fill(0.0);
                 }
                 v.tile_max[tj * (res / TILE) + ti0..tj * (res / TILE) + ti1].fill(f32::INFINITY);
             }
@@ -539,20 +605,18 @@ impl Hemicube {
         }
         let half = res as f64 / 2.0;
         let [ni0, ni1, nj0, nj1] = view.need;
-        // Corner indices strictly needed: corners of needed pixels inside the bound.
-        let ci0 = (((umin + 1.0) * half).ceil().max(0.0) as usize).max(ni0);
-        let ci1 =
-            (((umax + 1.0) * half).floor().min(res as f64).max(-1.0) as isize).min(ni1 as isize);
-        let cj0 = (((vmin - view.vmin) * half).ceil().max(0.0) as usize).max(nj0);
-        let cj1 = (((vmax - view.vmin) * half)
-            .floor()
-            .min(view.h as f64)
-            .max(-1.0) as isize)
-            .min(nj1 as isize);
-        if ci1 < ci0 as isize + 1 || cj1 < cj0 as isize + 1 {
+        // The needed pixels the projection's bound touches; their corners are tested.
+        let pi0 = (((umin + 1.0) * half).floor().max(0.0) as usize).max(ni0);
+        let pi1 = (((umax + 1.0) * half).ceil().clamp(0.0, res as f64) as usize).min(ni1);
+        let pj0 = (((vmin - view.vmin) * half).floor().max(0.0) as usize).max(nj0);
+        let pj1 = (((vmax - view.vmin) * half).ceil().clamp(0.0, view.h as f64) as usize).min(nj1);
+        if pi0 >= pi1 || pj0 >= pj1 {
             return false;
         }
-        let (ci1, cj1) = (ci1 as usize, cj1 as usize);
+        let subpixel = self.subpixel;
+        // A narrow projection may cover sub-pixels of pixels none of whose corners pass:
+        // all its pixels get masks. Otherwise only pixels with a passing corner do.
+        let thin = subpixel && (pi1 - pi0 <= 4 || pj1 - pj0 <= 4);
         let mut ev_buf = std::mem::take(&mut self.scratch_ev);
         ev_buf.clear();
         for &(m, s) in edges {
@@ -568,7 +632,7 @@ impl Hemicube {
         let z = round_up(zmax);
         // A polygon deep in this view (the ground, a wall seen at a slant) takes its plane's
         // depth per pixel instead: the largest of the pixel's corners (1/Z is affine over the
-        // pixel, which lies inside the silhouette, so Z is largest at a corner).
+        // pixel, so Z is largest at a corner; a corner beyond the plane's horizon gives ∞).
         let plane = if zmax - zmin > 0.05 * zmax {
             let nv = to_view(normal);
             Some((nv, nv.dot(to_view(q[0]))))
@@ -595,15 +659,16 @@ impl Hemicube {
         let view = &mut self.views[k];
         let mut wrote = false;
         let mut seen = false;
+        let mut any_prev = false;
         let (mut wi0, mut wi1, mut wj0, mut wj1) = (usize::MAX, 0, usize::MAX, 0);
-        for cj in cj0..=cj1 {
+        for cj in pj0..=pj1 {
             let v = (view.vmin + cj as f64 * ps) as f32;
             let row = &norms[cj * (res + 1)..];
             let mut any_pass = false;
             // The passing corners of a row are a run (a convex set meets a line in an
             // interval): stop at the first failure after it.
-            let mut ci = ci0;
-            while ci <= ci1 {
+            let mut ci = pi0;
+            while ci <= pi1 {
                 let u = (-1.0 + ci as f64 * ps) as f32;
                 let l = row[ci];
                 let ok = ev
@@ -611,44 +676,85 @@ impl Hemicube {
                     .all(|e| e[0] * u + e[1] * v + e[2] - e[3] * l >= CORNER_MARGIN);
                 pass[ci] = ok as u8;
                 if !ok && any_pass {
-                    pass[ci + 1..=ci1].fill(0);
+                    pass[ci + 1..=pi1].fill(0);
                     break;
                 }
                 any_pass |= ok;
                 ci += 1;
             }
-            if cj > cj0 {
+            if cj > pj0 && (any_pass || any_prev || thin) {
                 let pj = cj - 1;
-                for ci in ci0..ci1 {
-                    if prev[ci] & prev[ci + 1] & pass[ci] & pass[ci + 1] != 0 {
-                        let z = if plane.is_some() {
-                            let (u0, u1) = (-1.0 + ci as f64 * ps, -1.0 + (ci + 1) as f64 * ps);
-                            let (v0, v1) = (view.vmin + pj as f64 * ps, view.vmin + cj as f64 * ps);
-                            let m = plane_depth(u0, v0)
-                                .max(plane_depth(u1, v0))
-                                .max(plane_depth(u0, v1))
-                                .max(plane_depth(u1, v1));
-                            round_up(m).min(z)
-                        } else {
+                let prow = &norms[pj * (res + 1)..];
+                for ci in pi0..pi1 {
+                    let corners = prev[ci] + prev[ci + 1] + pass[ci] + pass[ci + 1];
+                    let (u0, v0) = (-1.0 + ci as f64 * ps, view.vmin + pj as f64 * ps);
+                    let cover = if corners == 4 {
+                        u64::MAX
+                    } else if subpixel && (corners > 0 || thin) {
+                        let lmax = row[ci].max(row[ci + 1]).max(prow[ci]).max(prow[ci + 1]);
+                        pixel_mask(ev, u0, v0, ps, f64::from(lmax))
+                    } else {
+                        0
+                    };
+                    if cover == 0 {
+                        continue;
+                    }
+                    let z = if plane.is_some() {
+                        let (u1, v1) = (u0 + ps, v0 + ps);
+                        let m = plane_depth(u0, v0)
+                            .max(plane_depth(u1, v0))
+                            .max(plane_depth(u0, v1))
+                            .max(plane_depth(u1, v1));
+                        round_up(m).min(z)
+                    } else {
+                        z
+                    };
+                    let idx = pj * res + ci;
+                    let d = view.depth[idx];
+                    if z >= d {
+                        continue;
+                    }
+                    // A partial layer no nearer than the pixel's depth can no longer help.
+                    if view.mask[idx] != 0 && view.wz[idx] >= d {
+                        view.mask[idx] = 0;
+                        view.wz[idx] = 0.0;
+                    }
+                    let new_depth = if cover == u64::MAX {
+                        Some(z)
+                    } else {
+                        let m = view.mask[idx] | cover;
+                        let wz = if view.mask[idx] == 0 {
                             z
+                        } else {
+                            view.wz[idx].max(z)
                         };
-                        let d = &mut view.depth[pj * res + ci];
-                        if z < *d {
-                            *d = z;
-                            wrote = true;
-                            wi0 = wi0.min(ci);
-                            wi1 = wi1.max(ci + 1);
-                            wj0 = wj0.min(pj);
-                            wj1 = wj1.max(pj + 1);
+                        if m == u64::MAX {
+                            view.mask[idx] = 0;
+                            view.wz[idx] = 0.0;
+                            (wz < d).then_some(wz)
+                        } else {
+                            view.mask[idx] = m;
+                            view.wz[idx] = wz;
+                            None
                         }
+                    };
+                    if let Some(nd) = new_depth {
+                        view.depth[idx] = nd;
+                        wrote = true;
+                        wi0 = wi0.min(ci);
+                        wi1 = wi1.max(ci + 1);
+                        wj0 = wj0.min(pj);
+                        wj1 = wj1.max(pj + 1);
                     }
                 }
             }
-            if !any_pass && seen {
-                // The passing corners are the lattice points of a convex set: none later.
+            if !any_pass && seen && !thin {
+                // The passing corners are the lattice points of a convex set: none later,
+                // and the pixels between this row and the last passing one are done.
                 break;
             }
             seen |= any_pass;
+            any_prev = any_pass;
             std::mem::swap(&mut pass, &mut prev);
         }
         if wrote {

@@ -52,6 +52,17 @@
 //! vertices rounded up: every ray in the pixel crosses `L` no deeper. A pixel keeps the nearest
 //! depth of the polygons covering it, so different polygons cover different pixels: fusion.
 //!
+//! **Sub-pixels.** A pixel no single polygon covers is split into 8 × 8 sub-pixels. For each
+//! edge the condition is relaxed to the linear `a·u + b·v + c − s·l_max ≥ margin`, where
+//! `l_max` is the largest of `√(u²+v²+1)` at the pixel's corners (the root is convex, so that
+//! is its maximum over the pixel, and `s ≥ 0`): wherever the linear test holds the exact one
+//! does. A sub-pixel passes a linear test everywhere iff its worst corner does, so a set bit
+//! means the whole sub-pixel lies inside `L`'s shrunk silhouette. The pixel's mask collects
+//! the bits of every polygon drawn into it (nearer than its depth so far) with the largest of
+//! their depths; when all 64 bits are set, every direction of the pixel lies in the shrunk
+//! silhouette of some polygon no deeper than that, and the pixel is covered at it. Seams
+//! between leaves and leaves narrower than a pixel fuse at eight times the resolution.
+//!
 //! **Occludees.** A box is tested with every pixel its directions can reach (the box cut to
 //! the half-space `Z ≥ dist(p, box)/√3`, which holds the box's part inside the view's
 //! frustum, then its exact `u`/`v` range, rounded outward to whole pixels) and its nearest view
