@@ -165,6 +165,23 @@ pub struct BakeArgs {
     /// Limit --dump-exr/--dump-png to these cell indices (e.g. 0,5,9).
     #[arg(long, value_delimiter = ',', value_name = "I,J,…")]
     pub dump_cells: Option<Vec<usize>>,
+    /// Continue an interrupted bake from its journal (OUTPUT.journal, written as cells
+    /// finish): finished cells are not baked again. The journal must come from the same
+    /// scene, cells, settings, backend and shard (else an error says what to do); without a
+    /// journal every cell is baked.
+    #[arg(long)]
+    pub resume: bool,
+    /// Bake only shard I of N (0 ≤ I < N): the cells I, I+N, I+2N, … Writes a shard file
+    /// (JSON) for `umbrasweep merge OUT SHARD…`. On Slurm: --shard $SLURM_ARRAY_TASK_ID/N with
+    /// --array=0-(N-1); on Kubernetes: $JOB_COMPLETION_INDEX/N.
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<umbrasweep::bake::ShardSpec>,
+    /// Write 0 for every timing (per-cell and per-culler milliseconds, total seconds), so that
+    /// the same inputs give byte-identical files whatever the thread or shard count, and a
+    /// resumed bake the same file as an uninterrupted one. (With --sampling and a budget the
+    /// sampler's point counts may still vary between runs.)
+    #[arg(long)]
+    pub reproducible: bool,
     /// No progress bar or summary.
     #[arg(short, long)]
     pub quiet: bool,
@@ -290,16 +307,67 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             a.output.display()
         ),
     };
+    if a.shard.is_some() && binary {
+        bail!(
+            "{}: a shard is written as JSON for `umbrasweep merge` (use a .json file name; \
+             merge writes .json or .pvs)",
+            a.output.display()
+        );
+    }
     let cells = read_cells(a)?;
     let t = std::time::Instant::now();
     let scene = scene::load(&a.scene)?;
     let load_s = t.elapsed().as_secs_f64();
     let backend = make_backend(a.backend)?;
     let backend = backend.as_ref();
+    let which: Vec<usize> = match a.shard {
+        Some(s) => s.cells(cells.len()),
+        None => (0..cells.len()).collect(),
+    };
+    // The journal: it also checks, before any work, that the output's folder is writable.
+    let inputs = bake::inputs_hash(
+        &scene,
+        &cells,
+        &settings,
+        &format!("backend {}", backend.name()),
+    );
+    let journal_inputs = match a.shard {
+        Some(s) => format!("{inputs}-shard-{}-of-{}", s.index, s.count),
+        None => inputs.clone(),
+    };
+    let jpath = bake::journal_path(&a.output);
+    let (journal, mut done) = if a.resume && jpath.exists() {
+        bake::Journal::resume(&jpath, &journal_inputs)?
+    } else {
+        if a.resume && !a.quiet {
+            eprintln!(
+                "note        no journal at {}: baking every cell",
+                jpath.display()
+            );
+        } else if jpath.exists() && !a.quiet {
+            eprintln!(
+                "warning     replacing {} (the journal of an interrupted bake; --resume \
+                 continues it)",
+                jpath.display()
+            );
+        }
+        (
+            bake::Journal::create(&jpath, &journal_inputs)
+                .with_context(|| format!("cannot write next to {}", a.output.display()))?,
+            std::collections::BTreeMap::new(),
+        )
+    };
+    done.retain(|k, _| which.binary_search(k).is_ok());
+    let resumed = done.len();
+    let todo: Vec<usize> = which
+        .iter()
+        .copied()
+        .filter(|i| !done.contains_key(i))
+        .collect();
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()
     } else {
-        let b = indicatif::ProgressBar::new(cells.len() as u64);
+        let b = indicatif::ProgressBar::new(which.len() as u64);
         b.set_style(
             indicatif::ProgressStyle::with_template(
                 "{spinner} baking [{bar:40}] {pos}/{len} cells, {elapsed} elapsed, eta {eta}",
@@ -307,9 +375,10 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             .expect("valid template")
             .progress_chars("=> "),
         );
+        b.set_position(resumed as u64);
         b
     };
-    let progress = |k: usize| bar.set_position(k as u64);
+    let progress = |k: usize| bar.set_position((resumed + k) as u64);
     let dump = umbrasweep::inspect::DumpOptions {
         exr: a.dump_exr.clone(),
         png: a.dump_png.clone(),
@@ -325,26 +394,61 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         }
     };
     let dumping = dump.exr.is_some() || dump.png.is_some();
-    let result = bake::bake_observed(
+    let journal = std::sync::Mutex::new(journal);
+    let on_cell =
+        |ci: usize, r: &bake::CellResult| journal.lock().expect("not poisoned").append(ci, r);
+    let mut result = bake::bake_cells(
         &scene,
         &cells,
+        &todo,
         &settings,
         backend,
-        Some(&progress),
-        dumping.then_some(&observe as bake::PlaneObserver),
+        bake::BakeHooks {
+            progress: Some(&progress),
+            observe: dumping.then_some(&observe as bake::PlaneObserver),
+            on_cell: Some(&on_cell),
+        },
     )?;
     bar.finish_and_clear();
     if let Some(e) = dump_error.into_inner().expect("not poisoned") {
         bail!("dumping the planes: {e}");
     }
-    let doc = bake::to_document(&scene, &cells, &result, &settings);
-    if binary {
-        umbrasweep::pvs::binary::write(&a.output, &doc)
-    } else {
-        umbrasweep::pvs::json::write(&a.output, &doc)
+    // The journal's cells back in their places.
+    let mut fresh: std::collections::BTreeMap<usize, bake::CellResult> =
+        todo.iter().copied().zip(result.cells.drain(..)).collect();
+    result.cells = which
+        .iter()
+        .map(|i| {
+            fresh
+                .remove(i)
+                .or_else(|| done.remove(i))
+                .expect("every cell is baked or in the journal")
+        })
+        .collect();
+    if a.reproducible {
+        result.clear_timings();
     }
-    .map_err(anyhow::Error::msg)
+    let baked: Vec<Aabb> = which.iter().map(|&i| cells[i]).collect();
+    let doc = bake::to_document(&scene, &baked, &result, &settings);
+    match a.shard {
+        Some(spec) => {
+            let file = bake::ShardFile::new(spec, inputs, cells.len(), doc.clone(), &result);
+            let json = serde_json::to_vec(&file).context("encoding the shard")?;
+            umbrasweep::util::write_atomic(&a.output, &json).map_err(anyhow::Error::msg)
+        }
+        None if binary => {
+            umbrasweep::pvs::binary::write(&a.output, &doc).map_err(anyhow::Error::msg)
+        }
+        None => umbrasweep::pvs::json::write(&a.output, &doc).map_err(anyhow::Error::msg),
+    }
     .with_context(|| "writing the PVS")?;
+    let journal = journal.into_inner().expect("not poisoned");
+    if let Err(e) = std::fs::remove_file(journal.path()) {
+        eprintln!(
+            "warning     could not remove the finished bake's journal {}: {e}",
+            journal.path().display()
+        );
+    }
     if !a.quiet {
         let s = doc.summary.as_ref().expect("bake writes a summary");
         eprintln!(
@@ -362,7 +466,22 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 .map(|x| format!(" ({x})"))
                 .unwrap_or_default()
         );
-        eprintln!("cells       {}", s.cells);
+        match a.shard {
+            Some(spec) => eprintln!(
+                "cells       {} (shard {spec}: {} of {} cells)",
+                s.cells,
+                which.len(),
+                cells.len()
+            ),
+            None => eprintln!("cells       {}", s.cells),
+        }
+        if resumed > 0 {
+            eprintln!(
+                "resumed     {resumed} cells from {} ({} baked now)",
+                jpath.display(),
+                todo.len()
+            );
+        }
         if result.sweep {
             let sw = &settings.sweep_settings;
             eprintln!(
@@ -435,10 +554,17 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 c.name, c.hidden, c.only, c.ms
             );
         }
-        eprintln!(
-            "time        {:.1} ms per cell (median), {:.2} s in all",
-            s.median_ms_per_cell, s.total_seconds
-        );
+        if a.reproducible {
+            eprintln!(
+                "time        {:.2} s in all (timings not recorded: --reproducible)",
+                t.elapsed().as_secs_f64()
+            );
+        } else {
+            eprintln!(
+                "time        {:.1} ms per cell (median), {:.2} s in all",
+                s.median_ms_per_cell, s.total_seconds
+            );
+        }
         eprintln!("wrote       {}", a.output.display());
     }
     Ok(())

@@ -1,4 +1,4 @@
-//! The `umbrasweep` command line: bake, validate, gen, bench, inspect, report.
+//! The `umbrasweep` command line: bake, merge, validate, gen, bench, inspect, report.
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -7,6 +7,7 @@ mod cli_bake;
 mod cli_bench;
 mod cli_gen;
 mod cli_inspect;
+mod cli_merge;
 mod cli_report;
 mod cli_validate;
 
@@ -33,6 +34,8 @@ enum Command {
     Bench(cli_bench::BenchArgs),
     /// Summarise a binary PVS file, list a cell's objects, or print it as JSON.
     Inspect(cli_inspect::InspectArgs),
+    /// Join the shard files of one `bake --shard I/N` run into one PVS (.json or .pvs).
+    Merge(cli_merge::MergeArgs),
     /// Write a static HTML report of a PVS: top-down picture, per-cell table, plane previews.
     Report(cli_report::ReportArgs),
 }
@@ -46,6 +49,7 @@ fn main() -> ExitCode {
         Command::Bench(a) => cli_bench::run(a).map(|_| 0),
         Command::Inspect(a) => cli_inspect::run(a).map(|_| 0),
         Command::Report(a) => cli_report::run(a).map(|_| 0),
+        Command::Merge(a) => cli_merge::run(a).map(|_| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code as u8),

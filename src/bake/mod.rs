@@ -2,20 +2,28 @@
 //! document ([`to_document`]). A scene is prepared once ([`Prepared`], `prepare.rs`); every
 //! cell — or every sub-cell of it with `subcell` — then runs the pipeline of cullers
 //! (`pipeline.rs`, [`Culler`]): today extended projections on separate planes or the occlusion
-//! sweep (`planes.rs`). Cells run in parallel (rayon).
+//! sweep (`planes.rs`), then the shrunk-occluder sampler (`sampling.rs`). Cells run in parallel
+//! (rayon); [`bake_cells`] bakes a subset of them (a shard, the rest of a resumed bake) and
+//! reports each finished cell (to the journal, `journal.rs`); shards are merged in `shard.rs`.
 
+mod journal;
 mod pipeline;
 mod planes;
 mod prepare;
 mod sampling;
+mod shard;
 
-pub use pipeline::{CullState, Culler, CullerStats, CullerWork, cullers};
+pub use journal::{
+    JOURNAL_MAGIC, JOURNAL_VERSION, Journal, JournalError, inputs_hash, journal_path,
+};
+pub use pipeline::{CULLER_NAMES, CullState, Culler, CullerStats, CullerWork, cullers};
 pub use planes::{PlaneCuller, SWEEP_TEST_REACH};
 pub use prepare::{
     PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared, SAMPLING_AUTO_NOTE, SMALL_OCCLUDER_CELLS,
     SMALL_OCCLUDER_SHARE, choose_sweep, split_cell,
 };
 pub use sampling::{SamplerData, SamplingCuller};
+pub use shard::{MergeError, SHARD_FORMAT, SHARD_VERSION, ShardBake, ShardFile, ShardSpec, merge};
 
 use crate::backend::{BackendError, RasterBackend};
 use crate::geom::Aabb;
@@ -39,10 +47,13 @@ pub enum BakeError {
     /// The backend failed (no adapter, device lost…).
     #[error(transparent)]
     Backend(#[from] BackendError),
+    /// A finished cell could not be written to the journal.
+    #[error(transparent)]
+    Journal(#[from] JournalError),
 }
 
 /// One cell's outcome.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CellResult {
     /// Potentially visible object ids, ascending.
     pub visible: Vec<u32>,
@@ -113,14 +124,67 @@ pub fn bake_observed(
     progress: Option<&(dyn Fn(usize) + Sync)>,
     observe: Option<PlaneObserver>,
 ) -> Result<BakeResult, BakeError> {
+    let all: Vec<usize> = (0..cells.len()).collect();
+    bake_cells(
+        scene,
+        cells,
+        &all,
+        settings,
+        backend,
+        BakeHooks {
+            progress,
+            observe,
+            on_cell: None,
+        },
+    )
+}
+
+/// Observer of every finished cell: `(cell index, result)`; an error stops the bake.
+pub type CellObserver<'a> = &'a (dyn Fn(usize, &CellResult) -> Result<(), JournalError> + Sync);
+
+/// What [`bake_cells`] reports while it works.
+#[derive(Clone, Copy, Default)]
+pub struct BakeHooks<'a> {
+    /// Called after each cell with the number done.
+    pub progress: Option<&'a (dyn Fn(usize) + Sync)>,
+    /// Every rendered plane (dumps and reports).
+    pub observe: Option<PlaneObserver<'a>>,
+    /// Every finished cell, by its index in `cells`, from the worker that baked it (the
+    /// journal); an error stops the bake.
+    pub on_cell: Option<CellObserver<'a>>,
+}
+
+/// Bakes the cells `which` (indices into `cells`) of a bake of all `cells`: the per-scene
+/// choices (the sweep's rule, the sampler's) are made for all of them, so that the cells of
+/// a shard or of a resumed bake come out as they would in one bake. `result.cells` follows
+/// `which`.
+///
+/// # Errors
+/// Invalid settings, an index out of range, the backend's or `on_cell`'s failure (no partial
+/// result).
+pub fn bake_cells(
+    scene: &Scene,
+    cells: &[Aabb],
+    which: &[usize],
+    settings: &BakeSettings,
+    backend: &dyn RasterBackend,
+    hooks: BakeHooks,
+) -> Result<BakeResult, BakeError> {
     let start = Instant::now();
+    if let Some(&bad) = which.iter().find(|&&i| i >= cells.len()) {
+        return Err(BakeError::Settings(SettingsError {
+            option: "cells",
+            value: bad.to_string(),
+            expected: format!("cell indices below {}", cells.len()),
+        }));
+    }
     let prepared = Prepared::new(scene, settings, cells)?;
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let cells_out: Result<Vec<CellResult>, BakeError> = cells
+    let cells_out: Result<Vec<CellResult>, BakeError> = which
         .par_iter()
-        .enumerate()
-        .map(|(ci, c)| {
-            let r = match observe {
+        .map(|&ci| {
+            let c = &cells[ci];
+            let r = match hooks.observe {
                 None => prepared.cell(c, backend),
                 Some(f) => {
                     let mut k = 0;
@@ -129,12 +193,15 @@ pub fn bake_observed(
                         k += 1;
                     })
                 }
-            };
+            }?;
+            if let Some(f) = hooks.on_cell {
+                f(ci, &r)?;
+            }
             let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            if let Some(p) = progress {
+            if let Some(p) = hooks.progress {
                 p(k);
             }
-            r
+            Ok(r)
         })
         .collect();
     Ok(BakeResult {
@@ -150,6 +217,20 @@ pub fn bake_observed(
         sampling_reason: prepared.sampling_reason.clone(),
         cullers: prepared.culler_names(),
     })
+}
+
+impl BakeResult {
+    /// Sets every timing to 0 (per-cell and per-culler milliseconds, the total seconds), so
+    /// that the same inputs give byte-identical PVS files (`bake --reproducible`).
+    pub fn clear_timings(&mut self) {
+        self.seconds = 0.0;
+        for c in &mut self.cells {
+            c.ms = 0.0;
+            for s in &mut c.cullers {
+                s.ms = 0.0;
+            }
+        }
+    }
 }
 
 /// Median of a list (0 for none).
@@ -191,9 +272,29 @@ pub fn to_document(
     result: &BakeResult,
     settings: &BakeSettings,
 ) -> PvsDocument {
-    let tri_count = |o: u32| scene.objects[o as usize].triangles.len();
-    let total_tris = scene.triangles.len().max(1);
-    let n_obj = scene.objects.len().max(1);
+    document(
+        scene.source.display().to_string(),
+        object_table(scene),
+        scene.triangles.len(),
+        cells,
+        result,
+        settings,
+    )
+}
+
+/// [`to_document`] from the parts of a scene it uses: its path as recorded, its object table
+/// and its triangle count (a merge of shards rebuilds the document from these).
+pub fn document(
+    source: String,
+    objects: Vec<PvsObject>,
+    triangles: usize,
+    cells: &[Aabb],
+    result: &BakeResult,
+    settings: &BakeSettings,
+) -> PvsDocument {
+    let tri_count = |o: u32| objects[o as usize].triangles as usize;
+    let total_tris = triangles.max(1);
+    let n_obj = objects.len().max(1);
     let mut obj_pct = 0.0;
     let mut tri_pct = 0.0;
     for c in &result.cells {
@@ -203,10 +304,11 @@ pub fn to_document(
     }
     let nc = result.cells.len().max(1) as f64;
     let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
+    let n_objects = objects.len();
     PvsDocument {
         format: FORMAT.into(),
         version: VERSION,
-        scene: scene.source.display().to_string(),
+        scene: source,
         settings: PvsSettings {
             backend: result.backend.clone(),
             bake: BakeSettings {
@@ -223,7 +325,7 @@ pub fn to_document(
                 ..settings.clone()
             },
         },
-        objects: object_table(scene),
+        objects,
         cells: cells
             .iter()
             .zip(&result.cells)
@@ -252,8 +354,8 @@ pub fn to_document(
             .collect(),
         summary: Some(PvsSummary {
             cells: cells.len(),
-            objects: scene.objects.len(),
-            triangles: scene.triangles.len(),
+            objects: n_objects,
+            triangles,
             occluder_triangles: result.occluder_triangles,
             degenerate_triangles: result.degenerate_triangles,
             backend: result.backend.clone(),

@@ -29,7 +29,7 @@ pub struct CullState<'k> {
 }
 
 /// What one culler did in one (sub-)cell, besides hiding objects.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CullerWork {
     /// Planes rasterised.
     pub planes: usize,
@@ -58,7 +58,7 @@ impl CullerWork {
 }
 
 /// One culler's account for one cell.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CullerStats {
     /// Objects culled from the cell that this culler proved hidden (in some sub-cell).
     pub hidden: u32,
@@ -70,6 +70,10 @@ pub struct CullerStats {
     /// Planes rasterised and occluder Projections sent.
     pub work: CullerWork,
 }
+
+/// Every name a culler of the pipeline may have ([`Culler::name`]); files that record the
+/// cullers (shards) are read back against this list.
+pub const CULLER_NAMES: [&str; 3] = ["extended_projections", "occlusion_sweep", "shrunk_sampling"];
 
 /// One culler of the pipeline: proves objects hidden from a (sub-)cell.
 ///

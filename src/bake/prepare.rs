@@ -41,6 +41,9 @@ pub struct Prepared<'a> {
     /// its triangles, tested when the object's own box is not hidden.
     pub(super) pieces: Vec<std::ops::Range<u32>>,
     pub(super) piece_boxes: Vec<DAabb>,
+    /// Per piece, its triangles: a range of `piece_triangles` (scene triangle indices).
+    pub(super) piece_triangle_ranges: Vec<std::ops::Range<u32>>,
+    pub(super) piece_triangles: Vec<u32>,
     /// Per object, its occluder parts (indices into `occluders.parts`).
     pub(super) object_parts: Vec<Vec<u32>>,
     /// A box holding every object: planes' rectangles stop where no ray toward it passes
@@ -58,13 +61,12 @@ pub const PIECE_LEVELS: u32 = 4;
 /// each possibly on another plane: the union of the pieces holds every triangle, so this is as
 /// conservative as testing the object's box, and much tighter for round or hollow objects (a
 /// tree crown's box has empty corners that low rays see under the other crowns).
-fn object_pieces(scene: &Scene) -> (Vec<std::ops::Range<u32>>, Vec<DAabb>) {
-    let mut ranges = Vec::with_capacity(scene.objects.len());
-    let mut boxes = Vec::new();
+fn object_pieces(scene: &Scene) -> Pieces {
+    let mut out = Pieces::default();
     for o in &scene.objects {
-        let start = boxes.len() as u32;
+        let start = out.boxes.len() as u32;
         if o.triangles.len() >= PIECE_MIN_TRIANGLES {
-            let mut tris: Vec<(glam::DVec3, DAabb)> = o
+            let mut tris: Vec<(glam::DVec3, DAabb, u32)> = o
                 .triangles
                 .clone()
                 .map(|t| {
@@ -73,17 +75,27 @@ fn object_pieces(scene: &Scene) -> (Vec<std::ops::Range<u32>>, Vec<DAabb>) {
                         min: a.min(b).min(c),
                         max: a.max(b).max(c),
                     };
-                    ((a + b + c) / 3.0, bx)
+                    ((a + b + c) / 3.0, bx, t)
                 })
                 .collect();
-            split_pieces(&mut tris, PIECE_LEVELS, &mut boxes);
+            split_pieces(&mut tris, PIECE_LEVELS, &mut out);
         }
-        ranges.push(start..boxes.len() as u32);
+        out.ranges.push(start..out.boxes.len() as u32);
     }
-    (ranges, boxes)
+    out
 }
 
-fn split_pieces(tris: &mut [(glam::DVec3, DAabb)], levels: u32, out: &mut Vec<DAabb>) {
+/// Every object's pieces: per object its range of pieces, per piece its box and its range
+/// of `triangles` (the scene's triangle indices).
+#[derive(Default)]
+struct Pieces {
+    ranges: Vec<std::ops::Range<u32>>,
+    boxes: Vec<DAabb>,
+    triangle_ranges: Vec<std::ops::Range<u32>>,
+    triangles: Vec<u32>,
+}
+
+fn split_pieces(tris: &mut [(glam::DVec3, DAabb, u32)], levels: u32, out: &mut Pieces) {
     if tris.is_empty() {
         return;
     }
@@ -93,7 +105,10 @@ fn split_pieces(tris: &mut [(glam::DVec3, DAabb)], levels: u32, out: &mut Vec<DA
         b.max = b.max.max(t.1.max);
     }
     if levels == 0 || tris.len() < 4 {
-        out.push(b);
+        out.boxes.push(b);
+        let start = out.triangles.len() as u32;
+        out.triangles.extend(tris.iter().map(|t| t.2));
+        out.triangle_ranges.push(start..out.triangles.len() as u32);
         return;
     }
     let axis = (b.max - b.min).max_position();
@@ -235,7 +250,12 @@ impl<'a> Prepared<'a> {
             );
             d
         });
-        let (pieces, piece_boxes) = object_pieces(scene);
+        let Pieces {
+            ranges: pieces,
+            boxes: piece_boxes,
+            triangle_ranges: piece_triangle_ranges,
+            triangles: piece_triangles,
+        } = object_pieces(scene);
         let mut object_parts = vec![Vec::new(); scene.objects.len()];
         for (i, p) in occluders.parts.iter().enumerate() {
             object_parts[p.object as usize].push(i as u32);
@@ -261,6 +281,8 @@ impl<'a> Prepared<'a> {
             sweep_reason,
             pieces,
             piece_boxes,
+            piece_triangle_ranges,
+            piece_triangles,
             object_parts,
         })
     }

@@ -361,9 +361,7 @@ impl Shared<'_> {
                     let pieces = self.prepared.pieces[o as usize].clone();
                     let mut first = None;
                     for k in pieces.clone() {
-                        if let BoxTest::Open { direction } =
-                            hc.test_box(&self.prepared.piece_boxes[k as usize])
-                        {
+                        if let BoxTest::Open { direction } = self.test_piece(hc, k as usize) {
                             first = Some(direction);
                             break;
                         }
@@ -409,6 +407,30 @@ impl Shared<'_> {
                 &open,
             );
         }
+    }
+
+    /// Tests piece `k` of an object: its box, and when that is open, the box of each of its
+    /// triangles (the union of which holds the piece).
+    fn test_piece(&self, hc: &Hemicube, k: usize) -> BoxTest {
+        let p = self.prepared;
+        let open = hc.test_box(&p.piece_boxes[k]);
+        if open == BoxTest::Hidden {
+            return open;
+        }
+        let scene = p.scene;
+        for &t in &p.piece_triangles
+            [p.piece_triangle_ranges[k].start as usize..p.piece_triangle_ranges[k].end as usize]
+        {
+            let [a, b, c] = scene.triangle(t as usize).map(|v| v.as_dvec3());
+            let tb = hc.test_box(&DAabb {
+                min: a.min(b).min(c),
+                max: a.max(b).max(c),
+            });
+            if tb != BoxTest::Hidden {
+                return tb;
+            }
+        }
+        BoxTest::Hidden
     }
 
     /// Casts up to [`CERTIFY_PER_OBJECT`] rays from `eye`: through the open pixel, and at a
