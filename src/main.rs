@@ -40,7 +40,25 @@ enum Command {
     Report(cli_report::ReportArgs),
 }
 
+/// Mesa's Vulkan drivers print "XDG_RUNTIME_DIR is invalid or not set in the environment"
+/// on stderr when the adapter probe (`--backend auto`) looks for a Wayland display and the
+/// variable is missing (servers, containers, CI). We never open a window: a private, empty
+/// folder for this run silences the probe. Returns the folder (removed when dropped).
+fn quiet_display_probe() -> Option<tempfile::TempDir> {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+        return None;
+    }
+    let dir = tempfile::Builder::new()
+        .prefix("umbrasweep-runtime-")
+        .tempdir()
+        .ok()?;
+    // SAFETY: called first thing in `main`, before any other thread exists.
+    unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir.path()) };
+    Some(dir)
+}
+
 fn main() -> ExitCode {
+    let _runtime_dir = quiet_display_probe();
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Bake(a) => cli_bake::run(a).map(|_| 0),

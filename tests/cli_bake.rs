@@ -243,3 +243,28 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
             .contains(&serde_json::json!(1))
     );
 }
+
+/// `--backend auto` probes the adapters without the display server's noise on stderr (Mesa
+/// prints "XDG_RUNTIME_DIR is invalid or not set" when the variable is missing, as on CI).
+#[test]
+fn backend_auto_prints_no_driver_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write(dir.path(), "s.obj", SCENE);
+    let cells = write(dir.path(), "c.json", CELLS);
+    let out = dir.path().join("pvs.json");
+    let r = bin()
+        .arg("bake")
+        .arg(&scene)
+        .arg("--cells")
+        .arg(&cells)
+        .arg("-o")
+        .arg(&out)
+        .args(["--backend", "auto"])
+        .env_remove("XDG_RUNTIME_DIR")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+    assert!(stderr.starts_with("scene "), "{stderr}");
+}
