@@ -141,47 +141,53 @@ pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Oc
         }
     }
     drop(index);
-    // 3. Merge coplanar neighbours per connected component, in parallel.
+    // 3. Merge coplanar neighbours per connected component, in parallel (a lone triangle —
+    //    every leaf of a forest — is its own polygon, made in place without a merge).
     let comps = components(&verts, &tris);
-    let merged: Vec<Vec<(u32, MergedPolygon)>> = comps
+    let comp = |k: usize| &comps.triangles[comps.offsets[k] as usize..comps.offsets[k + 1] as usize];
+    let multi: Vec<usize> = (0..comps.len()).filter(|&k| comp(k).len() > 1).collect();
+    let merged: Vec<Vec<MergedPolygon>> = multi
         .par_iter()
-        .map(|comp| {
-            let comp_tris: Vec<[u32; 3]> = comp.iter().map(|&t| tris[t]).collect();
-            let object = tri_object[comp[0]];
-            if comp_tris.len() == 1 {
-                let n = (verts[comp_tris[0][1] as usize] - verts[comp_tris[0][0] as usize])
-                    .cross(verts[comp_tris[0][2] as usize] - verts[comp_tris[0][0] as usize])
-                    .normalize();
-                return vec![(
-                    object,
-                    MergedPolygon {
-                        verts: comp_tris[0].to_vec(),
-                        normal: n,
-                        deviation: 0.0,
-                        inradius: 0.0,
-                    },
-                )];
-            }
+        .map(|&k| {
+            let comp_tris: Vec<[u32; 3]> = comp(k).iter().map(|&t| tris[t as usize]).collect();
             merge_coplanar(&verts, &comp_tris)
-                .into_iter()
-                .map(|p| (object, p))
-                .collect()
         })
         .collect();
-    for (object, poly) in merged.into_iter().flatten() {
-        out.stats.polygons += 1;
-        let pts: Vec<DVec3> = poly.verts.iter().map(|&i| verts[i as usize]).collect();
-        push_part(
-            &mut out.points,
-            &mut out.parts,
-            object,
-            pts,
-            PartKind::Polygon {
-                normal: poly.normal,
-            },
-            poly.deviation,
-            poly.inradius,
-        );
+    let mut merged = merged.into_iter();
+    for k in 0..comps.len() {
+        let c = comp(k);
+        let object = tri_object[c[0] as usize];
+        if c.len() == 1 {
+            let t = tris[c[0] as usize].map(|i| verts[i as usize]);
+            out.stats.polygons += 1;
+            push_part(
+                &mut out.points,
+                &mut out.parts,
+                object,
+                t.to_vec(),
+                PartKind::Polygon {
+                    normal: (t[1] - t[0]).cross(t[2] - t[0]).normalize(),
+                },
+                0.0,
+                0.0,
+            );
+            continue;
+        }
+        for poly in merged.next().expect("one merge per component of several triangles") {
+            out.stats.polygons += 1;
+            let pts: Vec<DVec3> = poly.verts.iter().map(|&i| verts[i as usize]).collect();
+            push_part(
+                &mut out.points,
+                &mut out.parts,
+                object,
+                pts,
+                PartKind::Polygon {
+                    normal: poly.normal,
+                },
+                poly.deviation,
+                poly.inradius,
+            );
+        }
     }
     out.bounds = DAabb {
         min: DVec3::INFINITY,
@@ -229,8 +235,10 @@ fn prepare_object(scene: &Scene, object: u32, alpha_occluders: bool) -> ObjectPa
     let mut points = Vec::new();
     let mut parts = Vec::new();
     let mut rest = Vec::new();
-    for comp in components(&verts, &tris) {
-        let comp_tris: Vec<[u32; 3]> = comp.iter().map(|&t| tris[t]).collect();
+    let comps = components(&verts, &tris);
+    for k in 0..comps.len() {
+        let comp = &comps.triangles[comps.offsets[k] as usize..comps.offsets[k + 1] as usize];
+        let comp_tris: Vec<[u32; 3]> = comp.iter().map(|&t| tris[t as usize]).collect();
         if comp_tris.len() <= MAX_SOLID_TRIANGLES
             && let Some(solid) = convex_solid(&verts, &comp_tris)
         {
@@ -252,7 +260,7 @@ fn prepare_object(scene: &Scene, object: u32, alpha_occluders: bool) -> ObjectPa
             stats.solids += 1;
             continue;
         }
-        rest.extend(comp.iter().map(|&t| raw[t]));
+        rest.extend(comp.iter().map(|&t| raw[t as usize]));
     }
     (points, parts, stats, rest)
 }
@@ -283,8 +291,22 @@ fn push_part(
     });
 }
 
-/// Connected components of triangles sharing a vertex; lists of triangle indices.
-fn components(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<Vec<usize>> {
+/// Connected components of triangles sharing a vertex, in the order of their first triangle,
+/// each listing its triangles in increasing order: component `k` is
+/// `triangles[offsets[k]..offsets[k + 1]]` (flat arrays: a forest has millions of one-triangle
+/// components).
+struct Components {
+    offsets: Vec<u32>,
+    triangles: Vec<u32>,
+}
+
+impl Components {
+    fn len(&self) -> usize {
+        self.offsets.len() - 1
+    }
+}
+
+fn components(verts: &[DVec3], tris: &[[u32; 3]]) -> Components {
     let mut parent: Vec<u32> = (0..verts.len() as u32).collect();
     fn find(p: &mut [u32], mut x: u32) -> u32 {
         while p[x as usize] != x {
@@ -302,22 +324,35 @@ fn components(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<Vec<usize>> {
             }
         }
     }
-    let mut groups: HashMap<u32, Vec<usize>> = HashMap::new();
-    let mut order = Vec::new();
-    for (i, t) in tris.iter().enumerate() {
-        let r = find(&mut parent, t[0]);
-        groups
-            .entry(r)
-            .or_insert_with(|| {
-                order.push(r);
-                Vec::new()
-            })
-            .push(i);
+    // Component ids by first appearance (reusing `parent`'s roots as the key), then a
+    // counting sort of the triangles by component (stable: increasing order within each).
+    let mut id_of_root = vec![u32::MAX; verts.len()];
+    let mut tri_comp = Vec::with_capacity(tris.len());
+    let mut counts: Vec<u32> = Vec::new();
+    for t in tris {
+        let r = find(&mut parent, t[0]) as usize;
+        if id_of_root[r] == u32::MAX {
+            id_of_root[r] = counts.len() as u32;
+            counts.push(0);
+        }
+        let c = id_of_root[r];
+        counts[c as usize] += 1;
+        tri_comp.push(c);
     }
-    order
-        .into_iter()
-        .map(|r| groups.remove(&r).unwrap())
-        .collect()
+    drop(parent);
+    drop(id_of_root);
+    let mut offsets = Vec::with_capacity(counts.len() + 1);
+    offsets.push(0u32);
+    for c in &counts {
+        offsets.push(offsets.last().expect("non-empty") + c);
+    }
+    let mut next: Vec<u32> = offsets[..counts.len()].to_vec();
+    let mut triangles = vec![0u32; tris.len()];
+    for (i, &c) in tri_comp.iter().enumerate() {
+        triangles[next[c as usize] as usize] = i as u32;
+        next[c as usize] += 1;
+    }
+    Components { offsets, triangles }
 }
 
 /// When the triangles form a closed, outward-oriented convex solid, its vertices shrunk toward
