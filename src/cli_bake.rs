@@ -182,9 +182,58 @@ pub struct BakeArgs {
     /// sampler's point counts may still vary between runs.)
     #[arg(long)]
     pub reproducible: bool,
+    /// Refuse a bake whose estimated peak memory exceeds SIZE (e.g. 16G, 512M, or bytes),
+    /// before it starts. Default: this machine's memory (MemTotal).
+    #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+    pub max_memory: Option<u64>,
     /// No progress bar or summary.
     #[arg(short, long)]
     pub quiet: bool,
+}
+
+/// Parses a memory size: bytes, or a number with K, M, G or T (powers of 1024; an optional
+/// `iB` or `B` after it).
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let t = t
+        .strip_suffix("iB")
+        .or_else(|| t.strip_suffix('B'))
+        .unwrap_or(t);
+    let (num, shift) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let shift = match c.to_ascii_uppercase() {
+                'K' => 10,
+                'M' => 20,
+                'G' => 30,
+                'T' => 40,
+                _ => {
+                    return Err(format!(
+                        "{s:?}: expected a size such as 16G, 512M or 1073741824"
+                    ));
+                }
+            };
+            (&t[..i], shift)
+        }
+        _ => (t, 0),
+    };
+    match num.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok((v * (1u64 << shift) as f64) as u64),
+        _ => Err(format!(
+            "{s:?}: expected a size such as 16G, 512M or 1073741824"
+        )),
+    }
+}
+
+/// This machine's memory (MemTotal of /proc/meminfo), if known.
+fn machine_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+fn gib(b: u64) -> String {
+    format!("{:.2} GiB", b as f64 / (1u64 << 30) as f64)
 }
 
 /// Resolves the cells of the command line.
@@ -318,6 +367,32 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     let t = std::time::Instant::now();
     let scene = scene::load(&a.scene)?;
     let load_s = t.elapsed().as_secs_f64();
+    let limit = a.max_memory.or_else(machine_memory);
+    if let Some(limit) = limit {
+        let need = bake::estimate_memory(&scene, &settings, rayon::current_num_threads());
+        if need > limit {
+            bail!(
+                "{}: the bake needs about {} ({} triangles{}, {} threads) but {} {}: bake on a \
+                 machine with more memory, use fewer threads (RAYON_NUM_THREADS), bake fewer \
+                 occluders (--occluders), or raise --max-memory if you know it fits",
+                a.scene.display(),
+                gib(need),
+                scene.triangles.len(),
+                if settings.sampling == SweepChoice::On {
+                    ", with the sampler"
+                } else {
+                    ""
+                },
+                rayon::current_num_threads(),
+                gib(limit),
+                if a.max_memory.is_some() {
+                    "is the --max-memory limit"
+                } else {
+                    "is all of this machine's memory (--max-memory)"
+                }
+            );
+        }
+    }
     let backend = make_backend(a.backend)?;
     let backend = backend.as_ref();
     let which: Vec<usize> = match a.shard {

@@ -268,3 +268,41 @@ fn backend_auto_prints_no_driver_noise() {
     assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
     assert!(stderr.starts_with("scene "), "{stderr}");
 }
+
+/// A bake estimated to need more memory than `--max-memory` is refused before it starts:
+/// the estimate and what to change in the message, no output and no journal.
+#[test]
+fn max_memory_refuses_a_bake_that_cannot_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write(dir.path(), "s.obj", SCENE);
+    let cells = write(dir.path(), "c.json", CELLS);
+    let out = dir.path().join("pvs.json");
+    let run = |limit: &str| {
+        bin()
+            .arg("bake")
+            .arg(&scene)
+            .arg("--cells")
+            .arg(&cells)
+            .arg("-o")
+            .arg(&out)
+            .args(["--backend", "cpu", "--max-memory", limit])
+            .output()
+            .unwrap()
+    };
+    let r = run("1K");
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("s.obj") && stderr.contains("GiB") && stderr.contains("--max-memory"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+    assert!(!dir.path().join("pvs.json.journal").exists());
+    let r = run("lots");
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("expected a size such as 16G"), "{stderr}");
+    let r = run("1.5GiB");
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(out.exists());
+}

@@ -144,7 +144,8 @@ pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Oc
     // 3. Merge coplanar neighbours per connected component, in parallel (a lone triangle —
     //    every leaf of a forest — is its own polygon, made in place without a merge).
     let comps = components(&verts, &tris);
-    let comp = |k: usize| &comps.triangles[comps.offsets[k] as usize..comps.offsets[k + 1] as usize];
+    let comp =
+        |k: usize| &comps.triangles[comps.offsets[k] as usize..comps.offsets[k + 1] as usize];
     let multi: Vec<usize> = (0..comps.len()).filter(|&k| comp(k).len() > 1).collect();
     let merged: Vec<Vec<MergedPolygon>> = multi
         .par_iter()
@@ -173,7 +174,10 @@ pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Oc
             );
             continue;
         }
-        for poly in merged.next().expect("one merge per component of several triangles") {
+        for poly in merged
+            .next()
+            .expect("one merge per component of several triangles")
+        {
             out.stats.polygons += 1;
             let pts: Vec<DVec3> = poly.verts.iter().map(|&i| verts[i as usize]).collect();
             push_part(
