@@ -39,7 +39,7 @@
 
 use super::{
     BenchBackend, BenchError, BenchOptions, BenchRow, Sampled, markdown_table, panic_message,
-    sample, say, score, shared_file, shared_folder,
+    peak_mib, reset_peak, sample, say, score, shared_file, shared_folder,
 };
 use crate::backend::RasterBackend;
 use crate::backend::cpu::CpuBackend;
@@ -533,26 +533,6 @@ fn spread(len: usize, n: Option<usize>) -> Vec<usize> {
         Some(n) if n < len => (0..n).map(|i| (2 * i + 1) * len / (2 * n)).collect(),
         _ => (0..len).collect(),
     }
-}
-
-/// Resets the process's resident high-water mark to the current resident size (Linux);
-/// false where that is not possible.
-fn reset_peak() -> bool {
-    std::fs::write("/proc/self/clear_refs", "5").is_ok()
-}
-
-/// The process's resident high-water mark (`VmHWM`), MiB.
-fn peak_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line
-        .trim_start_matches("VmHWM:")
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    Some(kib / 1024.0)
 }
 
 /// Runs the foliage study and returns its rows (progress lines to

@@ -217,6 +217,10 @@ pub struct BenchRow {
     pub planes_per_cell: f64,
     /// Validation rays per cell.
     pub rays_per_cell: u64,
+    /// The process's peak resident memory during the bake, MiB (the loaded scene and the
+    /// validator's ray index included; `VmHWM`, reset before the bake; None where that is
+    /// not possible).
+    pub peak_mib: Option<f64>,
 }
 
 /// A whole benchmark run: the `--json` document.
@@ -572,12 +576,14 @@ fn bench_scene(
             cells.len(),
             backend.name()
         );
+        let reset = reset_peak();
         let result =
             bake(scene, cells, settings, backend, None).map_err(|source| BenchError::Bake {
                 scene: bs.name.clone(),
                 backend: backend.name().into(),
                 source,
             })?;
+        let peak = if reset { peak_mib() } else { None };
         say!(
             args.progress,
             "bench: {}: baked in {:.1} s; validating with {} rays per cell",
@@ -597,7 +603,7 @@ fn bench_scene(
         }
         let truth: Vec<&Sampled> = samples[..cells.len()].iter().flatten().collect();
         let ids: Vec<usize> = (0..cells.len()).collect();
-        out.push(score(
+        let mut row = score(
             &bs.name,
             scene,
             cells,
@@ -606,9 +612,31 @@ fn bench_scene(
             &truth,
             plan.rays,
             args.progress,
-        ));
+        );
+        row.peak_mib = peak;
+        out.push(row);
     }
     Ok(out)
+}
+
+/// Resets the process's resident high-water mark to the current resident size (Linux);
+/// false where that is not possible.
+pub(crate) fn reset_peak() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// The process's resident high-water mark (`VmHWM`), MiB.
+pub(crate) fn peak_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line
+        .trim_start_matches("VmHWM:")
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kib / 1024.0)
 }
 
 /// A cell's ray-sampled visible set and the milliseconds sampling took.
@@ -690,6 +718,7 @@ pub(crate) fn score(
         adapter: result.adapter.clone(),
         median_ms_per_cell: median(&ms),
         validate_ms_per_cell: median(&vms),
+        peak_mib: None,
         objects_culled_percent: reports
             .iter()
             .map(|r| r.objects_culled_percent)
@@ -751,7 +780,7 @@ pub(crate) fn markdown_table(
 }
 
 /// The columns of the table, in order.
-pub const COLUMNS: [&str; 12] = [
+pub const COLUMNS: [&str; 13] = [
     "scene",
     "triangles",
     "objects",
@@ -764,6 +793,7 @@ pub const COLUMNS: [&str; 12] = [
     "PVS/VS",
     "false culls",
     "planes/cell",
+    "peak MiB",
 ];
 
 impl Bench {
@@ -810,6 +840,7 @@ impl Bench {
                     r.pvs_over_vs.map_or("–".into(), |v| format!("{v:.2}")),
                     r.false_culls.to_string(),
                     format!("{:.1}", r.planes_per_cell),
+                    r.peak_mib.map_or("n/a".into(), |p| format!("{p:.0}")),
                 ]
             })
             .collect();
