@@ -107,9 +107,17 @@ pub fn load_json(path: &Path) -> Result<Vec<Aabb>, CellError> {
         path: path.to_path_buf(),
         source,
     })?;
+    parse_json(&text, path)
+}
+
+/// Parses and checks the text of a cells file; `path` names it in errors.
+///
+/// # Errors
+/// Malformed JSON, no cells, or a bad cell; the message names `path`.
+pub fn parse_json(text: &str, path: &Path) -> Result<Vec<Aabb>, CellError> {
     // Read in f64 and round each cell outward to f32: nearest rounding could bake a cell
     // slightly smaller than written (100000.003 read as 100000.0).
-    let file: CellsFile = serde_json::from_str(&text).map_err(|e| CellError::Parse {
+    let file: CellsFile = serde_json::from_str(text).map_err(|e| CellError::Parse {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;

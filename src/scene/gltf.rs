@@ -175,12 +175,33 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
 /// Runs the gltf crate's validation, tolerating unknown required extensions (handled above).
 fn validate(root: &json::Root) -> Result<(), String> {
     use json::validation::{Error, Validate};
-    let mut errors = Vec::new();
-    root.validate(root, json::Path::new, &mut |path, error| {
-        if error != Error::Unsupported {
-            errors.push(format!("{}: {error}", path()));
+    // The gltf crate's own validation indexes the POSITION accessor before checking it
+    // exists (a panic found by fuzzing): check every primitive's accessors first.
+    let n_acc = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let attrs = prim.attributes.iter().map(|(_, a)| a.value());
+            for a in attrs.chain(prim.indices.iter().map(|i| i.value())) {
+                if a >= n_acc {
+                    return Err(format!(
+                        "invalid glTF: meshes[{m}].primitives[{p}] uses accessor {a}, but the \
+                         file has {n_acc} accessors"
+                    ));
+                }
+            }
         }
-    });
+    }
+    let mut errors = Vec::new();
+    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        root.validate(root, json::Path::new, &mut |path, error| {
+            if error != Error::Unsupported {
+                errors.push(format!("{}: {error}", path()));
+            }
+        });
+    }));
+    if ran.is_err() {
+        return Err("invalid glTF: the glTF validator failed on this file (it is malformed)".into());
+    }
     if errors.is_empty() {
         return Ok(());
     }
