@@ -172,7 +172,7 @@ pub struct BakeArgs {
     #[arg(long)]
     pub resume: bool,
     /// Bake only shard I of N (0 ≤ I < N): the cells I, I+N, I+2N, … Writes a shard file
-    /// (JSON) for `umbrasweep merge OUT SHARD…`. On Slurm: --shard $SLURM_ARRAY_TASK_ID/N with
+    /// for `umbrasweep merge OUT SHARD…` (.json, or .pvs: format version 5). On Slurm: --shard $SLURM_ARRAY_TASK_ID/N with
     /// --array=0-(N-1); on Kubernetes: $JOB_COMPLETION_INDEX/N.
     #[arg(long, value_name = "I/N")]
     pub shard: Option<umbrasweep::bake::ShardSpec>,
@@ -356,13 +356,6 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             a.output.display()
         ),
     };
-    if a.shard.is_some() && binary {
-        bail!(
-            "{}: a shard is written as JSON for `umbrasweep merge` (use a .json file name; \
-             merge writes .json or .pvs)",
-            a.output.display()
-        );
-    }
     let cells = read_cells(a)?;
     let t = std::time::Instant::now();
     let scene = scene::load(&a.scene)?;
@@ -507,9 +500,18 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     let doc = bake::to_document(&scene, &baked, &result, &settings);
     match a.shard {
         Some(spec) => {
-            let file = bake::ShardFile::new(spec, inputs, cells.len(), doc.clone(), &result);
-            let json = serde_json::to_vec(&file).context("encoding the shard")?;
-            umbrasweep::util::write_atomic(&a.output, &json).map_err(anyhow::Error::msg)
+            let mut file = bake::ShardFile::new(spec, inputs, cells.len(), doc.clone(), &result);
+            if binary {
+                // The .pvs holds the cells and objects; the description the rest.
+                file.document.cells.clear();
+                file.document.objects.clear();
+                let json = serde_json::to_string(&file).context("encoding the shard")?;
+                umbrasweep::pvs::binary::write_shard(&a.output, &doc, &json)
+                    .map_err(anyhow::Error::msg)
+            } else {
+                let json = serde_json::to_vec(&file).context("encoding the shard")?;
+                umbrasweep::util::write_atomic(&a.output, &json).map_err(anyhow::Error::msg)
+            }
         }
         None if binary => {
             umbrasweep::pvs::binary::write(&a.output, &doc).map_err(anyhow::Error::msg)

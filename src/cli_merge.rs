@@ -13,8 +13,8 @@ use umbrasweep::bake::{self, SHARD_FORMAT, ShardFile};
 pub struct MergeArgs {
     /// The merged PVS: .json (the document) or .pvs (the binary file).
     pub output: PathBuf,
-    /// The shard files (`bake --shard I/N -o SHARD.json`), every shard of one bake once, in
-    /// any order.
+    /// The shard files (`bake --shard I/N -o SHARD.json` or `SHARD.pvs`), every shard of one
+    /// bake once, in any order.
     #[arg(required = true)]
     pub shards: Vec<PathBuf>,
     /// No summary.
@@ -26,10 +26,20 @@ pub struct MergeArgs {
 fn read_shard(path: &PathBuf) -> anyhow::Result<ShardFile> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     if bytes.starts_with(&umbrasweep::pvs::format::MAGIC) {
-        bail!(
-            "{}: a binary .pvs file, not a shard (shards are the JSON files of `bake --shard I/N`)",
-            path.display()
-        );
+        let db = umbrasweep::pvs::PvsDatabase::from_bytes(&bytes)
+            .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.kind))?;
+        let Some(json) = db.shard() else {
+            bail!(
+                "{}: a whole .pvs file, not a shard (bake with --shard I/N to write shards)",
+                path.display()
+            );
+        };
+        let mut file: ShardFile = serde_json::from_str(json)
+            .with_context(|| format!("{}: a damaged shard description", path.display()))?;
+        let doc = db.to_document();
+        file.document.cells = doc.cells;
+        file.document.objects = doc.objects;
+        return Ok(file);
     }
     let value: serde_json::Value = serde_json::from_slice(&bytes)
         .with_context(|| format!("{}: not a shard file (not JSON)", path.display()))?;

@@ -133,11 +133,16 @@ fn shards_merge_to_the_bytes_of_one_bake_whatever_the_shard_and_thread_counts() 
     let whole_pvs = dir.path().join("whole.pvs");
     ok(&bake(nx, nz, &whole_json, &[], 2).output().unwrap());
     ok(&bake(nx, nz, &whole_pvs, &[], 1).output().unwrap());
-    for (n, threads) in [(1, 2), (2, 1), (3, 2)] {
+    // Shards as JSON, as .pvs (format version 5), and a mix.
+    for (n, threads, kinds) in [
+        (1, 2, ["json"; 3]),
+        (2, 1, ["pvs"; 3]),
+        (3, 2, ["pvs", "json", "pvs"]),
+    ] {
         let mut shards = Vec::new();
         // Given to merge in reverse order.
         for i in (0..n).rev() {
-            let p = dir.path().join(format!("s{i}of{n}.json"));
+            let p = dir.path().join(format!("s{i}of{n}.{}", kinds[i]));
             ok(
                 &bake(nx, nz, &p, &["--shard", &format!("{i}/{n}")], threads)
                     .output()
@@ -205,6 +210,9 @@ fn merge_refuses_other_bakes_and_missing_or_repeated_shards() {
     assert!(e.contains("given twice: 0/2"), "{e}");
     let e = failed(&merge("m.json", &["a0.json", "whole.json"]));
     assert!(e.contains("whole.json") && e.contains("not a shard"), "{e}");
+    ok(&bake(4, 3, &p("whole.pvs"), &[], 2).output().unwrap());
+    let e = failed(&merge("m.json", &["a0.json", "whole.pvs"]));
+    assert!(e.contains("whole.pvs") && e.contains("not a shard"), "{e}");
     std::fs::write(
         p("bad.json"),
         "{\"format\": \"umbrasweep-shard\", \"version\": 1}",
@@ -253,13 +261,6 @@ fn journals_of_other_bakes_are_refused_and_bad_outputs_fail_before_the_bake() {
             .unwrap(),
     );
     assert!(e.contains("no/such/dir"), "{e}");
-    // A shard cannot be written as .pvs.
-    let e = failed(
-        &bake(3, 2, &dir.path().join("s.pvs"), &["--shard", "0/2"], 1)
-            .output()
-            .unwrap(),
-    );
-    assert!(e.contains("s.pvs") && e.contains("JSON"), "{e}");
     let e = failed(&bake(3, 2, &out, &["--shard", "2/2"], 1).output().unwrap());
     assert!(e.contains("expected I/N"), "{e}");
 }

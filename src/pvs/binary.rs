@@ -19,7 +19,7 @@
 // The format's constants and checksum, at their old paths (`pvs::binary::FORMAT_VERSION`…).
 pub use super::format::{
     CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_DEPTH,
-    NO_PARENT, NO_STRING, OBJECT_RECORD_LEN, crc32,
+    NO_PARENT, NO_STRING, OBJECT_RECORD_LEN, SHARD_FORMAT_VERSION, crc32,
 };
 
 use super::PvsDocument;
@@ -231,6 +231,20 @@ fn choose_parents(doc: &PvsDocument, sets: &[Vec<u64>], objects: u32) -> Vec<u32
 /// `0, 1, 2…` in order, a cell whose visible ids are not strictly ascending or name a missing
 /// object, or more than `u32::MAX - 1` cells or objects.
 pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, EncodeError> {
+    encode_with(doc, None)
+}
+
+/// [`encode`] for a shard of a bake (`bake --shard I/N -o SHARD.pvs`): format version 5, the
+/// document's cells followed by `shard`, the shard's description (JSON) that `umbrasweep
+/// merge` reads back ([`PvsDatabase::shard`](super::PvsDatabase::shard)).
+///
+/// # Errors
+/// As [`encode`].
+pub fn encode_shard(doc: &PvsDocument, shard: &str) -> Result<Vec<u8>, EncodeError> {
+    encode_with(doc, Some(shard))
+}
+
+fn encode_with(doc: &PvsDocument, shard: Option<&str>) -> Result<Vec<u8>, EncodeError> {
     let objects = u32::try_from(doc.objects.len())
         .ok()
         .filter(|&n| n != u32::MAX)
@@ -397,10 +411,20 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, EncodeError> {
         u32::try_from(data.len()).map_err(|_| EncodeError::DataTooLarge)?,
     );
     p.extend_from_slice(&data);
+    if let Some(shard) = shard {
+        put_str(&mut p, shard)?;
+    }
 
     let mut out = Vec::with_capacity(HEADER_LEN + p.len());
     out.extend_from_slice(&MAGIC);
-    put_u32(&mut out, FORMAT_VERSION);
+    put_u32(
+        &mut out,
+        if shard.is_some() {
+            SHARD_FORMAT_VERSION
+        } else {
+            FORMAT_VERSION
+        },
+    );
     put_u32(&mut out, crc32(&p));
     out.extend_from_slice(&(p.len() as u64).to_le_bytes());
     out.extend_from_slice(&p);
@@ -416,6 +440,19 @@ pub fn encode(doc: &PvsDocument) -> Result<Vec<u8>, EncodeError> {
 #[cfg(feature = "bake")]
 pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), PvsWriteError> {
     let bytes = encode(doc).map_err(|e| PvsWriteError {
+        path: path.to_path_buf(),
+        kind: PvsWriteErrorKind::Encode(e),
+    })?;
+    crate::util::write_atomic(path, &bytes).map_err(|m| PvsWriteError::io(path, m.to_string()))
+}
+
+/// Writes a shard's `.pvs` file ([`encode_shard`]), atomically.
+///
+/// # Errors
+/// As [`write`].
+#[cfg(feature = "bake")]
+pub fn write_shard(path: &Path, doc: &PvsDocument, shard: &str) -> Result<(), PvsWriteError> {
+    let bytes = encode_shard(doc, shard).map_err(|e| PvsWriteError {
         path: path.to_path_buf(),
         kind: PvsWriteErrorKind::Encode(e),
     })?;

@@ -44,8 +44,8 @@
 
 pub use super::error::{PvsError, PvsErrorKind};
 use super::format::{
-    CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, FORMAT_VERSION, HEADER_LEN, MAGIC, NO_PARENT,
-    NO_STRING, OBJECT_RECORD_LEN, crc32, get_varint,
+    CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, HEADER_LEN, MAGIC, NO_PARENT, NO_STRING,
+    OBJECT_RECORD_LEN, SHARD_FORMAT_VERSION, crc32, get_varint,
 };
 use super::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
 use crate::settings::{Placement, Spacing, SweepChoice};
@@ -484,6 +484,8 @@ pub struct PvsDatabase {
     cells: Vec<Cell>,
     ms: Vec<f64>,
     data: Vec<u8>,
+    /// Version 5 (a shard's file): the shard's description for `umbrasweep merge`.
+    shard: Option<String>,
     grid: CellGrid,
     file_bytes: usize,
 }
@@ -530,7 +532,7 @@ impl PvsDatabase {
         let u32_at =
             |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
         let version = u32_at(8);
-        if !(1..=FORMAT_VERSION).contains(&version) {
+        if !(1..=SHARD_FORMAT_VERSION).contains(&version) {
             return Err(PvsErrorKind::UnsupportedVersion { found: version });
         }
         if bytes.len() < HEADER_LEN {
@@ -706,6 +708,11 @@ impl PvsDatabase {
         }
         let data_len = r.u32("the PVS data length")? as usize;
         let data = r.take(data_len, "the PVS data")?.to_vec();
+        let shard = if version >= 5 {
+            Some(r.str("the shard's description")?)
+        } else {
+            None
+        };
         if r.pos != payload.len() {
             return Err(corrupt(format!(
                 "{} bytes after the PVS data",
@@ -753,6 +760,7 @@ impl PvsDatabase {
             cells,
             ms,
             data,
+            shard,
             file_bytes: 0,
         };
         db.check_records()?;
@@ -807,6 +815,12 @@ impl PvsDatabase {
             }
         }
         Ok(())
+    }
+
+    /// The shard's description (JSON, read by `umbrasweep merge`) when the file is a shard of
+    /// a bake (`bake --shard I/N -o SHARD.pvs`, format version 5), else `None`.
+    pub fn shard(&self) -> Option<&str> {
+        self.shard.as_deref()
     }
 
     /// The number of cells.

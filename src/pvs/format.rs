@@ -9,8 +9,12 @@
 
 /// The first 8 bytes of every `.pvs` file.
 pub const MAGIC: [u8; 8] = *b"UMBRAPVS";
-/// The binary format version this crate writes (it reads versions 1 to this one).
+/// The binary format version this crate writes for a PVS.
 pub const FORMAT_VERSION: u32 = 4;
+/// The version of a shard's `.pvs` file (`bake --shard I/N -o SHARD.pvs`): version 4 with a
+/// trailing section holding the shard's description for `umbrasweep merge`. The crate reads
+/// versions 1 to this one.
+pub const SHARD_FORMAT_VERSION: u32 = 5;
 /// Length of the fixed header: magic, version, checksum, payload length.
 pub const HEADER_LEN: usize = 24;
 /// The `parent` value of a key cell (a record holding the full set).

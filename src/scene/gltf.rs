@@ -200,7 +200,9 @@ fn validate(root: &json::Root) -> Result<(), String> {
         });
     }));
     if ran.is_err() {
-        return Err("invalid glTF: the glTF validator failed on this file (it is malformed)".into());
+        return Err(
+            "invalid glTF: the glTF validator failed on this file (it is malformed)".into(),
+        );
     }
     if errors.is_empty() {
         return Ok(());
