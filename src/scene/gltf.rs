@@ -180,7 +180,7 @@ fn validate(root: &json::Root) -> Result<(), String> {
     let n_acc = root.accessors.len();
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, prim) in mesh.primitives.iter().enumerate() {
-            let attrs = prim.attributes.iter().map(|(_, a)| a.value());
+            let attrs = prim.attributes.values().map(|a| a.value());
             for a in attrs.chain(prim.indices.iter().map(|i| i.value())) {
                 if a >= n_acc {
                     return Err(format!(
