@@ -1,4 +1,5 @@
-//! Inputs the fuzz targets (`tests/fuzz`) found crashing a reader, kept as regression tests:
+//! Inputs the fuzz targets (`tests/fuzz`) found crashing a reader, and hand-made hostile ones
+//! (counts in headers claiming billions), kept as regression tests:
 //! every file under `tests/fuzz/regressions/<target>/` goes through the same reader as its
 //! target and must give an error or a result, never a panic. The seeds of `tests/fuzz/seeds`
 //! must be read without error.

@@ -639,13 +639,19 @@ fn decode_elements(
     }
 }
 
+/// The most components a sparse accessor without a buffer view may have (its zeros are made
+/// from its count alone, so a count claiming billions is refused: 512 MiB of `f64`).
+const MAX_SPARSE_COMPONENTS: usize = 1 << 26;
+
 /// Reads all components of an accessor, sparse substitution included.
 fn read_accessor(a: &Accessor, buffers: &[Option<Vec<u8>>]) -> Result<Vec<f64>, String> {
     let count = a.count();
     let n = a.dimensions().multiplicity();
     let ty = a.data_type();
     let elem = ty.size() * n;
-    let mut out = Vec::with_capacity(count * n);
+    // No allocation from a count before the data is known to be there: a hostile file may
+    // claim billions of elements.
+    let mut out = Vec::new();
     match a.view() {
         Some(view) => {
             let stride = view.stride().unwrap_or(elem);
@@ -656,9 +662,14 @@ fn read_accessor(a: &Accessor, buffers: &[Option<Vec<u8>>]) -> Result<Vec<f64>, 
                 ));
             }
             let src = view_bytes(&view, buffers)?;
-            if count > 0 && a.offset() + stride * (count - 1) + elem > src.len() {
+            let end = stride
+                .checked_mul(count.saturating_sub(1))
+                .and_then(|x| x.checked_add(a.offset()))
+                .and_then(|x| x.checked_add(elem));
+            if count > 0 && end.is_none_or(|e| e > src.len()) {
                 return Err(format!("accessor {} reads past its buffer view", a.index()));
             }
+            out.reserve(count * n);
             decode_elements(
                 src,
                 a.offset(),
@@ -670,7 +681,16 @@ fn read_accessor(a: &Accessor, buffers: &[Option<Vec<u8>>]) -> Result<Vec<f64>, 
                 &mut out,
             );
         }
-        None if a.sparse().is_some() => out.resize(count * n, 0.0),
+        None if a.sparse().is_some() => {
+            if count.saturating_mul(n) > MAX_SPARSE_COMPONENTS {
+                return Err(format!(
+                    "accessor {}: a sparse accessor of {count} elements without a buffer view \
+                     (over the reader's limit of {MAX_SPARSE_COMPONENTS} components)",
+                    a.index()
+                ));
+            }
+            out.resize(count * n, 0.0)
+        }
         None => return Err(format!("accessor {} has no data", a.index())),
     }
     if let Some(sparse) = a.sparse() {
