@@ -236,6 +236,20 @@ fn gib(b: u64) -> String {
     format!("{:.2} GiB", b as f64 / (1u64 << 30) as f64)
 }
 
+/// Writes a PVS document atomically: the binary `.pvs` file when `binary`, else the JSON.
+pub fn write_document(
+    path: &std::path::Path,
+    doc: &umbrasweep::pvs::PvsDocument,
+    binary: bool,
+) -> anyhow::Result<()> {
+    if binary {
+        umbrasweep::pvs::binary::write(path, doc)
+    } else {
+        umbrasweep::pvs::json::write(path, doc)
+    }
+    .map_err(anyhow::Error::msg)
+}
+
 /// Resolves the cells of the command line.
 fn read_cells(a: &BakeArgs) -> anyhow::Result<Vec<Aabb>> {
     if let Some(path) = &a.cells {
@@ -513,10 +527,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 umbrasweep::util::write_atomic(&a.output, &json).map_err(anyhow::Error::msg)
             }
         }
-        None if binary => {
-            umbrasweep::pvs::binary::write(&a.output, &doc).map_err(anyhow::Error::msg)
-        }
-        None => umbrasweep::pvs::json::write(&a.output, &doc).map_err(anyhow::Error::msg),
+        None => write_document(&a.output, &doc, binary),
     }
     .with_context(|| "writing the PVS")?;
     let journal = journal.into_inner().expect("not poisoned");

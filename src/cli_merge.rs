@@ -74,13 +74,8 @@ pub fn run(a: &MergeArgs) -> anyhow::Result<()> {
         shards.push((p.clone(), read_shard(p)?));
     }
     let doc = bake::merge(&shards)?;
-    if binary {
-        umbrasweep::pvs::binary::write(&a.output, &doc)
-    } else {
-        umbrasweep::pvs::json::write(&a.output, &doc)
-    }
-    .map_err(anyhow::Error::msg)
-    .with_context(|| "writing the merged PVS")?;
+    crate::cli_bake::write_document(&a.output, &doc, binary)
+        .with_context(|| "writing the merged PVS")?;
     if !a.quiet {
         eprintln!(
             "merged      {} shards, {} cells in {:.2} s",

@@ -244,21 +244,28 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
     );
 }
 
+/// `bake` of the wall scene and its cells written into `dir`, output `dir/pvs.json`.
+fn wall_bake(dir: &Path) -> (Command, PathBuf) {
+    let scene = write(dir, "s.obj", SCENE);
+    let cells = write(dir, "c.json", CELLS);
+    let out = dir.join("pvs.json");
+    let mut c = bin();
+    c.arg("bake")
+        .arg(&scene)
+        .arg("--cells")
+        .arg(&cells)
+        .arg("-o")
+        .arg(&out);
+    (c, out)
+}
+
 /// `--backend auto` probes the adapters without the display server's noise on stderr (Mesa
 /// prints "XDG_RUNTIME_DIR is invalid or not set" when the variable is missing, as on CI).
 #[test]
 fn backend_auto_prints_no_driver_noise() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = write(dir.path(), "s.obj", SCENE);
-    let cells = write(dir.path(), "c.json", CELLS);
-    let out = dir.path().join("pvs.json");
-    let r = bin()
-        .arg("bake")
-        .arg(&scene)
-        .arg("--cells")
-        .arg(&cells)
-        .arg("-o")
-        .arg(&out)
+    let (mut cmd, _) = wall_bake(dir.path());
+    let r = cmd
         .args(["--backend", "auto"])
         .env_remove("XDG_RUNTIME_DIR")
         .output()
@@ -274,17 +281,10 @@ fn backend_auto_prints_no_driver_noise() {
 #[test]
 fn max_memory_refuses_a_bake_that_cannot_fit() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = write(dir.path(), "s.obj", SCENE);
-    let cells = write(dir.path(), "c.json", CELLS);
     let out = dir.path().join("pvs.json");
     let run = |limit: &str| {
-        bin()
-            .arg("bake")
-            .arg(&scene)
-            .arg("--cells")
-            .arg(&cells)
-            .arg("-o")
-            .arg(&out)
+        wall_bake(dir.path())
+            .0
             .args(["--backend", "cpu", "--max-memory", limit])
             .output()
             .unwrap()

@@ -9,7 +9,9 @@ use std::process::Command;
 use std::sync::OnceLock;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{BakeSettings, bake, to_document};
-use umbrasweep::pvs::binary::{self, FORMAT_VERSION, HEADER_LEN, MAX_DEPTH, crc32};
+use umbrasweep::pvs::binary::{
+    self, FORMAT_VERSION, HEADER_LEN, MAX_DEPTH, SHARD_FORMAT_VERSION, crc32,
+};
 use umbrasweep::pvs::{
     CellId, EncodeError, PvsCell, PvsDatabase, PvsDocument, PvsErrorKind, PvsJsonErrorKind,
     PvsObject, PvsSummary, PvsWriteErrorKind,
@@ -262,7 +264,7 @@ fn wrong_magic_is_refused() {
 
 #[test]
 fn other_versions_are_refused_before_anything_else() {
-    for v in [0, FORMAT_VERSION + 1, u32::MAX] {
+    for v in [0, SHARD_FORMAT_VERSION + 1, u32::MAX] {
         let mut b = city_bytes().to_vec();
         b[8..12].copy_from_slice(&v.to_le_bytes());
         assert_eq!(kind(&b), PvsErrorKind::UnsupportedVersion { found: v });
@@ -707,4 +709,30 @@ fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read
     expected.settings.bake.sweep_settings = SweepSettings::default();
     expected.settings.bake.subcell = None;
     assert_eq!(json(&old), json(&expected));
+}
+
+/// A shard's file (version 5) reads as its version 4 payload plus the shard's description;
+/// a whole bake's file (version 4) has none.
+#[test]
+fn shard_files_carry_their_description() {
+    let plain = PvsDatabase::from_bytes(city_bytes()).unwrap();
+    assert_eq!(plain.shard(), None);
+    assert_eq!(u32::from_le_bytes(city_bytes()[8..12].try_into().unwrap()), FORMAT_VERSION);
+    let doc = plain.to_document();
+    let bytes = binary::encode_shard(&doc, "{\"format\": \"umbrasweep-shard\"}").unwrap();
+    assert_eq!(
+        u32::from_le_bytes(bytes[8..12].try_into().unwrap()),
+        SHARD_FORMAT_VERSION
+    );
+    let shard = PvsDatabase::from_bytes(&bytes).unwrap();
+    assert_eq!(shard.shard(), Some("{\"format\": \"umbrasweep-shard\"}"));
+    assert_eq!(shard.cell_count(), plain.cell_count());
+    assert_eq!(
+        serde_json::to_string(&shard.to_document()).unwrap(),
+        serde_json::to_string(&doc).unwrap()
+    );
+    // Cut short inside the description: refused, as any truncation is.
+    let mut cut = bytes.clone();
+    cut.truncate(cut.len() - 3);
+    assert!(PvsDatabase::from_bytes(&cut).is_err());
 }

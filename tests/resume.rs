@@ -24,7 +24,7 @@ fn bake(nx: u32, nz: u32, out: &Path, extra: &[&str], threads: usize) -> Command
         .arg(format!("{nx},1,{nz}"))
         .arg("-o")
         .arg(out)
-        .args(["--backend", "cpu", "--reproducible", "-q"])
+        .args(["--backend", "cpu", "--reproducible"])
         .args(extra)
         .env("RAYON_NUM_THREADS", threads.to_string());
     c
@@ -41,6 +41,26 @@ fn failed(o: &Output) -> String {
     assert_eq!(o.status.code(), Some(2), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
     stderr
+}
+
+/// Starts `bake`, kills it with SIGKILL once its journal holds `n` records, and returns the
+/// records the journal holds after the kill.
+fn kill_after(mut bake: Command, journal: &Path, n: usize) -> usize {
+    let mut child = bake.spawn().unwrap();
+    let start = Instant::now();
+    while records(journal) < n {
+        assert!(
+            start.elapsed() < Duration::from_secs(300),
+            "the bake wrote no journal records"
+        );
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the bake finished ({status}) before it could be killed: give it more cells");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    records(journal)
 }
 
 fn records(journal: &Path) -> usize {
@@ -62,21 +82,7 @@ fn a_bake_killed_by_kill_9_resumes_to_the_same_bytes() {
 
     let out = dir.path().join("pvs.json");
     let journal = dir.path().join("pvs.json.journal");
-    let mut child = bake(nx, nz, &out, &[], 1).spawn().unwrap();
-    let start = Instant::now();
-    while records(&journal) < 5 {
-        assert!(
-            start.elapsed() < Duration::from_secs(300),
-            "the bake wrote no journal records"
-        );
-        if let Some(status) = child.try_wait().unwrap() {
-            panic!("the bake finished ({status}) before it could be killed: give it more cells");
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    child.kill().unwrap(); // SIGKILL
-    child.wait().unwrap();
-    let at_kill = records(&journal);
+    let at_kill = kill_after(bake(nx, nz, &out, &[], 1), &journal, 5);
     assert!(!out.exists(), "a killed bake leaves no output");
     assert!(at_kill < (nx * nz) as usize, "killed after the last cell");
 
@@ -91,25 +97,8 @@ fn a_bake_killed_by_kill_9_resumes_to_the_same_bytes() {
     // The summary says how many cells came from the journal: all those recorded at the kill.
     let out2 = dir.path().join("pvs2.json");
     let j2 = dir.path().join("pvs2.json.journal");
-    let mut child = bake(nx, nz, &out2, &[], 1).spawn().unwrap();
-    while records(&j2) < 3 {
-        if child.try_wait().unwrap().is_some() {
-            panic!("the bake finished before it could be killed");
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    child.kill().unwrap();
-    child.wait().unwrap();
-    let at_kill = records(&j2);
-    let mut c = bin();
-    c.arg("bake")
-        .arg(demo_city())
-        .args(["--grid-box", "-80,1,-60,80,3,60", "--grid-size"])
-        .arg(format!("{nx},1,{nz}"))
-        .arg("-o")
-        .arg(&out2)
-        .args(["--backend", "cpu", "--reproducible", "--resume"]);
-    let stderr = ok(&c.output().unwrap());
+    let at_kill = kill_after(bake(nx, nz, &out2, &[], 1), &j2, 3);
+    let stderr = ok(&bake(nx, nz, &out2, &["--resume"], 2).output().unwrap());
     let line = stderr
         .lines()
         .find(|l| l.starts_with("resumed"))

@@ -227,6 +227,32 @@ fn cluster(
     }
 }
 
+/// `count` boxes behind a cluster of radius `r` about `c` (at distance `d` along `dir`): just
+/// behind it, or far behind it (large parallax across the ball), within its shadow.
+fn boxes_behind(
+    rng: &mut Rng,
+    boxes: &mut Vec<[DVec3; 2]>,
+    c: DVec3,
+    dir: DVec3,
+    d: f64,
+    r: f64,
+    count: usize,
+) {
+    for _ in 0..count {
+        let t = if rng.chance(0.5) {
+            r * rng.u(1.2, 4.0)
+        } else {
+            d * rng.u(0.5, 3.0)
+        };
+        let k = (d + t) / d;
+        let lat = rng.in_ball() * r * 0.4 * k;
+        let lat = lat - dir * lat.dot(dir);
+        let h = r * rng.u(0.03, 0.3) * k;
+        let hv = jitter_half(rng, h);
+        boxes.push(cube(c + dir * t + lat, hv));
+    }
+}
+
 /// A random box in the outer half-space.
 fn random_box(rng: &mut Rng, dist: f64, size: f64) -> [DVec3; 2] {
     let c = rng.unit_up(0.0) * dist;
@@ -256,20 +282,7 @@ fn gen_foliage(rng: &mut Rng) -> Local {
         ..Local::default()
     };
     cluster(rng, &mut l.polys, c, dir, r, n, s);
-    for _ in 0..5 {
-        // Just behind the cluster, or far behind it (large parallax across the ball).
-        let t = if rng.chance(0.5) {
-            r * rng.u(1.2, 4.0)
-        } else {
-            d * rng.u(0.5, 3.0)
-        };
-        let k = (d + t) / d;
-        let lat = rng.in_ball() * r * 0.4 * k;
-        let lat = lat - dir * lat.dot(dir);
-        let h = r * rng.u(0.03, 0.3) * k;
-        let hv = jitter_half(rng, h);
-        l.boxes.push(cube(c + dir * t + lat, hv));
-    }
+    boxes_behind(rng, &mut l.boxes, c, dir, d, r, 5);
     let dist = d * rng.u(0.5, 2.5);
     let size = rng.u(0.05, 0.5);
     l.boxes.push(random_box(rng, dist, size));
@@ -295,19 +308,7 @@ fn gen_fine_foliage(rng: &mut Rng) -> Local {
         ..Local::default()
     };
     cluster(rng, &mut l.polys, c, dir, r, n, s);
-    for _ in 0..6 {
-        let t = if rng.chance(0.5) {
-            r * rng.u(1.2, 4.0)
-        } else {
-            d * rng.u(0.5, 3.0)
-        };
-        let k = (d + t) / d;
-        let lat = rng.in_ball() * r * 0.4 * k;
-        let lat = lat - dir * lat.dot(dir);
-        let h = r * rng.u(0.03, 0.3) * k;
-        let hv = jitter_half(rng, h);
-        l.boxes.push(cube(c + dir * t + lat, hv));
-    }
+    boxes_behind(rng, &mut l.boxes, c, dir, d, r, 6);
     l
 }
 

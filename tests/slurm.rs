@@ -4,8 +4,9 @@
 //! city, and the merged file compared byte for byte with a bake on one machine. The daemons
 //! are stopped at the end, also when the test fails.
 //!
-//! Needs Debian's `slurm-wlm` and `munge` (CI installs them in `.ci/run`). Elsewhere, without
-//! them, the test prints why and skips; with `CI=true` it fails instead.
+//! Needs Debian's `slurm-wlm` and `munge`: with `CI=true` the test installs them with apt-get
+//! when they are missing (and fails if it cannot); elsewhere, without them, it prints why and
+//! skips.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -36,14 +37,32 @@ impl Drop for Cluster {
 #[test]
 fn a_slurm_job_array_bakes_the_same_pvs_as_one_machine() {
     let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    let missing: Vec<&str> = ["munged", "slurmctld", "slurmd", "sbatch"]
-        .into_iter()
-        .filter(|b| !found(b))
-        .collect();
+    let missing = || -> Vec<&str> {
+        ["munged", "slurmctld", "slurmd", "sbatch"]
+            .into_iter()
+            .filter(|b| !found(b))
+            .collect()
+    };
+    if ci && !missing().is_empty() {
+        // CI installs Slurm from Debian's packages here.
+        let apt = |args: &[&str]| {
+            Command::new("apt-get")
+                .args(args)
+                .env("DEBIAN_FRONTEND", "noninteractive")
+                .output()
+                .map(|o| (o.status.success(), String::from_utf8_lossy(&o.stderr).to_string()))
+                .unwrap_or_else(|e| (false, e.to_string()))
+        };
+        let (ok, err) = apt(&["update", "-qq"]);
+        assert!(ok, "apt-get update failed: {err}");
+        let (ok, err) = apt(&["install", "-y", "-qq", "slurm-wlm", "munge"]);
+        assert!(ok, "apt-get install slurm-wlm munge failed: {err}");
+    }
+    let missing = missing();
     if !missing.is_empty() {
         assert!(
             !ci,
-            "Slurm is not installed ({missing:?} missing): .ci/run installs slurm-wlm and munge"
+            "Slurm is not installed ({missing:?} missing) even after apt-get install slurm-wlm munge"
         );
         eprintln!(
             "skipping: Slurm is not installed ({missing:?}; apt-get install slurm-wlm munge)"

@@ -6,7 +6,7 @@
 //! `kind` fields say what went wrong for callers that handle cases differently. No error
 //! returns the same text again as its `source()`.
 
-use super::format::FORMAT_VERSION;
+use super::format::SHARD_FORMAT_VERSION;
 #[cfg(feature = "bake")]
 use super::{FORMAT, VERSION};
 #[cfg(feature = "bake")]
@@ -62,7 +62,7 @@ pub enum PvsErrorKind {
     /// The file has another format version.
     #[error(
         ".pvs format version {found} is not supported (this build reads versions 1 to \
-         {FORMAT_VERSION})"
+         {SHARD_FORMAT_VERSION})"
     )]
     UnsupportedVersion {
         /// The version in the header.
@@ -334,7 +334,7 @@ mod tests {
             at(PvsErrorKind::UnsupportedVersion { found: 9 }),
             format!(
                 "city.pvs: .pvs format version 9 is not supported (this build reads versions 1 \
-                 to {FORMAT_VERSION})"
+                 to {SHARD_FORMAT_VERSION})"
             )
         );
         assert_eq!(
