@@ -178,8 +178,8 @@ pub struct BakeArgs {
     pub shard: Option<umbrasweep::bake::ShardSpec>,
     /// Write 0 for every timing (per-cell and per-culler milliseconds, total seconds), so that
     /// the same inputs give byte-identical files whatever the thread or shard count, and a
-    /// resumed bake the same file as an uninterrupted one. (With --sampling and a budget the
-    /// sampler's point counts may still vary between runs.)
+    /// resumed bake the same file as an uninterrupted one. (With --sampling the sampler's point
+    /// counts may still vary between runs, and its PVS when its budget runs out.)
     #[arg(long)]
     pub reproducible: bool,
     /// Refuse a bake whose estimated peak memory exceeds SIZE (e.g. 16G, 512M, or bytes),
