@@ -43,7 +43,7 @@ pub enum BackendChoice {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  umbrasweep bake data/demo_city.obj --cells data/demo_city_cells.json -o demo.json\n  umbrasweep bake city.obj --grid-box 0,1,0,100,3,100 --grid-size 20,1,20 -o city.json --backend cpu"
+    after_help = "Examples:\n  umbrasweep bake data/demo_city.obj --cells data/demo_city_cells.json -o demo.json\n  umbrasweep bake city.obj --grid-box 0,1,0,100,3,100 --grid-size 20,1,20 -o city.json --backend cpu\n  umbrasweep bake city.obj --cells cells.json -o city.pvs --resume      (after an interruption)\n  umbrasweep bake city.obj --cells cells.json -o s0.json --shard 0/4    (then umbrasweep merge)"
 )]
 pub struct BakeArgs {
     /// The scene: .obj, .gltf or .glb.
@@ -62,7 +62,8 @@ pub struct BakeArgs {
     /// Cells per axis of --grid-box: nx,ny,nz.
     #[arg(long, value_delimiter = ',', requires = "grid_box")]
     pub grid_size: Option<Vec<u32>>,
-    /// Output PVS document (.json).
+    /// Output: .json (the PVS document) or .pvs (the binary file). While the bake runs, a
+    /// journal OUTPUT.journal beside it records finished cells (see --resume).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Raster backend.
