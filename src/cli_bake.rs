@@ -237,6 +237,21 @@ fn gib(b: u64) -> String {
     format!("{:.2} GiB", b as f64 / (1u64 << 30) as f64)
 }
 
+/// Whether an output path names the binary `.pvs` file (else the `.json` document).
+///
+/// # Errors
+/// Any other extension, naming the path.
+pub fn output_is_binary(path: &std::path::Path) -> anyhow::Result<bool> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("json") => Ok(false),
+        Some("pvs") => Ok(true),
+        _ => bail!(
+            "{}: unsupported output format (use a .json or .pvs file name)",
+            path.display()
+        ),
+    }
+}
+
 /// Writes a PVS document atomically: the binary `.pvs` file when `binary`, else the JSON.
 pub fn write_document(
     path: &std::path::Path,
@@ -363,14 +378,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         sampling_settings,
     };
     settings.check().map_err(anyhow::Error::msg)?;
-    let binary = match a.output.extension().and_then(|e| e.to_str()) {
-        Some("json") => false,
-        Some("pvs") => true,
-        _ => bail!(
-            "{}: unsupported output format (use a .json or .pvs file name)",
-            a.output.display()
-        ),
-    };
+    let binary = output_is_binary(&a.output)?;
     let cells = read_cells(a)?;
     let t = std::time::Instant::now();
     let scene = scene::load(&a.scene)?;

@@ -61,14 +61,7 @@ fn read_shard(path: &PathBuf) -> anyhow::Result<ShardFile> {
 
 pub fn run(a: &MergeArgs) -> anyhow::Result<()> {
     let t = std::time::Instant::now();
-    let binary = match a.output.extension().and_then(|e| e.to_str()) {
-        Some("json") => false,
-        Some("pvs") => true,
-        _ => bail!(
-            "{}: unsupported output format (use a .json or .pvs file name)",
-            a.output.display()
-        ),
-    };
+    let binary = crate::cli_bake::output_is_binary(&a.output)?;
     let mut shards = Vec::with_capacity(a.shards.len());
     for p in &a.shards {
         shards.push((p.clone(), read_shard(p)?));

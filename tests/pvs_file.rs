@@ -717,7 +717,10 @@ fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read
 fn shard_files_carry_their_description() {
     let plain = PvsDatabase::from_bytes(city_bytes()).unwrap();
     assert_eq!(plain.shard(), None);
-    assert_eq!(u32::from_le_bytes(city_bytes()[8..12].try_into().unwrap()), FORMAT_VERSION);
+    assert_eq!(
+        u32::from_le_bytes(city_bytes()[8..12].try_into().unwrap()),
+        FORMAT_VERSION
+    );
     let doc = plain.to_document();
     let bytes = binary::encode_shard(&doc, "{\"format\": \"umbrasweep-shard\"}").unwrap();
     assert_eq!(

@@ -50,7 +50,12 @@ fn a_slurm_job_array_bakes_the_same_pvs_as_one_machine() {
                 .args(args)
                 .env("DEBIAN_FRONTEND", "noninteractive")
                 .output()
-                .map(|o| (o.status.success(), String::from_utf8_lossy(&o.stderr).to_string()))
+                .map(|o| {
+                    (
+                        o.status.success(),
+                        String::from_utf8_lossy(&o.stderr).to_string(),
+                    )
+                })
                 .unwrap_or_else(|e| (false, e.to_string()))
         };
         let (ok, err) = apt(&["update", "-qq"]);
