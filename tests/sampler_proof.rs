@@ -1369,6 +1369,14 @@ fn report(cfg: &Config, v: &Violation, reused_state: bool) -> String {
     msg
 }
 
+/// The configuration's polygons relative to its eye, for the exact check.
+fn rel_polys(cfg: &Config) -> Vec<RelPoly> {
+    cfg.polys
+        .iter()
+        .filter_map(|(p, _)| RelPoly::new(p, cfg.eye))
+        .collect()
+}
+
 /// Runs `n` configurations of a family and checks every hidden box.
 #[expect(
     clippy::too_many_arguments,
@@ -1412,11 +1420,7 @@ fn run_family(
         };
         cubes[k].set_subpixel(subpixel);
         let results = render(&mut cubes[k], &cfg, &cfg.polys, render_eps);
-        let rel: Vec<RelPoly> = cfg
-            .polys
-            .iter()
-            .filter_map(|(p, _)| RelPoly::new(p, cfg.eye))
-            .collect();
+        let rel = rel_polys(&cfg);
         st.configs += 1;
         st.polygons += cfg.polys.len();
         for (bi, r) in results.iter().enumerate() {
@@ -1837,21 +1841,13 @@ fn shrink_matters() {
             );
         }
         // The check run on it as if it had been reported hidden finds a violation.
-        let rel: Vec<RelPoly> = cfg
-            .polys
-            .iter()
-            .filter_map(|(p, _)| RelPoly::new(p, cfg.eye))
-            .collect();
+        let rel = rel_polys(&cfg);
         let mut st = Stats::default();
         assert!(
             check_box(&mut rng, &cfg, &rel, 0, &mut st).is_err(),
             "the check misses the gap, {what}"
         );
-        let rel: Vec<RelPoly> = tiny
-            .polys
-            .iter()
-            .filter_map(|(p, _)| RelPoly::new(p, tiny.eye))
-            .collect();
+        let rel = rel_polys(&tiny);
         assert!(
             check_box(&mut rng, &tiny, &rel, 0, &mut st).is_ok(),
             "tiny ball: the check must pass, {what}"

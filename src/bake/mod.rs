@@ -23,7 +23,7 @@ pub use prepare::{
     SMALL_OCCLUDER_SHARE, choose_sweep, split_cell,
 };
 pub use sampling::{SamplerData, SamplingCuller};
-pub use shard::{MergeError, SHARD_FORMAT, SHARD_VERSION, ShardBake, ShardFile, ShardSpec, merge};
+pub use shard::{MergeError, SHARD_FORMAT, SHARD_VERSION, ShardFile, ShardSpec, merge};
 
 use crate::backend::{BackendError, RasterBackend};
 use crate::geom::Aabb;
@@ -67,8 +67,8 @@ pub struct CellResult {
     pub cullers: Vec<CullerStats>,
 }
 
-/// A whole bake's outcome.
-#[derive(Clone, Debug)]
+/// A whole bake's outcome (a shard file keeps it whole: `shard.rs`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BakeResult {
     /// Per cell, in the order of the cells given to the bake.
     pub cells: Vec<CellResult>,
@@ -90,7 +90,9 @@ pub struct BakeResult {
     pub sampling: bool,
     /// Why the sampler ran or not, and its finest ε.
     pub sampling_reason: String,
-    /// The names of the cullers every cell ran, in order.
+    /// The names of the cullers every cell ran, in order (read back against
+    /// [`CULLER_NAMES`]).
+    #[serde(deserialize_with = "pipeline::culler_names")]
     pub cullers: Vec<&'static str>,
 }
 

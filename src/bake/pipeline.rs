@@ -75,6 +75,24 @@ pub struct CullerStats {
 /// cullers (shards) are read back against this list.
 pub const CULLER_NAMES: [&str; 3] = ["extended_projections", "occlusion_sweep", "shrunk_sampling"];
 
+/// Deserialises culler names as the [`CULLER_NAMES`] they are, refusing unknown ones.
+pub(super) fn culler_names<'de, D>(d: D) -> Result<Vec<&'static str>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    let names: Vec<String> = serde::Deserialize::deserialize(d)?;
+    names
+        .iter()
+        .map(|n| {
+            CULLER_NAMES
+                .iter()
+                .copied()
+                .find(|k| k == n)
+                .ok_or_else(|| serde::de::Error::custom(format!("unknown culler {n:?}")))
+        })
+        .collect()
+}
+
 /// One culler of the pipeline: proves objects hidden from a (sub-)cell.
 ///
 /// Implementations must be conservative: an object marked hidden must be invisible from every

@@ -7,11 +7,11 @@
 //! cells — which cost about the same — spread over the shards). The shard file is JSON:
 //! `{"format": "umbrasweep-shard", "version": 1, "inputs": HASH, "index": i, "count": N,
 //! "cells_total": C, "cell_indices": […], "document": {the PVS document of its cells},
-//! "bake": {the bake's outcome: backend, cullers, reasons, every cell's result}}`. `inputs` is
+//! "bake": {the bake's outcome, `BakeResult`, with every cell's result}}`. `inputs` is
 //! [`super::inputs_hash`] of the scene, all cells, the settings and the backend: shards of
 //! different bakes are refused.
 
-use super::{BakeResult, BakeSettings, CULLER_NAMES, CellResult, document};
+use super::{BakeResult, BakeSettings, CellResult, document};
 use crate::geom::Aabb;
 use crate::pvs::PvsDocument;
 use serde::{Deserialize, Serialize};
@@ -64,33 +64,6 @@ impl ShardSpec {
     }
 }
 
-/// A bake's outcome besides its cells' boxes, as a shard file keeps it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ShardBake {
-    /// [`BakeResult::backend`].
-    pub backend: String,
-    /// [`BakeResult::adapter`].
-    pub adapter: Option<String>,
-    /// [`BakeResult::occluder_triangles`].
-    pub occluder_triangles: usize,
-    /// [`BakeResult::degenerate_triangles`].
-    pub degenerate_triangles: usize,
-    /// [`BakeResult::seconds`].
-    pub seconds: f64,
-    /// [`BakeResult::sweep`].
-    pub sweep: bool,
-    /// [`BakeResult::sweep_reason`].
-    pub sweep_reason: String,
-    /// [`BakeResult::sampling`].
-    pub sampling: bool,
-    /// [`BakeResult::sampling_reason`].
-    pub sampling_reason: String,
-    /// [`BakeResult::cullers`].
-    pub cullers: Vec<String>,
-    /// The shard's cells' results, in the order of `cell_indices`.
-    pub cells: Vec<CellResult>,
-}
-
 /// A shard's output file.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ShardFile {
@@ -110,8 +83,9 @@ pub struct ShardFile {
     pub cell_indices: Vec<usize>,
     /// The PVS document of this shard's cells alone.
     pub document: PvsDocument,
-    /// The bake's outcome with every cell's full result.
-    pub bake: ShardBake,
+    /// The shard's bake: its outcome and its cells' full results, in the order of
+    /// `cell_indices`.
+    pub bake: BakeResult,
 }
 
 impl ShardFile {
@@ -133,19 +107,7 @@ impl ShardFile {
             cells_total,
             cell_indices: spec.cells(cells_total),
             document,
-            bake: ShardBake {
-                backend: result.backend.clone(),
-                adapter: result.adapter.clone(),
-                occluder_triangles: result.occluder_triangles,
-                degenerate_triangles: result.degenerate_triangles,
-                seconds: result.seconds,
-                sweep: result.sweep,
-                sweep_reason: result.sweep_reason.clone(),
-                sampling: result.sampling,
-                sampling_reason: result.sampling_reason.clone(),
-                cullers: result.cullers.iter().map(|s| s.to_string()).collect(),
-                cells: result.cells.clone(),
-            },
+            bake: result.clone(),
         }
     }
 }
@@ -227,14 +189,6 @@ pub fn merge(shards: &[(PathBuf, ShardFile)]) -> Result<PvsDocument, MergeError>
                 s.cells_total
             )));
         }
-        if let Some(bad) = s
-            .bake
-            .cullers
-            .iter()
-            .find(|c| !CULLER_NAMES.contains(&c.as_str()))
-        {
-            return Err(invalid(format!("unknown culler {bad:?}")));
-        }
         let mismatch = |what: &str| MergeError::Mismatch {
             path: path.clone(),
             first: first_path.clone(),
@@ -291,31 +245,13 @@ pub fn merge(shards: &[(PathBuf, ShardFile)]) -> Result<PvsDocument, MergeError>
             };
         }
     }
-    let b = &first.bake;
     let result = BakeResult {
         cells: results
             .into_iter()
             .map(|r| r.expect("every cell is in one shard"))
             .collect(),
-        backend: b.backend.clone(),
-        adapter: b.adapter.clone(),
-        occluder_triangles: b.occluder_triangles,
-        degenerate_triangles: b.degenerate_triangles,
         seconds,
-        sweep: b.sweep,
-        sweep_reason: b.sweep_reason.clone(),
-        sampling: b.sampling,
-        sampling_reason: b.sampling_reason.clone(),
-        cullers: b
-            .cullers
-            .iter()
-            .map(|c| {
-                *CULLER_NAMES
-                    .iter()
-                    .find(|n| **n == c.as_str())
-                    .expect("checked above")
-            })
-            .collect(),
+        ..first.bake.clone()
     };
     let d = &first.document;
     let triangles = d.summary.as_ref().map_or_else(
@@ -336,6 +272,30 @@ pub fn merge(shards: &[(PathBuf, ShardFile)]) -> Result<PvsDocument, MergeError>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A bake's outcome reads back with its culler names as the pipeline's; an unknown name
+    /// is refused.
+    #[test]
+    fn bake_results_round_trip_and_unknown_cullers_are_refused() {
+        let r = BakeResult {
+            cells: Vec::new(),
+            backend: "cpu".into(),
+            adapter: None,
+            occluder_triangles: 3,
+            degenerate_triangles: 0,
+            seconds: 0.5,
+            sweep: true,
+            sweep_reason: "why".into(),
+            sampling: false,
+            sampling_reason: "off".into(),
+            cullers: vec!["occlusion_sweep"],
+        };
+        let json = serde_json::to_string(&r).unwrap();
+        assert_eq!(serde_json::from_str::<BakeResult>(&json).unwrap(), r);
+        let bad = json.replace("occlusion_sweep", "mystery");
+        let e = serde_json::from_str::<BakeResult>(&bad).unwrap_err();
+        assert!(e.to_string().contains("unknown culler \"mystery\""), "{e}");
+    }
 
     #[test]
     fn shard_specs_parse_and_split_cells() {
