@@ -412,3 +412,58 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
     // The scenes must give the culler something to decide, or the test proves nothing.
     assert!(targets_culled > 0, "no bake culled any target");
 }
+
+/// A wall with a window, its triangles meeting at T-junctions (zdm2's `slot1495`, moved to
+/// the origin): a boundary walk over such triangles folds back along a slit, and the occluder
+/// preparation once took the fold for a straight edge and made an L-shaped "convex" part over
+/// the window, which hid a small box seen through it from 500 units away. The box must stay
+/// visible, from near and from far, with every culler.
+#[test]
+fn a_window_in_a_wall_of_t_junctions_stays_open() {
+    // The wall at x = 0 (y 176..208, z -104..-50 shifted by (-192, +77)); the window is
+    // y in (-16, 8), z in (-15, -3).
+    let t = |a: [f32; 2], b: [f32; 2], c: [f32; 2]| {
+        [a, b, c].map(|p| Vec3::new(0.0, p[0] - 192.0, p[1] + 77.0))
+    };
+    let wall = vec![
+        t([208.0, -96.0], [200.0, -80.0], [200.0, -96.0]),
+        t([208.0, -96.0], [208.0, -80.0], [200.0, -80.0]),
+        t([176.0, -96.0], [176.0, -104.0], [184.0, -104.0]),
+        t([192.0, -104.0], [208.0, -104.0], [176.0, -96.0]),
+        t([184.0, -104.0], [192.0, -104.0], [176.0, -96.0]),
+        t([200.0, -96.0], [176.0, -96.0], [208.0, -104.0]),
+        t([208.0, -104.0], [208.0, -96.0], [200.0, -96.0]),
+        t([200.0, -96.0], [176.0, -92.0], [176.0, -96.0]),
+        t([200.0, -96.0], [200.0, -92.0], [176.0, -92.0]),
+        t([176.0, -50.0], [176.0, -80.0], [200.0, -80.0]),
+        t([200.0, -80.0], [208.0, -80.0], [176.0, -50.0]),
+        t([208.0, -80.0], [208.0, -50.0], [176.0, -50.0]),
+    ];
+    // A small box just behind the window (x < 0), seen through it from x > 0, where the
+    // L-shaped part's hull covered the window.
+    let target = box_triangles(Vec3::new(-1.0, -4.75, -13.0), Vec3::new(-0.375, -3.25, -12.0));
+    let scene = Scene::from_objects(
+        Path::new("window"),
+        vec![("wall".into(), wall.clone(), true), ("target".into(), target.clone(), true)],
+    );
+    for (far, cell) in [
+        (false, Aabb::new(Vec3::new(20.0, -10.0, -14.0), Vec3::new(24.0, -6.0, -10.0))),
+        (true, Aabb::new(Vec3::new(500.0, -10.0, -40.0), Vec3::new(560.0, 20.0, 20.0))),
+    ] {
+        // Independent proof: a ray from the cell's centre to the target's centre hits it first.
+        let (o, c) = (cell.center(), Vec3::new(-0.7, -4.0, -12.5));
+        let objects = [("wall", &wall[..]), ("target", &target[..])];
+        assert_eq!(common::first_hit(objects, o, c - o), Some("target"));
+        for sweep in [SweepChoice::On, SweepChoice::Off] {
+            let s = BakeSettings {
+                sweep,
+                ..BakeSettings::default()
+            };
+            let r = bake(&scene, &[cell], &s, &CpuBackend::new(), None).unwrap();
+            assert!(
+                r.cells[0].visible.contains(&1),
+                "far {far}, sweep {sweep:?}: the target seen through the window was culled"
+            );
+        }
+    }
+}

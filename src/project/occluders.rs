@@ -515,6 +515,27 @@ fn convex_region(
     (out.len() >= 3).then_some((out, region))
 }
 
+/// Whether the closed polygon `poly` turns left at every vertex (round `n`) and once round in
+/// all: the exterior angles add up to one full turn, so it is convex and simple.
+fn winds_once(poly: &[u32], verts: &[DVec3], n: DVec3) -> bool {
+    let m = poly.len();
+    let mut total = 0.0;
+    for i in 0..m {
+        let (a, b, c) = (
+            verts[poly[(i + m - 1) % m] as usize],
+            verts[poly[i] as usize],
+            verts[poly[(i + 1) % m] as usize],
+        );
+        let (u, v) = (b - a, c - b);
+        let angle = u.cross(v).dot(n).atan2(u.dot(v));
+        if angle < -1e-9 {
+            return false;
+        }
+        total += angle;
+    }
+    (total - std::f64::consts::TAU).abs() < 1e-6
+}
+
 /// Triangles of earlier pieces one piece may grow through (bounds the work on large flat
 /// regions with holes).
 const MAX_REUSED: usize = 256;
@@ -552,11 +573,13 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
         let scale = p0.abs().max_element().max(areas[seed].sqrt());
         let plane_tol = 4.0 * f32::EPSILON as f64 * scale;
         let mut poly: Vec<u32> = tris[seed].to_vec();
+        // A left turn or a straight continuation; a reversal (the boundary folding back on
+        // itself, as at a T-junction's slit) is not a turn a convex polygon makes.
         let turn = |a: u32, b: u32, c: u32| {
             let (a, b, c) = (verts[a as usize], verts[b as usize], verts[c as usize]);
             let t = (b - a).cross(c - b).dot(n);
             let m = (b - a).length() * (c - b).length();
-            t >= -1e-9 * m
+            t > 1e-9 * m || (t >= -1e-9 * m && (b - a).dot(c - b) > 0.0)
         };
         let coplanar = |t: usize| {
             let n2 = normal(&tris[t]).normalize();
@@ -615,6 +638,12 @@ pub fn merge_coplanar(verts: &[DVec3], tris: &[[u32; 3]]) -> Vec<MergedPolygon> 
                 }
                 e += 1;
             }
+        }
+        if !winds_once(&poly, verts, n) {
+            // Never happens with the checks above; a part must be convex, so fall back to the
+            // seed triangle (the others merged into it are lost as occluders: conservative).
+            debug_assert!(false, "merged polygon is not convex: {poly:?}");
+            poly = tris[seed].to_vec();
         }
         let pts: Vec<DVec3> = poly.iter().map(|&i| verts[i as usize]).collect();
         let deviation = if poly.len() == 3 {
@@ -686,6 +715,59 @@ mod tests {
                 let (a, b, c) = (p[i], p[(i + 1) % p.len()], p[(i + 2) % p.len()]);
                 assert!((b - a).cross(c - b).z >= -1e-12);
             }
+        }
+    }
+
+    /// A wall with a window, as zdm2's `slot1495` (12 triangles at x = −302): no part may
+    /// cover the window (an L-shaped "convex" part covered it and culled what was seen
+    /// through it).
+    #[test]
+    fn a_wall_with_a_window_never_gets_a_part_over_the_window() {
+        let t = |a: [f32; 2], b: [f32; 2], c: [f32; 2]| {
+            [a, b, c].map(|p| Vec3::new(-302.0, p[0], p[1]))
+        };
+        let tris = vec![
+            t([208.0, -96.0], [200.0, -80.0], [200.0, -96.0]),
+            t([208.0, -96.0], [208.0, -80.0], [200.0, -80.0]),
+            t([176.0, -96.0], [176.0, -104.0], [184.0, -104.0]),
+            t([192.0, -104.0], [208.0, -104.0], [176.0, -96.0]),
+            t([184.0, -104.0], [192.0, -104.0], [176.0, -96.0]),
+            t([200.0, -96.0], [176.0, -96.0], [208.0, -104.0]),
+            t([208.0, -104.0], [208.0, -96.0], [200.0, -96.0]),
+            t([200.0, -96.0], [176.0, -92.0], [176.0, -96.0]),
+            t([200.0, -96.0], [200.0, -92.0], [176.0, -92.0]),
+            t([176.0, -50.0], [176.0, -80.0], [200.0, -80.0]),
+            t([200.0, -80.0], [208.0, -80.0], [176.0, -50.0]),
+            t([208.0, -80.0], [208.0, -50.0], [176.0, -50.0]),
+        ];
+        let scene = Scene::from_objects(Path::new("t"), vec![("wall".into(), tris, true)]);
+        let occ = prepare(&scene, &[true], false);
+        // The window: y in (176, 200), z in (-92, -80).
+        for k in 0..occ.parts.len() {
+            let p = occ.part_points(k);
+            // Convex: every turn the same way round the normal.
+            if let PartKind::Polygon { normal } = occ.parts[k].kind {
+                for i in 0..p.len() {
+                    let (a, b, c) = (p[i], p[(i + 1) % p.len()], p[(i + 2) % p.len()]);
+                    assert!(
+                        (b - a).cross(c - b).dot(normal) >= -1e-9,
+                        "part {k} is not convex: {p:?}"
+                    );
+                }
+            }
+            let inside = |y: f64, z: f64| {
+                (0..p.len()).all(|i| {
+                    let (a, b) = (p[i], p[(i + 1) % p.len()]);
+                    let (ey, ez) = (b.y - a.y, b.z - a.z);
+                    let s = ey * (z - a.z) - ez * (y - a.y);
+                    s >= 0.0
+                }) || (0..p.len()).all(|i| {
+                    let (a, b) = (p[i], p[(i + 1) % p.len()]);
+                    let (ey, ez) = (b.y - a.y, b.z - a.z);
+                    ey * (z - a.z) - ez * (y - a.y) <= 0.0
+                })
+            };
+            assert!(!inside(188.0, -86.0), "part {k} covers the window: {p:?}");
         }
     }
 
