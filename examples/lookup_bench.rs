@@ -62,6 +62,7 @@ fn synthetic(n: usize, objects: usize) -> PvsDocument {
                 visible,
                 ms: 0.0,
                 cullers: Vec::new(),
+                parent: None,
             });
         }
     }
@@ -73,6 +74,7 @@ fn synthetic(n: usize, objects: usize) -> PvsDocument {
         objects: objs,
         cells,
         summary: None,
+        split: None,
     }
 }
 

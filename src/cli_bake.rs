@@ -48,9 +48,14 @@ pub enum BackendChoice {
 pub struct BakeArgs {
     /// The scene: .obj, .gltf or .glb.
     pub scene: PathBuf,
-    /// View cells: {"cells": [{"min": [x,y,z], "max": [x,y,z]}, …]} in scene units.
-    #[arg(long, conflicts_with_all = ["grid_box", "grid_size"], required_unless_present = "grid_box")]
+    /// View cells: {"cells": [{"min": [x,y,z], "max": [x,y,z]}, …]} in scene units, or `auto`:
+    /// found from the scene above its walkable surfaces (the rule of `umbrasweep cells`, with
+    /// the options under "Automatic cells").
+    #[arg(long, value_name = "FILE|auto", conflicts_with_all = ["grid_box", "grid_size"], required_unless_present = "grid_box")]
     pub cells: Option<PathBuf>,
+    /// The options of `--cells auto`.
+    #[command(flatten)]
+    pub auto_cells: Box<crate::cli_cells::AutoCellArgs>,
     /// A regular grid of cells filling this box: minx,miny,minz,maxx,maxy,maxz.
     #[arg(
         long,
@@ -157,6 +162,23 @@ pub struct BakeArgs {
     /// are not sampled (0 turns this off).
     #[arg(long, default_value_t = BakeSettings::default_settings().sampling_settings.rays)]
     pub sampling_rays: u64,
+    /// Split every object larger than SIZE (scene units) along some axis into clusters that
+    /// fit: its connected components, grouped or cut along the longest axis. For files whose
+    /// objects span the level (materials, one ground mesh, one mesh per tree). The PVS lists
+    /// clusters; its `split` table maps them back to the file's objects.
+    #[arg(long, value_name = "SIZE")]
+    pub split_objects: Option<f32>,
+    /// Adaptive subdivision: split a cell whose PVS holds more than N triangles in two along
+    /// its longest side and bake the halves (testing only the cell's PVS), down to
+    /// --min-cell-size. The PVS keeps every level; the run-time lookup descends to the
+    /// smallest cell holding the camera.
+    #[arg(long, value_name = "N")]
+    pub max_pvs_triangles: Option<u64>,
+    /// The smallest cell adaptive subdivision makes (scene units). Default: 1/8 of the
+    /// longest side of each cell given to the bake. A half whose PVS is not 2 % smaller than
+    /// its parent's is not split again.
+    #[arg(long, value_name = "SIZE", requires = "max_pvs_triangles")]
+    pub min_cell_size: Option<f64>,
     /// Write every plane's maps of the baked cells as OpenEXR files into this folder.
     #[arg(long, value_name = "DIR")]
     pub dump_exr: Option<PathBuf>,
@@ -266,8 +288,25 @@ pub fn write_document(
     .map_err(anyhow::Error::msg)
 }
 
-/// Resolves the cells of the command line.
-fn read_cells(a: &BakeArgs) -> anyhow::Result<Vec<Aabb>> {
+/// Resolves the cells of the command line: a cells file, `auto` (found from `scene`, with one
+/// line of statistics on stderr) or a grid.
+fn read_cells(a: &BakeArgs, scene: &scene::Scene) -> anyhow::Result<Vec<Aabb>> {
+    let auto = a.cells.as_ref().is_some_and(|p| p.as_os_str() == "auto");
+    if let (false, Some(flag)) = (auto, a.auto_cells.first_given()) {
+        bail!("{flag} is an option of automatic cells: it needs --cells auto");
+    }
+    if auto {
+        let t = std::time::Instant::now();
+        let found = a.auto_cells.compute(scene, &a.scene)?;
+        if !a.quiet {
+            eprintln!(
+                "auto cells  {} ({:.2} s)",
+                found.stats,
+                t.elapsed().as_secs_f64()
+            );
+        }
+        return Ok(found.cells);
+    }
     if let Some(path) = &a.cells {
         return Ok(cells::load_json(path)?);
     }
@@ -376,13 +415,20 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             SweepChoice::Auto
         },
         sampling_settings,
+        max_pvs_triangles: a.max_pvs_triangles,
+        min_cell_size: a.min_cell_size,
     };
     settings.check().map_err(anyhow::Error::msg)?;
     let binary = output_is_binary(&a.output)?;
-    let cells = read_cells(a)?;
     let t = std::time::Instant::now();
     let scene = scene::load(&a.scene)?;
     let load_s = t.elapsed().as_secs_f64();
+    let cells = read_cells(a, &scene)?;
+    let scene = match a.split_objects {
+        Some(size) => umbrasweep::scene::split::split_objects(&scene, size)
+            .with_context(|| a.scene.display().to_string())?,
+        None => scene,
+    };
     let limit = a.max_memory.or_else(machine_memory);
     if let Some(limit) = limit {
         let need = bake::estimate_memory(&scene, &settings, rayon::current_num_threads());
@@ -625,7 +671,38 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             planes as f64 / n as f64,
             occ as f64 / n as f64
         );
-        eprintln!("objects     {}", s.objects);
+        match &scene.split {
+            Some(m) => eprintln!(
+                "objects     {} clusters of {} objects (--split-objects {}: {} objects split)",
+                s.objects,
+                m.sources.len(),
+                m.size,
+                m.sources.iter().filter(|x| x.clusters.len() > 1).count()
+            ),
+            None => eprintln!("objects     {}", s.objects),
+        }
+        if let Some(limit) = settings.max_pvs_triangles {
+            let leaves: Vec<&bake::CellResult> =
+                result.cells.iter().flat_map(|c| c.leaves()).collect();
+            let tri = |c: &bake::CellResult| -> u64 {
+                c.visible
+                    .iter()
+                    .map(|&o| scene.objects[o as usize].triangles.len() as u64)
+                    .sum()
+            };
+            let over = leaves.iter().filter(|c| tri(c) > limit).count();
+            let mean =
+                leaves.iter().map(|c| tri(c)).sum::<u64>() as f64 / leaves.len().max(1) as f64;
+            eprintln!(
+                "subdivided  {} cells into {} leaves ({} cells in the PVS); mean PVS {:.0} \
+                 triangles per leaf against the budget {limit}; {over} leaves over it at the \
+                 smallest size",
+                result.cells.len(),
+                leaves.len(),
+                s.cells,
+                mean
+            );
+        }
         eprintln!(
             "triangles   {} ({} occluders, {} degenerate skipped)",
             s.triangles, s.occluder_triangles, s.degenerate_triangles

@@ -60,6 +60,13 @@ pub fn run(a: &InspectArgs) -> anyhow::Result<()> {
         let (min, max) = db.cell_bounds(cell);
         let rec = db.cell_record(cell);
         writeln!(out, "cell {n}: min {min:?} max {max:?}")?;
+        if let Some(p) = db.cell_parent(cell) {
+            writeln!(out, "a half of cell {}", p.0)?;
+        }
+        let halves: Vec<String> = db.cell_halves(cell).map(|h| h.0.to_string()).collect();
+        if !halves.is_empty() {
+            writeln!(out, "split into cells {}", halves.join(" and "))?;
+        }
         writeln!(
             out,
             "stored as {} of {} bytes, {}; {} records to decode from scratch",
@@ -100,8 +107,32 @@ pub fn run(a: &InspectArgs) -> anyhow::Result<()> {
     };
     writeln!(out, "file            {}", a.file.display())?;
     writeln!(out, "scene           {}", db.scene())?;
-    writeln!(out, "cells           {}", s.cells)?;
-    writeln!(out, "objects         {}", s.objects)?;
+    let halves = (0..s.cells as u32)
+        .filter(|&c| db.cell_parent(umbrasweep::pvs::CellId(c)).is_some())
+        .count();
+    if halves > 0 {
+        let leaves = (0..s.cells as u32)
+            .filter(|&c| db.cell_halves(umbrasweep::pvs::CellId(c)).next().is_none())
+            .count();
+        writeln!(
+            out,
+            "cells           {} ({} given to the bake, {halves} made by subdivision; {leaves} leaves)",
+            s.cells,
+            s.cells - halves
+        )?;
+    } else {
+        writeln!(out, "cells           {}", s.cells)?;
+    }
+    match db.split() {
+        Some(t) => writeln!(
+            out,
+            "objects         {} clusters of {} objects of the scene file (--split-objects {})",
+            s.objects,
+            t.sources.len(),
+            t.size
+        )?,
+        None => writeln!(out, "objects         {}", s.objects)?,
+    }
     writeln!(
         out,
         "average PVS     {:.1} objects ({:.1} % of the scene)",

@@ -12,7 +12,7 @@ use umbrasweep::inspect::report::{self, ReportOptions};
 pub struct ReportArgs {
     /// The scene the PVS was baked from (.obj, .gltf, .glb).
     pub scene: PathBuf,
-    /// The PVS document (.json) written by `umbrasweep bake`.
+    /// The PVS (.json or .pvs) written by `umbrasweep bake`.
     pub pvs: PathBuf,
     /// Output folder (created when missing); the page is DIR/index.html.
     #[arg(short, long, value_name = "DIR")]
@@ -32,7 +32,14 @@ pub struct ReportArgs {
 /// settings, or I/O errors writing the page (nothing is written then).
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let scene = umbrasweep::scene::load(&args.scene)?;
-    let doc = umbrasweep::pvs::json::read(&args.pvs).map_err(anyhow::Error::msg)?;
+    let doc = umbrasweep::pvs::json::read_any(&args.pvs).map_err(anyhow::Error::msg)?;
+    let scene = umbrasweep::scene::split::as_baked(scene, doc.split.as_ref()).map_err(|e| {
+        anyhow::anyhow!(
+            "{} against {}: {e}",
+            args.pvs.display(),
+            args.scene.display()
+        )
+    })?;
     let opts = ReportOptions {
         scene_file: args.scene.clone(),
         pvs_file: args.pvs.clone(),

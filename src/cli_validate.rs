@@ -25,7 +25,7 @@ and late columns give way to the culled objects hunted and the rays per object).
 pub struct ValidateArgs {
     /// The scene the PVS was baked from (.obj, .gltf, .glb).
     pub scene: PathBuf,
-    /// The PVS document written by `umbrasweep bake -o`.
+    /// The PVS written by `umbrasweep bake -o` (.json or .pvs).
     pub pvs: PathBuf,
     /// Rays cast per cell (with --hunt: split evenly between the cell's culled objects).
     #[arg(long, default_value_t = 1_000_000)]
@@ -53,8 +53,10 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
         anyhow::bail!(ValidateError::NoRays);
     }
     // The PVS first: reading it is cheap, loading a big scene is not.
-    let doc = umbrasweep::pvs::json::read(&args.pvs).map_err(anyhow::Error::msg)?;
+    let doc = umbrasweep::pvs::json::read_any(&args.pvs).map_err(anyhow::Error::msg)?;
     let scene = umbrasweep::scene::load(&args.scene)?;
+    let scene = umbrasweep::scene::split::as_baked(scene, doc.split.as_ref())
+        .with_context(|| format!("{} against {}", args.pvs.display(), args.scene.display()))?;
     check_input(&scene, &doc, args.rays).with_context(|| {
         format!(
             "{} does not fit {}",

@@ -1,10 +1,11 @@
-//! The `umbrasweep` command line: bake, merge, validate, gen, bench, inspect, report.
+//! The `umbrasweep` command line: bake, cells, merge, validate, gen, bench, inspect, report.
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 mod cli_bake;
 mod cli_bench;
+mod cli_cells;
 mod cli_gen;
 mod cli_inspect;
 mod cli_merge;
@@ -26,6 +27,8 @@ struct Cli {
 enum Command {
     /// Bake the potentially visible set of every view cell of a scene.
     Bake(cli_bake::BakeArgs),
+    /// Find view cells automatically (above walkable floors, or in a box); write a cells file.
+    Cells(cli_cells::CellsArgs),
     /// Check a PVS against ray-sampled ground truth (exit 0: no false cull, 1: false culls).
     Validate(cli_validate::ValidateArgs),
     /// Generate a test scene (forest, city, boxfield) as OBJ, with matching view cells.
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Bake(a) => cli_bake::run(a).map(|_| 0),
+        Command::Cells(a) => cli_cells::run(a).map(|_| 0),
         Command::Validate(a) => cli_validate::run(a),
         Command::Gen(a) => cli_gen::run(a).map(|_| 0),
         Command::Bench(a) => cli_bench::run(a).map(|_| 0),

@@ -77,6 +77,14 @@ pub struct BakeSettings {
     /// `sampling_resolution`, `sampling_rays`).
     #[serde(flatten)]
     pub sampling_settings: SamplingSettings,
+    /// Adaptive subdivision: a cell whose PVS holds more triangles than this is split in two
+    /// along its longest axis and its halves baked, testing only the objects of its PVS, down
+    /// to [`min_cell_size`](Self::min_cell_size). Default none (cells are baked as given).
+    pub max_pvs_triangles: Option<u64>,
+    /// The smallest cell adaptive subdivision makes: a cell is not split when its longest
+    /// side is at most this. Default none: 1/8 of the longest side of the cell being
+    /// subdivided.
+    pub min_cell_size: Option<f64>,
 }
 
 fn sampling_of_old_documents() -> SamplingChoice {
@@ -298,6 +306,8 @@ impl BakeSettings {
             subcell: None,
             sampling: SweepChoice::Auto,
             sampling_settings: SamplingSettings::default_settings(),
+            max_pvs_triangles: None,
+            min_cell_size: None,
         }
     }
 
@@ -396,6 +406,22 @@ impl BakeSettings {
                 "sampling-resolution",
                 sa.resolution,
                 "must be between 16 and 2048 pixels per 90° view (e.g. 128)",
+            ));
+        }
+        if self.max_pvs_triangles == Some(0) {
+            return Err(SettingsError::new(
+                "max-pvs-triangles",
+                0,
+                "must be a positive number of triangles (e.g. 200000)",
+            ));
+        }
+        if let Some(m) = self.min_cell_size
+            && !(m.is_finite() && m > 0.0)
+        {
+            return Err(SettingsError::new(
+                "min-cell-size",
+                m,
+                "must be a positive size in scene units (e.g. 1)",
             ));
         }
         if self.slice_planes > 16 {

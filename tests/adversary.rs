@@ -441,14 +441,26 @@ fn a_window_in_a_wall_of_t_junctions_stays_open() {
     ];
     // A small box just behind the window (x < 0), seen through it from x > 0, where the
     // L-shaped part's hull covered the window.
-    let target = box_triangles(Vec3::new(-1.0, -4.75, -13.0), Vec3::new(-0.375, -3.25, -12.0));
+    let target = box_triangles(
+        Vec3::new(-1.0, -4.75, -13.0),
+        Vec3::new(-0.375, -3.25, -12.0),
+    );
     let scene = Scene::from_objects(
         Path::new("window"),
-        vec![("wall".into(), wall.clone(), true), ("target".into(), target.clone(), true)],
+        vec![
+            ("wall".into(), wall.clone(), true),
+            ("target".into(), target.clone(), true),
+        ],
     );
     for (far, cell) in [
-        (false, Aabb::new(Vec3::new(20.0, -10.0, -14.0), Vec3::new(24.0, -6.0, -10.0))),
-        (true, Aabb::new(Vec3::new(500.0, -10.0, -40.0), Vec3::new(560.0, 20.0, 20.0))),
+        (
+            false,
+            Aabb::new(Vec3::new(20.0, -10.0, -14.0), Vec3::new(24.0, -6.0, -10.0)),
+        ),
+        (
+            true,
+            Aabb::new(Vec3::new(500.0, -10.0, -40.0), Vec3::new(560.0, 20.0, 20.0)),
+        ),
     ] {
         // Independent proof: a ray from the cell's centre to the target's centre hits it first.
         let (o, c) = (cell.center(), Vec3::new(-0.7, -4.0, -12.5));

@@ -5,9 +5,11 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use umbrasweep::pvs::{PvsCell, PvsDocument, PvsObject, binary};
+use umbrasweep::pvs::{PvsCell, PvsDocument, PvsObject, PvsSource, PvsSplit, binary};
 
-/// A small document whose cells share most objects (so deltas are used) with one overlap.
+/// A small document whose cells share most objects (so deltas are used) with one overlap;
+/// cell 4 is subdivided into cells 6 and 7, and the objects are clusters of two objects of
+/// the scene file (`--split-objects`).
 fn document() -> PvsDocument {
     let objects = (0..70)
         .map(|i| PvsObject {
@@ -28,8 +30,27 @@ fn document() -> PvsDocument {
                 .collect(),
             ms: 1.0,
             cullers: Vec::new(),
+            parent: None,
         })
-        .collect();
+        .collect::<Vec<_>>();
+    let mut cells = cells;
+    for (k, x) in [8.0f32, 9.0].into_iter().enumerate() {
+        let mut half = cells[4].clone();
+        half.min[0] = x;
+        half.max[0] = x + 1.0;
+        half.visible.retain(|&o| o % 3 != k as u32);
+        half.parent = Some(4);
+        cells.push(half);
+    }
+    let source = |id: u32, first: u32, count: u32| PvsSource {
+        id,
+        name: format!("file object {id}"),
+        triangles: 2 * count,
+        min: [0.0; 3],
+        max: [1.0; 3],
+        first,
+        count,
+    };
     PvsDocument {
         format: umbrasweep::pvs::FORMAT.into(),
         version: umbrasweep::pvs::VERSION,
@@ -38,6 +59,10 @@ fn document() -> PvsDocument {
         objects,
         cells,
         summary: None,
+        split: Some(PvsSplit {
+            size: 10.0,
+            sources: vec![source(0, 0, 10), source(1, 10, 60)],
+        }),
     }
 }
 
@@ -47,12 +72,25 @@ fn expected(doc: &PvsDocument) -> String {
     let mut s = format!("cells {} objects {n}\n", doc.cells.len());
     for (c, cell) in doc.cells.iter().enumerate() {
         let centre: Vec<f32> = (0..3).map(|k| 0.5 * (cell.min[k] + cell.max[k])).collect();
-        let at = doc
+        let holds = |d: &PvsCell| (0..3).all(|k| d.min[k] <= centre[k] && centre[k] <= d.max[k]);
+        // The lowest cell given to the bake, then down its halves.
+        let mut at = doc
             .cells
             .iter()
-            .position(|d| (0..3).all(|k| d.min[k] <= centre[k] && centre[k] <= d.max[k]))
+            .position(|d| d.parent.is_none() && holds(d))
             .map_or(-1, |i| i as i64);
-        s += &format!("cell {c} at {at}:");
+        while let Some(h) = (at >= 0)
+            .then(|| {
+                doc.cells
+                    .iter()
+                    .position(|d| d.parent == Some(at as u32) && holds(d))
+            })
+            .flatten()
+        {
+            at = h as i64;
+        }
+        let parent = cell.parent.map_or(-1, i64::from);
+        s += &format!("cell {c} at {at} parent {parent}:");
         for &o in &cell.visible {
             s += &format!(" {o}=obj{o}");
         }
@@ -63,6 +101,12 @@ fn expected(doc: &PvsDocument) -> String {
         s += "\n";
     }
     s += &format!("short {}\n", doc.cells[0].visible.len());
+    s += "sources";
+    let split = doc.split.as_ref().unwrap();
+    for o in 0..n as u32 {
+        s += &format!(" {}", split.source_of(o));
+    }
+    s += " -1 -1\n";
     s += "errors -1 -1 -1 0 null -1 0\n";
     s += "bytes error: truncated: the file has 8 bytes, its header says 24\n";
     s

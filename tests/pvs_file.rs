@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{BakeSettings, bake, to_document};
 use umbrasweep::pvs::binary::{
-    self, FORMAT_VERSION, HEADER_LEN, MAX_DEPTH, SHARD_FORMAT_VERSION, crc32,
+    self, FORMAT_VERSION, HEADER_LEN, LATEST_FORMAT_VERSION, MAX_DEPTH, SHARD_FORMAT_VERSION, crc32,
 };
 use umbrasweep::pvs::{
     CellId, EncodeError, PvsCell, PvsDatabase, PvsDocument, PvsErrorKind, PvsJsonErrorKind,
@@ -99,6 +99,7 @@ fn synthetic(nx: usize, nz: usize, objects: usize, seed: u64) -> PvsDocument {
                 visible,
                 ms: rng.unit() as f64,
                 cullers: Vec::new(),
+                parent: None,
             });
         }
     }
@@ -115,6 +116,7 @@ fn synthetic(nx: usize, nz: usize, objects: usize, seed: u64) -> PvsDocument {
             adapter: Some("none".into()),
             ..Default::default()
         }),
+        split: None,
     }
 }
 
@@ -264,7 +266,7 @@ fn wrong_magic_is_refused() {
 
 #[test]
 fn other_versions_are_refused_before_anything_else() {
-    for v in [0, SHARD_FORMAT_VERSION + 1, u32::MAX] {
+    for v in [0, LATEST_FORMAT_VERSION + 1, u32::MAX] {
         let mut b = city_bytes().to_vec();
         b[8..12].copy_from_slice(&v.to_le_bytes());
         assert_eq!(kind(&b), PvsErrorKind::UnsupportedVersion { found: v });

@@ -90,9 +90,11 @@ fn doc_cells(scene: &Scene, cells: Vec<(Aabb, Vec<u32>)>, alpha_occluders: bool)
                 visible,
                 ms: 0.0,
                 cullers: Vec::new(),
+                parent: None,
             })
             .collect(),
         summary: None,
+        split: None,
     }
 }
 

@@ -38,8 +38,17 @@ uint32_t us_pvs_cell_count(const UsPvs *pvs);
 uint32_t us_pvs_object_count(const UsPvs *pvs);
 
 /* The cell holding the point (boxes are closed; where cells overlap, the lowest index), or
- * -1 when no cell holds it. Uses a uniform grid over the cells. */
+ * -1 when no cell holds it. Uses a uniform grid over the cells. With adaptive subdivision
+ * (bake --max-pvs-triangles) it descends to the smallest cell holding the point. */
 int64_t us_pvs_cell_at(const UsPvs *pvs, float x, float y, float z);
+
+/* The cell this cell is a half of (adaptive subdivision), or -1 for a cell given to the
+ * bake, a bad cell or NULL. */
+int64_t us_pvs_cell_parent(const UsPvs *pvs, uint32_t cell);
+
+/* With bake --split-objects: the object of the scene file that object (a cluster) belongs
+ * to; without a split, the object itself; -1 for a bad object or NULL. */
+int64_t us_pvs_source_of(const UsPvs *pvs, uint32_t object);
 
 /* Writes the cell's box to min[3] and max[3]. 0 on success, -1 for a bad cell. */
 int us_pvs_cell_bounds(const UsPvs *pvs, uint32_t cell, float *min, float *max);

@@ -147,7 +147,8 @@ pub unsafe extern "C" fn us_pvs_object_count(pvs: *const UsPvs) -> u32 {
     unsafe { get(pvs) }.map_or(0, |p| p.db.object_count() as u32)
 }
 
-/// The cell holding the point (the lowest index where cells overlap), or -1.
+/// The cell holding the point (the lowest index where cells overlap; with adaptive
+/// subdivision, the smallest cell of the hierarchy holding it), or -1.
 ///
 /// # Safety
 /// `pvs` is null or a live handle.
@@ -157,6 +158,39 @@ pub unsafe extern "C" fn us_pvs_cell_at(pvs: *const UsPvs, x: f32, y: f32, z: f3
     unsafe { get(pvs) }
         .and_then(|p| p.db.cell_at([x, y, z]))
         .map_or(-1, |c| c.0 as i64)
+}
+
+/// The cell this cell is a half of (adaptive subdivision), or -1 for a cell given to the
+/// bake, a bad cell or a null handle.
+///
+/// # Safety
+/// `pvs` is null or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn us_pvs_cell_parent(pvs: *const UsPvs, cell: u32) -> i64 {
+    // SAFETY: forwarded from the caller.
+    match unsafe { get(pvs) } {
+        Some(p) if (cell as usize) < p.db.cell_count() => {
+            p.db.cell_parent(CellId(cell)).map_or(-1, |c| c.0 as i64)
+        }
+        _ => -1,
+    }
+}
+
+/// With `bake --split-objects`: the object of the scene file that object (cluster) `object`
+/// belongs to; without a split the object itself; -1 for a bad object or a null handle.
+///
+/// # Safety
+/// `pvs` is null or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn us_pvs_source_of(pvs: *const UsPvs, object: u32) -> i64 {
+    // SAFETY: forwarded from the caller.
+    match unsafe { get(pvs) } {
+        Some(p) if (object as usize) < p.db.object_count() => match p.db.split() {
+            Some(t) => t.source_of(object) as i64,
+            None => object as i64,
+        },
+        _ => -1,
+    }
 }
 
 /// Writes a cell's bounds to `min[3]` and `max[3]`; 0 on success, -1 for a bad cell.

@@ -1,6 +1,6 @@
 /* The C API's test program (run by tests/capi.rs): opens the .pvs file named on the command
- * line and prints, for each cell, the cell holding its centre, its visible ids and names, and
- * its is_visible row; then exercises the error values. Exit 1 when the file does not open. */
+ * line and prints, for each cell, the cell holding its centre, its parent, its visible ids and
+ * names, and its is_visible row; each object's source object; then exercises the error values. Exit 1 when the file does not open. */
 #include "umbrasweep.h"
 
 #include <stdio.h>
@@ -31,7 +31,8 @@ int main(int argc, char **argv) {
             int64_t n = us_pvs_visible(pvs, c, ids, objects);
             if (n != us_pvs_visible_count(pvs, c)) return 4;
             if (pass == 0) continue;
-            printf("cell %u at %lld:", c, (long long)at);
+            printf("cell %u at %lld parent %lld:", c, (long long)at,
+                   (long long)us_pvs_cell_parent(pvs, c));
             for (int64_t i = 0; i < n; i++) printf(" %u=%s", ids[i], us_pvs_object_name(pvs, ids[i]));
             printf("\nrow %u: ", c);
             for (uint32_t o = 0; o < objects; o++) printf("%d", us_pvs_is_visible(pvs, c, o));
@@ -40,6 +41,11 @@ int main(int argc, char **argv) {
     }
     /* A short buffer still gets the count. */
     if (cells > 0) printf("short %lld\n", (long long)us_pvs_visible(pvs, 0, ids, 1));
+    /* Each object's object of the scene file (--split-objects), then the error values. */
+    printf("sources");
+    for (uint32_t o = 0; o < objects; o++) printf(" %lld", (long long)us_pvs_source_of(pvs, o));
+    printf(" %lld %lld\n", (long long)us_pvs_source_of(pvs, objects),
+           (long long)us_pvs_cell_parent(pvs, cells));
     printf("errors %lld %lld %d %d %s %lld %u\n", (long long)us_pvs_cell_at(pvs, 1e30f, 0, 0),
            (long long)us_pvs_visible(pvs, cells, ids, objects), us_pvs_is_visible(pvs, cells, 0),
            us_pvs_is_visible(pvs, 0, objects), us_pvs_object_name(pvs, objects) ? "name" : "null",

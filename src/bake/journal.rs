@@ -288,6 +288,16 @@ mod tests {
                     finest_eps: Some(0.0123),
                 },
             }],
+            // A subdivided cell's halves travel with it.
+            children: if k % 2 == 1 {
+                vec![crate::bake::ChildCell {
+                    min: [0.0, 0.5, 1.0],
+                    max: [2.0, 2.5, 3.0],
+                    result: result(k - 1),
+                }]
+            } else {
+                Vec::new()
+            },
         }
     }
 

@@ -19,8 +19,9 @@ pub use journal::{
 pub use pipeline::{CULLER_NAMES, CullState, Culler, CullerStats, CullerWork, cullers};
 pub use planes::{PlaneCuller, SWEEP_TEST_REACH};
 pub use prepare::{
-    PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared, SAMPLING_AUTO_NOTE, SMALL_OCCLUDER_CELLS,
-    SMALL_OCCLUDER_SHARE, choose_sweep, split_cell,
+    MIN_CELL_FRACTION, MIN_SPLIT_GAIN, PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared,
+    SAMPLING_AUTO_NOTE, SMALL_OCCLUDER_CELLS, SMALL_OCCLUDER_SHARE, choose_sweep, halve,
+    split_cell,
 };
 pub use sampling::{SamplerData, SamplingCuller};
 pub use shard::{MergeError, SHARD_FORMAT, SHARD_VERSION, ShardFile, ShardSpec, merge};
@@ -65,6 +66,64 @@ pub struct CellResult {
     pub occluders_projected: usize,
     /// Per culler of the pipeline ([`BakeResult::cullers`]), its account for this cell.
     pub cullers: Vec<CullerStats>,
+    /// With adaptive subdivision (`max_pvs_triangles`): the two halves this cell was split
+    /// into, each baked testing only this cell's PVS; empty when it was not split.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub children: Vec<ChildCell>,
+}
+
+/// One half of a subdivided cell: its box and its own result (which may be subdivided again).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ChildCell {
+    /// Lower corner.
+    pub min: [f32; 3],
+    /// Upper corner.
+    pub max: [f32; 3],
+    /// Its bake.
+    pub result: CellResult,
+}
+
+impl CellResult {
+    /// This cell and its subdivision, depth first (a cell before its halves, the lower half
+    /// first), each with the index in that order of the cell it is a half of: the order of
+    /// the PVS document's cells after the cells given to the bake.
+    pub fn flatten(&self, bounds: Aabb) -> Vec<(Aabb, Option<usize>, &CellResult)> {
+        fn walk<'r>(
+            r: &'r CellResult,
+            b: Aabb,
+            parent: Option<usize>,
+            out: &mut Vec<(Aabb, Option<usize>, &'r CellResult)>,
+        ) {
+            let me = out.len();
+            out.push((b, parent, r));
+            for c in &r.children {
+                walk(
+                    &c.result,
+                    Aabb::new(c.min.into(), c.max.into()),
+                    Some(me),
+                    out,
+                );
+            }
+        }
+        let mut out = Vec::new();
+        walk(self, bounds, None, &mut out);
+        out
+    }
+
+    /// The cells of this cell's subdivision that were not split further (itself when it was
+    /// not subdivided).
+    pub fn leaves(&self) -> Vec<&CellResult> {
+        let mut out = Vec::new();
+        let mut stack = vec![self];
+        while let Some(c) = stack.pop() {
+            if c.children.is_empty() {
+                out.push(c);
+            } else {
+                stack.extend(c.children.iter().rev().map(|h| &h.result));
+            }
+        }
+        out
+    }
 }
 
 /// A whole bake's outcome (a shard file keeps it whole: `shard.rs`).
@@ -226,11 +285,13 @@ impl BakeResult {
     /// that the same inputs give byte-identical PVS files (`bake --reproducible`).
     pub fn clear_timings(&mut self) {
         self.seconds = 0.0;
-        for c in &mut self.cells {
+        let mut stack: Vec<&mut CellResult> = self.cells.iter_mut().collect();
+        while let Some(c) = stack.pop() {
             c.ms = 0.0;
             for s in &mut c.cullers {
                 s.ms = 0.0;
             }
+            stack.extend(c.children.iter_mut().map(|h| &mut h.result));
         }
     }
 }
@@ -297,14 +358,16 @@ pub fn to_document(
     result: &BakeResult,
     settings: &BakeSettings,
 ) -> PvsDocument {
-    document(
+    let mut doc = document(
         scene.source.display().to_string(),
         object_table(scene),
         scene.triangles.len(),
         cells,
         result,
         settings,
-    )
+    );
+    doc.split = scene.split.as_ref().map(split_table);
+    doc
 }
 
 /// [`to_document`] from the parts of a scene it uses: its path as recorded, its object table
@@ -320,15 +383,31 @@ pub fn document(
     let tri_count = |o: u32| objects[o as usize].triangles as usize;
     let total_tris = triangles.max(1);
     let n_obj = objects.len().max(1);
-    let mut obj_pct = 0.0;
-    let mut tri_pct = 0.0;
-    for c in &result.cells {
+    // The cells given to the bake, then each one's subdivision depth first.
+    let mut flat: Vec<(Aabb, Option<usize>, &CellResult)> = (cells.iter().copied())
+        .zip(&result.cells)
+        .map(|(b, c)| (b, None, c))
+        .collect();
+    for (i, (b, c)) in cells.iter().zip(&result.cells).enumerate() {
+        let base = flat.len();
+        for (bx, parent, r) in c.flatten(*b).into_iter().skip(1) {
+            let parent = match parent {
+                Some(0) | None => i,
+                Some(k) => base + k - 1,
+            };
+            flat.push((bx, Some(parent), r));
+        }
+    }
+    // Culling figures over the cells a run-time lookup ends in (not split further).
+    let (mut obj_pct, mut tri_pct, mut leaves) = (0.0, 0.0, 0usize);
+    for (_, _, c) in flat.iter().filter(|(_, _, c)| c.children.is_empty()) {
         obj_pct += 100.0 * (1.0 - c.visible.len() as f64 / n_obj as f64);
         let vis_tris: usize = c.visible.iter().map(|&o| tri_count(o)).sum();
         tri_pct += 100.0 * (1.0 - vis_tris as f64 / total_tris as f64);
+        leaves += 1;
     }
-    let nc = result.cells.len().max(1) as f64;
-    let ms: Vec<f64> = result.cells.iter().map(|c| c.ms).collect();
+    let nc = leaves.max(1) as f64;
+    let ms: Vec<f64> = flat.iter().map(|(_, _, c)| c.ms).collect();
     let n_objects = objects.len();
     PvsDocument {
         format: FORMAT.into(),
@@ -351,14 +430,14 @@ pub fn document(
             },
         },
         objects,
-        cells: cells
+        cells: flat
             .iter()
-            .zip(&result.cells)
-            .map(|(b, c)| PvsCell {
+            .map(|&(b, parent, c)| PvsCell {
                 min: b.min.to_array(),
                 max: b.max.to_array(),
                 visible: c.visible.clone(),
                 ms: c.ms,
+                parent: parent.map(|p| p as u32),
                 cullers: if result.sampling {
                     result
                         .cullers
@@ -378,7 +457,7 @@ pub fn document(
             })
             .collect(),
         summary: Some(PvsSummary {
-            cells: cells.len(),
+            cells: flat.len(),
             objects: n_objects,
             triangles,
             occluder_triangles: result.occluder_triangles,
@@ -391,6 +470,25 @@ pub fn document(
             total_seconds: result.seconds,
             cullers: culler_summary(result),
         }),
+        split: None,
+    }
+}
+
+/// The PVS document's form of a scene's [`SplitMap`](crate::scene::split::SplitMap).
+pub fn split_table(map: &crate::scene::split::SplitMap) -> crate::pvs::PvsSplit {
+    crate::pvs::PvsSplit {
+        size: map.size,
+        sources: (map.sources.iter().enumerate())
+            .map(|(i, s)| crate::pvs::PvsSource {
+                id: i as u32,
+                name: s.name.clone(),
+                triangles: s.triangles,
+                min: s.bounds.min.to_array(),
+                max: s.bounds.max.to_array(),
+                first: s.clusters.start,
+                count: s.clusters.len() as u32,
+            })
+            .collect(),
     }
 }
 

@@ -168,21 +168,28 @@ impl CellAccount {
 }
 
 /// Runs `cullers` over one (sub-)cell, adding to `account`. Returns the objects hidden.
+/// `inherited` are objects already proven hidden from a box holding the cell (the parent of
+/// a subdivided cell): they start hidden, are not tested and do not occlude.
 ///
 /// # Errors
 /// A culler's failure.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the pipeline's inputs, each distinct"
+)]
 pub(super) fn run(
     cullers: &[Box<dyn Culler>],
     prepared: &Prepared,
     cell: &Aabb,
     backend: &dyn RasterBackend,
     known_visible: Option<&[bool]>,
+    inherited: Option<&[bool]>,
     observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
     account: &mut CellAccount,
 ) -> Result<Vec<bool>, BakeError> {
     let n = prepared.scene.objects.len();
     let mut state = CullState {
-        hidden: vec![false; n],
+        hidden: inherited.map_or_else(|| vec![false; n], <[bool]>::to_vec),
         known_visible,
     };
     for (k, culler) in cullers.iter().enumerate() {

@@ -302,6 +302,8 @@ impl<'a> Prepared<'a> {
 
     /// Bakes one cell, handing every rendered plane to `observe` (its job, its Depth Map and
     /// its Hierarchical Depth Map) before its occludees are tested: for dumps and reports.
+    /// With `max_pvs_triangles` the result holds the cell's subdivision
+    /// ([`CellResult::children`]).
     ///
     /// # Errors
     /// The backend's failure.
@@ -311,6 +313,63 @@ impl<'a> Prepared<'a> {
         backend: &dyn RasterBackend,
         observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
     ) -> Result<CellResult, BakeError> {
+        let min_size = self
+            .settings
+            .min_cell_size
+            .unwrap_or((cell.max - cell.min).max_element() as f64 / MIN_CELL_FRACTION);
+        self.cell_tree(cell, None, min_size, backend, observe)
+    }
+
+    /// Bakes `cell` (objects in `inherited` start hidden), then, while its PVS holds more
+    /// triangles than `max_pvs_triangles` and its longest side exceeds `min_size`, its two
+    /// halves along that side, each testing only the objects of this cell's PVS: a half's PVS
+    /// is a subset of its parent's, since each of its points is a point of the parent. A half
+    /// whose PVS is not at least [`MIN_SPLIT_GAIN`] smaller than its parent's is not split
+    /// again (splitting where nothing changes rarely starts to pay one level down).
+    fn cell_tree(
+        &self,
+        cell: &Aabb,
+        inherited: Option<(&[bool], u64)>,
+        min_size: f64,
+        backend: &dyn RasterBackend,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    ) -> Result<CellResult, BakeError> {
+        let (mut result, hidden) =
+            self.cell_once(cell, inherited.map(|h| h.0), backend, observe)?;
+        let Some(limit) = self.settings.max_pvs_triangles else {
+            return Ok(result);
+        };
+        let tris: u64 = (result.visible.iter())
+            .map(|&o| self.scene.objects[o as usize].triangles.len() as u64)
+            .sum();
+        let stalled = inherited
+            .is_some_and(|(_, parent)| tris as f64 > (1.0 - MIN_SPLIT_GAIN) * parent as f64);
+        if tris <= limit || stalled {
+            return Ok(result);
+        }
+        let Some(halves) = halve(cell, min_size) else {
+            return Ok(result);
+        };
+        for half in halves {
+            let child = self.cell_tree(&half, Some((&hidden, tris)), min_size, backend, observe)?;
+            result.children.push(super::ChildCell {
+                min: half.min.to_array(),
+                max: half.max.to_array(),
+                result: child,
+            });
+        }
+        Ok(result)
+    }
+
+    /// Bakes one cell without subdividing it: its result, and per object whether it is
+    /// culled (hidden from every sub-cell).
+    fn cell_once(
+        &self,
+        cell: &Aabb,
+        inherited: Option<&[bool]>,
+        backend: &dyn RasterBackend,
+        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    ) -> Result<(CellResult, Vec<bool>), BakeError> {
         let start = Instant::now();
         let n = self.scene.objects.len();
         let subcells = match self.settings.subcell {
@@ -327,6 +386,7 @@ impl<'a> Prepared<'a> {
                 sub,
                 backend,
                 known,
+                inherited,
                 observe,
                 &mut account,
             )?;
@@ -335,17 +395,49 @@ impl<'a> Prepared<'a> {
             }
         }
         let stats = account.finish(&visible);
+        let hidden: Vec<bool> = visible.iter().map(|v| !v).collect();
         let visible = (0..n as u32)
             .filter(|&o| visible[o as usize] && !self.scene.objects[o as usize].bounds.is_empty())
             .collect();
-        Ok(CellResult {
-            visible,
-            ms: start.elapsed().as_secs_f64() * 1e3,
-            planes: stats.iter().map(|s| s.work.planes).sum(),
-            occluders_projected: stats.iter().map(|s| s.work.occluders_projected).sum(),
-            cullers: stats,
-        })
+        Ok((
+            CellResult {
+                visible,
+                ms: start.elapsed().as_secs_f64() * 1e3,
+                planes: stats.iter().map(|s| s.work.planes).sum(),
+                occluders_projected: stats.iter().map(|s| s.work.occluders_projected).sum(),
+                cullers: stats,
+                children: Vec::new(),
+            },
+            hidden,
+        ))
     }
+}
+
+/// Without `min_cell_size`, adaptive subdivision stops at cells whose longest side is this
+/// fraction of the longest side of the cell given to the bake (at most 3 splits along it).
+pub const MIN_CELL_FRACTION: f64 = 8.0;
+
+/// A half of a subdivided cell is split again only when its PVS has at least this share
+/// fewer triangles than its parent's.
+pub const MIN_SPLIT_GAIN: f64 = 0.02;
+
+/// The two halves of `cell` along its longest side, split at its middle (rounded to `f32`,
+/// the halves share the plane exactly); `None` when that side is at most `min_size` or too
+/// thin to split in `f32`.
+pub fn halve(cell: &Aabb, min_size: f64) -> Option<[Aabb; 2]> {
+    let ext = cell.max - cell.min;
+    let axis = ext.max_position();
+    if (ext[axis] as f64) <= min_size {
+        return None;
+    }
+    let mid = cell.min[axis] + 0.5 * ext[axis];
+    if !(mid > cell.min[axis] && mid < cell.max[axis]) {
+        return None;
+    }
+    let (mut lo, mut hi) = (*cell, *cell);
+    lo.max[axis] = mid;
+    hi.min[axis] = mid;
+    Some([lo, hi])
 }
 
 /// The sub-cells of `cell` no larger than `size` along any axis: a regular split, as few per

@@ -259,14 +259,16 @@ pub fn merge(shards: &[(PathBuf, ShardFile)]) -> Result<PvsDocument, MergeError>
         |s| s.triangles,
     );
     let settings: BakeSettings = d.settings.bake.clone();
-    Ok(document(
+    let mut doc = document(
         d.scene.clone(),
         d.objects.clone(),
         triangles,
         &boxes,
         &result,
         &settings,
-    ))
+    );
+    doc.split = d.split.clone();
+    Ok(doc)
 }
 
 #[cfg(test)]

@@ -685,6 +685,7 @@ pub(crate) fn score(
             visible: r.visible.clone(),
             ms: r.ms,
             cullers: Vec::new(),
+            parent: None,
         };
         reports.push(cell_report(scene, &pvs, &sample.0));
     }

@@ -1,6 +1,10 @@
 //! View cells: boxes the camera may be anywhere inside. Read from a JSON file
 //! (`{"cells": [{"min": [x,y,z], "max": [x,y,z]}, …]}`) or laid out as a regular grid.
 
+pub mod auto;
+
+pub use auto::{AutoCellOptions, AutoCellStats, AutoCells, CellClass, auto_cells};
+
 use crate::geom::Aabb;
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};

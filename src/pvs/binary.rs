@@ -18,8 +18,9 @@
 
 // The format's constants and checksum, at their old paths (`pvs::binary::FORMAT_VERSION`…).
 pub use super::format::{
-    CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, FORMAT_VERSION, HEADER_LEN, MAGIC, MAX_DEPTH,
-    NO_PARENT, NO_STRING, OBJECT_RECORD_LEN, SHARD_FORMAT_VERSION, crc32,
+    CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, EXTENDED_FORMAT_VERSION, FORMAT_VERSION,
+    HEADER_LEN, LATEST_FORMAT_VERSION, MAGIC, MAX_DEPTH, NO_PARENT, NO_STRING, OBJECT_RECORD_LEN,
+    SHARD_FORMAT_VERSION, TAG_HIERARCHY, TAG_SHARD, TAG_SPLIT, crc32,
 };
 
 use super::PvsDocument;
@@ -411,24 +412,92 @@ fn encode_with(doc: &PvsDocument, shard: Option<&str>) -> Result<Vec<u8>, Encode
         u32::try_from(data.len()).map_err(|_| EncodeError::DataTooLarge)?,
     );
     p.extend_from_slice(&data);
-    if let Some(shard) = shard {
+    let hierarchy = doc.cells.iter().any(|c| c.parent.is_some());
+    let version = if doc.split.is_some() || hierarchy {
+        // Version 6: tagged extension sections.
+        let mut sections: Vec<(u32, Vec<u8>)> = Vec::new();
+        if let Some(shard) = shard {
+            sections.push((TAG_SHARD, shard.as_bytes().to_vec()));
+        }
+        if let Some(split) = &doc.split {
+            sections.push((TAG_SPLIT, encode_split(split, objects)?));
+        }
+        if hierarchy {
+            sections.push((TAG_HIERARCHY, encode_hierarchy(doc, cells)?));
+        }
+        put_u32(&mut p, sections.len() as u32);
+        for (tag, bytes) in sections {
+            put_u32(&mut p, tag);
+            put_u32(
+                &mut p,
+                u32::try_from(bytes.len()).map_err(|_| EncodeError::DataTooLarge)?,
+            );
+            p.extend_from_slice(&bytes);
+        }
+        EXTENDED_FORMAT_VERSION
+    } else if let Some(shard) = shard {
         put_str(&mut p, shard)?;
-    }
+        SHARD_FORMAT_VERSION
+    } else {
+        FORMAT_VERSION
+    };
 
     let mut out = Vec::with_capacity(HEADER_LEN + p.len());
     out.extend_from_slice(&MAGIC);
-    put_u32(
-        &mut out,
-        if shard.is_some() {
-            SHARD_FORMAT_VERSION
-        } else {
-            FORMAT_VERSION
-        },
-    );
+    put_u32(&mut out, version);
     put_u32(&mut out, crc32(&p));
     out.extend_from_slice(&(p.len() as u64).to_le_bytes());
     out.extend_from_slice(&p);
     Ok(out)
+}
+
+/// The split section: the cluster size, then per object of the file its name, triangle
+/// count, bounds and range of clusters (which must follow each other and cover the objects).
+fn encode_split(split: &super::PvsSplit, objects: u32) -> Result<Vec<u8>, EncodeError> {
+    let mut b = Vec::new();
+    b.extend_from_slice(&split.size.to_le_bytes());
+    put_u32(&mut b, split.sources.len() as u32);
+    let mut next = 0u32;
+    for (i, s) in split.sources.iter().enumerate() {
+        if s.id as usize != i || s.first != next {
+            return Err(EncodeError::BadSplit {
+                index: i,
+                why: format!("its clusters start at {}, expected {next}", s.first),
+            });
+        }
+        next = s.first.saturating_add(s.count);
+        put_str(&mut b, &s.name)?;
+        put_u32(&mut b, s.triangles);
+        for v in s.min.iter().chain(&s.max) {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        put_u32(&mut b, s.first);
+        put_u32(&mut b, s.count);
+    }
+    if next != objects {
+        return Err(EncodeError::BadSplit {
+            index: split.sources.len(),
+            why: format!("the clusters cover {next} objects, the PVS has {objects}"),
+        });
+    }
+    Ok(b)
+}
+
+/// The hierarchy section: the subdivision settings, then per cell the cell it is a half of
+/// (an earlier cell) or `0xFFFFFFFF`.
+fn encode_hierarchy(doc: &PvsDocument, cells: u32) -> Result<Vec<u8>, EncodeError> {
+    let mut b = Vec::with_capacity(16 + 4 * cells as usize);
+    let s = &doc.settings.bake;
+    b.extend_from_slice(&s.max_pvs_triangles.unwrap_or(0).to_le_bytes());
+    b.extend_from_slice(&s.min_cell_size.unwrap_or(0.0).to_le_bytes());
+    for (i, c) in doc.cells.iter().enumerate() {
+        match c.parent {
+            None => put_u32(&mut b, NO_PARENT),
+            Some(p) if (p as usize) < i => put_u32(&mut b, p),
+            Some(p) => return Err(EncodeError::BadParent { cell: i, parent: p }),
+        }
+    }
+    Ok(b)
 }
 
 /// Writes `doc` as a binary `.pvs` file, atomically (temporary file, then rename).

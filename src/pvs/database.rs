@@ -18,13 +18,14 @@
 //! };
 //! let cell = |x: f32, visible: Vec<u32>| PvsCell {
 //!     min: [x, 0.0, 0.0], max: [x + 1.0, 1.0, 1.0], visible, ms: 0.0, cullers: Vec::new(),
+//!     parent: None,
 //! };
 //! let doc = PvsDocument {
 //!     format: umbrasweep::pvs::FORMAT.into(), version: umbrasweep::pvs::VERSION,
 //!     scene: "demo.obj".into(), settings: Default::default(),
 //!     objects: vec![object(0, "house"), object(1, "tree")],
 //!     cells: vec![cell(0.0, vec![0, 1]), cell(1.0, vec![1])],
-//!     summary: None,
+//!     summary: None, split: None,
 //! };
 //! let bytes = binary::encode(&doc).unwrap(); // what `bake -o OUT.pvs` writes
 //! let db = PvsDatabase::from_bytes(&bytes).unwrap();
@@ -44,10 +45,13 @@
 
 pub use super::error::{PvsError, PvsErrorKind};
 use super::format::{
-    CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, HEADER_LEN, MAGIC, NO_PARENT, NO_STRING,
-    OBJECT_RECORD_LEN, SHARD_FORMAT_VERSION, crc32, get_varint,
+    CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, HEADER_LEN, LATEST_FORMAT_VERSION, MAGIC,
+    NO_PARENT, NO_STRING, OBJECT_RECORD_LEN, TAG_HIERARCHY, TAG_SHARD, TAG_SPLIT, crc32,
+    get_varint,
 };
-use super::{FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSummary, VERSION};
+use super::{
+    FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSource, PvsSplit, PvsSummary, VERSION,
+};
 use crate::settings::{Placement, Spacing, SweepChoice};
 use glam::Vec3;
 use std::fmt;
@@ -160,9 +164,10 @@ struct CellGrid {
 }
 
 impl CellGrid {
-    fn new(cells: &[Cell]) -> Self {
+    /// The grid over the cells `indexed` says (all but the halves of subdivided cells).
+    fn new(cells: &[Cell], indexed: impl Fn(usize) -> bool) -> Self {
         let live: Vec<usize> = (0..cells.len())
-            .filter(|&i| (0..3).all(|k| cells[i].min[k] <= cells[i].max[k]))
+            .filter(|&i| indexed(i) && (0..3).all(|k| cells[i].min[k] <= cells[i].max[k]))
             .collect();
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
@@ -486,6 +491,13 @@ pub struct PvsDatabase {
     data: Vec<u8>,
     /// Version 5 (a shard's file): the shard's description for `umbrasweep merge`.
     shard: Option<String>,
+    /// Version 6 with split objects: the clusters' mapping to the objects of the file.
+    split: Option<PvsSplit>,
+    /// Version 6 with a cell hierarchy: per cell the cell it is a half of, or `NO_PARENT`.
+    up: Vec<u32>,
+    /// Per cell its halves (CSR over `halves`); empty without a hierarchy.
+    halves_start: Vec<u32>,
+    halves: Vec<u32>,
     grid: CellGrid,
     file_bytes: usize,
 }
@@ -532,7 +544,7 @@ impl PvsDatabase {
         let u32_at =
             |o: usize| u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]);
         let version = u32_at(8);
-        if !(1..=SHARD_FORMAT_VERSION).contains(&version) {
+        if !(1..=LATEST_FORMAT_VERSION).contains(&version) {
             return Err(PvsErrorKind::UnsupportedVersion { found: version });
         }
         if bytes.len() < HEADER_LEN {
@@ -708,11 +720,37 @@ impl PvsDatabase {
         }
         let data_len = r.u32("the PVS data length")? as usize;
         let data = r.take(data_len, "the PVS data")?.to_vec();
-        let shard = if version >= 5 {
+        let mut shard = if version == 5 {
             Some(r.str("the shard's description")?)
         } else {
             None
         };
+        let (mut split, mut up) = (None, Vec::new());
+        if version >= 6 {
+            let count = r.u32("the extension count")?;
+            for _ in 0..count {
+                let tag = r.u32("an extension tag")?;
+                let len = r.u32("an extension length")? as usize;
+                let bytes = r.take(len, "an extension section")?;
+                match tag {
+                    TAG_SHARD => {
+                        shard = Some(
+                            String::from_utf8(bytes.to_vec())
+                                .map_err(|_| corrupt("the shard's description is not UTF-8"))?,
+                        );
+                    }
+                    TAG_SPLIT => split = Some(read_split(bytes, objects)?),
+                    TAG_HIERARCHY => {
+                        let (max, min, parents) = read_hierarchy(bytes, ncells)?;
+                        settings.bake.max_pvs_triangles = (max > 0).then_some(max);
+                        settings.bake.min_cell_size = (min > 0.0).then_some(min);
+                        up = parents;
+                    }
+                    // Sections of later writers that this reader does not know: skipped.
+                    _ => {}
+                }
+            }
+        }
         if r.pos != payload.len() {
             return Err(corrupt(format!(
                 "{} bytes after the PVS data",
@@ -746,7 +784,32 @@ impl PvsDatabase {
                 cells[k as usize].depth = d;
             }
         }
+        // Halves inside the cell they halve.
+        for (i, &p) in up.iter().enumerate() {
+            if p != NO_PARENT {
+                let (c, q) = (&cells[i], &cells[p as usize]);
+                if (0..3).any(|k| c.min[k] < q.min[k] || c.max[k] > q.max[k]) {
+                    return Err(corrupt(format!(
+                        "cell {i} is a half of cell {p} but does not lie inside it"
+                    )));
+                }
+            }
+        }
+        let mut halves_start = vec![0u32; if up.is_empty() { 0 } else { cells.len() + 1 }];
+        for &p in up.iter().filter(|&&p| p != NO_PARENT) {
+            halves_start[p as usize + 1] += 1;
+        }
+        for i in 1..halves_start.len() {
+            halves_start[i] += halves_start[i - 1];
+        }
+        let mut halves = vec![0u32; halves_start.last().copied().unwrap_or(0) as usize];
+        let mut fill = halves_start.clone();
+        for (i, &p) in up.iter().enumerate().filter(|(_, p)| **p != NO_PARENT) {
+            halves[fill[p as usize] as usize] = i as u32;
+            fill[p as usize] += 1;
+        }
         let words = objects.div_ceil(64) as usize;
+        let grid = CellGrid::new(&cells, |i| up.get(i).is_none_or(|&p| p == NO_PARENT));
         let mut db = PvsDatabase {
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             objects,
@@ -756,11 +819,15 @@ impl PvsDatabase {
             summary,
             object_table,
             names,
-            grid: CellGrid::new(&cells),
+            grid,
             cells,
             ms,
             data,
             shard,
+            split,
+            up,
+            halves_start,
+            halves,
             file_bytes: 0,
         };
         db.check_records()?;
@@ -882,13 +949,67 @@ impl PvsDatabase {
 
     /// The cell holding `point` (boxes are closed; where cells overlap, the lowest index),
     /// found through a uniform grid over the cells; `None` outside every cell or for NaN.
+    /// With adaptive subdivision the lookup then descends to the smallest cell holding the
+    /// point: of the cell's halves the first that holds it, and so on.
     pub fn cell_at(&self, point: impl Into<Vec3>) -> Option<CellId> {
         let p = point.into();
-        self.grid
+        let mut at = *self
+            .grid
             .candidates(p)
             .iter()
-            .find(|&&i| self.cells[i as usize].contains(p))
-            .map(|&i| CellId(i))
+            .find(|&&i| self.cells[i as usize].contains(p))?;
+        while let Some(&h) = self
+            .halves_of(at)
+            .iter()
+            .find(|&&h| self.cells[h as usize].contains(p))
+        {
+            at = h;
+        }
+        Some(CellId(at))
+    }
+
+    fn halves_of(&self, cell: u32) -> &[u32] {
+        match self.halves_start.get(cell as usize..cell as usize + 2) {
+            Some(&[a, b]) => &self.halves[a as usize..b as usize],
+            _ => &[],
+        }
+    }
+
+    /// The halves a cell was split into by adaptive subdivision (`bake --max-pvs-triangles`),
+    /// empty when it was not split (and in files without subdivision).
+    ///
+    /// # Panics
+    /// When `cell` is out of range.
+    pub fn cell_halves(&self, cell: CellId) -> impl Iterator<Item = CellId> + '_ {
+        assert!(
+            cell.index() < self.cells.len(),
+            "cell {} out of range",
+            cell.0
+        );
+        self.halves_of(cell.0).iter().map(|&h| CellId(h))
+    }
+
+    /// The cell that `cell` is a half of (adaptive subdivision), `None` for a cell given to
+    /// the bake.
+    ///
+    /// # Panics
+    /// When `cell` is out of range.
+    pub fn cell_parent(&self, cell: CellId) -> Option<CellId> {
+        assert!(
+            cell.index() < self.cells.len(),
+            "cell {} out of range",
+            cell.0
+        );
+        self.up
+            .get(cell.index())
+            .filter(|&&p| p != NO_PARENT)
+            .map(|&p| CellId(p))
+    }
+
+    /// With `bake --split-objects`: how the objects (clusters) map to the objects of the
+    /// scene file; `None` otherwise.
+    pub fn split(&self) -> Option<&PvsSplit> {
+        self.split.as_ref()
     }
 
     /// Whether `object` is in `cell`'s PVS, without decoding the set or allocating (false
@@ -1005,12 +1126,77 @@ impl PvsDatabase {
                         visible: cur.visible(self, CellId(i as u32)).collect(),
                         ms: self.ms[i],
                         cullers: Vec::new(),
+                        parent: self.cell_parent(CellId(i as u32)).map(|p| p.0),
                     }
                 })
                 .collect(),
             summary: self.summary.clone(),
+            split: self.split.clone(),
         }
     }
+}
+
+/// Reads the split section (`docs/pvs-format.md`), checking that the sources' clusters follow
+/// each other and cover the `objects`.
+fn read_split(bytes: &[u8], objects: u32) -> Result<PvsSplit, PvsErrorKind> {
+    let mut r = Rd { b: bytes, pos: 0 };
+    let size = r.f32("the split size")?;
+    let count = r.u32("the split source count")?;
+    // Each entry takes at least 36 bytes.
+    if (count as usize).saturating_mul(36) > bytes.len() - r.pos {
+        return Err(corrupt("the split table runs past its section"));
+    }
+    let mut sources = Vec::with_capacity(count as usize);
+    let mut next = 0u32;
+    for id in 0..count {
+        let s = PvsSource {
+            id,
+            name: r.str("a split source's name")?,
+            triangles: r.u32("a split source")?,
+            min: r.vec3("a split source")?,
+            max: r.vec3("a split source")?,
+            first: r.u32("a split source")?,
+            count: r.u32("a split source")?,
+        };
+        if s.first != next || s.first.checked_add(s.count).is_none_or(|e| e > objects) {
+            return Err(corrupt(format!(
+                "split source {id}: clusters {}..+{} do not follow the previous source's",
+                s.first, s.count
+            )));
+        }
+        next = s.first + s.count;
+        sources.push(s);
+    }
+    if next != objects || r.pos != bytes.len() {
+        return Err(corrupt(
+            "the split table does not cover the objects exactly",
+        ));
+    }
+    Ok(PvsSplit { size, sources })
+}
+
+/// Reads the hierarchy section: the subdivision settings and per cell its parent (an earlier
+/// cell) or `NO_PARENT`.
+fn read_hierarchy(bytes: &[u8], cells: u32) -> Result<(u64, f64, Vec<u32>), PvsErrorKind> {
+    let mut r = Rd { b: bytes, pos: 0 };
+    let max = r.u64("the subdivision's max_pvs_triangles")?;
+    let min = r.f64("the subdivision's min_cell_size")?;
+    if bytes.len() - r.pos != 4 * cells as usize {
+        return Err(corrupt(
+            "the cell hierarchy does not hold one entry per cell",
+        ));
+    }
+    let mut up = Vec::with_capacity(cells as usize);
+    for i in 0..cells {
+        let p = r.u32("the cell hierarchy")?;
+        if p != NO_PARENT && p >= i {
+            return Err(corrupt(format!(
+                "cell {i} is a half of cell {p}, which does not come before it"
+            )));
+        }
+        up.push(p);
+    }
+    Ok((max, min, up))
 }
 
 /// One decoded visible set that moves from cell to cell by applying only the delta records on

@@ -181,6 +181,24 @@ pub enum EncodeError {
     /// The records together need more than `u32::MAX` bytes.
     #[error("the PVS data exceeds 4 GiB")]
     DataTooLarge,
+    /// The `split` table does not map the objects: source object `index`'s clusters are not where
+    /// they should be (each source's must follow the previous one's and all cover the
+    /// objects).
+    #[error("split objects: source object {index}: {why}")]
+    BadSplit {
+        /// The source object's position in `split.sources`.
+        index: usize,
+        /// What is wrong.
+        why: String,
+    },
+    /// Cell `cell` names as its `parent` a cell that does not come before it.
+    #[error("cell {cell} is a half of cell {parent}, which does not come before it")]
+    BadParent {
+        /// The cell's position in the document.
+        cell: usize,
+        /// The parent it names.
+        parent: u32,
+    },
 }
 
 /// An error writing a PVS file with [`binary::write`](super::binary::write) or

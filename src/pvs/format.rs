@@ -12,11 +12,21 @@ pub const MAGIC: [u8; 8] = *b"UMBRAPVS";
 /// The binary format version this crate writes for a PVS.
 pub const FORMAT_VERSION: u32 = 4;
 /// The version of a shard's `.pvs` file (`bake --shard I/N -o SHARD.pvs`): version 4 with a
-/// trailing section holding the shard's description for `umbrasweep merge`. The crate reads
-/// versions 1 to this one.
+/// trailing section holding the shard's description for `umbrasweep merge`.
 pub const SHARD_FORMAT_VERSION: u32 = 5;
+/// The version of a file with extension sections (split objects, a cell hierarchy, or a
+/// shard's description beside either): version 4's payload followed by tagged sections.
+pub const EXTENDED_FORMAT_VERSION: u32 = 6;
+/// Extension tag: a shard's description (UTF-8 JSON), as version 5's last section.
+pub const TAG_SHARD: u32 = 1;
+/// Extension tag: objects split into clusters (`--split-objects`), mapped to the file's.
+pub const TAG_SPLIT: u32 = 2;
+/// Extension tag: the cell hierarchy of adaptive subdivision (`--max-pvs-triangles`).
+pub const TAG_HIERARCHY: u32 = 3;
 /// Length of the fixed header: magic, version, checksum, payload length.
 pub const HEADER_LEN: usize = 24;
+/// The newest version this crate reads (it reads versions 1 to this one).
+pub const LATEST_FORMAT_VERSION: u32 = EXTENDED_FORMAT_VERSION;
 /// The `parent` value of a key cell (a record holding the full set).
 pub const NO_PARENT: u32 = u32::MAX;
 /// The `length` value of an absent optional string.

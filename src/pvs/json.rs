@@ -36,6 +36,25 @@ pub fn read(path: &Path) -> Result<PvsDocument, PvsJsonError> {
     Ok(doc)
 }
 
+/// Reads a PVS in either form: a binary `.pvs` file (told by its magic number, whatever its
+/// name) as [`binary::read`](super::binary::read) turns it into the document, else a JSON
+/// document as [`read`] does. Errors are messages naming the file.
+///
+/// # Errors
+/// The file cannot be read, or is neither a valid `.pvs` file nor a valid JSON document.
+pub fn read_any(path: &Path) -> Result<PvsDocument, String> {
+    let mut head = [0u8; 8];
+    let is_binary = std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head))
+        .is_ok()
+        && head == super::format::MAGIC;
+    if is_binary {
+        super::binary::read(path).map_err(|e| e.to_string())
+    } else {
+        read(path).map_err(|e| e.to_string())
+    }
+}
+
 /// Writes the document atomically (temporary file, then rename).
 ///
 /// # Errors

@@ -32,6 +32,56 @@ pub struct PvsDocument {
     /// Totals of the bake; absent in documents made by other tools.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub summary: Option<PvsSummary>,
+    /// When the bake split objects too big to cull (`bake --split-objects SIZE`): the objects
+    /// above are clusters, and this maps them back to the objects of the scene file. Absent
+    /// otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub split: Option<PvsSplit>,
+}
+
+/// The clusters of a bake with `--split-objects`, mapped back to the objects of the file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PvsSplit {
+    /// The cluster size given to `--split-objects`, in scene units.
+    pub size: f32,
+    /// The objects of the scene file, in their id order; each names its clusters.
+    pub sources: Vec<PvsSource>,
+}
+
+/// One object of the scene file and the clusters (objects of the PVS) it was split into.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PvsSource {
+    /// The object's id in the scene file (its index in [`PvsSplit::sources`]).
+    pub id: u32,
+    /// Its name in the file.
+    pub name: String,
+    /// Its triangle count.
+    pub triangles: u32,
+    /// Lower corner of its bounds.
+    pub min: [f32; 3],
+    /// Upper corner of its bounds.
+    pub max: [f32; 3],
+    /// Its clusters: the PVS object ids `first .. first + count` (contiguous; the sources'
+    /// ranges follow each other and cover every object).
+    pub first: u32,
+    /// How many clusters it became (1 when it was left whole).
+    pub count: u32,
+}
+
+impl PvsSplit {
+    /// The object of the file that PVS object (cluster) `object` belongs to.
+    pub fn source_of(&self, object: u32) -> u32 {
+        self.sources
+            .partition_point(|s| s.first + s.count <= object) as u32
+    }
+
+    /// The objects of the file visible when the clusters `visible` (ascending) are: each
+    /// source object once, ascending.
+    pub fn source_visible(&self, visible: &[u32]) -> Vec<u32> {
+        let mut out: Vec<u32> = visible.iter().map(|&o| self.source_of(o)).collect();
+        out.dedup();
+        out
+    }
 }
 
 /// One scene object, as the PVS numbers it.
@@ -61,6 +111,11 @@ pub struct PvsCell {
     /// Milliseconds spent baking this cell.
     #[serde(default)]
     pub ms: f64,
+    /// With adaptive subdivision (`--max-pvs-triangles`): the cell this one is a half of
+    /// (always an earlier cell), absent for the cells given to the bake. The run-time lookup
+    /// descends from a given cell to the smallest cell holding the point.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parent: Option<u32>,
     /// Per culler, what it did in this cell (JSON documents from bakes that ran the
     /// shrunk-occluder sampler; absent otherwise and in `.pvs` files).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]

@@ -7,6 +7,7 @@
 pub mod closed;
 pub mod gltf;
 pub mod obj;
+pub mod split;
 
 use crate::geom::Aabb;
 use glam::Vec3;
@@ -43,6 +44,9 @@ pub struct Scene {
     pub objects: Vec<SceneObject>,
     /// Things skipped on import (points, lines, …), one line each, for the summary.
     pub warnings: Vec<String>,
+    /// When the objects are clusters of the file's objects (`--split-objects`,
+    /// [`split::split_objects`]): the mapping back to the file's objects.
+    pub split: Option<split::SplitMap>,
 }
 
 /// Errors of scene import. Every variant names the file.
