@@ -1,5 +1,6 @@
 //! Diagnostic: which occluder parts a segment crosses, and what the real triangles say.
-//! `part_probe SCENE SPLIT ox oy oz hx hy hz`
+//! `part_probe SCENE SPLIT ox oy oz hx hy hz [OBJECT]`, or `part_probe SCENE SPLIT` for the
+//! parts' size statistics (SPLIT 0: objects as in the file).
 use glam::DVec3;
 fn main() {
     let a: Vec<String> = std::env::args().collect();
@@ -10,6 +11,50 @@ fn main() {
     } else {
         scene
     };
+    if a.len() == 3 {
+        let occ = umbrasweep::project::occluders::prepare(
+            &scene,
+            &vec![true; scene.objects.len()],
+            false,
+        );
+        let mut sides: Vec<f64> = occ
+            .parts
+            .iter()
+            .map(|p| (p.bounds.max - p.bounds.min).max_element())
+            .collect();
+        sides.sort_by(f64::total_cmp);
+        let tris = occ.parts.iter().filter(|p| p.end - p.start == 3).count();
+        println!(
+            "{} parts ({} lone triangles) from {} triangles; largest side: median {:.2}, p90 {:.2}, max {:.2}",
+            occ.parts.len(),
+            tris,
+            scene.triangles.len(),
+            sides[sides.len() / 2],
+            sides[sides.len() * 9 / 10],
+            sides[sides.len() - 1]
+        );
+        // Area-weighted: the share of the occluder area in parts of each size.
+        let area = |p: &umbrasweep::project::occluders::OccluderPart| {
+            let pts = &occ.points[p.start as usize..p.end as usize];
+            (1..pts.len().saturating_sub(1))
+                .map(|i| (pts[i] - pts[0]).cross(pts[i + 1] - pts[0]).length() / 2.0)
+                .sum::<f64>()
+        };
+        let total: f64 = occ.parts.iter().map(area).sum();
+        for lim in [4.0, 16.0, 64.0, 256.0] {
+            let a: f64 = occ
+                .parts
+                .iter()
+                .filter(|p| (p.bounds.max - p.bounds.min).max_element() < lim)
+                .map(area)
+                .sum();
+            println!(
+                "  {:.1} % of the area in parts smaller than {lim}",
+                100.0 * a / total
+            );
+        }
+        return;
+    }
     let v: Vec<f64> = a[3..9].iter().map(|s| s.parse().unwrap()).collect();
     let (o, h) = (DVec3::new(v[0], v[1], v[2]), DVec3::new(v[3], v[4], v[5]));
     let only = a.get(9).cloned();

@@ -43,7 +43,7 @@ pub enum BackendChoice {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  umbrasweep bake data/demo_city.obj --cells data/demo_city_cells.json -o demo.json\n  umbrasweep bake city.obj --grid-box 0,1,0,100,3,100 --grid-size 20,1,20 -o city.json --backend cpu\n  umbrasweep bake city.obj --cells cells.json -o city.pvs --resume      (after an interruption)\n  umbrasweep bake city.obj --cells cells.json -o s0.json --shard 0/4    (then umbrasweep merge)"
+    after_help = "Examples:\n  umbrasweep bake data/demo_city.obj --cells data/demo_city_cells.json -o demo.json\n  umbrasweep bake city.obj --grid-box 0,1,0,100,3,100 --grid-size 20,1,20 -o city.json --backend cpu\n  umbrasweep bake city.obj --cells cells.json -o city.pvs --resume      (after an interruption)\n  umbrasweep bake city.obj --cells cells.json -o s0.json --shard 0/4    (then umbrasweep merge)\n  umbrasweep bake level.obj --cells auto --cell-size 64 --band 32 --headroom 24 --one-sided --split-objects 64 -o level.pvs\n  umbrasweep bake city.glb --cells cells.json --max-pvs-triangles 25000 -o city.pvs   (halves cells over budget)"
 )]
 pub struct BakeArgs {
     /// The scene: .obj, .gltf or .glb.
@@ -695,8 +695,8 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 leaves.iter().map(|c| tri(c)).sum::<u64>() as f64 / leaves.len().max(1) as f64;
             eprintln!(
                 "subdivided  {} cells into {} leaves ({} cells in the PVS); mean PVS {:.0} \
-                 triangles per leaf against the budget {limit}; {over} leaves over it at the \
-                 smallest size",
+                 triangles per leaf against the budget {limit}; {over} leaves still over it \
+                 (smallest size reached, or halving gained under 2 %)",
                 result.cells.len(),
                 leaves.len(),
                 s.cells,

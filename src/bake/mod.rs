@@ -2,7 +2,9 @@
 //! document ([`to_document`]). A scene is prepared once ([`Prepared`], `prepare.rs`); every
 //! cell — or every sub-cell of it with `subcell` — then runs the pipeline of cullers
 //! (`pipeline.rs`, [`Culler`]): today extended projections on separate planes or the occlusion
-//! sweep (`planes.rs`), then the shrunk-occluder sampler (`sampling.rs`). Cells run in parallel
+//! sweep (`planes.rs`), then the shrunk-occluder sampler (`sampling.rs`). With
+//! `max_pvs_triangles` a cell over budget is halved and its halves baked with its hidden set
+//! ([`CellResult::children`], `prepare.rs`). Cells run in parallel
 //! (rayon); [`bake_cells`] bakes a subset of them (a shard, the rest of a resumed bake) and
 //! reports each finished cell (to the journal, `journal.rs`); shards are merged in `shard.rs`.
 

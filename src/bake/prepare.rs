@@ -427,7 +427,8 @@ pub const MIN_SPLIT_GAIN: f64 = 0.02;
 pub fn halve(cell: &Aabb, min_size: f64) -> Option<[Aabb; 2]> {
     let ext = cell.max - cell.min;
     let axis = ext.max_position();
-    if (ext[axis] as f64) <= min_size {
+    // A side at the minimum up to f32 rounding (halving a side three times) is at the minimum.
+    if (ext[axis] as f64) <= min_size * (1.0 + 1e-6) {
         return None;
     }
     let mid = cell.min[axis] + 0.5 * ext[axis];

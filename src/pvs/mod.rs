@@ -4,7 +4,9 @@
 //! Schema (documented in the README):
 //! `{"format": "umbrasweep-pvs", "version": 1, "scene": PATH, "settings": {…},
 //!   "objects": [{"id", "name", "triangles", "min", "max"}, …],
-//!   "cells": [{"min", "max", "visible": [sorted object ids], "ms"}, …], "summary": {…}}`
+//!   "cells": [{"min", "max", "visible": [sorted object ids], "ms", "parent"?}, …],
+//!   "summary": {…}, "split"?: {"size", "sources": […]}}` — `parent` only on the halves of
+//! adaptive subdivision, `split` only with `--split-objects`.
 
 use serde::{Deserialize, Serialize};
 
