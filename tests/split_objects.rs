@@ -2,39 +2,25 @@
 //! PVS maps clusters back to the file's objects (JSON and `.pvs`), `validate` splits the
 //! scene again to check it, and bad input gets a clear error.
 
+use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use umbrasweep::geom::box_triangles;
 use umbrasweep::pvs::PvsDocument;
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
 }
 
-/// A closed box as OBJ faces, vertices numbered from `base`.
+/// A closed box as OBJ triangles ([`box_triangles`]), vertices numbered from `base`.
 fn obj_box(out: &mut String, base: &mut usize, min: [f32; 3], max: [f32; 3]) {
-    for k in 0..8 {
-        let p = [0, 1, 2].map(|a| if k >> a & 1 == 1 { max[a] } else { min[a] });
-        out.push_str(&format!("v {} {} {}\n", p[0], p[1], p[2]));
+    for t in box_triangles(Vec3::from(min), Vec3::from(max)) {
+        for p in t {
+            out.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
+        }
+        out.push_str(&format!("f {} {} {}\n", *base, *base + 1, *base + 2));
+        *base += 3;
     }
-    let b = *base;
-    // Outward faces of the box whose corner k has bit a set for max along axis a.
-    for f in [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ] {
-        out.push_str(&format!(
-            "f {} {} {} {}\n",
-            b + f[0],
-            b + f[1],
-            b + f[2],
-            b + f[3]
-        ));
-    }
-    *base += 8;
 }
 
 /// A wall 4 × 4 at z = 1 in front of the cell at the origin (small enough to stay whole at

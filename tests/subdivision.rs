@@ -215,27 +215,20 @@ fn damaged_extensions_are_refused_without_panics() {
     let set = settings(20);
     let r = bake::bake(&s, &[cell], &set, &CpuBackend::new(), None).unwrap();
     let mut doc = bake::to_document(&s, &[cell], &r, &set);
+    let source = |id: u32, name: &str, triangles: u32, first: u32, count: u32| PvsSource {
+        id,
+        name: name.into(),
+        triangles,
+        min: [0.0; 3],
+        max: [1.0; 3],
+        first,
+        count,
+    };
     doc.split = Some(PvsSplit {
         size: 2.0,
         sources: vec![
-            PvsSource {
-                id: 0,
-                name: "wall and target".into(),
-                triangles: 24,
-                min: [0.0; 3],
-                max: [1.0; 3],
-                first: 0,
-                count: 2,
-            },
-            PvsSource {
-                id: 1,
-                name: "beside".into(),
-                triangles: 12,
-                min: [0.0; 3],
-                max: [1.0; 3],
-                first: 2,
-                count: 1,
-            },
+            source(0, "wall and target", 24, 0, 2),
+            source(1, "beside", 12, 2, 1),
         ],
     });
     let b = binary::encode(&doc).unwrap();

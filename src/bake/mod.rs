@@ -368,7 +368,10 @@ pub fn to_document(
         result,
         settings,
     );
-    doc.split = scene.split.as_ref().map(split_table);
+    doc.split = scene
+        .split
+        .as_ref()
+        .map(crate::scene::split::SplitMap::to_pvs);
     doc
 }
 
@@ -473,24 +476,6 @@ pub fn document(
             cullers: culler_summary(result),
         }),
         split: None,
-    }
-}
-
-/// The PVS document's form of a scene's [`SplitMap`](crate::scene::split::SplitMap).
-pub fn split_table(map: &crate::scene::split::SplitMap) -> crate::pvs::PvsSplit {
-    crate::pvs::PvsSplit {
-        size: map.size,
-        sources: (map.sources.iter().enumerate())
-            .map(|(i, s)| crate::pvs::PvsSource {
-                id: i as u32,
-                name: s.name.clone(),
-                triangles: s.triangles,
-                min: s.bounds.min.to_array(),
-                max: s.bounds.max.to_array(),
-                first: s.clusters.start,
-                count: s.clusters.len() as u32,
-            })
-            .collect(),
     }
 }
 

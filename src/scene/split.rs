@@ -24,7 +24,8 @@
 //! # Why it is conservative
 //! Splitting changes what a PVS lists, not what is visible: an original object is visible from
 //! a cell exactly when one of its clusters is, and the PVS keeps every cluster it cannot prove
-//! hidden ([`SplitMap::source_visible`] gives the original objects). Occlusion can only get
+//! hidden ([`PvsSplit::source_visible`](crate::pvs::PvsSplit::source_visible) gives the
+//! original objects). Occlusion can only get
 //! weaker: a closed object cut into open pieces stops occluding as a solid (each cluster is
 //! tested for closedness again), which loses culling, never correctness.
 
@@ -57,17 +58,24 @@ pub struct SourceObject {
 }
 
 impl SplitMap {
-    /// The object of the file that cluster `object` came from.
-    pub fn source_of(&self, object: u32) -> u32 {
-        self.sources.partition_point(|s| s.clusters.end <= object) as u32
-    }
-
-    /// The objects of the file visible when the clusters `visible` (ascending) are: each
-    /// source object once, ascending.
-    pub fn source_visible(&self, visible: &[u32]) -> Vec<u32> {
-        let mut out: Vec<u32> = visible.iter().map(|&o| self.source_of(o)).collect();
-        out.dedup();
-        out
+    /// The PVS document's form of the mapping (`split` in the document and the `.pvs` file),
+    /// where [`PvsSplit::source_of`](crate::pvs::PvsSplit::source_of) and
+    /// [`PvsSplit::source_visible`](crate::pvs::PvsSplit::source_visible) answer lookups.
+    pub fn to_pvs(&self) -> crate::pvs::PvsSplit {
+        crate::pvs::PvsSplit {
+            size: self.size,
+            sources: (self.sources.iter().enumerate())
+                .map(|(i, s)| crate::pvs::PvsSource {
+                    id: i as u32,
+                    name: s.name.clone(),
+                    triangles: s.triangles,
+                    min: s.bounds.min.to_array(),
+                    max: s.bounds.max.to_array(),
+                    first: s.clusters.start,
+                    count: s.clusters.len() as u32,
+                })
+                .collect(),
+        }
     }
 }
 
@@ -355,6 +363,7 @@ mod tests {
         let t = split_objects(&s, 4.0).unwrap();
         t.validate().unwrap();
         let m = t.split.as_ref().unwrap();
+        let table = m.to_pvs();
         assert_eq!(m.sources.len(), 2);
         assert_eq!(m.sources[0].clusters, 0..1);
         let c = m.sources[1].clusters.clone();
@@ -364,12 +373,12 @@ mod tests {
             let b = t.objects[o as usize].bounds;
             assert!((b.max - b.min).max_element() <= 4.0, "{b:?}");
             assert!(t.objects[o as usize].name.starts_with("row#"));
-            assert_eq!(m.source_of(o), 1);
+            assert_eq!(table.source_of(o), 1);
             total += t.objects[o as usize].triangles.len();
         }
         assert_eq!(total, 32);
-        assert_eq!(m.source_of(0), 0);
-        assert_eq!(m.source_visible(&[0, c.start, c.start + 1]), vec![0, 1]);
+        assert_eq!(table.source_of(0), 0);
+        assert_eq!(table.source_visible(&[0, c.start, c.start + 1]), vec![0, 1]);
         // Stable: the same input gives the same clusters.
         let again = split_objects(&s, 4.0).unwrap();
         assert_eq!(again.triangles, t.triangles);
