@@ -518,7 +518,7 @@ pub fn write(path: &Path, doc: &PvsDocument) -> Result<(), PvsWriteError> {
 /// Writes a shard's `.pvs` file ([`encode_shard`]), atomically.
 ///
 /// # Errors
-/// As [`write`].
+/// As [`write()`].
 #[cfg(feature = "bake")]
 pub fn write_shard(path: &Path, doc: &PvsDocument, shard: &str) -> Result<(), PvsWriteError> {
     let bytes = encode_shard(doc, shard).map_err(|e| PvsWriteError {
