@@ -10,6 +10,7 @@ use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{self, BakeSettings, SweepChoice};
 use umbrasweep::geom::Aabb;
 use umbrasweep::project::planes::{Spacing, SweepSettings};
+use umbrasweep::settings::UpAxis;
 use umbrasweep::{cells, scene};
 
 /// Where each direction's planes go.
@@ -28,6 +29,15 @@ pub enum SpacingChoice {
     Geometric,
     /// The paper's rule: each step makes the kernel K pixels wide.
     Kernel,
+}
+
+/// The scene's up axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum UpChoice {
+    /// y is up (glTF, most OBJ exports).
+    Y,
+    /// z is up.
+    Z,
 }
 
 /// Which raster backend runs.
@@ -132,6 +142,23 @@ pub struct BakeArgs {
     /// time roughly proportional to the number of sub-cells.
     #[arg(long, value_name = "SIZE")]
     pub subcell: Option<f64>,
+    /// Run ray space factorization first (Leyvand et al. 2003: per horizontal direction, the
+    /// umbrae of upright occluders standing on the ground, fused; cities and levels).
+    /// Default: on when at least 40 % of the occluder area is upright about --up; the summary
+    /// says which and why.
+    #[arg(long, conflicts_with = "no_rsf")]
+    pub rsf: bool,
+    /// Never run ray space factorization.
+    #[arg(long)]
+    pub no_rsf: bool,
+    /// Pixels per side of each of ray space factorization's four charts (slopes × crossings
+    /// of the lines leaving each side of the cell).
+    #[arg(long, default_value_t = BakeSettings::default_settings().rsf_resolution)]
+    pub rsf_resolution: u32,
+    /// The scene's up axis (cells are boxes aligned with it; ray space factorization works in
+    /// vertical planes).
+    #[arg(long, value_enum, default_value_t = UpChoice::Y)]
+    pub up: UpChoice,
     /// Run the shrunk-occluder sampler after the planes (fine foliage: fuses leaves of any size
     /// by rendering the cell's faces from sample points with every leaf shrunk for the ball
     /// around the point). Slow: minutes per cell on two cores. Default: off (it does not yet
@@ -179,6 +206,12 @@ pub struct BakeArgs {
     /// its parent's is not split again.
     #[arg(long, value_name = "SIZE", requires = "max_pvs_triangles")]
     pub min_cell_size: Option<f64>,
+    /// Occluder selection by solid angle: occluder parts whose bounding sphere subtends less
+    /// than SR steradians from every point of a cell are not projected for that cell. Faster
+    /// on large scenes, at the cost of a looser PVS (never a false cull). 0 (the default)
+    /// projects every part that may hide something; 1e-4 is a disc 1 unit across at 89 units.
+    #[arg(long, value_name = "SR", default_value_t = 0.0)]
+    pub occluder_min_solid_angle: f64,
     /// Write every plane's maps of the baked cells as OpenEXR files into this folder.
     #[arg(long, value_name = "DIR")]
     pub dump_exr: Option<PathBuf>,
@@ -417,6 +450,19 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         sampling_settings,
         max_pvs_triangles: a.max_pvs_triangles,
         min_cell_size: a.min_cell_size,
+        occluder_min_solid_angle: a.occluder_min_solid_angle,
+        rsf: if a.rsf {
+            SweepChoice::On
+        } else if a.no_rsf {
+            SweepChoice::Off
+        } else {
+            SweepChoice::Auto
+        },
+        rsf_resolution: a.rsf_resolution,
+        up: match a.up {
+            UpChoice::Y => UpAxis::Y,
+            UpChoice::Z => UpAxis::Z,
+        },
     };
     settings.check().map_err(anyhow::Error::msg)?;
     let binary = output_is_binary(&a.output)?;
@@ -650,6 +696,11 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 result.sweep_reason
             );
         }
+        eprintln!(
+            "rsf         {} — {}",
+            if result.rsf { "yes" } else { "no" },
+            result.rsf_reason
+        );
         eprintln!(
             "sampling    {} — {}{}",
             if result.sampling { "yes" } else { "no" },

@@ -139,6 +139,34 @@ impl DAabb {
         self.min.cmple(o.max).all() && o.min.cmple(self.max).all()
     }
 
+    /// An upper bound of the solid angle (steradians) this box subtends from any point of
+    /// `from`: that of its bounding sphere seen from the point of `from` nearest the sphere's
+    /// centre, `2π(1 − √(1 − (r/d)²))`, and 4π when that point may be inside the sphere. A
+    /// sphere holding the box subtends at least the box's solid angle from every point, and
+    /// its solid angle only shrinks with the distance to its centre.
+    ///
+    /// ```
+    /// use glam::DVec3;
+    /// use umbrasweep::geom::DAabb;
+    /// let cell = DAabb { min: DVec3::ZERO, max: DVec3::ONE };
+    /// let far = DAabb { min: DVec3::new(100.0, 0.0, 0.0), max: DVec3::new(101.0, 1.0, 1.0) };
+    /// let near = DAabb { min: DVec3::new(0.5, 0.5, 0.5), max: DVec3::new(2.0, 2.0, 2.0) };
+    /// assert!(far.max_solid_angle_from(&cell) < 1e-3);
+    /// assert_eq!(near.max_solid_angle_from(&cell), 4.0 * std::f64::consts::PI);
+    /// ```
+    pub fn max_solid_angle_from(&self, from: &DAabb) -> f64 {
+        let c = self.center();
+        let r = 0.5 * (self.max - self.min).length();
+        let d = c.clamp(from.min, from.max).distance(c);
+        // (Written so that a NaN distance also gives the whole sphere.)
+        if d.partial_cmp(&r) != Some(std::cmp::Ordering::Greater) {
+            return 4.0 * std::f64::consts::PI;
+        }
+        let q = r / d;
+        // 1 − √(1 − q²) without cancellation for small q.
+        2.0 * std::f64::consts::PI * q * q / (1.0 + (1.0 - q * q).sqrt())
+    }
+
     /// The 8 corners, corner `i` taking `max` on axis `k` when bit `k` of `i` is set.
     pub fn corners(&self) -> [DVec3; 8] {
         std::array::from_fn(|i| {

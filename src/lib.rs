@@ -61,6 +61,8 @@ pub mod plane;
 #[cfg(feature = "bake")]
 pub mod project;
 #[cfg(feature = "bake")]
+pub mod rsf;
+#[cfg(feature = "bake")]
 pub mod sampler;
 #[cfg(feature = "bake")]
 pub mod scene;

@@ -85,6 +85,48 @@ pub struct BakeSettings {
     /// side is at most this. Default none: 1/8 of the longest side of the cell being
     /// subdivided.
     pub min_cell_size: Option<f64>,
+    /// Occluder selection by solid angle (steradians): an occluder part whose bounding sphere
+    /// subtends less than this from every point of the cell is not projected
+    /// ([`crate::geom::DAabb::max_solid_angle_from`]). Lossy but conservative (an occluder
+    /// left out only keeps more objects visible); it trades PVS for time on large scenes.
+    /// Default 0: every part that may project is projected.
+    pub occluder_min_solid_angle: f64,
+    /// Ray space factorization (`bake::rsf`, the half umbra of 2.5D occluders), run before
+    /// the planes: on, off, or chosen per scene ([`SweepChoice::Auto`], the default: on when
+    /// most of the occluder area stands upright, `bake::choose_rsf`). A PVS document records
+    /// what the bake chose; documents from before it read as `false`.
+    #[serde(default = "rsf_of_old_documents")]
+    pub rsf: SweepChoice,
+    /// Pixels per side of each of the four ray-space charts. Default 512 (the paper's).
+    pub rsf_resolution: u32,
+    /// The scene's up axis: ray space factorization works in vertical planes. Default y
+    /// (glTF's).
+    pub up: UpAxis,
+}
+
+fn rsf_of_old_documents() -> SweepChoice {
+    SweepChoice::Off
+}
+
+/// The scene's up axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UpAxis {
+    /// y is up (glTF, most OBJ exports).
+    #[default]
+    Y,
+    /// z is up (CAD, GIS, Blender's own axes).
+    Z,
+}
+
+impl UpAxis {
+    /// The axis index: 1 for y, 2 for z.
+    pub const fn index(self) -> usize {
+        match self {
+            UpAxis::Y => 1,
+            UpAxis::Z => 2,
+        }
+    }
 }
 
 fn sampling_of_old_documents() -> SamplingChoice {
@@ -308,6 +350,10 @@ impl BakeSettings {
             sampling_settings: SamplingSettings::default_settings(),
             max_pvs_triangles: None,
             min_cell_size: None,
+            occluder_min_solid_angle: 0.0,
+            rsf: SweepChoice::Auto,
+            rsf_resolution: 512,
+            up: UpAxis::Y,
         }
     }
 
@@ -422,6 +468,21 @@ impl BakeSettings {
                 "min-cell-size",
                 m,
                 "must be a positive size in scene units (e.g. 1)",
+            ));
+        }
+        let sa = self.occluder_min_solid_angle;
+        if !(sa.is_finite() && (0.0..4.0 * std::f64::consts::PI).contains(&sa)) {
+            return Err(SettingsError::new(
+                "occluder-min-solid-angle",
+                sa,
+                "must be a solid angle in steradians from 0 (off) to below 4π (e.g. 0.001)",
+            ));
+        }
+        if !(8..=4096).contains(&self.rsf_resolution) {
+            return Err(SettingsError::new(
+                "rsf-resolution",
+                self.rsf_resolution,
+                "must be between 8 and 4096 pixels per side (e.g. 512)",
             ));
         }
         if self.slice_planes > 16 {

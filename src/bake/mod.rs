@@ -12,6 +12,7 @@ mod journal;
 mod pipeline;
 mod planes;
 mod prepare;
+mod rsf;
 mod sampling;
 mod shard;
 
@@ -25,6 +26,7 @@ pub use prepare::{
     SAMPLING_AUTO_NOTE, SMALL_OCCLUDER_CELLS, SMALL_OCCLUDER_SHARE, choose_sweep, halve,
     split_cell,
 };
+pub use rsf::{RSF_AUTO_UPRIGHT_SHARE, RsfCuller, UPRIGHT_SLOPE, choose_rsf};
 pub use sampling::{SamplerData, SamplingCuller};
 pub use shard::{MergeError, SHARD_FORMAT, SHARD_VERSION, ShardFile, ShardSpec, merge};
 
@@ -147,6 +149,12 @@ pub struct BakeResult {
     pub sweep: bool,
     /// Why the bake swept or not, one human-readable line.
     pub sweep_reason: String,
+    /// Whether cells ran ray space factorization first.
+    #[serde(default)]
+    pub rsf: bool,
+    /// Why ray space factorization ran or not, one human-readable line.
+    #[serde(default)]
+    pub rsf_reason: String,
     /// Whether cells ran the shrunk-occluder sampler.
     pub sampling: bool,
     /// Why the sampler ran or not, and its finest ε.
@@ -276,6 +284,8 @@ pub fn bake_cells(
         seconds: start.elapsed().as_secs_f64(),
         sweep: prepared.sweep,
         sweep_reason: prepared.sweep_reason.clone(),
+        rsf: prepared.rsf,
+        rsf_reason: prepared.rsf_reason.clone(),
         sampling: prepared.sampling,
         sampling_reason: prepared.sampling_reason.clone(),
         cullers: prepared.culler_names(),
@@ -427,6 +437,11 @@ pub fn document(
                     SweepChoice::Off
                 },
                 sampling: if result.sampling {
+                    SweepChoice::On
+                } else {
+                    SweepChoice::Off
+                },
+                rsf: if result.rsf {
                     SweepChoice::On
                 } else {
                     SweepChoice::Off

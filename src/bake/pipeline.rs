@@ -73,7 +73,12 @@ pub struct CullerStats {
 
 /// Every name a culler of the pipeline may have ([`Culler::name`]); files that record the
 /// cullers (shards) are read back against this list.
-pub const CULLER_NAMES: [&str; 3] = ["extended_projections", "occlusion_sweep", "shrunk_sampling"];
+pub const CULLER_NAMES: [&str; 4] = [
+    "extended_projections",
+    "occlusion_sweep",
+    "shrunk_sampling",
+    "ray_space_factorization",
+];
 
 /// Deserialises culler names as the [`CULLER_NAMES`] they are, refusing unknown ones.
 pub(super) fn culler_names<'de, D>(d: D) -> Result<Vec<&'static str>, D::Error>
@@ -117,11 +122,21 @@ pub trait Culler: Send + Sync {
     ) -> Result<CullerWork, BakeError>;
 }
 
-/// The cullers of a bake, in order: the occlusion sweep where `sweep` (what
-/// [`super::SweepChoice`] and the automatic rule chose), else extended projections on separate
-/// planes; then the shrunk-occluder sampler where `sampling` (on what is still visible).
-pub fn cullers(_settings: &BakeSettings, sweep: bool, sampling: bool) -> Vec<Box<dyn Culler>> {
-    let mut out: Vec<Box<dyn Culler>> = vec![Box::new(super::planes::PlaneCuller { sweep })];
+/// The cullers of a bake, in order: ray space factorization where `rsf`; the occlusion sweep
+/// where `sweep` (what [`super::SweepChoice`] and the automatic rule chose), else extended
+/// projections on separate planes; then the shrunk-occluder sampler where `sampling` (on
+/// what is still visible).
+pub fn cullers(
+    _settings: &BakeSettings,
+    rsf: bool,
+    sweep: bool,
+    sampling: bool,
+) -> Vec<Box<dyn Culler>> {
+    let mut out: Vec<Box<dyn Culler>> = Vec::new();
+    if rsf {
+        out.push(Box::new(super::rsf::RsfCuller));
+    }
+    out.push(Box::new(super::planes::PlaneCuller { sweep }));
     if sampling {
         out.push(Box::new(super::sampling::SamplingCuller));
     }

@@ -31,6 +31,10 @@ pub struct Prepared<'a> {
     pub sweep: bool,
     /// Why cells are swept or not, one human-readable line.
     pub sweep_reason: String,
+    /// Whether cells run ray space factorization first.
+    pub rsf: bool,
+    /// Why ray space factorization runs or not, one human-readable line.
+    pub rsf_reason: String,
     /// Whether cells run the shrunk-occluder sampler.
     pub sampling: bool,
     /// Why the sampler runs or not (and its ε), one human-readable line.
@@ -242,6 +246,11 @@ impl<'a> Prepared<'a> {
                 format!("off by default ({SAMPLING_AUTO_NOTE}; --sampling turns it on)"),
             ),
         };
+        let (rsf, rsf_reason) = match settings.rsf {
+            SweepChoice::On => (true, "--rsf".to_string()),
+            SweepChoice::Off => (false, "--no-rsf".to_string()),
+            SweepChoice::Auto => super::rsf::choose_rsf(&occluders, settings.up.index()),
+        };
         let sampler = sampling.then(|| {
             let d = super::sampling::SamplerData::new(&occluders, scene, settings);
             sampling_reason = format!(
@@ -267,7 +276,9 @@ impl<'a> Prepared<'a> {
             .fold(Aabb::EMPTY, |b, o| b.union(&o.bounds))
             .to_f64();
         Ok(Prepared {
-            cullers: pipeline::cullers(settings, sweep, sampling),
+            cullers: pipeline::cullers(settings, rsf, sweep, sampling),
+            rsf,
+            rsf_reason,
             sampling,
             sampling_reason,
             sampler,

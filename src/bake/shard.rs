@@ -288,6 +288,8 @@ mod tests {
             seconds: 0.5,
             sweep: true,
             sweep_reason: "why".into(),
+            rsf: false,
+            rsf_reason: "off".into(),
             sampling: false,
             sampling_reason: "off".into(),
             cullers: vec!["occlusion_sweep"],

@@ -45,6 +45,9 @@ pub struct PlaneSettings {
     pub placement: Placement,
     /// When set, every direction is an occlusion sweep ([`crate::sweep`]) instead.
     pub sweep: Option<SweepSettings>,
+    /// Parts whose bounds subtend less than this solid angle (steradians) from every point of
+    /// the cell are not projected (0: all are).
+    pub min_solid_angle: f64,
 }
 
 impl PlaneSettings {
@@ -61,6 +64,7 @@ impl PlaneSettings {
             slice_planes: settings.slice_planes,
             placement: settings.placement,
             sweep: sweep.then_some(settings.sweep_settings),
+            min_solid_angle: settings.occluder_min_solid_angle,
         }
     }
 }
@@ -142,6 +146,8 @@ pub struct DirectionPlan {
     sweep: bool,
     /// Distance tolerance at the face.
     eps: f64,
+    /// Parts subtending less than this solid angle from every point of the cell are left out.
+    min_solid_angle: f64,
 }
 
 impl DirectionPlan {
@@ -324,9 +330,19 @@ fn plan_direction(
             extend: settings.extend,
             sweep: true,
             eps,
+            min_solid_angle: settings.min_solid_angle,
         });
     }
-    let summary = summarize(cell, occ, axis, positive, face, eps, settings.extend);
+    let summary = summarize(
+        cell,
+        occ,
+        axis,
+        positive,
+        face,
+        eps,
+        settings.extend,
+        settings.min_solid_angle,
+    );
     if summary.index.is_empty() {
         return None;
     }
@@ -385,6 +401,7 @@ fn plan_direction(
         extend: settings.extend,
         sweep: false,
         eps,
+        min_solid_angle: settings.min_solid_angle,
     })
 }
 
@@ -795,6 +812,13 @@ fn assemble_job(
     })
 }
 
+/// Occluder selection by solid angle: true when the part's bounds `b` subtend less than
+/// `min_solid_angle` from every point of the cell (never with 0). Leaving an occluder out
+/// only keeps more objects visible.
+fn too_small(b: &DAabb, cell: &DAabb, min_solid_angle: f64) -> bool {
+    min_solid_angle > 0.0 && b.max_solid_angle_from(cell) < min_solid_angle
+}
+
 /// A quick necessary condition for a part at distances `near..far` beyond the face, with
 /// extents `e` along the plane, to have a non-empty Projection on a plane at distance `tp`:
 /// views from corners `c` apart drift by about `c·|tp − t| / min(t, tp)` relative to the part's
@@ -865,6 +889,10 @@ fn in_frustum(cell: &DAabb, axis: usize, extend: f64, eps: f64, b: &DAabb, far: 
 }
 
 /// The parts reaching beyond the face, from their bounds only (no points copied).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a private helper of plan_direction; the direction and its tolerances are independent inputs"
+)]
 fn summarize(
     cell: &DAabb,
     occ: &Occluders,
@@ -873,6 +901,7 @@ fn summarize(
     face: f64,
     eps: f64,
     extend: f64,
+    min_solid_angle: f64,
 ) -> DirParts {
     let s = if positive { 1.0 } else { -1.0 };
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
@@ -888,7 +917,7 @@ fn summarize(
         if far_t <= eps {
             continue;
         }
-        if !in_frustum(cell, axis, extend, eps, b, far_t) {
+        if !in_frustum(cell, axis, extend, eps, b, far_t) || too_small(b, cell, min_solid_angle) {
             continue;
         }
         // A solid the cell may be inside hides nothing for sure from there.
@@ -984,7 +1013,7 @@ fn beyond_face(
 /// Shrinks a slightly non-planar merged polygon in its plane so that every ray from the cell
 /// crossing the shrunk polygon crosses the real triangles (see
 /// [`super::occluders::OccluderPart::deviation`]). False when it would vanish.
-fn shrink_bent_polygon(
+pub(crate) fn shrink_bent_polygon(
     pts: &mut [DVec3],
     normal: DVec3,
     deviation: f64,
@@ -1209,7 +1238,10 @@ pub fn gather_slab(
     for pi in candidates {
         let part = &occ.parts[pi as usize];
         let b = &part.bounds;
-        if (leave_out.object)(part.object) || !plan.slab_may_hold(k, b) {
+        if (leave_out.object)(part.object)
+            || !plan.slab_may_hold(k, b)
+            || too_small(b, cell, plan.min_solid_angle)
+        {
             continue;
         }
         if let PartKind::Solid { hull } = part.kind
@@ -1353,6 +1385,7 @@ mod tests {
             extend: 1.5,
             sweep: true,
             eps: 1e-9,
+            min_solid_angle: 0.0,
         }
     }
 

@@ -20,7 +20,7 @@
 pub use super::format::{
     CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, EXTENDED_FORMAT_VERSION, FORMAT_VERSION,
     HEADER_LEN, LATEST_FORMAT_VERSION, MAGIC, MAX_DEPTH, NO_PARENT, NO_STRING, OBJECT_RECORD_LEN,
-    SHARD_FORMAT_VERSION, TAG_HIERARCHY, TAG_SHARD, TAG_SPLIT, crc32,
+    SHARD_FORMAT_VERSION, TAG_CULLING, TAG_HIERARCHY, TAG_SHARD, TAG_SPLIT, crc32,
 };
 
 use super::PvsDocument;
@@ -413,7 +413,11 @@ fn encode_with(doc: &PvsDocument, shard: Option<&str>) -> Result<Vec<u8>, Encode
     );
     p.extend_from_slice(&data);
     let hierarchy = doc.cells.iter().any(|c| c.parent.is_some());
-    let version = if doc.split.is_some() || hierarchy {
+    let d = crate::settings::BakeSettings::default_settings();
+    let b = &doc.settings.bake;
+    let culling =
+        b.occluder_min_solid_angle != 0.0 || b.rsf_resolution != d.rsf_resolution || b.up != d.up;
+    let version = if doc.split.is_some() || hierarchy || culling {
         // Version 6: tagged extension sections.
         let mut sections: Vec<(u32, Vec<u8>)> = Vec::new();
         if let Some(shard) = shard {
@@ -424,6 +428,12 @@ fn encode_with(doc: &PvsDocument, shard: Option<&str>) -> Result<Vec<u8>, Encode
         }
         if hierarchy {
             sections.push((TAG_HIERARCHY, encode_hierarchy(doc, cells)?));
+        }
+        if culling {
+            let mut c = b.occluder_min_solid_angle.to_le_bytes().to_vec();
+            put_u32(&mut c, b.rsf_resolution);
+            c.push(b.up.index() as u8);
+            sections.push((TAG_CULLING, c));
         }
         put_u32(&mut p, sections.len() as u32);
         for (tag, bytes) in sections {

@@ -46,8 +46,8 @@
 pub use super::error::{PvsError, PvsErrorKind};
 use super::format::{
     CELL_RECORD_LEN, ENC_BITSET, ENC_LIST, ENC_RUNS, HEADER_LEN, LATEST_FORMAT_VERSION, MAGIC,
-    NO_PARENT, NO_STRING, OBJECT_RECORD_LEN, TAG_HIERARCHY, TAG_SHARD, TAG_SPLIT, crc32,
-    get_varint,
+    NO_PARENT, NO_STRING, OBJECT_RECORD_LEN, TAG_CULLING, TAG_HIERARCHY, TAG_SHARD, TAG_SPLIT,
+    crc32, get_varint,
 };
 use super::{
     FORMAT, PvsCell, PvsDocument, PvsObject, PvsSettings, PvsSource, PvsSplit, PvsSummary, VERSION,
@@ -654,16 +654,21 @@ impl PvsDatabase {
                 });
             }
         }
-        // The sampler's switch and parameters are not stored: it ran when the cullers'
-        // accounts name it (its parameters read as the defaults).
-        settings.bake.sampling = if summary
-            .as_ref()
-            .is_some_and(|s| s.cullers.iter().any(|c| c.name == "shrunk_sampling"))
-        {
-            SweepChoice::On
-        } else {
-            SweepChoice::Off
+        // The sampler's and ray space factorization's switches are not stored: each ran when
+        // the cullers' accounts name it (the sampler's parameters read as the defaults; ray
+        // space factorization's are in the culling section when not the defaults).
+        let ran = |name: &str| {
+            if summary
+                .as_ref()
+                .is_some_and(|s| s.cullers.iter().any(|c| c.name == name))
+            {
+                SweepChoice::On
+            } else {
+                SweepChoice::Off
+            }
         };
+        settings.bake.sampling = ran("shrunk_sampling");
+        settings.bake.rsf = ran("ray_space_factorization");
         // Check sizes before allocating from counts.
         let left = payload.len() - r.pos;
         if (objects as usize).saturating_mul(OBJECT_RECORD_LEN + 4) > left {
@@ -746,6 +751,7 @@ impl PvsDatabase {
                         settings.bake.min_cell_size = (min > 0.0).then_some(min);
                         up = parents;
                     }
+                    TAG_CULLING => read_culling(bytes, &mut settings.bake)?,
                     // Sections of later writers that this reader does not know: skipped.
                     _ => {}
                 }
@@ -1173,6 +1179,28 @@ fn read_split(bytes: &[u8], objects: u32) -> Result<PvsSplit, PvsErrorKind> {
         ));
     }
     Ok(PvsSplit { size, sources })
+}
+
+/// Reads the culling section: the occluders' minimum solid angle, then (when present) ray
+/// space factorization's resolution and the up axis (`docs/pvs-format.md`).
+fn read_culling(bytes: &[u8], s: &mut crate::settings::BakeSettings) -> Result<(), PvsErrorKind> {
+    let mut r = Rd { b: bytes, pos: 0 };
+    let angle = r.f64("the culling section's solid angle")?;
+    if !(angle.is_finite() && (0.0..4.0 * std::f64::consts::PI).contains(&angle)) {
+        return Err(corrupt(format!(
+            "the occluder solid angle {angle} is not a solid angle"
+        )));
+    }
+    s.occluder_min_solid_angle = angle;
+    if r.pos < r.b.len() {
+        s.rsf_resolution = r.u32("the culling section's rsf resolution")?;
+        s.up = match r.u8("the culling section's up axis")? {
+            1 => crate::settings::UpAxis::Y,
+            2 => crate::settings::UpAxis::Z,
+            k => return Err(corrupt(format!("up axis {k} (expected 1 for y, 2 for z)"))),
+        };
+    }
+    Ok(())
 }
 
 /// Reads the hierarchy section: the subdivision settings and per cell its parent (an earlier

@@ -23,6 +23,9 @@ pub const TAG_SHARD: u32 = 1;
 pub const TAG_SPLIT: u32 = 2;
 /// Extension tag: the cell hierarchy of adaptive subdivision (`--max-pvs-triangles`).
 pub const TAG_HIERARCHY: u32 = 3;
+/// Extension tag: culling settings version 4 has no field for (occluder selection by solid
+/// angle); written only when one differs from its default.
+pub const TAG_CULLING: u32 = 4;
 /// Length of the fixed header: magic, version, checksum, payload length.
 pub const HEADER_LEN: usize = 24;
 /// The newest version this crate reads (it reads versions 1 to this one).

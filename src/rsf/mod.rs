@@ -1,0 +1,629 @@
+//! Ray space factorization (Leyvand, Sorkine and Cohen-Or 2003), the half umbra of 2.5D
+//! occluders, on the CPU: the charts of horizontal lines leaving a cell, the occluder inserts
+//! and the occludee tests. The culler that drives it is `bake::rsf`.
+//!
+//! # The parameterisation
+//! The cell's horizontal footprint is a rectangle; the up axis is `up` (y or z). For each of
+//! the four sides of the footprint (outward normal `+X`, the tangent `Z`) a *chart* holds the
+//! horizontal lines `Z = s + m·X` with `|m| ≤ 1`, where `X` is the distance beyond that side
+//! and `s` the line's crossing of it: every horizontal direction is within 45° of one of the
+//! four normals, so every ray from the cell that leaves it with a horizontal component lies on
+//! a line of some chart, going towards `+X`. A line meeting the footprint crosses `X = 0` within
+//! `[z0 − w, z1 + w]` (`w` the footprint's depth along `X`), so `s` spans that and `m` spans
+//! `[−1, 1]`, both cut in `resolution` pixels. This is the paper's two-line parameterisation
+//! (its `t` is `s + m·D` on a parallel line at distance `D`), sheared so that pixels are
+//! rectangles in `(s, m)`.
+//!
+//! # The half umbra (§3, §5 of the paper)
+//! In the vertical plane of a line the cell is (within) the rectangle `K = [−w, 0] × [y0, y1]`
+//! (`X`, height). A convex polygon that the plane cuts in a segment from a bottom point `B` at
+//! or below `y0` to a top point `T = (Xt, Yt)`, wholly beyond the face (`X > 0`), blocks every
+//! ray from `K` to a point `q` beyond the segment (`Xq ≥` the segment's largest `X`) that
+//! passes `Xt` below `Yt` and whose heights stay at or above `B` (true when `q` is no lower
+//! than `B`: the ray's heights are at least `min(y0, Yq)`). The points every ray from `K`
+//! passes below `T` lie under the line `Y = y1 + v·X` with `v = (Yt − y1)/Xt` when `Yt < y1`
+//! (the worst eye is `K`'s front top corner) and `v = (Yt − y1)/(Xt + w)` when `Yt ≥ y1`
+//! (the back top corner's line, lowered to pass through the front corner: it is below the
+//! exact one for every `X ≥ 0`). Each pixel keeps such a line as an *umbra*: the smallest
+//! slope `v`, with the *guard* `g` (the occludee must be at `X ≥ g`) and the *base* (it must
+//! be no lower than that).
+//!
+//! # Why it is conservative
+//! - **Every value bounds the whole pixel.** Along an edge of a polygon the point a line
+//!   crosses moves monotonically between the pixel's corners (the lines through one point
+//!   form a line in `(s, m)`, so the edge parameter is quasi-linear on the pixel rectangle):
+//!   when the four corner lines cut the same two edges, every line of the pixel does, and the
+//!   extremes of the cut points' `X` and heights over the pixel are at its corners. A pixel
+//!   whose corner lines cut different edges, or whose slope range holds an edge's own
+//!   horizontal direction, receives nothing from that polygon.
+//! - **Fusion.** A point hidden under one polygon's line is hidden; keeping per pixel the
+//!   highest line of several polygons, with the largest guard and base, keeps only points
+//!   that the polygon with that line hides. Two umbrae per pixel (a near one and a far one
+//!   that also holds the near one's line) keep the guard from jumping to the far polygons.
+//! - **Occludees.** A box is hidden in a chart when every pixel holding a line that meets the
+//!   box's footprint beyond the back of the cell (over-estimated from the rectangle's corners
+//!   and the column's slope range) has an umbra whose guard is at most the box's near `X`,
+//!   whose base is at most its bottom, and whose line is at or above its top at the worst of
+//!   its `X` extremes; a box reaching `X ≤ 0` with any such line is visible. It is hidden from
+//!   the cell when it is hidden in all four charts. Rays straight up or down meet only boxes
+//!   over the footprint, which reach `X ≤ 0` in every chart.
+//! - **Rounding.** Values are computed in f64 and stored in f32 rounded toward "visible":
+//!   slopes down, guards and bases up.
+
+use crate::geom::DAabb;
+use glam::DVec3;
+
+/// The default pixels per side of each chart (the paper's 512²).
+pub const DEFAULT_RESOLUTION: u32 = 512;
+
+/// One umbra of a pixel: it hides points at `X ≥ guard` no lower than `base` and no higher
+/// than `y1 + slope·X`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Umbra {
+    /// The slope `v` of the line through the cell's front top edge (rounded down).
+    pub slope: f32,
+    /// The distance beyond the face from which the umbra holds (rounded up).
+    pub guard: f32,
+    /// The lowest height it hides (rounded up).
+    pub base: f32,
+}
+
+impl Umbra {
+    /// No umbra: hides nothing.
+    pub const NONE: Umbra = Umbra {
+        slope: f32::NEG_INFINITY,
+        guard: f32::INFINITY,
+        base: f32::INFINITY,
+    };
+
+    fn is_none(&self) -> bool {
+        self.guard == f32::INFINITY
+    }
+
+    /// The umbra of both (valid where both are): the higher line, the larger guard and base.
+    fn merged(&self, o: &Umbra) -> Umbra {
+        Umbra {
+            slope: self.slope.max(o.slope),
+            guard: self.guard.max(o.guard),
+            base: self.base.max(o.base),
+        }
+    }
+
+    /// True when the umbra hides the points `X ∈ [x0, x1]`, heights `[y_lo, y_hi]`, from the
+    /// cell of frame `fr`.
+    ///
+    /// The base test has a margin: a ray from an eye at height `≥ y0` to a point at height
+    /// `y ≥ y_lo` passes the occluder's bottom point (at `X ≤ guard`) at least
+    /// `(y0 − y_lo)·(x0 − guard)/(x1 + w)` above `y_lo`, so a base a rounding error above a
+    /// box standing on the same ground still hides it.
+    fn hides(&self, fr: &Frame, x0: f64, x1: f64, y_lo: f64, y_hi: f64) -> bool {
+        let guard = self.guard as f64;
+        if self.is_none() || guard > x0 {
+            return false;
+        }
+        let margin = (fr.y0 - y_lo).max(0.0) * (x0 - guard) / (x1 + fr.w);
+        if (self.base as f64) > y_lo + margin {
+            return false;
+        }
+        let v = self.slope as f64;
+        let x = if v >= 0.0 { x0 } else { x1 };
+        y_hi <= fr.y1 + v * x
+    }
+}
+
+fn f32_down(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) > x { f.next_down() } else { f }
+}
+
+fn f32_up(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) < x { f.next_up() } else { f }
+}
+
+/// One side of the footprint: the local frame `(X, Z, height)` of its chart.
+#[derive(Clone, Copy, Debug)]
+struct Frame {
+    up: usize,
+    a: usize,
+    b: usize,
+    sign: f64,
+    face: f64,
+    /// The footprint's depth along `X`.
+    w: f64,
+    /// The footprint's range along `Z`.
+    z0: f64,
+    z1: f64,
+    y0: f64,
+    y1: f64,
+    s0: f64,
+    ds: f64,
+    res: usize,
+}
+
+impl Frame {
+    fn local(&self, p: DVec3) -> DVec3 {
+        DVec3::new(self.sign * (p[self.a] - self.face), p[self.b], p[self.up])
+    }
+
+    fn m_of(&self, i: usize) -> f64 {
+        -1.0 + 2.0 * i as f64 / self.res as f64
+    }
+
+    fn s_of(&self, j: usize) -> f64 {
+        self.s0 + self.ds * j as f64
+    }
+
+    /// The rows whose s-range meets `[lo, hi]`, or `None`.
+    fn rows(&self, lo: f64, hi: f64) -> Option<(usize, usize)> {
+        let n = self.res as f64;
+        let a = ((lo - self.s0) / self.ds).floor().max(0.0);
+        let b = ((hi - self.s0) / self.ds).floor().min(n - 1.0);
+        (a <= b && a < n && b >= 0.0).then_some((a as usize, b as usize))
+    }
+}
+
+/// What inserting polygons did, for the accounting.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RsfWork {
+    /// Polygons inserted into at least one pixel.
+    pub polygons: usize,
+    /// Pixels written.
+    pub pixels: usize,
+}
+
+/// The four charts of one cell.
+pub struct RayCharts {
+    frames: Vec<Frame>,
+    /// Per chart, per pixel (`j · res + i`, row `j` of `s`, column `i` of `m`), the near and
+    /// the far umbra.
+    umbrae: Vec<Vec<[Umbra; 2]>>,
+    /// Counts of what was inserted.
+    pub work: RsfWork,
+}
+
+impl RayCharts {
+    /// Empty charts of `cell` with `up` the up axis (1 or 2) and `resolution` pixels per side.
+    ///
+    /// # Panics
+    /// When `up` is not 1 or 2, or the resolution is 0.
+    pub fn new(cell: &DAabb, up: usize, resolution: u32) -> Self {
+        assert!(up == 1 || up == 2, "the up axis is y (1) or z (2)");
+        assert!(resolution > 0, "a chart has at least one pixel");
+        let horiz: [usize; 2] = if up == 1 { [0, 2] } else { [0, 1] };
+        let res = resolution as usize;
+        let mut frames = Vec::with_capacity(4);
+        for (k, &a) in horiz.iter().enumerate() {
+            let b = horiz[1 - k];
+            for positive in [true, false] {
+                let w = cell.max[a] - cell.min[a];
+                let (z0, z1) = (cell.min[b], cell.max[b]);
+                let s0 = z0 - w;
+                frames.push(Frame {
+                    up,
+                    a,
+                    b,
+                    sign: if positive { 1.0 } else { -1.0 },
+                    face: if positive { cell.max[a] } else { cell.min[a] },
+                    w,
+                    z0,
+                    z1,
+                    y0: cell.min[up],
+                    y1: cell.max[up],
+                    s0,
+                    ds: ((z1 + w) - s0) / res as f64,
+                    res,
+                });
+            }
+        }
+        let umbrae = frames
+            .iter()
+            .map(|_| vec![[Umbra::NONE; 2]; res * res])
+            .collect();
+        RayCharts {
+            frames,
+            umbrae,
+            work: RsfWork::default(),
+        }
+    }
+
+    /// The umbrae of chart `chart` (0..4) at pixel (row `j`, column `i`): near, far.
+    pub fn umbrae(&self, chart: usize, j: usize, i: usize) -> [Umbra; 2] {
+        self.umbrae[chart][j * self.frames[chart].res + i]
+    }
+
+    /// Pixels per side.
+    pub fn resolution(&self) -> usize {
+        self.frames[0].res
+    }
+
+    /// Inserts a convex occluder as a 2.5D occluder: a polygon (points in order, `solid`
+    /// false) or a convex solid (its vertices, `solid` true). It is written into every pixel
+    /// whose lines all cut it from a point at or below the cell's bottom up to a higher point,
+    /// wholly beyond the face; occluders the vertical planes do not cut that way (roofs,
+    /// bridges) write nothing. Returns the pixels written.
+    pub fn insert(&mut self, pts: &[DVec3], solid: bool) -> usize {
+        if pts.len() < 3 {
+            return 0;
+        }
+        let mut written = 0;
+        let mut segs: Vec<(DVec3, DVec3)> = Vec::new();
+        for c in 0..self.frames.len() {
+            let fr = self.frames[c];
+            let lo_h = pts.iter().map(|p| p[fr.up]).fold(f64::INFINITY, f64::min);
+            let lo_x = pts
+                .iter()
+                .map(|p| fr.sign * (p[fr.a] - fr.face))
+                .fold(f64::INFINITY, f64::min);
+            if lo_h > fr.y0 || lo_x <= 0.0 {
+                continue;
+            }
+            // Local (X, Z, height) stored as (x, y, z).
+            let local: Vec<DVec3> = pts.iter().map(|&p| fr.local(p)).collect();
+            segs.clear();
+            let n = local.len();
+            if solid {
+                for a in 0..n {
+                    for b in a + 1..n {
+                        segs.push((local[a], local[b]));
+                    }
+                }
+            } else {
+                segs.extend((0..n).map(|k| (local[k], local[(k + 1) % n])));
+            }
+            written += insert_chart(&fr, &segs, &mut self.umbrae[c]);
+        }
+        if written > 0 {
+            self.work.polygons += 1;
+            self.work.pixels += written;
+        }
+        written
+    }
+
+    /// True when the box is hidden from the cell in every chart.
+    pub fn box_hidden(&self, b: &DAabb) -> bool {
+        (0..self.frames.len()).all(|c| self.box_hidden_in(c, b))
+    }
+
+    /// True when the box is hidden in chart `chart` (0..4): from the rays of the cell whose
+    /// horizontal direction is within 45° of that side's outward normal.
+    pub fn box_hidden_in_chart(&self, chart: usize, b: &DAabb) -> bool {
+        self.box_hidden_in(chart, b)
+    }
+
+    fn box_hidden_in(&self, c: usize, b: &DAabb) -> bool {
+        let fr = &self.frames[c];
+        let lo = fr.local(b.min);
+        let hi = fr.local(b.max);
+        let (x0, x1) = (lo.x.min(hi.x), lo.x.max(hi.x));
+        let (z0, z1) = (b.min[fr.b], b.max[fr.b]);
+        let (y_lo, y_hi) = (b.min[fr.up], b.max[fr.up]);
+        // A ray of this chart from the cell to the box goes from X ≥ −w forward with
+        // |ΔZ| ≤ ΔX: the box is out of the chart when even the longest run, from the back of
+        // the cell to the box's far side, cannot cover the gap between their Z ranges.
+        let gap = (z0 - fr.z1).max(fr.z0 - z1).max(0.0);
+        if x1 <= -fr.w || gap > x1 + fr.w {
+            return true;
+        }
+        let x0c = x0.max(-fr.w);
+        let umbrae = &self.umbrae[c];
+        for i in 0..fr.res {
+            let (m0, m1) = (fr.m_of(i), fr.m_of(i + 1));
+            let (mut smin, mut smax) = (f64::INFINITY, f64::NEG_INFINITY);
+            for m in [m0, m1] {
+                for x in [x0c, x1] {
+                    for z in [z0, z1] {
+                        let s = z - m * x;
+                        smin = smin.min(s);
+                        smax = smax.max(s);
+                    }
+                }
+            }
+            // Only lines through the footprint: Z = s + m·X meets [z0, z1] for some
+            // X ∈ [−w, 0] only when s ∈ [z0 + min(0, m·w), z1 + max(0, m·w)].
+            smin = smin.max(fr.z0 + (m0 * fr.w).min(0.0));
+            smax = smax.min(fr.z1 + (m1 * fr.w).max(0.0));
+            if smin > smax {
+                continue;
+            }
+            // Outward: a margin of the rounding of s.
+            let pad = 1e-9 * (smin.abs().max(smax.abs()) + fr.ds);
+            let Some((j0, j1)) = fr.rows(smin - pad, smax + pad) else {
+                continue;
+            };
+            if x0 <= 0.0 {
+                return false;
+            }
+            for j in j0..=j1 {
+                let [near, far] = umbrae[j * fr.res + i];
+                if !(far.hides(fr, x0, x1, y_lo, y_hi) || near.hides(fr, x0, x1, y_lo, y_hi)) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+}
+
+/// Inserts one convex occluder (its segments, local points) into one chart; returns the
+/// pixels written.
+fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) -> usize {
+    let mut written = 0;
+    // The best umbra the occluder could cast anywhere: pixels whose umbra already beats it
+    // are skipped before any crossing is computed.
+    let (mut x_lo, mut x_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut h_lo, mut h_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for &(p, q) in segs {
+        for e in [p, q] {
+            x_lo = x_lo.min(e.x);
+            x_hi = x_hi.max(e.x);
+            h_lo = h_lo.min(e.z);
+            h_hi = h_hi.max(e.z);
+        }
+    }
+    let best_slope = if h_hi >= fr.y1 {
+        (h_hi - fr.y1) / (x_lo + fr.w)
+    } else {
+        (h_hi - fr.y1) / x_hi
+    };
+    let beats = |u: &Umbra| {
+        !u.is_none()
+            && (u.guard as f64) <= x_lo
+            && (u.slope as f64) >= best_slope
+            && (u.base as f64) <= h_lo
+    };
+    let beaten = |px: &[Umbra; 2]| beats(&px[0]) || beats(&px[1]);
+    let mut live: Vec<usize> = Vec::new();
+    // Per corner row (j0..=j1+1) and live segment: the crossing at m0 and at m1.
+    let mut lin: Vec<Lin> = Vec::new();
+    for i in 0..fr.res {
+        let (m0, m1) = (fr.m_of(i), fr.m_of(i + 1));
+        // Segments whose horizontal direction is within the column's slopes: the lines
+        // crossing them there form a double wedge, not a convex set, so corners prove nothing.
+        live.clear();
+        live.extend((0..segs.len()).filter(|&k| {
+            let (p, q) = segs[k];
+            let (dx, dz) = (q.x - p.x, q.y - p.y);
+            let (l, h) = (dz - m0 * dx, dz - m1 * dx);
+            l * h > 0.0
+        }));
+        if live.is_empty() {
+            continue;
+        }
+        let (mut smin, mut smax) = (f64::INFINITY, f64::NEG_INFINITY);
+        for m in [m0, m1] {
+            for &(p, q) in segs {
+                for e in [p, q] {
+                    let s = e.y - m * e.x;
+                    smin = smin.min(s);
+                    smax = smax.max(s);
+                }
+            }
+        }
+        let Some((mut j0, mut j1)) = fr.rows(smin, smax) else {
+            continue;
+        };
+        while j0 <= j1 && beaten(&umbrae[j0 * fr.res + i]) {
+            j0 += 1;
+        }
+        while j1 > j0 && beaten(&umbrae[j1 * fr.res + i]) {
+            j1 -= 1;
+        }
+        if j0 > j1 {
+            continue;
+        }
+        // Per live segment and slope: the s-range it is crossed in and its crossing point as
+        // linear functions of s (`X = x0 + xs·s`, height `h0 + hs·s`).
+        lin.clear();
+        for &k in &live {
+            let (p, q) = segs[k];
+            for m in [m0, m1] {
+                let (ap, aq) = (p.y - m * p.x, q.y - m * q.x);
+                let d = ap - aq;
+                // t = (ap − s)/d; X = p.x + t·(q.x − p.x); h = p.z + t·(q.z − p.z).
+                let (dx, dh) = ((q.x - p.x) / d, (q.z - p.z) / d);
+                lin.push(Lin {
+                    lo: ap.min(aq),
+                    hi: ap.max(aq),
+                    x0: p.x + ap * dx,
+                    xs: -dx,
+                    h0: p.z + ap * dh,
+                    hs: -dh,
+                });
+            }
+        }
+        for j in j0..=j1 {
+            if beaten(&umbrae[j * fr.res + i]) {
+                continue;
+            }
+            let Some(u) = pixel_umbra(fr, &lin, fr.s_of(j), fr.s_of(j + 1)) else {
+                continue;
+            };
+            insert_umbra(&mut umbrae[j * fr.res + i], u);
+            written += 1;
+        }
+    }
+    written
+}
+
+/// A segment's crossing by the lines `Z = s + m·X` of one slope `m`: crossed for `s` in
+/// `(lo, hi)`, at `X = x0 + xs·s`, height `h0 + hs·s`.
+#[derive(Clone, Copy, Debug)]
+struct Lin {
+    lo: f64,
+    hi: f64,
+    x0: f64,
+    xs: f64,
+    h0: f64,
+    hs: f64,
+}
+
+/// The umbra an occluder casts over a whole pixel `s ∈ [sa, sb]` of a column, from its live
+/// segments' crossings (`lin[2k]` at the column's first slope, `lin[2k + 1]` at its last), or
+/// `None`.
+///
+/// A segment crossed by the pixel's four corner lines is crossed by every line of the pixel,
+/// at heights and `X` between its corners' extremes. The top point is taken on the crossed
+/// segment whose lowest corner height is highest, the bottom one on the segment whose highest
+/// corner height is lowest; the occluder's cut by any line of the pixel is convex and holds
+/// both points, hence the segment between them.
+fn pixel_umbra(fr: &Frame, lin: &[Lin], sa: f64, sb: f64) -> Option<Umbra> {
+    // (lowest height, X range) of the top candidate; (highest height, X range) of the bottom.
+    let mut top: Option<(f64, f64, f64)> = None;
+    let mut bot: Option<(f64, f64, f64)> = None;
+    for pair in lin.chunks_exact(2) {
+        let (a, b) = (pair[0], pair[1]);
+        if !(a.lo < sa && sb < a.hi && b.lo < sa && sb < b.hi) {
+            continue;
+        }
+        let hs = [
+            a.h0 + a.hs * sa,
+            a.h0 + a.hs * sb,
+            b.h0 + b.hs * sa,
+            b.h0 + b.hs * sb,
+        ];
+        let xs = [
+            a.x0 + a.xs * sa,
+            a.x0 + a.xs * sb,
+            b.x0 + b.xs * sa,
+            b.x0 + b.xs * sb,
+        ];
+        let hmin = hs[0].min(hs[1]).min(hs[2].min(hs[3]));
+        let hmax = hs[0].max(hs[1]).max(hs[2].max(hs[3]));
+        let xmin = xs[0].min(xs[1]).min(xs[2].min(xs[3]));
+        let xmax = xs[0].max(xs[1]).max(xs[2].max(xs[3]));
+        if top.is_none_or(|t| hmin > t.0) {
+            top = Some((hmin, xmin, xmax));
+        }
+        if bot.is_none_or(|b| hmax < b.0) {
+            bot = Some((hmax, xmin, xmax));
+        }
+    }
+    let (top_min, xt_min, xt_max) = top?;
+    let (bot_max, xb_min, xb_max) = bot?;
+    // A relative margin for the rounding of the crossings.
+    let scale = xt_max
+        .abs()
+        .max(xb_max.abs())
+        .max(top_min.abs())
+        .max(fr.w)
+        .max(1.0);
+    let eps = 1e-9 * scale;
+    let (xmin, xmax) = (xt_min.min(xb_min) - eps, xt_max.max(xb_max) + eps);
+    let (top_min, bot_max) = (top_min - eps, bot_max + eps);
+    let (xt_min, xt_max) = (xt_min - eps, xt_max + eps);
+    if xmin <= 0.0 || bot_max > fr.y0 || top_min <= bot_max {
+        return None;
+    }
+    let slope = if top_min >= fr.y1 {
+        (top_min - fr.y1) / (xt_max + fr.w)
+    } else {
+        (top_min - fr.y1) / xt_min
+    };
+    Some(Umbra {
+        slope: f32_down(slope - 1e-12 * slope.abs()),
+        guard: f32_up(xmax),
+        base: f32_up(bot_max),
+    })
+}
+
+/// Adds umbra `u` to a pixel's near and far umbrae (see the module docs).
+fn insert_umbra(px: &mut [Umbra; 2], u: Umbra) {
+    let [near, far] = *px;
+    if near.is_none() {
+        px[0] = u;
+        return;
+    }
+    if u.guard <= near.guard {
+        // Valid wherever the near one is: both gain it.
+        px[0] = Umbra {
+            slope: near.slope.max(u.slope),
+            guard: near.guard,
+            base: near.base.max(u.base),
+        };
+        if !far.is_none() {
+            px[1] = Umbra {
+                slope: far.slope.max(u.slope),
+                guard: far.guard,
+                base: far.base.max(u.base),
+            };
+        }
+        return;
+    }
+    if far.is_none() {
+        px[1] = near.merged(&u);
+    } else if u.guard <= far.guard {
+        px[1] = Umbra {
+            slope: far.slope.max(u.slope),
+            guard: far.guard,
+            base: far.base.max(u.base),
+        };
+    } else {
+        px[1] = far.merged(&u);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cell() -> DAabb {
+        DAabb {
+            min: DVec3::new(-2.0, 0.0, -2.0),
+            max: DVec3::new(2.0, 2.0, 2.0),
+        }
+    }
+
+    /// A vertical wall across x = `x`, z in `[z0, z1]`, from the ground to `h`.
+    fn wall(x: f64, z0: f64, z1: f64, h: f64) -> Vec<DVec3> {
+        vec![
+            DVec3::new(x, -0.5, z0),
+            DVec3::new(x, -0.5, z1),
+            DVec3::new(x, h, z1),
+            DVec3::new(x, h, z0),
+        ]
+    }
+
+    fn boxed(min: [f64; 3], max: [f64; 3]) -> DAabb {
+        DAabb {
+            min: DVec3::from(min),
+            max: DVec3::from(max),
+        }
+    }
+
+    #[test]
+    fn a_wide_tall_wall_hides_a_box_behind_it_and_not_one_beside_the_cell() {
+        let mut r = RayCharts::new(&cell(), 1, 64);
+        assert!(r.insert(&wall(6.0, -100.0, 100.0, 10.0), false) > 0);
+        assert!(r.box_hidden(&boxed([20.0, 0.0, -1.0], [21.0, 5.0, 1.0])));
+        // Taller than what the wall hides from the cell's top at the back.
+        assert!(!r.box_hidden(&boxed([20.0, 0.0, -1.0], [21.0, 40.0, 1.0])));
+        // In front of the wall.
+        assert!(!r.box_hidden(&boxed([4.0, 0.0, -1.0], [5.0, 1.0, 1.0])));
+        // Behind the cell, seen through the other charts.
+        assert!(!r.box_hidden(&boxed([-21.0, 0.0, -1.0], [-20.0, 1.0, 1.0])));
+    }
+
+    #[test]
+    fn a_wall_lower_than_the_eye_hides_only_below_the_line_from_the_front_top_edge() {
+        let mut r = RayCharts::new(&cell(), 1, 128);
+        r.insert(&wall(6.0, -200.0, 200.0, 1.0), false);
+        // From (0 beyond the face, 2) over (4, 1): height 2 − X/4... at X = 8 (x = 10) the
+        // line is at 0; a box up to 0.5 at x = 10 is seen over the wall.
+        assert!(!r.box_hidden(&boxed([10.0, 0.0, -1.0], [11.0, 0.5, 1.0])));
+        // Just behind the wall, low: hidden (the line at X = 5 is at 0.75).
+        assert!(r.box_hidden(&boxed([6.5, 0.0, -0.5], [7.0, 0.5, 0.5])));
+    }
+
+    #[test]
+    fn a_floating_polygon_is_not_a_half_umbra() {
+        let mut r = RayCharts::new(&cell(), 1, 32);
+        let mut w = wall(6.0, -100.0, 100.0, 10.0);
+        for p in &mut w {
+            if p.y < 0.0 {
+                p.y = 0.5;
+            }
+        }
+        assert_eq!(r.insert(&w, false), 0, "a bridge above the cell's bottom");
+    }
+}
