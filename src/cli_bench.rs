@@ -63,6 +63,13 @@ pub struct BenchArgs {
     /// poinciana.
     #[arg(long, value_name = "LIST", value_delimiter = ',')]
     pub scenes: Option<Vec<String>>,
+    /// Force ray space factorization on in the scene table's bakes (default: chosen per scene,
+    /// as `bake` does).
+    #[arg(long, conflicts_with = "no_rsf")]
+    pub rsf: bool,
+    /// Never run ray space factorization in the scene table's bakes (to measure what it adds).
+    #[arg(long)]
+    pub no_rsf: bool,
     /// Also write the rows as JSON to this file.
     #[arg(long, value_name = "OUT.json")]
     pub json: Option<PathBuf>,
@@ -126,6 +133,13 @@ impl From<&BenchArgs> for BenchOptions {
             shared: a.shared.clone(),
             scenes: a.scenes.clone(),
             pvs_out: a.pvs_out.clone(),
+            rsf: if a.rsf {
+                umbrasweep::settings::SweepChoice::On
+            } else if a.no_rsf {
+                umbrasweep::settings::SweepChoice::Off
+            } else {
+                umbrasweep::settings::SweepChoice::Auto
+            },
             foliage_studies: a.foliage_studies.clone(),
             foliage_subcell_cells: a.foliage_subcell_cells,
             foliage_paper_cells: a.foliage_paper_cells,

@@ -95,6 +95,9 @@ pub struct BenchOptions {
     pub foliage_trees: Option<u32>,
     /// Receives the progress lines; none are reported when `None`.
     pub progress: Option<ProgressLog>,
+    /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
+    /// `bake`), forced on or off, to measure what it adds.
+    pub rsf: crate::settings::SweepChoice,
 }
 
 impl Default for BenchOptions {
@@ -115,6 +118,7 @@ impl Default for BenchOptions {
             foliage_model_trees: foliage::DEFAULT_MODEL_TREES,
             foliage_trees: None,
             progress: None,
+            rsf: crate::settings::SweepChoice::Auto,
         }
     }
 }
@@ -456,7 +460,10 @@ fn build(
 pub fn collect(args: &BenchOptions) -> Result<Bench, BenchError> {
     let start = Instant::now();
     let plan = Plan::new(args)?;
-    let settings = BakeSettings::default();
+    let settings = BakeSettings {
+        rsf: args.rsf,
+        ..BakeSettings::default()
+    };
     let mut skipped = Vec::new();
 
     let cpu = CpuBackend::new();

@@ -53,8 +53,6 @@
 use crate::geom::DAabb;
 use glam::DVec3;
 
-/// The default pixels per side of each chart (the paper's 512²).
-pub const DEFAULT_RESOLUTION: u32 = 512;
 
 /// One umbra of a pixel: it hides points at `X ≥ guard` no lower than `base` and no higher
 /// than `y1 + slope·X`.
@@ -152,6 +150,31 @@ impl Frame {
 
     fn s_of(&self, j: usize) -> f64 {
         self.s0 + self.ds * j as f64
+    }
+
+    /// The columns holding every line through the footprint and one of `pts` (local points,
+    /// all with `X > 0`), padded by a column for rounding: the slope of a line through a point
+    /// of the footprint's rectangle and a point of the points' hull is between the slopes
+    /// between their corners.
+    fn columns(&self, pts: impl Iterator<Item = (f64, f64)>) -> (usize, usize) {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (x, z) in pts {
+            for ex in [-self.w, 0.0] {
+                for ez in [self.z0, self.z1] {
+                    let m = (z - ez) / (x - ex);
+                    lo = lo.min(m);
+                    hi = hi.max(m);
+                }
+            }
+        }
+        let n = self.res as f64;
+        let col = |m: f64| ((m + 1.0) * 0.5 * n).floor();
+        if !(lo <= hi) || lo > 1.0 || hi < -1.0 {
+            return (1, 0);
+        }
+        let a = (col(lo) - 1.0).clamp(0.0, n - 1.0) as usize;
+        let b = (col(hi) + 1.0).clamp(0.0, n - 1.0) as usize;
+        (a, b)
     }
 
     /// The rows whose s-range meets `[lo, hi]`, or `None`.
@@ -307,7 +330,12 @@ impl RayCharts {
         }
         let x0c = x0.max(-fr.w);
         let umbrae = &self.umbrae[c];
-        for i in 0..fr.res {
+        let (c0, c1) = if x0 > 0.0 {
+            fr.columns([(x0, z0), (x0, z1), (x1, z0), (x1, z1)].into_iter())
+        } else {
+            (0, fr.res - 1)
+        };
+        for i in c0..=c1 {
             let (m0, m1) = (fr.m_of(i), fr.m_of(i + 1));
             let (mut smin, mut smax) = (f64::INFINITY, f64::NEG_INFINITY);
             for m in [m0, m1] {
@@ -366,17 +394,21 @@ fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) 
     } else {
         (h_hi - fr.y1) / x_hi
     };
-    let beats = |u: &Umbra| {
-        !u.is_none()
-            && (u.guard as f64) <= x_lo
-            && (u.slope as f64) >= best_slope
-            && (u.base as f64) <= h_lo
+    // An umbra of this occluder (guard ≥ x_lo, slope ≤ best_slope) can only raise the near
+    // umbra's slope when its guard may be within the near one's, or the far umbra's slope
+    // (see `insert_umbra`): a pixel where neither can happen is skipped.
+    let beaten = |px: &[Umbra; 2]| {
+        let [near, far] = px;
+        let near_gains = near.is_none()
+            || (x_lo <= near.guard as f64 && best_slope > near.slope as f64);
+        let far_gains = far.is_none() || best_slope > far.slope as f64;
+        !near_gains && !far_gains
     };
-    let beaten = |px: &[Umbra; 2]| beats(&px[0]) || beats(&px[1]);
     let mut live: Vec<usize> = Vec::new();
     // Per corner row (j0..=j1+1) and live segment: the crossing at m0 and at m1.
     let mut lin: Vec<Lin> = Vec::new();
-    for i in 0..fr.res {
+    let (c0, c1) = fr.columns(segs.iter().flat_map(|&(p, q)| [(p.x, p.y), (q.x, q.y)]));
+    for i in c0..=c1 {
         let (m0, m1) = (fr.m_of(i), fr.m_of(i + 1));
         // Segments whose horizontal direction is within the column's slopes: the lines
         // crossing them there form a double wedge, not a convex set, so corners prove nothing.
@@ -552,9 +584,12 @@ fn insert_umbra(px: &mut [Umbra; 2], u: Umbra) {
     }
     if far.is_none() {
         px[1] = near.merged(&u);
+    } else if u.slope <= far.slope {
+        // Nothing to gain: the far umbra's line is at least as high, and merging could only
+        // raise its guard or base.
     } else if u.guard <= far.guard {
         px[1] = Umbra {
-            slope: far.slope.max(u.slope),
+            slope: u.slope,
             guard: far.guard,
             base: far.base.max(u.base),
         };
