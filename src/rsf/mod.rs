@@ -53,7 +53,6 @@
 use crate::geom::DAabb;
 use glam::DVec3;
 
-
 /// One umbra of a pixel: it hides points at `X ≥ guard` no lower than `base` and no higher
 /// than `y1 + slope·X`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -271,6 +270,12 @@ impl RayCharts {
         }
         let mut written = 0;
         let mut segs: Vec<(DVec3, DVec3)> = Vec::new();
+        // A convex solid's cut by a plane has its vertices on the solid's edges.
+        let pairs: Vec<(usize, usize)> = if solid {
+            hull_edges(pts)
+        } else {
+            (0..pts.len()).map(|k| (k, (k + 1) % pts.len())).collect()
+        };
         for c in 0..self.frames.len() {
             let fr = self.frames[c];
             let lo_h = pts.iter().map(|p| p[fr.up]).fold(f64::INFINITY, f64::min);
@@ -284,16 +289,7 @@ impl RayCharts {
             // Local (X, Z, height) stored as (x, y, z).
             let local: Vec<DVec3> = pts.iter().map(|&p| fr.local(p)).collect();
             segs.clear();
-            let n = local.len();
-            if solid {
-                for a in 0..n {
-                    for b in a + 1..n {
-                        segs.push((local[a], local[b]));
-                    }
-                }
-            } else {
-                segs.extend((0..n).map(|k| (local[k], local[(k + 1) % n])));
-            }
+            segs.extend(pairs.iter().map(|&(a, b)| (local[a], local[b])));
             written += insert_chart(&fr, &segs, &mut self.umbrae[c]);
         }
         if written > 0 {
@@ -373,6 +369,57 @@ impl RayCharts {
     }
 }
 
+/// The edges of the convex hull of `pts` (pairs of indices): a pair is kept when some plane
+/// through it and a third point has every point on one side, and the points on that plane on
+/// one side of the pair's line. Keeping a pair that is not an edge (a rounding case) is
+/// harmless: it lies in the solid, so its crossings are points of the solid's cut.
+pub fn hull_edges(pts: &[DVec3]) -> Vec<(usize, usize)> {
+    let n = pts.len();
+    let scale = pts
+        .iter()
+        .fold(0.0f64, |m, p| m.max((*p - pts[0]).length()))
+        .max(1e-300);
+    let tol = 1e-9 * scale * scale;
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            let e = pts[j] - pts[i];
+            let edge = (0..n).filter(|&k| k != i && k != j).any(|k| {
+                let nrm = e.cross(pts[k] - pts[i]);
+                if nrm.length_squared() <= tol * tol {
+                    return false;
+                }
+                let (mut pos, mut neg) = (false, false);
+                let (mut ipos, mut ineg) = (false, false);
+                let inplane = nrm.cross(e);
+                for (l, &p) in pts.iter().enumerate() {
+                    if l == i || l == j {
+                        continue;
+                    }
+                    let d = nrm.dot(p - pts[i]);
+                    if d > tol * scale {
+                        pos = true;
+                    } else if d < -tol * scale {
+                        neg = true;
+                    } else {
+                        let s = inplane.dot(p - pts[i]);
+                        if s > tol * scale * scale {
+                            ipos = true;
+                        } else if s < -tol * scale * scale {
+                            ineg = true;
+                        }
+                    }
+                }
+                !(pos && neg) && !(ipos && ineg)
+            });
+            if edge {
+                out.push((i, j));
+            }
+        }
+    }
+    out
+}
+
 /// Inserts one convex occluder (its segments, local points) into one chart; returns the
 /// pixels written.
 fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) -> usize {
@@ -399,14 +446,15 @@ fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) 
     // (see `insert_umbra`): a pixel where neither can happen is skipped.
     let beaten = |px: &[Umbra; 2]| {
         let [near, far] = px;
-        let near_gains = near.is_none()
-            || (x_lo <= near.guard as f64 && best_slope > near.slope as f64);
+        let near_gains =
+            near.is_none() || (x_lo <= near.guard as f64 && best_slope > near.slope as f64);
         let far_gains = far.is_none() || best_slope > far.slope as f64;
         !near_gains && !far_gains
     };
     let mut live: Vec<usize> = Vec::new();
     // Per corner row (j0..=j1+1) and live segment: the crossing at m0 and at m1.
     let mut lin: Vec<Lin> = Vec::new();
+    let mut orders = Orders::default();
     let (c0, c1) = fr.columns(segs.iter().flat_map(|&(p, q)| [(p.x, p.y), (q.x, q.y)]));
     for i in c0..=c1 {
         let (m0, m1) = (fr.m_of(i), fr.m_of(i + 1));
@@ -447,6 +495,15 @@ fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) 
         // Per live segment and slope: the s-range it is crossed in and its crossing point as
         // linear functions of s (`X = x0 + xs·s`, height `h0 + hs·s`).
         lin.clear();
+        orders.top.clear();
+        orders.bot.clear();
+        for (idx, &k) in live.iter().enumerate() {
+            let (p, q) = segs[k];
+            orders.top.push((idx, p.z.max(q.z)));
+            orders.bot.push((idx, p.z.min(q.z)));
+        }
+        orders.top.sort_by(|a, b| b.1.total_cmp(&a.1));
+        orders.bot.sort_by(|a, b| a.1.total_cmp(&b.1));
         for &k in &live {
             let (p, q) = segs[k];
             for m in [m0, m1] {
@@ -468,7 +525,7 @@ fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) 
             if beaten(&umbrae[j * fr.res + i]) {
                 continue;
             }
-            let Some(u) = pixel_umbra(fr, &lin, fr.s_of(j), fr.s_of(j + 1)) else {
+            let Some(u) = pixel_umbra(fr, &lin, &orders, fr.s_of(j), fr.s_of(j + 1)) else {
                 continue;
             };
             insert_umbra(&mut umbrae[j * fr.res + i], u);
@@ -499,15 +556,53 @@ struct Lin {
 /// segment whose lowest corner height is highest, the bottom one on the segment whose highest
 /// corner height is lowest; the occluder's cut by any line of the pixel is convex and holds
 /// both points, hence the segment between them.
-fn pixel_umbra(fr: &Frame, lin: &[Lin], sa: f64, sb: f64) -> Option<Umbra> {
+fn pixel_umbra(fr: &Frame, lin: &[Lin], order: &Orders, sa: f64, sb: f64) -> Option<Umbra> {
     // (lowest height, X range) of the top candidate; (highest height, X range) of the bottom.
     let mut top: Option<(f64, f64, f64)> = None;
     let mut bot: Option<(f64, f64, f64)> = None;
-    for pair in lin.chunks_exact(2) {
-        let (a, b) = (pair[0], pair[1]);
-        if !(a.lo < sa && sb < a.hi && b.lo < sa && sb < b.hi) {
-            continue;
+    // Segments by their highest end, highest first: none after one whose end is below the
+    // best top found can beat it.
+    for &(k, hi_end) in &order.top {
+        if top.is_some_and(|t| hi_end <= t.0) {
+            break;
         }
+        if let Some((hmin, _, xmin, xmax)) = corners_of(lin, k, sa, sb) {
+            if top.is_none_or(|t| hmin > t.0) {
+                top = Some((hmin, xmin, xmax));
+            }
+        }
+    }
+    top?;
+    // By their lowest end, lowest first, for the bottom.
+    for &(k, lo_end) in &order.bot {
+        if bot.is_some_and(|b| lo_end >= b.0) {
+            break;
+        }
+        if let Some((_, hmax, xmin, xmax)) = corners_of(lin, k, sa, sb) {
+            if bot.is_none_or(|b| hmax < b.0) {
+                bot = Some((hmax, xmin, xmax));
+            }
+        }
+    }
+    finish_umbra(fr, top, bot)
+}
+
+/// Per live segment, its index in `lin` (pairs) with its highest (for `top`) or lowest (for
+/// `bot`) end height, sorted for [`pixel_umbra`]'s searches.
+#[derive(Default)]
+struct Orders {
+    top: Vec<(usize, f64)>,
+    bot: Vec<(usize, f64)>,
+}
+
+/// The corner crossings of live segment `k` over the pixel `s ∈ [sa, sb]`: (lowest height,
+/// highest height, smallest X, largest X), or `None` when a corner line misses it.
+fn corners_of(lin: &[Lin], k: usize, sa: f64, sb: f64) -> Option<(f64, f64, f64, f64)> {
+    let (a, b) = (lin[2 * k], lin[2 * k + 1]);
+    if !(a.lo < sa && sb < a.hi && b.lo < sa && sb < b.hi) {
+        return None;
+    }
+    {
         let hs = [
             a.h0 + a.hs * sa,
             a.h0 + a.hs * sb,
@@ -524,13 +619,17 @@ fn pixel_umbra(fr: &Frame, lin: &[Lin], sa: f64, sb: f64) -> Option<Umbra> {
         let hmax = hs[0].max(hs[1]).max(hs[2].max(hs[3]));
         let xmin = xs[0].min(xs[1]).min(xs[2].min(xs[3]));
         let xmax = xs[0].max(xs[1]).max(xs[2].max(xs[3]));
-        if top.is_none_or(|t| hmin > t.0) {
-            top = Some((hmin, xmin, xmax));
-        }
-        if bot.is_none_or(|b| hmax < b.0) {
-            bot = Some((hmax, xmin, xmax));
-        }
+        Some((hmin, hmax, xmin, xmax))
     }
+}
+
+/// The umbra of a top candidate (lowest height, X range) and a bottom one (highest height,
+/// X range), with margins for rounding; `None` when it does not stand on the ground.
+fn finish_umbra(
+    fr: &Frame,
+    top: Option<(f64, f64, f64)>,
+    bot: Option<(f64, f64, f64)>,
+) -> Option<Umbra> {
     let (top_min, xt_min, xt_max) = top?;
     let (bot_max, xb_min, xb_max) = bot?;
     // A relative margin for the rounding of the crossings.
@@ -648,6 +747,17 @@ mod tests {
         assert!(!r.box_hidden(&boxed([10.0, 0.0, -1.0], [11.0, 0.5, 1.0])));
         // Just behind the wall, low: hidden (the line at X = 5 is at 0.75).
         assert!(r.box_hidden(&boxed([6.5, 0.0, -0.5], [7.0, 0.5, 0.5])));
+    }
+
+    #[test]
+    fn a_box_has_twelve_hull_edges() {
+        let b = boxed([1.0, 2.0, 3.0], [4.0, 7.0, 5.0]).corners();
+        let e = hull_edges(&b);
+        assert_eq!(e.len(), 12, "{e:?}");
+        for (i, j) in e {
+            // Box corners differing in exactly one coordinate bit.
+            assert_eq!((i ^ j).count_ones(), 1, "{i} {j}");
+        }
     }
 
     #[test]
