@@ -625,8 +625,10 @@ fn version_4_keeps_the_cullers_and_sweep_settings_and_versions_1_to_3_still_read
     s.sweep_settings.spacing = Spacing::Kernel;
     s.subcell = Some(2.0);
     s.max_stretch = 4;
-    // A bake records the sampler as it ran (true or false).
+    // A bake records the sampler and ray space factorization as they ran (true or false);
+    // the cullers' accounts below name neither.
     s.sampling = SweepChoice::Off;
+    s.rsf = SweepChoice::Off;
     let culler = umbrasweep::pvs::PvsCullerSummary {
         name: "occlusion_sweep".into(),
         hidden: 12.5,

@@ -711,6 +711,7 @@ fn plane_slices(
             && b.min[v] <= fmax.y
             && !b.overlaps(&plan.cell)
             && !skip(sliceable.objects[i])
+            && !too_small(b, &plan.cell, plan.min_solid_angle)
         {
             slice_object(scene, sliceable.objects[i], axis, position, &mut slices);
         }

@@ -220,14 +220,15 @@ pub struct PvsSettings {
 
 impl Default for PvsSettings {
     /// What a document without settings reads as: the defaults, as a bake without the sweep,
-    /// without the sampler and with square maps ran (the reading of fields older documents
-    /// lack).
+    /// without the sampler, without ray space factorization and with square maps ran (the
+    /// reading of fields older documents lack).
     fn default() -> Self {
         PvsSettings {
             backend: String::new(),
             bake: crate::settings::BakeSettings {
                 sweep: crate::settings::SweepChoice::Off,
                 sampling: crate::settings::SweepChoice::Off,
+                rsf: crate::settings::SweepChoice::Off,
                 max_stretch: 1,
                 ..crate::settings::BakeSettings::default()
             },

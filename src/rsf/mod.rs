@@ -168,7 +168,12 @@ impl Frame {
         }
         let n = self.res as f64;
         let col = |m: f64| ((m + 1.0) * 0.5 * n).floor();
-        if !(lo <= hi) || lo > 1.0 || hi < -1.0 {
+        if lo.partial_cmp(&hi) == Some(std::cmp::Ordering::Greater)
+            || lo.is_nan()
+            || hi.is_nan()
+            || lo > 1.0
+            || hi < -1.0
+        {
             return (1, 0);
         }
         let a = (col(lo) - 1.0).clamp(0.0, n - 1.0) as usize;
@@ -410,7 +415,7 @@ pub fn hull_edges(pts: &[DVec3]) -> Vec<(usize, usize)> {
                         }
                     }
                 }
-                !(pos && neg) && !(ipos && ineg)
+                !(pos && neg || ipos && ineg)
             });
             if edge {
                 out.push((i, j));
@@ -566,10 +571,10 @@ fn pixel_umbra(fr: &Frame, lin: &[Lin], order: &Orders, sa: f64, sb: f64) -> Opt
         if top.is_some_and(|t| hi_end <= t.0) {
             break;
         }
-        if let Some((hmin, _, xmin, xmax)) = corners_of(lin, k, sa, sb) {
-            if top.is_none_or(|t| hmin > t.0) {
-                top = Some((hmin, xmin, xmax));
-            }
+        if let Some((hmin, _, xmin, xmax)) = corners_of(lin, k, sa, sb)
+            && top.is_none_or(|t| hmin > t.0)
+        {
+            top = Some((hmin, xmin, xmax));
         }
     }
     top?;
@@ -578,10 +583,10 @@ fn pixel_umbra(fr: &Frame, lin: &[Lin], order: &Orders, sa: f64, sb: f64) -> Opt
         if bot.is_some_and(|b| lo_end >= b.0) {
             break;
         }
-        if let Some((_, hmax, xmin, xmax)) = corners_of(lin, k, sa, sb) {
-            if bot.is_none_or(|b| hmax < b.0) {
-                bot = Some((hmax, xmin, xmax));
-            }
+        if let Some((_, hmax, xmin, xmax)) = corners_of(lin, k, sa, sb)
+            && bot.is_none_or(|b| hmax < b.0)
+        {
+            bot = Some((hmax, xmin, xmax));
         }
     }
     finish_umbra(fr, top, bot)
