@@ -697,9 +697,14 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             );
         }
         eprintln!(
-            "rsf         {} — {}",
+            "rsf         {} — {}{}",
             if result.rsf { "yes" } else { "no" },
-            result.rsf_reason
+            result.rsf_reason,
+            if result.rsf && result.backend != "cpu" {
+                " (on the CPU: ray space factorization has no GPU half yet)"
+            } else {
+                ""
+            }
         );
         eprintln!(
             "sampling    {} — {}{}",

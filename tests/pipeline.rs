@@ -30,11 +30,44 @@ fn scene() -> Scene {
     )
 }
 
+/// The planes alone (ray space factorization, which the automatic rule runs on these boxes,
+/// has its own test below).
 fn settings(sweep: SweepChoice) -> BakeSettings {
     BakeSettings {
         sweep,
+        rsf: SweepChoice::Off,
         ..BakeSettings::default()
     }
+}
+
+/// With ray space factorization first, each culler accounts for what it hid; the planes skip
+/// what it hid, so what it hid counts as hidden only by it.
+#[test]
+fn ray_space_factorization_runs_first_and_the_planes_skip_what_it_hid() {
+    let scene = scene();
+    let cells = [unit_cell()];
+    let s = BakeSettings {
+        sweep: SweepChoice::Off,
+        ..BakeSettings::default()
+    };
+    let r = bake(&scene, &cells, &s, &CpuBackend::new(), None).unwrap();
+    assert!(r.rsf, "boxes are upright: {}", r.rsf_reason);
+    assert_eq!(
+        r.cullers,
+        vec!["ray_space_factorization", "extended_projections"]
+    );
+    let c = &r.cells[0];
+    let culled = (scene.objects.iter().enumerate())
+        .filter(|(o, ob)| !ob.bounds.is_empty() && !c.visible.contains(&(*o as u32)))
+        .count() as u32;
+    assert!(culled >= 3, "{:?}", c.visible);
+    let (rsf, planes) = (&c.cullers[0], &c.cullers[1]);
+    assert_eq!(rsf.hidden + planes.hidden, culled);
+    assert_eq!(rsf.only, rsf.hidden);
+    assert_eq!(planes.only, planes.hidden);
+    // The wall reaches below the cell's bottom (it spans y −30..30), so it casts half
+    // umbrae: the boxes behind it are ray space factorization's.
+    assert!(rsf.hidden >= 3, "{rsf:?}");
 }
 
 #[test]
@@ -108,6 +141,7 @@ fn sub_cells_count_only_what_the_whole_cell_hides() {
     let s = BakeSettings {
         subcell: Some(1.0),
         sweep: SweepChoice::Off,
+        rsf: SweepChoice::Off,
         ..BakeSettings::default()
     };
     let r = bake(&scene, &[cell], &s, &CpuBackend::new(), None).unwrap();

@@ -176,6 +176,7 @@ fn the_document_records_the_sampler_per_cell_and_in_the_summary() {
     let (scene, cell) = scene(None);
     let s = BakeSettings {
         sweep: SweepChoice::Off,
+        rsf: SweepChoice::Off,
         ..settings()
     };
     let r = bake::bake(&scene, &[cell], &s, &CpuBackend::new(), None).unwrap();
