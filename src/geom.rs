@@ -78,14 +78,7 @@ impl Aabb {
     /// never baked smaller than the user wrote it). Non-finite or out-of-range values become
     /// infinite, which [`crate::cells::check`] refuses.
     pub fn outward(min: DVec3, max: DVec3) -> Aabb {
-        fn down(x: f64) -> f32 {
-            let f = x as f32;
-            if (f as f64) > x { f.next_down() } else { f }
-        }
-        fn up(x: f64) -> f32 {
-            let f = x as f32;
-            if (f as f64) < x { f.next_up() } else { f }
-        }
+        let (down, up) = (f32_down, f32_up);
         Aabb::new(
             Vec3::new(down(min.x), down(min.y), down(min.z)),
             Vec3::new(up(max.x), up(max.y), up(max.z)),
@@ -177,6 +170,18 @@ impl DAabb {
             )
         })
     }
+}
+
+/// `x` rounded to the nearest `f32` at or above it.
+pub fn f32_up(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) < x { f.next_up() } else { f }
+}
+
+/// `x` rounded to the nearest `f32` at or below it.
+pub fn f32_down(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) > x { f.next_down() } else { f }
 }
 
 /// The 12 outward-facing (counter-clockwise seen from outside) triangles of a box.

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::cube;
+use common::{Lcg, cube};
 use glam::{DVec3, Vec3};
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{self, BakeSettings};
@@ -13,19 +13,6 @@ use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::pvs::{PvsDatabase, binary};
 use umbrasweep::scene::Scene;
 use umbrasweep::settings::SweepChoice;
-
-/// A small LCG, so that the test needs no random crate.
-struct Lcg(u64);
-
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// The fraction of `n` uniform directions from `p` whose ray meets `b`, times 4π.
 fn monte_carlo_solid_angle(p: DVec3, b: &DAabb, n: usize, rng: &mut Lcg) -> f64 {

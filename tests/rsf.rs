@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::cube;
+use common::{Lcg, cube};
 use glam::{DVec3, Vec3};
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{self, BakeSettings};
@@ -14,22 +14,6 @@ use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::rsf::RayCharts;
 use umbrasweep::scene::Scene;
 use umbrasweep::settings::SweepChoice;
-
-/// A small LCG, so that the test needs no random crate.
-struct Lcg(u64);
-
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.unit()
-    }
-}
 
 fn dbox(min: [f64; 3], max: [f64; 3]) -> DAabb {
     DAabb {

@@ -230,14 +230,12 @@ impl DepthMap {
 
 /// Rounds an `f64` Depth up to the nearest `f32` at or above it (conservative for occluders).
 pub fn depth_up(d: f64) -> f32 {
-    let f = d as f32;
-    if (f as f64) < d { f.next_up() } else { f }
+    crate::geom::f32_up(d)
 }
 
 /// Rounds an `f64` Depth down to the nearest `f32` at or below it (conservative for occludees).
 pub fn depth_down(d: f64) -> f32 {
-    let f = d as f32;
-    if (f as f64) > d { f.next_down() } else { f }
+    crate::geom::f32_down(d)
 }
 
 #[cfg(test)]

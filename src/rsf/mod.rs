@@ -50,7 +50,7 @@
 //! - **Rounding.** Values are computed in f64 and stored in f32 rounded toward "visible":
 //!   slopes down, guards and bases up.
 
-use crate::geom::DAabb;
+use crate::geom::{DAabb, f32_down, f32_up};
 use glam::DVec3;
 
 /// One umbra of a pixel: it hides points at `X ≥ guard` no lower than `base` and no higher
@@ -106,16 +106,6 @@ impl Umbra {
         let x = if v >= 0.0 { x0 } else { x1 };
         y_hi <= fr.y1 + v * x
     }
-}
-
-fn f32_down(x: f64) -> f32 {
-    let f = x as f32;
-    if (f as f64) > x { f.next_down() } else { f }
-}
-
-fn f32_up(x: f64) -> f32 {
-    let f = x as f32;
-    if (f as f64) < x { f.next_up() } else { f }
 }
 
 /// One side of the footprint: the local frame `(X, Z, height)` of its chart.

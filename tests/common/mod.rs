@@ -16,6 +16,25 @@ use umbrasweep::scene::Scene;
 /// An object as `Scene::from_objects` takes it: name, triangles, opaque.
 pub type Obj = (String, Vec<[Vec3; 3]>, bool);
 
+/// A small LCG, so that tests need no random crate: `unit` in [0, 1), `range` in [a, b).
+pub struct Lcg(pub u64);
+
+impl Lcg {
+    /// The next number in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// The next number in [a, b).
+    pub fn range(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * self.unit()
+    }
+}
+
 /// A closed, outward-facing opaque box.
 pub fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
     (
