@@ -16,11 +16,11 @@
 //!
 //! # The half umbra (§3, §5 of the paper)
 //! In the vertical plane of a line the cell is (within) the rectangle `K = [−w, 0] × [y0, y1]`
-//! (`X`, height). A convex polygon that the plane cuts in a segment from a bottom point `B` at
-//! or below `y0` to a top point `T = (Xt, Yt)`, wholly beyond the face (`X > 0`), blocks every
-//! ray from `K` to a point `q` beyond the segment (`Xq ≥` the segment's largest `X`) that
-//! passes `Xt` below `Yt` and whose heights stay at or above `B` (true when `q` is no lower
-//! than `B`: the ray's heights are at least `min(y0, Yq)`). The points every ray from `K`
+//! (`X`, height). A convex occluder (a polygon, or a solid) whose cut by the plane holds a
+//! bottom point `B` at or below `y0` and a top point `T = (Xt, Yt)`, wholly beyond the face
+//! (`X > 0`), holds the segment `BT`, which blocks every ray from `K` to a point `q` beyond it
+//! (`Xq ≥` its largest `X`) that passes `Xt` below `Yt` and `B`'s `X` above `B` (true when `q`
+//! is no lower than `B`: the ray's heights are at least `min(y0, Yq)`). The points every ray from `K`
 //! passes below `T` lie under the line `Y = y1 + v·X` with `v = (Yt − y1)/Xt` when `Yt < y1`
 //! (the worst eye is `K`'s front top corner) and `v = (Yt − y1)/(Xt + w)` when `Yt ≥ y1`
 //! (the back top corner's line, lowered to pass through the front corner: it is below the
@@ -29,22 +29,26 @@
 //! be no lower than that).
 //!
 //! # Why it is conservative
-//! - **Every value bounds the whole pixel.** Along an edge of a polygon the point a line
-//!   crosses moves monotonically between the pixel's corners (the lines through one point
-//!   form a line in `(s, m)`, so the edge parameter is quasi-linear on the pixel rectangle):
-//!   when the four corner lines cut the same two edges, every line of the pixel does, and the
-//!   extremes of the cut points' `X` and heights over the pixel are at its corners. A pixel
-//!   whose corner lines cut different edges, or whose slope range holds an edge's own
-//!   horizontal direction, receives nothing from that polygon.
+//! - **Every value bounds the whole pixel.** Along an edge of the occluder (a polygon's edges,
+//!   a solid's hull edges: the cut's corners lie on them) the point a line crosses moves
+//!   monotonically between the pixel's corners (the lines through one point form a line in
+//!   `(s, m)`, so the edge parameter is quasi-linear on the pixel rectangle): an edge crossed by
+//!   the four corner lines is crossed by every line of the pixel, at `X` and heights between
+//!   its corners' extremes. `T` is taken on the crossed edge whose lowest corner height is
+//!   highest, `B` on the one whose highest corner height is lowest. An edge whose horizontal
+//!   direction lies in the pixel's slope range is never used there (the lines crossing it form
+//!   a double wedge, not a convex set); a pixel without two usable edges receives nothing.
 //! - **Fusion.** A point hidden under one polygon's line is hidden; keeping per pixel the
 //!   highest line of several polygons, with the largest guard and base, keeps only points
 //!   that the polygon with that line hides. Two umbrae per pixel (a near one and a far one
 //!   that also holds the near one's line) keep the guard from jumping to the far polygons.
 //! - **Occludees.** A box is hidden in a chart when every pixel holding a line that meets the
-//!   box's footprint beyond the back of the cell (over-estimated from the rectangle's corners
-//!   and the column's slope range) has an umbra whose guard is at most the box's near `X`,
-//!   whose base is at most its bottom, and whose line is at or above its top at the worst of
-//!   its `X` extremes; a box reaching `X ≤ 0` with any such line is visible. It is hidden from
+//!   box's footprint and the cell's (over-estimated from the rectangles' corners and the
+//!   column's slope range) has an umbra whose guard is at most the box's near `X`, whose base
+//!   is at most its bottom (give or take a margin the rays provably clear, see
+//!   [`Umbra`]'s `hides`), and whose line is at or above its top at the worst of its `X`
+//!   extremes; a box reaching `X ≤ 0` with any such line is visible. A box no ray of the
+//!   chart can reach from the cell (`|ΔZ| > ΔX` for every pair of points) is out of it. It is hidden from
 //!   the cell when it is hidden in all four charts. Rays straight up or down meet only boxes
 //!   over the footprint, which reach `X ≤ 0` in every chart.
 //! - **Rounding.** Values are computed in f64 and stored in f32 rounded toward "visible":
