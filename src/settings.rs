@@ -98,8 +98,8 @@ pub struct BakeSettings {
     #[serde(default = "rsf_of_old_documents")]
     pub rsf: SweepChoice,
     /// Pixels per side of each of the four ray-space charts. Default 256: on Munich's 50 street
-    /// cells 160, 256 and 512 (the paper's) give PVS/VS 2.44, 2.29 and 2.17 for 55, 82 and
-    /// 199 ms per cell with the planes (CPU, two cores).
+    /// cells 128, 160, 256 and 512 (the paper's) give PVS/VS 2.52, 2.44, 2.29 and 2.17 for
+    /// 46, 55, 76 and 199–211 ms per cell with the planes (CPU, two cores).
     pub rsf_resolution: u32,
     /// The scene's up axis: ray space factorization works in vertical planes. Default y
     /// (glTF's).
