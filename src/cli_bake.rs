@@ -596,6 +596,19 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     if let Some(e) = dump_error.into_inner().expect("not poisoned") {
         bail!("dumping the planes: {e}");
     }
+    if dump.exr.is_some() && result.rsf {
+        // Ray space factorization's charts, traversed again for the cells dumped.
+        let which: Vec<usize> = match &dump.cells {
+            Some(c) => c.iter().copied().filter(|&i| i < cells.len()).collect(),
+            None => todo.clone(),
+        };
+        if let Some(charts) = bake::rsf_charts(&scene, &cells, &which, &settings)? {
+            for (ci, ch) in &charts {
+                umbrasweep::inspect::dump_charts(&dump, *ci, &cells[*ci], ch)
+                    .map_err(|e| anyhow::anyhow!("dumping the ray space charts: {e}"))?;
+            }
+        }
+    }
     // The journal's cells back in their places.
     let mut fresh: std::collections::BTreeMap<usize, bake::CellResult> =
         todo.iter().copied().zip(result.cells.drain(..)).collect();

@@ -531,3 +531,76 @@ fn report_renders_in_headless_chromium() {
         "no green footprint in the screenshot"
     );
 }
+
+/// `--dump-exr` with ray space factorization: its four charts of a cell as one EXR file, a
+/// part per side of the footprint; a wall across +x fills the +x chart and nothing else.
+#[test]
+fn ray_space_charts_dump_as_four_exr_parts() {
+    let dir = tmp();
+    let scene = Scene::from_objects(
+        Path::new("charts"),
+        vec![cube("wall", [6.0, -1.0, -40.0], [7.0, 10.0, 40.0])],
+    );
+    let cells = [Aabb::new(
+        Vec3::new(-2.0, 0.0, -2.0),
+        Vec3::new(2.0, 2.0, 2.0),
+    )];
+    let s = BakeSettings {
+        rsf: umbrasweep::bake::SweepChoice::On,
+        rsf_resolution: 32,
+        ..BakeSettings::default()
+    };
+    let charts = umbrasweep::bake::rsf_charts(&scene, &cells, &[0], &s)
+        .unwrap()
+        .expect("ray space factorization is on");
+    let opts = DumpOptions {
+        exr: Some(dir.path().to_path_buf()),
+        png: None,
+        cells: None,
+    };
+    umbrasweep::inspect::dump_charts(&opts, 0, &cells[0], &charts[0].1).unwrap();
+    let img = read_exr(&dir.path().join("cell0000_rsf.exr"));
+    let mut filled = std::collections::BTreeMap::new();
+    for layer in &img.layer_data {
+        let name = layer.attributes.layer_name.as_ref().unwrap().to_string();
+        assert_eq!((layer.size.0, layer.size.1), (32, 32), "{name}");
+        let channels: Vec<String> = layer
+            .channel_data
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        for want in [
+            "near_slope",
+            "near_guard",
+            "near_base",
+            "far_slope",
+            "far_guard",
+            "far_base",
+        ] {
+            assert!(channels.iter().any(|c| c == want), "{name}: {channels:?}");
+        }
+        let guard = layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == "near_guard")
+            .unwrap();
+        let finite = f32_samples(guard).iter().filter(|g| g.is_finite()).count();
+        filled.insert(name, finite);
+    }
+    let names: Vec<&str> = filled.keys().map(String::as_str).collect();
+    assert_eq!(names, ["chart_+x", "chart_+z", "chart_-x", "chart_-z"]);
+    assert!(filled["chart_+x"] > 100, "{filled:?}");
+    assert_eq!(filled["chart_-x"], 0, "{filled:?}");
+    // Without ray space factorization there is nothing to dump.
+    let off = BakeSettings {
+        rsf: umbrasweep::bake::SweepChoice::Off,
+        ..s
+    };
+    assert!(
+        umbrasweep::bake::rsf_charts(&scene, &cells, &[0], &off)
+            .unwrap()
+            .is_none()
+    );
+}

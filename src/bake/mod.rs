@@ -165,6 +165,37 @@ pub struct BakeResult {
     pub cullers: Vec<&'static str>,
 }
 
+/// Ray space factorization's charts of the cells `which` of `cells` (for `--dump-exr`): each
+/// cell's four charts as its traversal leaves them, or `None` when the bake would not run it
+/// (the settings' `rsf` and the automatic rule).
+///
+/// # Errors
+/// Invalid settings, or an index out of range.
+pub fn rsf_charts(
+    scene: &Scene,
+    cells: &[Aabb],
+    which: &[usize],
+    settings: &BakeSettings,
+) -> Result<Option<Vec<(usize, crate::rsf::RayCharts)>>, BakeError> {
+    if let Some(&bad) = which.iter().find(|&&i| i >= cells.len()) {
+        return Err(BakeError::Settings(SettingsError {
+            option: "dump-cells",
+            value: bad.to_string(),
+            expected: format!("cell indices below {}", cells.len()),
+        }));
+    }
+    let prepared = Prepared::new(scene, settings, cells)?;
+    if !prepared.rsf {
+        return Ok(None);
+    }
+    Ok(Some(
+        which
+            .par_iter()
+            .map(|&ci| (ci, rsf::cell_charts(&prepared, &cells[ci])))
+            .collect(),
+    ))
+}
+
 /// Bakes every cell. `progress` is called after each cell with the number done.
 ///
 /// # Errors

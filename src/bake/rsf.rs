@@ -49,6 +49,29 @@ impl Culler for RsfCuller {
         state: &mut CullState,
         _observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
     ) -> Result<CullerWork, BakeError> {
+        let charts = traverse(prepared, cell, state, false);
+        Ok(CullerWork {
+            occluders_projected: charts.work.polygons,
+            ..CullerWork::default()
+        })
+    }
+}
+
+/// The charts of one cell, as a bake without earlier cullers fills them, with the parts of
+/// the last objects inserted too (for dumps): what the traversal proves hidden is dropped.
+pub fn cell_charts(prepared: &Prepared, cell: &Aabb) -> RayCharts {
+    let mut state = CullState {
+        hidden: vec![false; prepared.scene.objects.len()],
+        known_visible: None,
+    };
+    traverse(prepared, cell, &mut state, true)
+}
+
+/// Ray space factorization's traversal of one cell: marks in `state.hidden` what it proves
+/// hidden and returns the charts it filled. Parts still waiting when the last object has been
+/// tested can hide nothing more; they are inserted only when `drain` (dumps).
+fn traverse(prepared: &Prepared, cell: &Aabb, state: &mut CullState, drain: bool) -> RayCharts {
+    {
         let settings = &prepared.settings;
         let cell64 = cell.to_f64();
         let mut charts = RayCharts::new(&cell64, settings.up.index(), settings.rsf_resolution);
@@ -93,10 +116,12 @@ impl Culler for RsfCuller {
                 pending.push(Reverse((OrdF64(pd), p)));
             }
         }
-        Ok(CullerWork {
-            occluders_projected: charts.work.polygons,
-            ..CullerWork::default()
-        })
+        if drain {
+            while let Some(Reverse((_, p))) = pending.pop() {
+                insert_part(occ, p as usize, &cell64, &corners, &mut buf, &mut charts);
+            }
+        }
+        charts
     }
 }
 

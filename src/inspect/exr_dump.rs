@@ -146,3 +146,99 @@ pub fn encode(
         .map_err(|e| format!("cannot encode OpenEXR: {e}"))?;
     Ok(out.into_inner())
 }
+
+/// Encodes ray space factorization's four charts of one cell as an OpenEXR file: one part per
+/// chart (`chart_+x`, `chart_-x`, `chart_+z`, `chart_-z` with y up), `resolution²` pixels,
+/// column `i` the slope `m` from −1 to 1, row `j` the crossing `s` from `sMin` to `sMax`;
+/// channels `near_slope`, `near_guard`, `near_base`, `far_slope`, `far_guard`, `far_base`
+/// (the pixel's two umbrae, `crate::rsf::Umbra`; `guard` `+inf` where there is none).
+/// Attributes: `cellIndex`, `resolution` (int), `cellMin`, `cellMax` (v3f), `side`,
+/// `tangentAxis` (text), `sMin`, `sMax` (double).
+///
+/// # Errors
+/// The exr crate's message when encoding fails.
+pub fn encode_charts(
+    cell: usize,
+    bounds: &crate::geom::Aabb,
+    charts: &crate::rsf::RayCharts,
+) -> std::result::Result<Vec<u8>, String> {
+    let n = charts.resolution();
+    let names = ["x", "y", "z"];
+    let mut layers = Vec::new();
+    for c in 0..4 {
+        let info = charts.chart_info(c);
+        let side = format!(
+            "{}{}",
+            if info.positive { "+" } else { "-" },
+            names[info.axis]
+        );
+        let mut attrs = std::collections::HashMap::new();
+        let mut put = |k: &str, a: AttributeValue| {
+            attrs.insert(Text::from(k), a);
+        };
+        put(
+            "cellIndex",
+            AttributeValue::I32(i32::try_from(cell).unwrap_or(i32::MAX)),
+        );
+        put(
+            "resolution",
+            AttributeValue::I32(i32::try_from(n).unwrap_or(i32::MAX)),
+        );
+        let v3 = |p: glam::Vec3| AttributeValue::FloatVec3((p.x, p.y, p.z));
+        put("cellMin", v3(bounds.min));
+        put("cellMax", v3(bounds.max));
+        put("side", AttributeValue::Text(Text::from(side.as_str())));
+        put(
+            "tangentAxis",
+            AttributeValue::Text(Text::from(names[info.tangent])),
+        );
+        put("sMin", AttributeValue::F64(info.s_min));
+        put("sMax", AttributeValue::F64(info.s_max));
+        let mut ch: [Vec<f32>; 6] = Default::default();
+        for j in 0..n {
+            for i in 0..n {
+                let [near, far] = charts.umbrae(c, j, i);
+                for (k, v) in [
+                    near.slope, near.guard, near.base, far.slope, far.guard, far.base,
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    ch[k].push(v);
+                }
+            }
+        }
+        let [ns, ng, nb, fs, fg, fb] = ch;
+        let list: Vec<AnyChannel<FlatSamples>> = [
+            ("near_slope", ns),
+            ("near_guard", ng),
+            ("near_base", nb),
+            ("far_slope", fs),
+            ("far_guard", fg),
+            ("far_base", fb),
+        ]
+        .into_iter()
+        .map(|(name, s)| AnyChannel::new(name, FlatSamples::F32(s)))
+        .collect();
+        let mut la = LayerAttributes::named(format!("chart_{side}").as_str());
+        la.software_name = Some(Text::from("umbrasweep"));
+        la.other = attrs;
+        layers.push(Layer::new(
+            Vec2(n, n),
+            la,
+            Encoding::SMALL_LOSSLESS,
+            AnyChannels::sort(list.into()),
+        ));
+    }
+    let image = Image::from_layers(
+        ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(n, n))),
+        layers,
+    );
+    let mut out = Cursor::new(Vec::new());
+    image
+        .write()
+        .non_parallel()
+        .to_buffered(&mut out)
+        .map_err(|e| format!("cannot encode OpenEXR: {e}"))?;
+    Ok(out.into_inner())
+}

@@ -44,6 +44,27 @@ fn ensure_dir(dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create: {e}", dir.display()))
 }
 
+/// Writes ray space factorization's charts of one cell as `cell<NNNN>_rsf.exr` into
+/// `opts.exr` (nothing without it; layout in [`exr_dump::encode_charts`]), atomically.
+///
+/// # Errors
+/// I/O or encoding errors, naming the file.
+pub fn dump_charts(
+    opts: &DumpOptions,
+    cell: usize,
+    bounds: &crate::geom::Aabb,
+    charts: &crate::rsf::RayCharts,
+) -> Result<(), String> {
+    let Some(dir) = &opts.exr else {
+        return Ok(());
+    };
+    ensure_dir(dir)?;
+    let path = dir.join(format!("cell{cell:04}_rsf.exr"));
+    let bytes = exr_dump::encode_charts(cell, bounds, charts)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    crate::util::write_atomic(&path, &bytes).map_err(|e| e.to_string())
+}
+
 /// Writes the dumps of one plane of one cell: `<stem>.exr` into `opts.exr`, and
 /// `<stem>_depth.png`, `<stem>_mask.png`, `<stem>_hdm.png` and `legend.png` into `opts.png`
 /// (see [`file_stem`]; folders are created when missing). Every file is written atomically

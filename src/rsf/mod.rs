@@ -184,6 +184,21 @@ impl Frame {
     }
 }
 
+/// What one chart covers ([`RayCharts::chart_info`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChartInfo {
+    /// The horizontal axis of the footprint side's outward normal.
+    pub axis: usize,
+    /// True for the side at the footprint's maximum along `axis`.
+    pub positive: bool,
+    /// The other horizontal axis, along which `s` runs.
+    pub tangent: usize,
+    /// The crossing of the side by row 0's lower edge.
+    pub s_min: f64,
+    /// The crossing by the last row's upper edge.
+    pub s_max: f64,
+}
+
 /// What inserting polygons did, for the accounting.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RsfWork {
@@ -256,6 +271,20 @@ impl RayCharts {
     /// Pixels per side.
     pub fn resolution(&self) -> usize {
         self.frames[0].res
+    }
+
+    /// What chart `chart` (0..4) covers: the footprint side it leaves (`axis`, `positive`),
+    /// the axis its crossings `s` run along, and their range (rows); slopes `m` run from −1 to
+    /// 1 over the columns.
+    pub fn chart_info(&self, chart: usize) -> ChartInfo {
+        let f = &self.frames[chart];
+        ChartInfo {
+            axis: f.a,
+            positive: f.sign > 0.0,
+            tangent: f.b,
+            s_min: f.s0,
+            s_max: f.s0 + f.ds * f.res as f64,
+        }
     }
 
     /// Inserts a convex occluder as a 2.5D occluder: a polygon (points in order, `solid`
