@@ -134,8 +134,16 @@ pub fn encode(
             ));
         }
     }
+    write_layers((w, h), layers)
+}
+
+/// The bytes of a multi-part OpenEXR file of `layers` over an image of `size`.
+fn write_layers(
+    size: (usize, usize),
+    layers: Vec<Layer<AnyChannels<FlatSamples>>>,
+) -> std::result::Result<Vec<u8>, String> {
     let image = Image::from_layers(
-        ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(w, h))),
+        ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(size.0, size.1))),
         layers,
     );
     let mut out = Cursor::new(Vec::new());
@@ -230,15 +238,5 @@ pub fn encode_charts(
             AnyChannels::sort(list.into()),
         ));
     }
-    let image = Image::from_layers(
-        ImageAttributes::new(IntegerBounds::from_dimensions(Vec2(n, n))),
-        layers,
-    );
-    let mut out = Cursor::new(Vec::new());
-    image
-        .write()
-        .non_parallel()
-        .to_buffered(&mut out)
-        .map_err(|e| format!("cannot encode OpenEXR: {e}"))?;
-    Ok(out.into_inner())
+    write_layers((n, n), layers)
 }
