@@ -39,13 +39,14 @@ fn main() {
                 if normal.y.abs() <= 0.2 {
                     upright += 1;
                 }
-                if charts.insert(occ.part_points(i), false) > 0 {
+                if charts.insert(occ.part_points(i), None) > 0 {
                     inserted += 1;
                 }
             }
             PartKind::Solid { .. } => {
                 solid += 1;
-                if charts.insert(occ.part_points(i), true) > 0 {
+                let pts = occ.part_points(i);
+                if charts.insert(pts, Some(&umbrasweep::rsf::hull_edges(pts))) > 0 {
                     inserted += 1;
                 }
             }

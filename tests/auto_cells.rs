@@ -3,6 +3,8 @@
 //! without a false cull, and the answers to bad options and to a scene without a floor (exit
 //! code 2, a message naming the option or the way out).
 
+mod common;
+
 use glam::DVec3;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -32,19 +34,10 @@ fn inside(scene: &Scene, o: usize, p: DVec3) -> bool {
     let d = DVec3::new(0.0123, 1.0, 0.0071);
     let mut winding = 0;
     for t in scene.objects[o].triangles.clone() {
-        let [a, b, c] = scene.triangle(t as usize).map(|v| v.as_dvec3());
-        let (e1, e2) = (b - a, c - a);
-        let pv = d.cross(e2);
-        let det = e1.dot(pv);
-        if det == 0.0 {
-            continue;
-        }
-        let tv = p - a;
-        let u = tv.dot(pv) / det;
-        let qv = tv.cross(e1);
-        let v = d.dot(qv) / det;
-        let tt = e2.dot(qv) / det;
-        if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && tt > 0.0 {
+        let tri = scene.triangle(t as usize).map(|v| v.as_dvec3());
+        if let Some((tt, det)) = common::ray_triangle(p, d, tri)
+            && tt > 0.0
+        {
             winding += if det < 0.0 { 1 } else { -1 };
         }
     }

@@ -11,7 +11,7 @@ use glam::{DVec3, Vec3};
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{self, BakeSettings};
 use umbrasweep::geom::{Aabb, DAabb};
-use umbrasweep::rsf::RayCharts;
+use umbrasweep::rsf::{RayCharts, hull_edges};
 use umbrasweep::scene::Scene;
 use umbrasweep::settings::SweepChoice;
 
@@ -101,7 +101,9 @@ fn wall(x0: f64, z0: f64, x1: f64, z1: f64, bottom: f64, top: f64) -> Occ {
 fn charts(cell: &DAabb, occ: &[Occ], res: u32) -> RayCharts {
     let mut c = RayCharts::new(cell, 1, res);
     for o in occ {
-        c.insert(&o.points(), matches!(o, Occ::Solid(_)));
+        let pts = o.points();
+        let edges = matches!(o, Occ::Solid(_)).then(|| hull_edges(&pts));
+        c.insert(&pts, edges.as_deref());
     }
     c
 }

@@ -41,6 +41,9 @@ pub struct Prepared<'a> {
     pub sampling_reason: String,
     /// The sampler's per-scene data (with `sampling`).
     pub(super) sampler: Option<super::sampling::SamplerData>,
+    /// With ray space factorization: per occluder part, a solid's hull edges (empty for
+    /// polygons and without it).
+    pub(super) rsf_edges: Vec<Vec<(usize, usize)>>,
     /// Per object, its pieces in `piece_boxes` (empty for small objects): boxes around parts of
     /// its triangles, tested when the object's own box is not hidden.
     pub(super) pieces: Vec<std::ops::Range<u32>>,
@@ -275,8 +278,14 @@ impl<'a> Prepared<'a> {
             .filter(|o| !o.bounds.is_empty())
             .fold(Aabb::EMPTY, |b, o| b.union(&o.bounds))
             .to_f64();
+        let rsf_edges = if rsf {
+            super::rsf::solid_edges(&occluders)
+        } else {
+            Vec::new()
+        };
         Ok(Prepared {
             cullers: pipeline::cullers(settings, rsf, sweep, sampling),
+            rsf_edges,
             rsf,
             rsf_reason,
             sampling,

@@ -100,7 +100,15 @@ fn traverse(prepared: &Prepared, cell: &Aabb, state: &mut CullState, drain: bool
                     break;
                 }
                 pending.pop();
-                insert_part(occ, p as usize, &cell64, &corners, &mut buf, &mut charts);
+                insert_part(
+                    occ,
+                    &prepared.rsf_edges,
+                    p as usize,
+                    &cell64,
+                    &corners,
+                    &mut buf,
+                    &mut charts,
+                );
             }
             let o = o as usize;
             if !known.is_some_and(|k| k[o]) && hidden(prepared, &charts, o) {
@@ -118,7 +126,15 @@ fn traverse(prepared: &Prepared, cell: &Aabb, state: &mut CullState, drain: bool
         }
         if drain {
             while let Some(Reverse((_, p))) = pending.pop() {
-                insert_part(occ, p as usize, &cell64, &corners, &mut buf, &mut charts);
+                insert_part(
+                    occ,
+                    &prepared.rsf_edges,
+                    p as usize,
+                    &cell64,
+                    &corners,
+                    &mut buf,
+                    &mut charts,
+                );
             }
         }
         charts
@@ -143,6 +159,7 @@ fn hidden(prepared: &Prepared, charts: &RayCharts, o: usize) -> bool {
 /// outside of.
 fn insert_part(
     occ: &Occluders,
+    solid_edges: &[Vec<(usize, usize)>],
     p: usize,
     cell: &DAabb,
     corners: &[glam::DVec3; 8],
@@ -153,17 +170,17 @@ fn insert_part(
     match part.kind {
         PartKind::Polygon { normal } => {
             if part.deviation == 0.0 {
-                charts.insert(occ.part_points(p), false);
+                charts.insert(occ.part_points(p), None);
             } else {
                 buf.clear();
                 buf.extend_from_slice(occ.part_points(p));
                 if shrink_bent_polygon(buf, normal, part.deviation, part.inradius, corners) {
-                    charts.insert(buf, false);
+                    charts.insert(buf, None);
                 }
             }
         }
         PartKind::Solid { hull } if !hull.overlaps(cell) => {
-            charts.insert(occ.part_points(p), true);
+            charts.insert(occ.part_points(p), Some(&solid_edges[p]));
         }
         PartKind::Solid { .. } => {}
     }
@@ -191,6 +208,19 @@ impl Ord for OrdF64 {
 fn box_distance(a: &DAabb, b: &DAabb) -> f64 {
     let d = (a.min - b.max).max(b.min - a.max).max(glam::DVec3::ZERO);
     d.length()
+}
+
+/// Per occluder part, a solid's hull edges ([`crate::rsf::hull_edges`]; empty for
+/// polygons), computed once per scene.
+pub(super) fn solid_edges(occ: &Occluders) -> Vec<Vec<(usize, usize)>> {
+    occ.parts
+        .iter()
+        .enumerate()
+        .map(|(k, part)| match part.kind {
+            PartKind::Solid { .. } => crate::rsf::hull_edges(occ.part_points(k)),
+            PartKind::Polygon { .. } => Vec::new(),
+        })
+        .collect()
 }
 
 /// The automatic rule: ray space factorization when at least [`RSF_AUTO_UPRIGHT_SHARE`] of the

@@ -287,23 +287,19 @@ impl RayCharts {
         }
     }
 
-    /// Inserts a convex occluder as a 2.5D occluder: a polygon (points in order, `solid`
-    /// false) or a convex solid (its vertices, `solid` true). It is written into every pixel
+    /// Inserts a convex occluder as a 2.5D occluder: a polygon (points in order, `hull_edges`
+    /// `None`) or a convex solid (its vertices, and its edges from [`hull_edges`], computed
+    /// once per solid). It is written into every pixel
     /// whose lines all cut it from a point at or below the cell's bottom up to a higher point,
     /// wholly beyond the face; occluders the vertical planes do not cut that way (roofs,
     /// bridges) write nothing. Returns the pixels written.
-    pub fn insert(&mut self, pts: &[DVec3], solid: bool) -> usize {
+    pub fn insert(&mut self, pts: &[DVec3], hull_edges: Option<&[(usize, usize)]>) -> usize {
         if pts.len() < 3 {
             return 0;
         }
         let mut written = 0;
         let mut segs: Vec<(DVec3, DVec3)> = Vec::new();
-        // A convex solid's cut by a plane has its vertices on the solid's edges.
-        let pairs: Vec<(usize, usize)> = if solid {
-            hull_edges(pts)
-        } else {
-            (0..pts.len()).map(|k| (k, (k + 1) % pts.len())).collect()
-        };
+        let mut local: Vec<DVec3> = Vec::with_capacity(pts.len());
         for c in 0..self.frames.len() {
             let fr = self.frames[c];
             let lo_h = pts.iter().map(|p| p[fr.up]).fold(f64::INFINITY, f64::min);
@@ -315,9 +311,17 @@ impl RayCharts {
                 continue;
             }
             // Local (X, Z, height) stored as (x, y, z).
-            let local: Vec<DVec3> = pts.iter().map(|&p| fr.local(p)).collect();
+            local.clear();
+            local.extend(pts.iter().map(|&p| fr.local(p)));
             segs.clear();
-            segs.extend(pairs.iter().map(|&(a, b)| (local[a], local[b])));
+            match hull_edges {
+                // A convex solid's cut by a plane has its vertices on the solid's edges.
+                Some(e) => segs.extend(e.iter().map(|&(a, b)| (local[a], local[b]))),
+                None => {
+                    let n = local.len();
+                    segs.extend((0..n).map(|k| (local[k], local[(k + 1) % n])));
+                }
+            }
             written += insert_chart(&fr, &segs, &mut self.umbrae[c]);
         }
         if written > 0 {
@@ -756,7 +760,7 @@ mod tests {
     #[test]
     fn a_wide_tall_wall_hides_a_box_behind_it_and_not_one_beside_the_cell() {
         let mut r = RayCharts::new(&cell(), 1, 64);
-        assert!(r.insert(&wall(6.0, -100.0, 100.0, 10.0), false) > 0);
+        assert!(r.insert(&wall(6.0, -100.0, 100.0, 10.0), None) > 0);
         assert!(r.box_hidden(&boxed([20.0, 0.0, -1.0], [21.0, 5.0, 1.0])));
         // Taller than what the wall hides from the cell's top at the back.
         assert!(!r.box_hidden(&boxed([20.0, 0.0, -1.0], [21.0, 40.0, 1.0])));
@@ -769,7 +773,7 @@ mod tests {
     #[test]
     fn a_wall_lower_than_the_eye_hides_only_below_the_line_from_the_front_top_edge() {
         let mut r = RayCharts::new(&cell(), 1, 128);
-        r.insert(&wall(6.0, -200.0, 200.0, 1.0), false);
+        r.insert(&wall(6.0, -200.0, 200.0, 1.0), None);
         // From (0 beyond the face, 2) over (4, 1): height 2 − X/4... at X = 8 (x = 10) the
         // line is at 0; a box up to 0.5 at x = 10 is seen over the wall.
         assert!(!r.box_hidden(&boxed([10.0, 0.0, -1.0], [11.0, 0.5, 1.0])));
@@ -797,6 +801,6 @@ mod tests {
                 p.y = 0.5;
             }
         }
-        assert_eq!(r.insert(&w, false), 0, "a bridge above the cell's bottom");
+        assert_eq!(r.insert(&w, None), 0, "a bridge above the cell's bottom");
     }
 }

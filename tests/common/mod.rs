@@ -7,7 +7,7 @@
     reason = "each test crate uses its own subset of these helpers, so what is dead differs per crate"
 )]
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{BakeResult, BakeSettings, PlaneObserver, bake_observed};
 use umbrasweep::geom::{Aabb, box_triangles};
@@ -71,6 +71,23 @@ pub fn quad(name: &str, a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Obj {
     (name.into(), vec![[a, b, c], [a, c, d]], true)
 }
 
+/// Möller–Trumbore: where the ray from `o` along `d` meets triangle `[a, b, c]`, as (the
+/// ray parameter, the determinant: negative when the ray enters through the back of a
+/// counter-clockwise triangle), or `None` (parallel, or outside the triangle).
+pub fn ray_triangle(o: DVec3, d: DVec3, [a, b, c]: [DVec3; 3]) -> Option<(f64, f64)> {
+    let (e1, e2) = (b - a, c - a);
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-300 {
+        return None;
+    }
+    let s = o - a;
+    let u = s.dot(p) / det;
+    let q = s.cross(e1);
+    let v = d.dot(q) / det;
+    (u >= 0.0 && v >= 0.0 && u + v <= 1.0).then(|| (e2.dot(q) / det, det))
+}
+
 /// The name of the first object hit by the ray from `origin` along `dir` (brute force over
 /// every triangle, Möller–Trumbore in f64 on the f32 vertices).
 pub fn first_hit<'a>(
@@ -82,19 +99,10 @@ pub fn first_hit<'a>(
     let mut best = (f64::INFINITY, None);
     for (name, tris) in objects {
         for t in tris {
-            let [a, b, c] = t.map(|p| p.as_dvec3());
-            let (e1, e2) = (b - a, c - a);
-            let p = d.cross(e2);
-            let det = e1.dot(p);
-            if det.abs() < 1e-300 {
-                continue;
-            }
-            let s = o - a;
-            let u = s.dot(p) / det;
-            let q = s.cross(e1);
-            let v = d.dot(q) / det;
-            let dist = e2.dot(q) / det;
-            if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && dist > 0.0 && dist < best.0 {
+            if let Some((dist, _)) = ray_triangle(o, d, t.map(|p| p.as_dvec3()))
+                && dist > 0.0
+                && dist < best.0
+            {
                 best = (dist, Some(name));
             }
         }
