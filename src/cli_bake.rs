@@ -31,6 +31,24 @@ pub enum SpacingChoice {
     Kernel,
 }
 
+/// How alpha-tested cards occlude.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum CardChoice {
+    /// The parts of each card that are opaque at every trusted mip level (conservative).
+    Coverage,
+    /// Cards never occlude.
+    Ignore,
+}
+
+/// What import does with an alpha-tested material's missing or undecodable image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MissingChoice {
+    /// Refuse the scene, naming the file and the image.
+    Error,
+    /// Keep those cards as non-occluders, with a warning.
+    Transparent,
+}
+
 /// The scene's up axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum UpChoice {
@@ -111,10 +129,32 @@ pub struct BakeArgs {
     /// every object stays an occludee.
     #[arg(long)]
     pub occluders: Option<String>,
-    /// Treat alpha-tested and blended triangles (glTF MASK/BLEND, MTL d < 1 or map_d) as opaque
-    /// occluders. WARNING: this may cull visible objects, seen through transparent texels.
+    /// UNSAFE: treat alpha-tested and blended triangles (glTF MASK/BLEND, MTL d < 1 or map_d)
+    /// as wholly opaque occluders. This may cull visible objects, seen through transparent
+    /// texels; the default `--alpha-cards coverage` uses only the surely opaque texels.
     #[arg(long)]
     pub alpha_occluders: bool,
+    /// Alpha-tested cards (glTF MASK) as occluders: `coverage` uses the parts of each card
+    /// that are opaque at every mip level a renderer may sample (bilinear filtering, box-filtered
+    /// mips), conservatively; `ignore` makes cards never occlude. The summary prints the share
+    /// of card area that is surely opaque.
+    #[arg(long, value_enum, default_value_t = CardChoice::Coverage)]
+    pub alpha_cards: CardChoice,
+    /// Mip levels the card coverage trusts: 0 (default) = all of them, down to 1×1, which is
+    /// safe for any renderer but leaves little opaque on sparse leaf textures; N = levels
+    /// 0..N only. A limit assumes the engine never samples foliage from farther levels
+    /// (alpha-to-coverage, coverage-preserving mips or a LOD clamp); with plain mipmapping it
+    /// may cull objects seen through far cards.
+    #[arg(long, default_value_t = 0)]
+    pub alpha_mips: u32,
+    /// Most polygons per card: rectangles of surely opaque texels, largest first.
+    #[arg(long, default_value_t = BakeSettings::default_settings().alpha_card_polygons)]
+    pub alpha_card_polygons: u32,
+    /// What to do when an alpha-tested material's image is missing or cannot be decoded:
+    /// `error` refuses the scene (naming the image), `transparent` keeps its cards as
+    /// non-occluders.
+    #[arg(long, value_enum, default_value_t = MissingChoice::Error)]
+    pub alpha_missing: MissingChoice,
     /// Disable the improved occludee Projection (Durand §4).
     #[arg(long)]
     pub no_improved_projection: bool,
@@ -422,6 +462,16 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             PlacementChoice::Quantile => umbrasweep::project::planes::Placement::Quantile,
         },
         alpha_occluders: a.alpha_occluders,
+        alpha_cards: match a.alpha_cards {
+            CardChoice::Coverage => umbrasweep::settings::AlphaCards::Coverage,
+            CardChoice::Ignore => umbrasweep::settings::AlphaCards::Ignore,
+        },
+        alpha_mips: a.alpha_mips,
+        alpha_card_polygons: a.alpha_card_polygons,
+        alpha_missing: match a.alpha_missing {
+            MissingChoice::Error => umbrasweep::settings::AlphaMissing::Error,
+            MissingChoice::Transparent => umbrasweep::settings::AlphaMissing::Transparent,
+        },
         occluders: a.occluders.clone(),
         improved_projection: !a.no_improved_projection,
         sweep: if a.sweep {
@@ -467,7 +517,12 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     settings.check().map_err(anyhow::Error::msg)?;
     let binary = output_is_binary(&a.output)?;
     let t = std::time::Instant::now();
-    let scene = scene::load(&a.scene)?;
+    let scene = scene::load_with(
+        &a.scene,
+        &scene::LoadOptions {
+            alpha_missing: settings.alpha_missing,
+        },
+    )?;
     let load_s = t.elapsed().as_secs_f64();
     let cells = read_cells(a, &scene)?;
     let scene = match a.split_objects {
@@ -776,6 +831,20 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             "triangles   {} ({} occluders, {} degenerate skipped)",
             s.triangles, s.occluder_triangles, s.degenerate_triangles
         );
+        if let Some(c) = &s.alpha_cards {
+            eprintln!(
+                "alpha cards {} card triangles gave {} surely opaque polygons covering {:.1} % of \
+                 their area ({})",
+                c.triangles,
+                c.polygons,
+                100.0 * c.opaque_share,
+                if settings.alpha_mips == 0 {
+                    "all mip levels trusted".to_string()
+                } else {
+                    format!("mip levels 0..{} trusted", settings.alpha_mips)
+                }
+            );
+        }
         eprintln!(
             "culled      {:.1} % of objects, {:.1} % of triangles (mean over cells)",
             s.objects_culled_percent, s.triangles_culled_percent

@@ -31,8 +31,13 @@ pub struct ReportArgs {
 /// Unreadable or mismatching scene and PVS, a cell index out of range, invalid recorded
 /// settings, or I/O errors writing the page (nothing is written then).
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    let scene = umbrasweep::scene::load(&args.scene)?;
     let doc = umbrasweep::pvs::json::read_any(&args.pvs).map_err(anyhow::Error::msg)?;
+    let scene = umbrasweep::scene::load_with(
+        &args.scene,
+        &umbrasweep::scene::LoadOptions {
+            alpha_missing: doc.settings.bake.alpha_missing,
+        },
+    )?;
     let scene = umbrasweep::scene::split::as_baked(scene, doc.split.as_ref()).map_err(|e| {
         anyhow::anyhow!(
             "{} against {}: {e}",

@@ -54,7 +54,12 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
     }
     // The PVS first: reading it is cheap, loading a big scene is not.
     let doc = umbrasweep::pvs::json::read_any(&args.pvs).map_err(anyhow::Error::msg)?;
-    let scene = umbrasweep::scene::load(&args.scene)?;
+    let scene = umbrasweep::scene::load_with(
+        &args.scene,
+        &umbrasweep::scene::LoadOptions {
+            alpha_missing: doc.settings.bake.alpha_missing,
+        },
+    )?;
     let scene = umbrasweep::scene::split::as_baked(scene, doc.split.as_ref())
         .with_context(|| format!("{} against {}", args.pvs.display(), args.scene.display()))?;
     check_input(&scene, &doc, args.rays).with_context(|| {

@@ -104,6 +104,46 @@ pub struct BakeSettings {
     /// The scene's up axis: ray space factorization works in vertical planes. Default y
     /// (glTF's).
     pub up: UpAxis,
+    /// Alpha-tested cards (glTF `MASK`) as occluders: [`AlphaCards::Coverage`] (the default)
+    /// uses the parts of each card that are opaque at every trusted mip level
+    /// (`scene::alpha`); [`AlphaCards::Ignore`]: cards never occlude. Documents from before
+    /// read as `ignore`.
+    #[serde(default = "cards_of_old_documents")]
+    pub alpha_cards: AlphaCards,
+    /// Mip levels the card coverage trusts: 0 (the default) means all of them, down to 1×1;
+    /// N trusts levels `0..N` only, which is right for engines that never sample far levels
+    /// of foliage (alpha-to-coverage, coverage-preserving mips, a LOD clamp).
+    pub alpha_mips: u32,
+    /// Most polygons per card (rectangles of surely opaque texels, largest first). Default 4.
+    pub alpha_card_polygons: u32,
+    /// What scene import does with an alpha-tested material's missing image.
+    pub alpha_missing: AlphaMissing,
+}
+
+fn cards_of_old_documents() -> AlphaCards {
+    AlphaCards::Ignore
+}
+
+/// How alpha-tested cards occlude.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AlphaCards {
+    /// The surely opaque parts of each card occlude (conservative).
+    #[default]
+    Coverage,
+    /// Cards never occlude (the behaviour before card coverage existed).
+    Ignore,
+}
+
+/// What scene import does with an alpha-tested (`MASK`) material whose image cannot be read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlphaMissing {
+    /// Refuse the scene, naming the file and the image (the default).
+    #[default]
+    Error,
+    /// Keep its cards as non-occluders (they never hide anything), with a warning.
+    Transparent,
 }
 
 fn rsf_of_old_documents() -> SweepChoice {
@@ -356,6 +396,10 @@ impl BakeSettings {
             rsf: SweepChoice::Auto,
             rsf_resolution: 256,
             up: UpAxis::Y,
+            alpha_cards: AlphaCards::Coverage,
+            alpha_mips: 0,
+            alpha_card_polygons: 4,
+            alpha_missing: AlphaMissing::Error,
         }
     }
 
@@ -485,6 +529,20 @@ impl BakeSettings {
                 "rsf-resolution",
                 self.rsf_resolution,
                 "must be between 8 and 4096 pixels per side (e.g. 512)",
+            ));
+        }
+        if self.alpha_mips > 32 {
+            return Err(SettingsError::new(
+                "alpha-mips",
+                self.alpha_mips,
+                "must be 0 (all levels) or a number of mip levels up to 32 (e.g. 4)",
+            ));
+        }
+        if !(1..=64).contains(&self.alpha_card_polygons) {
+            return Err(SettingsError::new(
+                "alpha-card-polygons",
+                self.alpha_card_polygons,
+                "must be between 1 and 64 polygons per card (e.g. 4)",
             ));
         }
         if self.slice_planes > 16 {

@@ -141,6 +141,10 @@ pub struct BakeResult {
     pub adapter: Option<String>,
     /// Triangles used as occluders (opaque, selected, not degenerate).
     pub occluder_triangles: usize,
+    /// What the alpha-tested cards gave as occluders (`None` without cards or with their
+    /// coverage off).
+    #[serde(default)]
+    pub cards: Option<crate::project::occluders::CardStats>,
     /// Zero-area triangles skipped.
     pub degenerate_triangles: usize,
     /// Wall time of the whole bake (preparation included), in seconds.
@@ -311,6 +315,7 @@ pub fn bake_cells(
         backend: backend.name().to_string(),
         adapter: backend.adapter(),
         occluder_triangles: prepared.occluders.stats.triangles,
+        cards: (prepared.occluders.cards.triangles > 0).then_some(prepared.occluders.cards),
         degenerate_triangles: scene.degenerate_triangles(),
         seconds: start.elapsed().as_secs_f64(),
         sweep: prepared.sweep,
@@ -520,6 +525,15 @@ pub fn document(
             median_ms_per_cell: median(&ms),
             total_seconds: result.seconds,
             cullers: culler_summary(result),
+            alpha_cards: result.cards.map(|c| crate::pvs::PvsCardSummary {
+                triangles: c.triangles,
+                polygons: c.polygons,
+                opaque_share: if c.card_area > 0.0 {
+                    c.opaque_area / c.card_area
+                } else {
+                    0.0
+                },
+            }),
         }),
         split: None,
     }

@@ -211,7 +211,15 @@ impl<'a> Prepared<'a> {
                     .collect()
             }
         };
-        let occluders = occluders::prepare(scene, &is_occluder, settings.alpha_occluders);
+        let cards = (settings.alpha_cards == crate::settings::AlphaCards::Coverage).then(|| {
+            crate::scene::alpha::CardOptions {
+                mips: (settings.alpha_mips > 0).then_some(settings.alpha_mips),
+                max_polygons: settings.alpha_card_polygons as usize,
+                min_share: 0.01,
+            }
+        });
+        let occluders =
+            occluders::prepare_with(scene, &is_occluder, settings.alpha_occluders, cards);
         let sliceable = Sliceable::new(scene, &is_occluder, settings.alpha_occluders);
         let boxes: Vec<ObjBox> = scene
             .objects

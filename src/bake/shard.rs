@@ -284,6 +284,7 @@ mod tests {
             backend: "cpu".into(),
             adapter: None,
             occluder_triangles: 3,
+            cards: None,
             degenerate_triangles: 0,
             seconds: 0.5,
             sweep: true,

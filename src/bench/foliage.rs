@@ -30,6 +30,14 @@
 //!   `gen forest --preset coarse --tree-model` does (the coarse options, the spacing from the
 //!   model's footprint, each tree split into 8 objects with `--model-split 8`) but with
 //!   `--foliage-model-trees` trees, `--sweep` and `--no-sweep`.
+//! * `palm`, `birch`, `beech`: forests of the textured trees of `foliage-textured/`
+//!   ([`TEXTURED`]: palm_tree_5, the crooked birch of the low-poly pack, the European beech),
+//!   placed like the jacaranda (scaled to a realistic height, each split into 8 objects) and
+//!   baked with the sweep four ways: alpha-tested cards ignored (`--alpha-cards ignore`,
+//!   the behaviour before issue 21), their conservative coverage over all mip levels (the
+//!   default), trusting mip levels 0..4 only (`--alpha-mips 4`), and the unsafe
+//!   `--alpha-occluders` (whole cards opaque). Validation traces cards as a renderer at full
+//!   resolution draws them (bilinear alpha at mip 0), so the last row's false culls are real.
 //!
 //! Every cell of a forest is sampled once (the same rays as the scene bench: seed, cell
 //! number) before its first bake, and every row baking it is checked against that sample.
@@ -56,14 +64,43 @@ use std::fmt::Write as _;
 use std::time::Instant;
 
 /// The studies, in the order they run and print.
-pub const STUDIES: [&str; 6] = [
+pub const STUDIES: [&str; 9] = [
     "coarse",
     "ellipsoid",
     "fine",
     "params",
     "paper",
     "jacaranda",
+    "palm",
+    "birch",
+    "beech",
 ];
+
+/// The textured-tree studies: (study, model in the shared scene folder, tree height in scene
+/// units, trees).
+pub const TEXTURED: [(&str, &str, f32, u32); 3] = [
+    (
+        "palm",
+        "foliage-textured/palm_tree_5_nextspring/scene.gltf",
+        10.0,
+        100,
+    ),
+    (
+        "birch",
+        "foliage-textured/low_poly_realistic_trees_pack_v124entkl/scene.gltf",
+        12.0,
+        200,
+    ),
+    (
+        "beech",
+        "foliage-textured/euro_beech_fadiyasotodeh_partial/scene.gltf",
+        15.0,
+        200,
+    ),
+];
+
+/// Mip levels the `--alpha-mips` row of the textured studies trusts.
+pub const TEXTURED_MIPS: u32 = 4;
 /// Cells per forest unless `--cells`.
 pub const DEFAULT_CELLS: usize = 10;
 /// Validation rays per cell unless `--rays` (fewer than the scene bench's 1,000,000: the
@@ -96,10 +133,15 @@ enum Forest {
     Fine,
     Paper,
     Jacaranda,
+    /// A forest of [`TEXTURED`]`[i]`.
+    Textured(usize),
 }
 
 impl Forest {
     fn of(study: &str) -> Forest {
+        if let Some(i) = TEXTURED.iter().position(|t| t.0 == study) {
+            return Forest::Textured(i);
+        }
         match study {
             "ellipsoid" => Forest::CoarseEllipsoid,
             "fine" => Forest::Fine,
@@ -116,6 +158,9 @@ impl Forest {
             Forest::Fine => "fine_forest",
             Forest::Paper => "paper_forest",
             Forest::Jacaranda => "jacaranda_forest",
+            Forest::Textured(0) => "palm_forest",
+            Forest::Textured(1) => "birch_forest",
+            Forest::Textured(_) => "beech_forest",
         }
     }
 }
@@ -196,6 +241,33 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
         }
         "ellipsoid" | "jacaranda" => {
             vec![variant("--sweep", on()), variant("--no-sweep", off())]
+        }
+        "palm" | "birch" | "beech" => {
+            use crate::settings::AlphaCards;
+            vec![
+                variant(
+                    "--sweep --alpha-cards ignore",
+                    BakeSettings {
+                        alpha_cards: AlphaCards::Ignore,
+                        ..on()
+                    },
+                ),
+                variant("--sweep", on()),
+                variant(
+                    format!("--sweep --alpha-mips {TEXTURED_MIPS}"),
+                    BakeSettings {
+                        alpha_mips: TEXTURED_MIPS,
+                        ..on()
+                    },
+                ),
+                variant(
+                    "--sweep --alpha-occluders",
+                    BakeSettings {
+                        alpha_occluders: true,
+                        ..on()
+                    },
+                ),
+            ]
         }
         "fine" => {
             let mut v = vec![variant("--sweep", on())];
@@ -508,6 +580,42 @@ fn build(
                  on the path",
                 o.trees,
                 model.triangles.len(),
+                o.scale_jitter,
+                o.model_split,
+                o.model_split
+            );
+            (forest_of_models(&o, &model)?, about)
+        }
+        Forest::Textured(i) => {
+            let (study, file, height, trees) = TEXTURED[i];
+            let shared = shared_folder(args)?;
+            let path = match shared_file(shared.as_deref(), study, file) {
+                Ok(p) => p,
+                Err(why) => return Ok(Err(why)),
+            };
+            let model = TreeModel::from_scene(&crate::scene::load(&path).map_err(|source| {
+                BenchError::Scene {
+                    path: path.clone(),
+                    source,
+                }
+            })?);
+            let o = ForestOptions {
+                seed,
+                trees,
+                area_per_tree: None,
+                max_cells: cells,
+                model_split: JACARANDA_SPLIT,
+                model_height: Some(height),
+                ..ForestOptions::coarse()
+            };
+            let about = format!(
+                "{} instances of `{file}` ({} triangles each, {} alpha-tested; {height} tall, \
+                 scale 1 ± {}, each split into {} objects around its trunk), as `gen forest \
+                 --preset coarse --tree-model --model-height {height} --model-split {}` places \
+                 them; cells 1×1×1 on the path",
+                o.trees,
+                model.triangles.len(),
+                model.cards.as_ref().map_or(0, |c| c.cards.len()),
                 o.scale_jitter,
                 o.model_split,
                 o.model_split

@@ -208,6 +208,7 @@ pub fn boxfield(o: &BoxfieldOptions) -> Result<Generated, GenError> {
             "boxfield of {} boxes of {}–{} in a cube of side {}",
             o.boxes, o.box_size[0], o.box_size[1], o.extent
         ),
+        alpha: None,
     })
 }
 

@@ -180,6 +180,7 @@ pub fn city(o: &CityOptions) -> Result<Generated, GenError> {
             "city of {}×{} blocks of {}×{} buildings, streets {s} wide",
             o.blocks[0], o.blocks[1], bx, bz
         ),
+        alpha: None,
     })
 }
 

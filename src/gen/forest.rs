@@ -167,6 +167,8 @@ pub struct TreeModel {
     pub triangles: Vec<[u32; 3]>,
     /// Per triangle: false when it was not opaque in the model.
     pub opaque: Vec<bool>,
+    /// The model's alpha-tested cards (indexed by model triangle), when it has any.
+    pub cards: Option<crate::scene::alpha::AlphaCards>,
 }
 
 impl TreeModel {
@@ -192,6 +194,7 @@ impl TreeModel {
             vertices,
             triangles,
             opaque: scene.opaque.clone(),
+            cards: scene.alpha.clone(),
         }
     }
 
@@ -436,6 +439,7 @@ pub fn forest(o: &ForestOptions) -> Result<Generated, GenError> {
             o.leaf_size[0],
             o.leaf_size[1]
         ),
+        alpha: None,
     })
 }
 
@@ -565,7 +569,7 @@ fn tree(o: &ForestOptions, index: usize, at: Vec2) -> Vec<GenObject> {
 
 /// One sector of a model tree: the model vertices it uses, its faces (indices into those) and
 /// their opacity.
-type Sector = (Vec<u32>, Vec<[u32; 4]>, Vec<bool>);
+type Sector = (Vec<u32>, Vec<[u32; 4]>, Vec<bool>, Vec<u32>);
 
 /// Generates a forest of instances of `model`: `ground`, then one object `treeI` per tree —
 /// or `model_split` objects `treeI_partK`, angular sectors around the trunk — (random yaw, scale `1 ± scale_jitter` times `model_height / model height` or 1), keeping
@@ -626,7 +630,7 @@ pub fn forest_of_models(o: &ForestOptions, model: &TreeModel) -> Result<Generate
                 / 3.0;
             let angle = c.z.atan2(c.x).rem_euclid(TAU);
             let k = ((angle / TAU * split as f32) as usize).min(split - 1);
-            let (verts, faces, opaque) = &mut sectors[k];
+            let (verts, faces, opaque, cards) = &mut sectors[k];
             let f = tri.map(|i| {
                 let r = &mut remap[k][i as usize];
                 if *r == u32::MAX {
@@ -637,6 +641,9 @@ pub fn forest_of_models(o: &ForestOptions, model: &TreeModel) -> Result<Generate
             });
             faces.push([f[0], f[1], f[2], super::NO_VERTEX]);
             opaque.push(model.opaque[t]);
+            if let Some(c) = &model.cards {
+                cards.push(c.card_of[t]);
+            }
         }
     }
     let trees: Vec<GenObject> = positions
@@ -653,7 +660,7 @@ pub fn forest_of_models(o: &ForestOptions, model: &TreeModel) -> Result<Generate
             };
             let sectors = &sectors;
             (0..split).filter_map(move |k| {
-                let (verts, faces, opaque) = &sectors[k];
+                let (verts, faces, opaque, cards) = &sectors[k];
                 if faces.is_empty() {
                     return None;
                 }
@@ -669,6 +676,7 @@ pub fn forest_of_models(o: &ForestOptions, model: &TreeModel) -> Result<Generate
                 }
                 t.faces.extend_from_slice(faces);
                 t.opaque.extend_from_slice(opaque);
+                t.cards.extend_from_slice(cards);
                 Some(t)
             })
         })
@@ -682,6 +690,7 @@ pub fn forest_of_models(o: &ForestOptions, model: &TreeModel) -> Result<Generate
             o.trees,
             model.triangles.len()
         ),
+        alpha: model.cards.clone(),
     })
 }
 
@@ -759,6 +768,7 @@ mod tests {
             vertices: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
             opaque: vec![true, false],
+            cards: None,
         };
         let o = ForestOptions {
             trees: 5,
@@ -794,6 +804,7 @@ mod tests {
             vertices,
             triangles,
             opaque: vec![true, false, true, true],
+            cards: None,
         };
         let o = ForestOptions {
             trees: 3,

@@ -129,6 +129,9 @@ pub struct GenObject {
     pub faces: Vec<[u32; 4]>,
     /// Per face: false for a non-opaque (alpha-tested) face, written with a `d 0.5` material.
     pub opaque: Vec<bool>,
+    /// Per face (or empty: none): the index of its alpha-tested card in
+    /// [`Generated::alpha`]'s `cards`, or [`NO_CARD`](crate::scene::alpha::NO_CARD).
+    pub cards: Vec<u32>,
 }
 
 impl GenObject {
@@ -219,6 +222,10 @@ pub struct Generated {
     /// One line describing the scene, written as an OBJ comment (no file names, so output
     /// bytes do not depend on where they are written).
     pub comment: String,
+    /// The alpha-tested cards of a textured tree model (materials, textures and the model's
+    /// card triangles, which [`GenObject::cards`] index); `None` for untextured scenes. Kept
+    /// by [`Generated::to_scene`]; OBJ output drops them (the cards stay non-opaque).
+    pub alpha: Option<crate::scene::alpha::AlphaCards>,
 }
 
 impl Generated {
@@ -259,6 +266,24 @@ impl Generated {
             .collect();
         debug_assert_eq!(opaque.len(), scene.opaque.len());
         scene.opaque = opaque;
+        if let Some(template) = &self.alpha {
+            use crate::scene::alpha::NO_CARD;
+            let mut card_of = Vec::with_capacity(scene.triangles.len());
+            for o in &self.objects {
+                for (f, face) in o.faces.iter().enumerate() {
+                    let card = o.cards.get(f).copied().unwrap_or(NO_CARD);
+                    card_of.push(card);
+                    if face[3] != NO_VERTEX {
+                        card_of.push(NO_CARD);
+                    }
+                }
+            }
+            debug_assert_eq!(card_of.len(), scene.triangles.len());
+            scene.alpha = Some(crate::scene::alpha::AlphaCards {
+                card_of,
+                ..template.clone()
+            });
+        }
         scene
     }
 }

@@ -6,11 +6,16 @@
 //! - every other triangle joins adjacent coplanar triangles into convex polygons
 //!   ([`PartKind::Polygon`]; a lone triangle is a polygon of 3 points).
 //!
+//! - alpha-tested cards (glTF `MASK`) give the convex polygons of their surely opaque
+//!   texels ([`crate::scene::alpha`], flagged [`OccluderPart::card`]) unless the cards are
+//!   ignored or `--alpha-occluders` treats whole cards as opaque.
+//!
 //! Every part is a convex point set whose convex hull lies inside the opaque surface or solid
 //! (up to a measured deviation that is removed by shrinking, see [`OccluderPart::deviation`]),
 //! so the views of its points are views of real occluding geometry.
 
 use crate::geom::DAabb;
+use crate::scene::alpha::{self, CardOptions};
 use crate::scene::{Scene, is_degenerate};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -54,6 +59,8 @@ pub struct OccluderPart {
     /// For polygons: the distance from the vertex centroid to the nearest edge (in-plane
     /// inradius about the centroid), used to shrink it.
     pub inradius: f64,
+    /// True for the surely opaque polygon of an alpha-tested card.
+    pub card: bool,
 }
 
 /// All occluder parts of a scene.
@@ -67,6 +74,21 @@ pub struct Occluders {
     pub stats: OccluderStats,
     /// Bounds of all parts (empty — min > max — without parts).
     pub bounds: DAabb,
+    /// What the alpha-tested cards gave.
+    pub cards: CardStats,
+}
+
+/// What the alpha-tested cards gave, for the summary.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CardStats {
+    /// Card triangles of occluder objects looked at.
+    pub triangles: usize,
+    /// Surely opaque polygons made from them.
+    pub polygons: usize,
+    /// World-space area of the card triangles.
+    pub card_area: f64,
+    /// World-space area of the polygons (the rest is transparent, or not surely opaque).
+    pub opaque_area: f64,
 }
 
 /// Counts for the summary.
@@ -101,6 +123,18 @@ const MAX_SOLID_TRIANGLES: usize = 256;
 /// coplanar polygons per connected component, so two walls of different objects that share an
 /// edge project as one polygon, with no crack at their seam.
 pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Occluders {
+    prepare_with(scene, is_occluder, alpha_occluders, None)
+}
+
+/// [`prepare`], plus the surely opaque polygons of the alpha-tested cards of the selected
+/// objects when `cards` is given (and `alpha_occluders` is not set: then whole cards are
+/// used as opaque triangles).
+pub fn prepare_with(
+    scene: &Scene,
+    is_occluder: &[bool],
+    alpha_occluders: bool,
+    cards: Option<CardOptions>,
+) -> Occluders {
     // 1. Per object: solids, and the triangles left over.
     let per_object: Vec<ObjectParts> = (0..scene.objects.len())
         .into_par_iter()
@@ -191,6 +225,39 @@ pub fn prepare(scene: &Scene, is_occluder: &[bool], alpha_occluders: bool) -> Oc
                 poly.deviation,
                 poly.inradius,
             );
+        }
+    }
+    // 4. Alpha-tested cards: their surely opaque polygons.
+    if let (Some(opts), Some(a), false) = (cards, &scene.alpha, alpha_occluders) {
+        let tris: Vec<u32> = (0..scene.triangles.len() as u32)
+            .filter(|&t| {
+                a.card_of[t as usize] != alpha::NO_CARD
+                    && is_occluder[scene.triangle_object(t) as usize]
+                    && !is_degenerate(scene.triangle(t as usize))
+            })
+            .collect();
+        let corners = |t: usize| scene.triangle(t).map(Vec3::as_dvec3);
+        let object_of = |t: u32| scene.triangle_object(t);
+        let made = alpha::card_occluders(a, &corners, &tris, &object_of, opts);
+        out.cards = CardStats {
+            triangles: made.triangles,
+            polygons: made.polygons.len(),
+            card_area: made.card_area,
+            opaque_area: made.opaque_area,
+        };
+        for (object, pts, normal) in made.polygons {
+            let inradius = polygon_inradius(&pts);
+            push_part(
+                &mut out.points,
+                &mut out.parts,
+                object,
+                pts,
+                PartKind::Polygon { normal },
+                0.0,
+                inradius,
+            );
+            out.parts.last_mut().expect("just pushed").card = true;
+            out.stats.polygons += 1;
         }
     }
     out.bounds = DAabb {
@@ -292,7 +359,25 @@ fn push_part(
         kind,
         deviation,
         inradius,
+        card: false,
     });
+}
+
+/// Distance from the vertex centroid of a convex polygon to its nearest edge line.
+fn polygon_inradius(pts: &[DVec3]) -> f64 {
+    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    (0..pts.len())
+        .map(|i| {
+            let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
+            let d = b - a;
+            let l = d.length();
+            if l > 0.0 {
+                (c - a).cross(d).length() / l
+            } else {
+                0.0
+            }
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Connected components of triangles sharing a vertex, in the order of their first triangle,

@@ -415,8 +415,13 @@ fn encode_with(doc: &PvsDocument, shard: Option<&str>) -> Result<Vec<u8>, Encode
     let hierarchy = doc.cells.iter().any(|c| c.parent.is_some());
     let d = crate::settings::BakeSettings::default_settings();
     let b = &doc.settings.bake;
-    let culling =
-        b.occluder_min_solid_angle != 0.0 || b.rsf_resolution != d.rsf_resolution || b.up != d.up;
+    let culling = b.occluder_min_solid_angle != 0.0
+        || b.rsf_resolution != d.rsf_resolution
+        || b.up != d.up
+        || b.alpha_cards != d.alpha_cards
+        || b.alpha_mips != d.alpha_mips
+        || b.alpha_card_polygons != d.alpha_card_polygons
+        || b.alpha_missing != d.alpha_missing;
     let version = if doc.split.is_some() || hierarchy || culling {
         // Version 6: tagged extension sections.
         let mut sections: Vec<(u32, Vec<u8>)> = Vec::new();
@@ -433,6 +438,16 @@ fn encode_with(doc: &PvsDocument, shard: Option<&str>) -> Result<Vec<u8>, Encode
             let mut c = b.occluder_min_solid_angle.to_le_bytes().to_vec();
             put_u32(&mut c, b.rsf_resolution);
             c.push(b.up.index() as u8);
+            c.push(match b.alpha_cards {
+                crate::settings::AlphaCards::Coverage => 0,
+                crate::settings::AlphaCards::Ignore => 1,
+            });
+            put_u32(&mut c, b.alpha_mips);
+            put_u32(&mut c, b.alpha_card_polygons);
+            c.push(match b.alpha_missing {
+                crate::settings::AlphaMissing::Error => 0,
+                crate::settings::AlphaMissing::Transparent => 1,
+            });
             sections.push((TAG_CULLING, c));
         }
         put_u32(&mut p, sections.len() as u32);

@@ -630,6 +630,7 @@ impl PvsDatabase {
                 median_ms_per_cell: r.f64("summary.median_ms_per_cell")?,
                 total_seconds: r.f64("summary.total_seconds")?,
                 cullers: Vec::new(),
+                alpha_cards: None,
             })
         } else {
             None
@@ -1182,7 +1183,8 @@ fn read_split(bytes: &[u8], objects: u32) -> Result<PvsSplit, PvsErrorKind> {
 }
 
 /// Reads the culling section: the occluders' minimum solid angle, then (when present) ray
-/// space factorization's resolution and the up axis (`docs/pvs-format.md`).
+/// space factorization's resolution and the up axis, then (when present) the alpha-card
+/// settings (`docs/pvs-format.md`).
 fn read_culling(bytes: &[u8], s: &mut crate::settings::BakeSettings) -> Result<(), PvsErrorKind> {
     let mut r = Rd { b: bytes, pos: 0 };
     let angle = r.f64("the culling section's solid angle")?;
@@ -1198,6 +1200,20 @@ fn read_culling(bytes: &[u8], s: &mut crate::settings::BakeSettings) -> Result<(
             1 => crate::settings::UpAxis::Y,
             2 => crate::settings::UpAxis::Z,
             k => return Err(corrupt(format!("up axis {k} (expected 1 for y, 2 for z)"))),
+        };
+    }
+    if r.pos < r.b.len() {
+        s.alpha_cards = match r.u8("the culling section's alpha cards")? {
+            0 => crate::settings::AlphaCards::Coverage,
+            1 => crate::settings::AlphaCards::Ignore,
+            k => return Err(corrupt(format!("alpha cards {k} (expected 0 or 1)"))),
+        };
+        s.alpha_mips = r.u32("the culling section's alpha mips")?;
+        s.alpha_card_polygons = r.u32("the culling section's alpha card polygons")?;
+        s.alpha_missing = match r.u8("the culling section's alpha missing")? {
+            0 => crate::settings::AlphaMissing::Error,
+            1 => crate::settings::AlphaMissing::Transparent,
+            k => return Err(corrupt(format!("alpha missing {k} (expected 0 or 1)"))),
         };
     }
     Ok(())

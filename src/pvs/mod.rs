@@ -174,6 +174,22 @@ pub struct PvsSummary {
     /// documents written before the culler pipeline).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub cullers: Vec<PvsCullerSummary>,
+    /// What the alpha-tested cards gave as occluders, when the scene has cards and the bake
+    /// used their coverage (not kept in `.pvs` files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_cards: Option<PvsCardSummary>,
+}
+
+/// The alpha-tested cards' account in a PVS document's summary.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PvsCardSummary {
+    /// Card triangles of occluder objects.
+    pub triangles: usize,
+    /// Surely opaque polygons made from them.
+    pub polygons: usize,
+    /// Share of the cards' world-space area those polygons cover (the rest is transparent or
+    /// not surely opaque at every trusted mip level).
+    pub opaque_share: f64,
 }
 
 /// One culler's account in a PVS document's summary: means per cell.

@@ -148,7 +148,8 @@ impl SampleOccluders {
         let mut out = SampleOccluders::default();
         let mut inradii = Vec::new();
         for (k, p) in occ.parts.iter().enumerate() {
-            if raw[p.object as usize] || !matches!(p.kind, PartKind::Polygon { .. }) {
+            // Card polygons are always taken as they are (exactly planar, inside the card).
+            if (raw[p.object as usize] && !p.card) || !matches!(p.kind, PartKind::Polygon { .. }) {
                 continue;
             }
             out.push(occ.part_points(k), p.object);

@@ -16,31 +16,44 @@
 //! kind. Positions of any component type (float, or normalized/unnormalized integers as
 //! `KHR_mesh_quantization` allows) and sparse accessors are decoded here. Nodes with
 //! `EXT_mesh_gpu_instancing` contribute every instance to their one object.
-//! Draco (`KHR_draco_mesh_compression`) and meshopt (`EXT_meshopt_compression`,
-//! `KHR_meshopt_compression`) compression is refused when required. Images are never loaded.
+//! Meshopt compression (`EXT_meshopt_compression`, `KHR_meshopt_compression`: files straight
+//! out of gltfpack or glTF-Transform) is decoded ([`super::meshopt`]); Draco
+//! (`KHR_draco_mesh_compression`) is refused when required.
 //!
-//! # Opacity
-//! Triangles whose material has `alphaMode` `MASK` or `BLEND` are not opaque.
+//! # Opacity and alpha-tested cards
+//! Triangles whose material has `alphaMode` `MASK` or `BLEND` are not opaque. `MASK`
+//! triangles are also alpha-tested cards ([`super::alpha`]): import keeps their material's
+//! `alphaCutoff` (default 0.5), the alpha of `baseColorFactor`, the alpha plane of the
+//! `baseColorTexture` (PNG with palette and `tRNS` too, JPEG, WebP; `KHR_texture_basisu` and
+//! `EXT_texture_webp` sources are preferred when present) with its sampler's wrap modes, the
+//! texture coordinates of the set the texture names (with `KHR_texture_transform`) and the
+//! alpha of `COLOR_0`. A `MASK` material's image that cannot be read or decoded is an error
+//! naming the file and the image, unless [`LoadOptions::alpha_missing`] is
+//! [`AlphaMissing::Transparent`] (its cards then never occlude; the summary counts them).
+//! Images of other materials are not decoded; a missing image file is a warning.
 
-use super::{Scene, SceneError, SceneObject};
+use super::alpha::{AlphaCards, AlphaMaterial, AlphaTexture, CardTriangle, NO_CARD, Wrap};
+use super::{AlphaMissing, LoadOptions, Scene, SceneError, SceneObject};
 use crate::geom::Aabb;
 use ::gltf::accessor::{Accessor, DataType};
 use ::gltf::json;
 use ::gltf::mesh::Mode;
-use glam::{DMat4, DQuat, DVec3, Vec3};
+use glam::{DMat4, DQuat, DVec3, Mat3, Vec2, Vec3};
 use std::collections::HashMap;
 use std::path::Path;
 use std::rc::Rc;
+use std::sync::Arc;
 
 /// Compression extensions whose data this importer cannot decode.
-const COMPRESSION_EXTENSIONS: &[&str] = &[
-    "KHR_draco_mesh_compression",
-    "EXT_meshopt_compression",
-    "KHR_meshopt_compression",
-];
+const COMPRESSION_EXTENSIONS: &[&str] = &["KHR_draco_mesh_compression"];
+
+/// Buffer-view compression decoded here ([`super::meshopt`]).
+const MESHOPT_EXTENSIONS: &[&str] = &["EXT_meshopt_compression", "KHR_meshopt_compression"];
 
 /// Required extensions known not to change the geometry we read (or read here).
 const HARMLESS_EXTENSIONS: &[&str] = &[
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
     "KHR_mesh_quantization",
     "EXT_mesh_gpu_instancing",
     "KHR_texture_transform",
@@ -79,11 +92,20 @@ const INSTANCING: &str = "EXT_mesh_gpu_instancing";
 /// for malformed glTF, a required compression extension, missing or short buffers,
 /// out-of-range indices or a cyclic node hierarchy.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    load_with(path, &LoadOptions::default())
+}
+
+/// [`load`] with import options.
+///
+/// # Errors
+/// As [`load`], and [`SceneError::Invalid`] for a `MASK` material's unreadable image unless
+/// `options.alpha_missing` is [`AlphaMissing::Transparent`].
+pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    parse(&bytes, path)
+    parse_with(&bytes, path, options)
 }
 
 /// Parses glTF JSON or GLB bytes; `path` names the file in messages and anchors external
@@ -92,6 +114,14 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
 /// # Errors
 /// As [`load`], except for reading the file itself.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
+    parse_with(bytes, path, &LoadOptions::default())
+}
+
+/// [`parse`] with import options.
+///
+/// # Errors
+/// As [`load_with`], except for reading the file itself.
+pub fn parse_with(bytes: &[u8], path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let invalid = |message: String| SceneError::Invalid {
         path: path.to_path_buf(),
         message,
@@ -144,7 +174,14 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         },
         points: 0,
         lines: 0,
+        path,
+        options,
+        cards: AlphaCards::default(),
+        card_materials: HashMap::new(),
+        card_textures: HashMap::new(),
+        any_card: false,
     };
+    warnings.extend(missing_image_warnings(doc, path));
     for v in &visits {
         b.object(v).map_err(|m| {
             invalid(match &compression_used {
@@ -154,6 +191,19 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Scene, SceneError> {
         })?;
     }
     let mut scene = b.scene;
+    if b.any_card {
+        scene.alpha = Some(b.cards);
+    }
+    if let Some(a) = &scene.alpha
+        && a.missing_transparent > 0
+    {
+        warnings.push(format!(
+            "{}: {} alpha-tested triangle(s) whose image is missing are left transparent \
+             (--alpha-missing transparent)",
+            path.display(),
+            a.missing_transparent
+        ));
+    }
     if b.points > 0 {
         warnings.push(format!(
             "{}: ignored {} point primitive(s)",
@@ -194,8 +244,23 @@ fn validate(root: &json::Root) -> Result<(), String> {
     let mut errors = Vec::new();
     let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         root.validate(root, json::Path::new, &mut |path, error| {
-            if error != Error::Unsupported {
-                errors.push(format!("{}: {error}", path()));
+            let path = path().to_string();
+            // A texture may name its image only through an extension (KHR_texture_basisu,
+            // EXT_texture_webp): its plain `source` is then absent, which is valid.
+            let extension_source = error == Error::Missing
+                && path
+                    .strip_prefix("textures[")
+                    .and_then(|r| r.strip_suffix("].source"))
+                    .and_then(|i| i.parse::<usize>().ok())
+                    .and_then(|i| root.textures.get(i))
+                    .and_then(|t| t.extensions.as_ref())
+                    .is_some_and(|e| {
+                        ["KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif"]
+                            .iter()
+                            .any(|k| e.others.contains_key(*k))
+                    });
+            if error != Error::Unsupported && !extension_source {
+                errors.push(format!("{path}: {error}"));
             }
         });
     }));
@@ -288,13 +353,24 @@ fn load_buffers(
     path: &Path,
 ) -> Result<Vec<Option<Vec<u8>>>, String> {
     let mut needed = vec![false; doc.buffers().len()];
+    // Buffers whose views are meshopt-compressed: made from the decoded views.
+    let mut synthesized = vec![false; doc.buffers().len()];
+    let mut mark_view = |v: &::gltf::buffer::View| match meshopt_source(v) {
+        Some(src) => {
+            if let Some(n) = needed.get_mut(src) {
+                *n = true;
+            }
+            synthesized[v.buffer().index()] = true;
+        }
+        None => needed[v.buffer().index()] = true,
+    };
     let mut mark = |a: &Accessor| {
         if let Some(v) = a.view() {
-            needed[v.buffer().index()] = true;
+            mark_view(&v);
         }
         if let Some(s) = a.sparse() {
-            needed[s.indices().view().buffer().index()] = true;
-            needed[s.values().view().buffer().index()] = true;
+            mark_view(&s.indices().view());
+            mark_view(&s.values().view());
         }
     };
     let accessors: Vec<Accessor> = doc.accessors().collect();
@@ -312,11 +388,38 @@ fn load_buffers(
                 if let Some(a) = p.indices() {
                     mark(&a);
                 }
+                if p.material().alpha_mode() == ::gltf::material::AlphaMode::Mask {
+                    for (sem, a) in p.attributes() {
+                        if matches!(
+                            sem,
+                            ::gltf::Semantic::TexCoords(_) | ::gltf::Semantic::Colors(0)
+                        ) {
+                            mark(&a);
+                        }
+                    }
+                }
             }
         }
         for a in instancing_accessors(node) {
             if let Some(a) = a.and_then(|i| accessors.get(i)) {
                 mark(a);
+            }
+        }
+    }
+    // Images stored in buffer views (GLB) of MASK materials' textures.
+    let views = &doc.as_json().buffer_views;
+    for m in doc.materials() {
+        if m.alpha_mode() != ::gltf::material::AlphaMode::Mask {
+            continue;
+        }
+        if let Some(info) = m.pbr_metallic_roughness().base_color_texture() {
+            for img in texture_images(doc, info.texture().index()) {
+                if let Some(v) = doc.as_json().images.get(img).and_then(|i| i.buffer_view)
+                    && let Some(view) = views.get(v.value())
+                    && let Some(n) = needed.get_mut(view.buffer.value())
+                {
+                    *n = true;
+                }
             }
         }
     }
@@ -358,7 +461,50 @@ fn load_buffers(
         }
         out.push(Some(data));
     }
+    // Decode the meshopt views into their (fallback) buffers.
+    for view in doc.views() {
+        let i = view.buffer().index();
+        if !synthesized[i] || meshopt_source(&view).is_none() {
+            continue;
+        }
+        let ext = MESHOPT_EXTENSIONS
+            .iter()
+            .find_map(|e| view.extension_value(e))
+            .expect("a meshopt view");
+        let decoded = super::meshopt::decode_view(ext, &out)
+            .map_err(|m| format!("buffer view {}: meshopt: {m}", view.index()))?;
+        let len = view.buffer().length();
+        let target = out[i].get_or_insert_with(Vec::new);
+        if target.len() < len {
+            if len > (1 << 31) {
+                return Err(format!(
+                    "buffer {i}: byteLength {len} is too large to decode into"
+                ));
+            }
+            target.resize(len, 0);
+        }
+        let dest = target
+            .get_mut(view.offset()..view.offset() + decoded.len())
+            .ok_or_else(|| {
+                format!(
+                    "buffer view {}: its decoded {} bytes do not fit buffer {i}",
+                    view.index(),
+                    decoded.len()
+                )
+            })?;
+        dest.copy_from_slice(&decoded);
+    }
     Ok(out)
+}
+
+/// The buffer holding a meshopt-compressed view's data, when the view is compressed.
+fn meshopt_source(view: &::gltf::buffer::View) -> Option<usize> {
+    MESHOPT_EXTENSIONS
+        .iter()
+        .find_map(|e| view.extension_value(e))
+        .and_then(|ext| ext.get("buffer"))
+        .and_then(|b| b.as_u64())
+        .map(|b| b as usize)
 }
 
 /// The accessor indices of a node's `EXT_mesh_gpu_instancing` (translation, rotation, scale).
@@ -378,6 +524,18 @@ struct Prim {
     positions: Vec<Vec3>,
     triangles: Vec<[u32; 3]>,
     opaque: bool,
+    /// For alpha-tested cards: the material (index into [`AlphaCards::materials`]), each
+    /// vertex's transformed texture coordinates and `COLOR_0` alpha.
+    card: Option<PrimCard>,
+    /// A `MASK` primitive whose image is missing, kept transparent.
+    missing: bool,
+}
+
+/// The per-vertex data of a `MASK` primitive.
+struct PrimCard {
+    material: u32,
+    uv: Vec<Vec2>,
+    alpha: Vec<f32>,
 }
 
 struct Builder<'a> {
@@ -388,6 +546,14 @@ struct Builder<'a> {
     scene: Scene,
     points: usize,
     lines: usize,
+    path: &'a Path,
+    options: &'a LoadOptions,
+    cards: AlphaCards,
+    /// glTF material → card material (`None`: its image is missing, left transparent).
+    card_materials: HashMap<usize, Option<u32>>,
+    /// (image, wrap s, wrap t) → index into `cards.textures`.
+    card_textures: HashMap<(usize, u32, u32), u32>,
+    any_card: bool,
 }
 
 impl Builder<'_> {
@@ -454,6 +620,31 @@ impl Builder<'_> {
                 }
                 s.opaque
                     .extend(std::iter::repeat_n(d.opaque, d.triangles.len()));
+                let cards = &mut self.cards;
+                match &d.card {
+                    Some(c) => {
+                        self.any_card = true;
+                        for &[a, b, cc] in &d.triangles {
+                            let (b, cc) = if flip { (cc, b) } else { (b, cc) };
+                            let ix = [a as usize, b as usize, cc as usize];
+                            cards.card_of.push(cards.cards.len() as u32);
+                            cards.cards.push(CardTriangle {
+                                material: c.material,
+                                uv: ix.map(|i| c.uv[i]),
+                                vertex_alpha: ix.map(|i| c.alpha[i]),
+                            });
+                        }
+                    }
+                    None => {
+                        if d.missing {
+                            self.any_card = true;
+                            cards.missing_transparent += d.triangles.len();
+                        }
+                        cards
+                            .card_of
+                            .extend(std::iter::repeat_n(NO_CARD, d.triangles.len()))
+                    }
+                }
             }
         }
         if s.triangles.len() > u32::MAX as usize {
@@ -517,13 +708,15 @@ impl Builder<'_> {
     }
 
     /// Decodes a triangle primitive in local space.
-    fn decode(&self, p: &::gltf::Primitive) -> Result<Prim, String> {
+    fn decode(&mut self, p: &::gltf::Primitive) -> Result<Prim, String> {
         let opaque = p.material().alpha_mode() == ::gltf::material::AlphaMode::Opaque;
         let Some(pos) = p.get(&::gltf::Semantic::Positions) else {
             return Ok(Prim {
                 positions: Vec::new(),
                 triangles: Vec::new(),
                 opaque,
+                card: None,
+                missing: false,
             });
         };
         if pos.dimensions().multiplicity() != 3 {
@@ -576,12 +769,282 @@ impl Builder<'_> {
                 .collect(),
             _ => Vec::new(),
         };
+        let mask = p.material().alpha_mode() == ::gltf::material::AlphaMode::Mask;
+        let card = if mask { self.prim_card(p, nv)? } else { None };
         Ok(Prim {
             positions,
             triangles,
             opaque,
+            missing: mask && card.is_none(),
+            card,
         })
     }
+
+    /// The card data of a `MASK` primitive with `nv` vertices (`None` when its image is
+    /// missing and left transparent).
+    fn prim_card(&mut self, p: &::gltf::Primitive, nv: usize) -> Result<Option<PrimCard>, String> {
+        let m = p.material();
+        let Some(material) = self.card_material(&m)? else {
+            return Ok(None);
+        };
+        let mut uv = vec![Vec2::ZERO; nv];
+        if let Some(info) = m.pbr_metallic_roughness().base_color_texture() {
+            let transform = info.extension_value("KHR_texture_transform");
+            let set = transform
+                .and_then(|t| t.get("texCoord"))
+                .and_then(|v| v.as_u64())
+                .map_or(info.tex_coord(), |v| v as u32);
+            let Some(a) = p.get(&::gltf::Semantic::TexCoords(set)) else {
+                return Err(format!(
+                    "alpha-tested material {} samples TEXCOORD_{set}, which the primitive lacks",
+                    material_name(&m)
+                ));
+            };
+            if a.dimensions().multiplicity() != 2 {
+                return Err(format!(
+                    "TEXCOORD_{set} accessor {} is not a VEC2",
+                    a.index()
+                ));
+            }
+            let raw = read_accessor(&a, self.buffers)?;
+            if raw.len() / 2 < nv {
+                return Err(format!(
+                    "TEXCOORD_{set} accessor {} has fewer elements than POSITION",
+                    a.index()
+                ));
+            }
+            let t = texture_transform(transform);
+            for (i, u) in uv.iter_mut().enumerate() {
+                let v = Vec2::new(raw[2 * i] as f32, raw[2 * i + 1] as f32);
+                *u = t.transform_point2(v);
+            }
+        }
+        let mut alpha = vec![1f32; nv];
+        if let Some(a) = p.get(&::gltf::Semantic::Colors(0))
+            && a.dimensions().multiplicity() == 4
+        {
+            let raw = read_accessor(&a, self.buffers)?;
+            for (i, x) in alpha.iter_mut().enumerate() {
+                *x = raw.get(4 * i + 3).map_or(1.0, |&v| v as f32);
+            }
+        }
+        Ok(Some(PrimCard {
+            material,
+            uv,
+            alpha,
+        }))
+    }
+
+    /// The card material of a `MASK` glTF material, its texture decoded once.
+    fn card_material(&mut self, m: &::gltf::Material) -> Result<Option<u32>, String> {
+        let key = m.index().unwrap_or(usize::MAX);
+        if let Some(&done) = self.card_materials.get(&key) {
+            return Ok(done);
+        }
+        let pbr = m.pbr_metallic_roughness();
+        let texture = match pbr.base_color_texture() {
+            None => Some(None),
+            Some(info) => {
+                let tex = info.texture();
+                let sampler = tex.sampler();
+                let wrap = [sampler.wrap_s().as_gl_enum(), sampler.wrap_t().as_gl_enum()];
+                match self.card_texture(tex.index(), wrap) {
+                    Ok(t) => Some(Some(t)),
+                    Err(e) if self.options.alpha_missing == AlphaMissing::Transparent => {
+                        self.scene.warnings.push(format!(
+                            "{}: alpha-tested material {}: {e}; its cards are left transparent",
+                            self.path.display(),
+                            material_name(m)
+                        ));
+                        None
+                    }
+                    Err(e) => {
+                        return Err(format!(
+                            "alpha-tested material {}: {e} (pass --alpha-missing transparent to \
+                             keep its cards as non-occluders)",
+                            material_name(m)
+                        ));
+                    }
+                }
+            }
+        };
+        let out = texture.map(|texture| {
+            self.cards.materials.push(AlphaMaterial {
+                name: material_name(m),
+                cutoff: m.alpha_cutoff().unwrap_or(0.5),
+                factor: pbr.base_color_factor()[3],
+                texture,
+            });
+            (self.cards.materials.len() - 1) as u32
+        });
+        self.card_materials.insert(key, out);
+        Ok(out)
+    }
+
+    /// Decodes glTF texture `index` with wrap modes `wrap` once.
+    fn card_texture(&mut self, index: usize, wrap: [u32; 2]) -> Result<u32, String> {
+        let candidates = texture_images(self.doc, index);
+        let Some(&image) = candidates.first() else {
+            return Err(format!("texture {index} has no image"));
+        };
+        if let Some(&t) = self.card_textures.get(&(image, wrap[0], wrap[1])) {
+            return Ok(t);
+        }
+        let mut last = String::new();
+        let mut decoded = None;
+        // Extension sources first (KTX2, WebP), then the plain one.
+        for &img in &candidates {
+            match self.image_alpha(img) {
+                Ok(d) => {
+                    decoded = Some((img, d));
+                    break;
+                }
+                Err(e) => last = e,
+            }
+        }
+        let Some((img, (width, height, alpha))) = decoded else {
+            return Err(last);
+        };
+        self.cards.textures.push(AlphaTexture {
+            label: image_label(self.doc, img),
+            width,
+            height,
+            alpha: Arc::new(alpha),
+            wrap: [Wrap::from_gl(wrap[0]), Wrap::from_gl(wrap[1])],
+        });
+        let t = (self.cards.textures.len() - 1) as u32;
+        self.card_textures.insert((image, wrap[0], wrap[1]), t);
+        Ok(t)
+    }
+
+    /// The alpha plane of glTF image `index`.
+    fn image_alpha(&self, index: usize) -> Result<(u32, u32, Vec<u8>), String> {
+        let label = image_label(self.doc, index);
+        let json = self
+            .doc
+            .as_json()
+            .images
+            .get(index)
+            .ok_or_else(|| format!("no image {index}"))?;
+        let bytes: Vec<u8> = if let Some(v) = json.buffer_view {
+            let view = self
+                .doc
+                .views()
+                .nth(v.value())
+                .ok_or_else(|| format!("{label}: no buffer view {}", v.value()))?;
+            view_bytes(&view, self.buffers)
+                .map_err(|e| format!("{label}: {e}"))?
+                .to_vec()
+        } else if let Some(uri) = &json.uri {
+            if let Some(rest) = uri.strip_prefix("data:") {
+                decode_data_uri(rest).map_err(|m| format!("{label}: bad data URI: {m}"))?
+            } else if uri.contains("://") {
+                return Err(format!("{label}: external URL {uri} is not supported"));
+            } else {
+                let file = self
+                    .path
+                    .parent()
+                    .unwrap_or(Path::new(""))
+                    .join(percent_decode(uri));
+                std::fs::read(&file)
+                    .map_err(|e| format!("{label}: cannot read {}: {e}", file.display()))?
+            }
+        } else {
+            return Err(format!("{label} has neither a uri nor a buffer view"));
+        };
+        super::image::decode_alpha(&bytes).map_err(|e| format!("{label}: {e}"))
+    }
+}
+
+/// Images of glTF texture `index`, extension sources (`KHR_texture_basisu`,
+/// `EXT_texture_webp`) first.
+fn texture_images(doc: &::gltf::Document, index: usize) -> Vec<usize> {
+    let Some(t) = doc.as_json().textures.get(index) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    if let Some(ext) = &t.extensions {
+        for name in ["KHR_texture_basisu", "EXT_texture_webp"] {
+            if let Some(src) = ext.others.get(name).and_then(|e| e.get("source"))
+                && let Some(i) = src.as_u64()
+            {
+                out.push(i as usize);
+            }
+        }
+    }
+    let plain = t.source.value();
+    if plain < doc.as_json().images.len() {
+        out.push(plain);
+    }
+    out.retain(|&i| i < doc.as_json().images.len());
+    out
+}
+
+/// "image I (URI or name)".
+fn image_label(doc: &::gltf::Document, index: usize) -> String {
+    let img = &doc.as_json().images[index];
+    match (&img.uri, &img.name) {
+        (Some(u), _) if !u.starts_with("data:") => format!("image {index} ({u})"),
+        (_, Some(n)) => format!("image {index} ({n})"),
+        _ => format!("image {index}"),
+    }
+}
+
+fn material_name(m: &::gltf::Material) -> String {
+    match (m.name(), m.index()) {
+        (Some(n), _) if !n.is_empty() => n.to_string(),
+        (_, Some(i)) => format!("material{i}"),
+        _ => "default material".into(),
+    }
+}
+
+/// `KHR_texture_transform` as a matrix: translation · rotation · scale.
+fn texture_transform(t: Option<&json::Value>) -> Mat3 {
+    let Some(t) = t else { return Mat3::IDENTITY };
+    let pair = |k: &str, d: f32| -> Vec2 {
+        t.get(k)
+            .and_then(|v| v.as_array())
+            .filter(|a| a.len() == 2)
+            .map_or(Vec2::splat(d), |a| {
+                Vec2::new(
+                    a[0].as_f64().unwrap_or(d as f64) as f32,
+                    a[1].as_f64().unwrap_or(d as f64) as f32,
+                )
+            })
+    };
+    let offset = pair("offset", 0.0);
+    let scale = pair("scale", 1.0);
+    let r = t.get("rotation").and_then(|v| v.as_f64()).unwrap_or(0.0) as f32;
+    let (sin, cos) = r.sin_cos();
+    // The extension's GLSL: mat3(cos, sin, 0, -sin, cos, 0, 0, 0, 1), column-major.
+    let rotation = Mat3::from_cols(
+        glam::Vec3::new(cos, sin, 0.0),
+        glam::Vec3::new(-sin, cos, 0.0),
+        glam::Vec3::Z,
+    );
+    Mat3::from_translation(offset) * rotation * Mat3::from_scale(scale)
+}
+
+/// Warnings for image files that materials other than `MASK` name but that are missing
+/// (visibility does not need them).
+fn missing_image_warnings(doc: &::gltf::Document, path: &Path) -> Vec<String> {
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let mut out = Vec::new();
+    for (i, img) in doc.as_json().images.iter().enumerate() {
+        if let Some(uri) = &img.uri
+            && !uri.starts_with("data:")
+            && !uri.contains("://")
+        {
+            let file = dir.join(percent_decode(uri));
+            if !file.exists() {
+                out.push(format!(
+                    "{}: image {i} ({uri}) is missing; only an alpha-tested material needs it",
+                    path.display()
+                ));
+            }
+        }
+    }
+    out
 }
 
 /// The bytes of a buffer view.

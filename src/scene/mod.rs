@@ -4,8 +4,12 @@
 //! Object numbering is a contract shared with other tools; see [`obj`] and [`gltf`] for the
 //! exact rules per format.
 
+pub mod alpha;
 pub mod closed;
 pub mod gltf;
+pub mod image;
+pub mod ktx2;
+pub mod meshopt;
 pub mod obj;
 pub mod split;
 
@@ -44,9 +48,21 @@ pub struct Scene {
     pub objects: Vec<SceneObject>,
     /// Things skipped on import (points, lines, …), one line each, for the summary.
     pub warnings: Vec<String>,
+    /// Alpha-tested cards (glTF `MASK` materials with what their alpha test needs), when the
+    /// scene has any; see [`alpha`].
+    pub alpha: Option<alpha::AlphaCards>,
     /// When the objects are clusters of the file's objects (`--split-objects`,
     /// [`split::split_objects`]): the mapping back to the file's objects.
     pub split: Option<split::SplitMap>,
+}
+
+pub use crate::settings::AlphaMissing;
+
+/// Options of [`load_with`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LoadOptions {
+    /// What to do with a `MASK` material's missing or undecodable image.
+    pub alpha_missing: AlphaMissing,
 }
 
 /// Errors of scene import. Every variant names the file.
@@ -194,6 +210,11 @@ impl Scene {
         if next as usize != self.triangles.len() {
             return Err(invalid("objects do not cover all triangles".into()));
         }
+        if let Some(a) = &self.alpha
+            && a.card_of.len() != self.triangles.len()
+        {
+            return Err(invalid("alpha-card flags do not match triangles".into()));
+        }
         if self.triangles.is_empty() {
             return Err(invalid("the scene has no triangles".into()));
         }
@@ -214,13 +235,21 @@ pub fn is_degenerate(t: [Vec3; 3]) -> bool {
 /// A [`SceneError`] naming the file: unreadable, malformed, unsupported, NaN or infinite
 /// coordinates, or no triangles at all.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    load_with(path, &LoadOptions::default())
+}
+
+/// [`load`] with import options (what to do with alpha-tested materials' missing images).
+///
+/// # Errors
+/// As [`load`].
+pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase());
     let mut scene = match ext.as_deref() {
         Some("obj") => obj::load(path)?,
-        Some("gltf") | Some("glb") => gltf::load(path)?,
+        Some("gltf") | Some("glb") => gltf::load_with(path, options)?,
         _ => {
             return Err(SceneError::UnknownFormat {
                 path: path.to_path_buf(),

@@ -421,6 +421,7 @@ impl<'p> Parser<'p> {
             opaque,
             objects,
             warnings: self.warnings,
+            alpha: None,
             split: None,
         }
     }

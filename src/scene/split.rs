@@ -161,6 +161,7 @@ pub fn split_objects(scene: &Scene, size: f32) -> Result<Scene, SplitError> {
         ..Default::default()
     };
     let mut sources = Vec::with_capacity(scene.objects.len());
+    let mut order: Vec<u32> = Vec::new();
     for o in &scene.objects {
         let first = out.objects.len() as u32;
         let fits = o.bounds.is_empty() || (o.bounds.max - o.bounds.min).max_element() <= size;
@@ -180,6 +181,7 @@ pub fn split_objects(scene: &Scene, size: f32) -> Result<Scene, SplitError> {
                 }
                 out.triangles.push(tri);
                 out.opaque.push(scene.opaque[t as usize]);
+                order.push(t);
             }
             out.objects.push(SceneObject {
                 name: if whole {
@@ -199,6 +201,7 @@ pub fn split_objects(scene: &Scene, size: f32) -> Result<Scene, SplitError> {
             clusters: first..out.objects.len() as u32,
         });
     }
+    out.alpha = scene.alpha.as_ref().map(|a| a.reorder(&order));
     super::closed::mark_closed_objects(&mut out);
     out.split = Some(SplitMap { size, sources });
     Ok(out)

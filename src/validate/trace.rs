@@ -2,6 +2,10 @@
 //! the scene's non-degenerate triangles, a watertight ray/triangle test, first-hit tracing with
 //! see-through (alpha-tested) triangles, and area-weighted point sampling on objects.
 //!
+//! Alpha-tested cards (glTF `MASK`, [`crate::scene::alpha`]) are traced as a renderer at
+//! full resolution draws them: a hit where the card's bilinear mip-0 alpha reaches the
+//! cutoff blocks like an opaque triangle; a hit on a transparent texel is no hit at all.
+//!
 //! Robustness matters more than usual here: a ray that leaks through the shared edge of two
 //! wall triangles would "see" an object that is really hidden and report a false cull that is
 //! not there. Hence:
@@ -13,6 +17,7 @@
 //! * zero-area triangles are left out: they never block and never name an object.
 
 use crate::geom::Aabb;
+use crate::scene::alpha::{AlphaCards, NO_CARD};
 use crate::scene::{self, Scene};
 use glam::{DVec3, UVec2, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
@@ -44,6 +49,8 @@ pub(crate) struct TriMeta {
     pub object: u32,
     pub triangle: u32,
     pub opaque: bool,
+    /// Index into the scene's alpha cards, or [`NO_CARD`].
+    pub card: u32,
 }
 
 /// Area-weighted sampling data of one object: its run of `SceneRays::samples`.
@@ -83,6 +90,8 @@ pub struct SceneRays {
     targetable: Vec<u32>,
     /// Object bounds, as in the scene.
     bounds: Vec<Aabb>,
+    /// The scene's alpha-tested cards (their alpha test at mip 0), if any.
+    alpha: Option<AlphaCards>,
 }
 
 impl std::fmt::Debug for SceneRays {
@@ -142,6 +151,10 @@ impl SceneRays {
                 object: scene.triangle_object(t),
                 triangle: t,
                 opaque: scene.opaque[t as usize],
+                card: scene
+                    .alpha
+                    .as_ref()
+                    .map_or(NO_CARD, |a| a.card_of[t as usize]),
             });
         }
 
@@ -188,6 +201,7 @@ impl SceneRays {
             samples,
             targetable,
             bounds: scene.objects.iter().map(|o| o.bounds).collect(),
+            alpha: scene.alpha.clone(),
         }
     }
 
@@ -268,8 +282,17 @@ impl SceneRays {
             {
                 let slot = state.primitive_id;
                 if let Some(t) = shear.intersect(&self.tris[slot as usize], ray.tmax) {
-                    hits.push(RawHit { slot, t });
-                    if t < ray.tmax && (alpha_blocks || self.meta[slot as usize].opaque) {
+                    let m = &self.meta[slot as usize];
+                    // A card is seen only where it is drawn; a transparent texel lets the ray
+                    // pass and shows nothing.
+                    let drawn = alpha_blocks
+                        || m.card == NO_CARD
+                        || self.card_drawn(slot, m.card, origin, direction, t);
+                    let blocks = drawn && (alpha_blocks || m.opaque || m.card != NO_CARD);
+                    if drawn {
+                        hits.push(RawHit { slot, t });
+                    }
+                    if t < ray.tmax && blocks {
                         ray.tmax = t;
                     }
                 }
@@ -277,6 +300,23 @@ impl SceneRays {
         );
         let tmax = ray.tmax;
         hits.retain(|h| h.t <= tmax);
+    }
+
+    /// Whether card `card` (BVH slot `slot`) is drawn where the ray meets it at `t`.
+    fn card_drawn(&self, slot: u32, card: u32, origin: Vec3, direction: Vec3, t: f32) -> bool {
+        let Some(a) = &self.alpha else { return true };
+        let [p0, p1, p2] = self.tris[slot as usize].map(|v| Vec3::from(v).as_dvec3());
+        let p = origin.as_dvec3() + direction.as_dvec3() * t as f64;
+        let (v0, v1, v2) = (p1 - p0, p2 - p0, p - p0);
+        let (d00, d01, d11) = (v0.dot(v0), v0.dot(v1), v1.dot(v1));
+        let (d20, d21) = (v2.dot(v0), v2.dot(v1));
+        let denom = d00 * d11 - d01 * d01;
+        if denom.abs() <= 0.0 || !denom.is_finite() {
+            return true;
+        }
+        let b1 = ((d11 * d20 - d01 * d21) / denom).clamp(0.0, 1.0);
+        let b2 = ((d00 * d21 - d01 * d20) / denom).clamp(0.0, 1.0 - b1);
+        a.drawn_at(&a.cards[card as usize], b1 as f32, b2 as f32)
     }
 
     #[inline]
