@@ -82,7 +82,8 @@ pub struct BenchArgs {
     /// backend unless --backend gpu; see docs/bench.md).
     #[arg(long, conflicts_with_all = ["quick", "gpu_cells", "scenes"])]
     pub foliage: bool,
-    /// Only these foliage studies (comma-separated): coarse, ellipsoid, fine, params, paper, jacaranda.
+    /// Only these foliage studies (comma-separated): coarse, ellipsoid, fine, params, paper, jacaranda,
+    /// palm, birch, beech (the last three: textured trees with alpha-tested cards).
     #[arg(long, value_name = "LIST", value_delimiter = ',', requires = "foliage")]
     pub foliage_studies: Option<Vec<String>>,
     /// Cells baked by the fine forest's sub-cell variants and by the sampler rows (spread over

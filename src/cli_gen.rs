@@ -33,8 +33,10 @@ pub enum GenKind {
 /// Options shared by every kind.
 #[derive(clap::Args, Debug, Clone)]
 pub struct CommonArgs {
-    /// The OBJ file to write (an MTL file beside it too when some faces are translucent).
-    #[arg(short = 'o', long = "output", value_name = "FILE.obj")]
+    /// The file to write: OBJ (an MTL file beside it too when some faces are translucent), or
+    /// glTF binary (`.glb`), which keeps a textured `--tree-model`'s alpha-tested cards
+    /// (materials, texture coordinates, textures' alpha) so that they occlude when baked.
+    #[arg(short = 'o', long = "output", value_name = "FILE.obj|FILE.glb")]
     pub output: PathBuf,
     /// Seed of the random generator: the same seed and options give identical files.
     #[arg(long, default_value_t = 1)]
@@ -432,13 +434,16 @@ pub fn run(args: &GenArgs) -> anyhow::Result<()> {
         GenKind::City(a) => &a.common,
         GenKind::Boxfield(a) => &a.common,
     };
-    let ext_ok = common
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
-    if !ext_ok {
+    let ext = |x: &str| {
+        common
+            .output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case(x))
+    };
+    let glb = ext("glb");
+    if !ext("obj") && !glb {
         bail!(
-            "-o {}: the output must be an .obj file",
+            "-o {}: the output must be an .obj or a .glb file",
             common.output.display()
         );
     }
@@ -485,12 +490,16 @@ pub fn run(args: &GenArgs) -> anyhow::Result<()> {
         );
     }
 
-    write_obj(&common.output, &generated)?;
+    if glb {
+        umbrasweep::generate::write_glb(&common.output, &generated)?;
+    } else {
+        write_obj(&common.output, &generated)?;
+    }
     if let Some(c) = &common.cells_out
         && let Err(e) = umbrasweep::cells::save_json(c, &generated.cells)
     {
         let _ = std::fs::remove_file(&common.output);
-        if generated.has_translucent() {
+        if generated.has_translucent() && !glb {
             let _ = std::fs::remove_file(mtl_path(&common.output));
         }
         bail!("{e}");
@@ -500,7 +509,12 @@ pub fn run(args: &GenArgs) -> anyhow::Result<()> {
         common.output.display(),
         generated.objects.len(),
         generated.triangle_count(),
-        if generated.has_translucent() {
+        if let Some(c) = generated.alpha.as_ref().filter(|_| glb) {
+            format!(
+                " ({} alpha-tested card triangles per tree model)",
+                c.cards.len()
+            )
+        } else if generated.has_translucent() && !glb {
             format!(" (materials in {})", mtl_path(&common.output).display())
         } else {
             String::new()

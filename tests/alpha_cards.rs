@@ -725,3 +725,96 @@ fn a_partial_asset_warns_about_its_missing_bark_and_loads() {
     );
     assert_eq!(scene.alpha.as_ref().unwrap().cards.len(), 7456);
 }
+
+/// `gen forest --tree-model TREE.gltf -o forest.glb` keeps the model's cards: materials,
+/// texture coordinates, wrap modes and the textures' alpha, so the forest bakes with them.
+#[test]
+fn gen_writes_textured_forests_as_glb_with_their_cards() {
+    let dir = tempfile::tempdir().unwrap();
+    // A "tree": a trunk and two crossed cards above it.
+    let crown = |a: Vec3, b: Vec3| Card {
+        corners: [
+            Vec3::new(0.0, 2.0, 0.0) - a,
+            Vec3::new(0.0, 2.0, 0.0) + a,
+            Vec3::new(0.0, 2.0, 0.0) + a + b,
+            Vec3::new(0.0, 2.0, 0.0) - a + b,
+        ],
+        uv: [
+            Vec2::new(0.0, 1.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(0.0, 0.0),
+        ],
+    };
+    let cards = [crown(Vec3::X, Vec3::Y * 2.0), crown(Vec3::Z, Vec3::Y * 2.0)];
+    let trunk = [Aabb::new(
+        Vec3::new(-0.1, 0.0, -0.1),
+        Vec3::new(0.1, 2.0, 0.1),
+    )];
+    let model = write_scene(
+        dir.path(),
+        "tree",
+        &cards,
+        &trunk,
+        &half_opaque(),
+        true,
+        33648,
+    );
+    let out = dir.path().join("forest.glb");
+    let cells = dir.path().join("cells.json");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
+        .args(["gen", "forest", "--tree-model", model.to_str().unwrap()])
+        .args(["--trees", "12", "--seed", "4", "--cells", "2", "-o"])
+        .arg(&out)
+        .arg("--cells-out")
+        .arg(&cells)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let source = scene::load(&model).unwrap();
+    let forest = scene::load(&out).unwrap_or_else(|e| panic!("{e}"));
+    let (a, b) = (
+        source.alpha.unwrap(),
+        forest.alpha.clone().expect("cards kept"),
+    );
+    assert_eq!(b.cards.len(), 12 * a.cards.len());
+    assert_eq!(b.materials.len(), 1);
+    assert_eq!(b.materials[0].cutoff, a.materials[0].cutoff);
+    assert_eq!(b.textures[0].alpha, a.textures[0].alpha);
+    assert_eq!(
+        b.textures[0].wrap,
+        [umbrasweep::scene::alpha::Wrap::MirroredRepeat; 2]
+    );
+    // The same texture coordinates on every tree, in the same corner order.
+    let uv_set = |cards: &umbrasweep::scene::alpha::AlphaCards| {
+        let mut v: Vec<[u32; 6]> = cards
+            .cards
+            .iter()
+            .map(|c| {
+                let f = c.uv.map(|u| u.to_array());
+                [f[0][0], f[0][1], f[1][0], f[1][1], f[2][0], f[2][1]].map(f32::to_bits)
+            })
+            .collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    assert_eq!(uv_set(&a), uv_set(&b));
+    // Opaque trunks stay opaque; the cards alone are not.
+    let opaque = forest.opaque.iter().filter(|&&o| o).count();
+    assert_eq!(opaque, forest.triangles.len() - b.cards.len());
+    let cells = umbrasweep::cells::load_json(&cells).unwrap();
+    let r = bake::bake(
+        &forest,
+        &cells,
+        &settings(AlphaCards::Coverage, 1),
+        &CpuBackend::new(),
+        None,
+    )
+    .unwrap();
+    assert!(r.cards.is_some_and(|c| c.polygons > 0));
+}

@@ -59,7 +59,10 @@
 //! `--model-height H / model height` (or 1). Triangles that were not opaque in the model
 //! (alpha-tested leaf cards) get the material `translucent` (`d 0.5`) of an MTL file written
 //! next to the OBJ, the others `opaque`, so re-importing keeps them occludee-only. The path is
-//! kept clear of all opaque model geometry below eye level.
+//! kept clear of all opaque model geometry below eye level. With `-o FILE.glb` the forest is
+//! written as glTF binary instead ([`write_glb`]), which keeps the model's alpha-tested cards
+//! (materials, cutoffs, texture coordinates, wrap modes and the textures' alpha), so that a
+//! forest of textured trees bakes with its cards' coverage.
 //!
 //! ## City
 //!
@@ -100,11 +103,13 @@
 mod boxfield;
 mod city;
 mod forest;
+mod glb;
 mod write;
 
 pub use boxfield::{BoxfieldOptions, boxfield};
 pub use city::{CityOptions, city};
 pub use forest::{CrownShape, ForestOptions, TreeModel, forest, forest_of_models};
+pub use glb::write_glb;
 pub use write::{mtl_path, write_obj};
 
 use crate::geom::Aabb;
