@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::Lcg;
+use common::{Lcg, shared_scenes};
 use glam::{Vec2, Vec3};
 use std::path::{Path, PathBuf};
 use umbrasweep::backend::cpu::CpuBackend;
@@ -193,6 +193,19 @@ fn two_boxes() -> Vec<Aabb> {
     ]
 }
 
+/// The card with [`half_opaque`] (clamped) in front of [`two_boxes`], written into `dir`.
+fn half_scene(dir: &Path) -> PathBuf {
+    write_scene(
+        dir,
+        "half",
+        &[wall_card()],
+        &two_boxes(),
+        &half_opaque(),
+        true,
+        33071,
+    )
+}
+
 fn settings(cards: AlphaCards, mips: u32) -> BakeSettings {
     BakeSettings {
         alpha_cards: cards,
@@ -217,15 +230,7 @@ fn boxes_visible(scene: &Scene, s: &BakeSettings) -> Vec<bool> {
 #[test]
 fn opaque_texels_hide_transparent_ones_do_not_and_all_mips_are_conservative() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write_scene(
-        dir.path(),
-        "half",
-        &[wall_card()],
-        &two_boxes(),
-        &half_opaque(),
-        true,
-        33071,
-    );
+    let path = half_scene(dir.path());
     let scene = scene::load(&path).unwrap();
     let a = scene.alpha.as_ref().expect("the card is alpha-tested");
     assert_eq!(a.cards.len(), 2);
@@ -353,15 +358,7 @@ fn an_opaque_texture_hides_at_every_mip_level() {
 #[test]
 fn validate_sees_through_transparent_texels_only() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write_scene(
-        dir.path(),
-        "half",
-        &[wall_card()],
-        &two_boxes(),
-        &half_opaque(),
-        true,
-        33071,
-    );
+    let path = half_scene(dir.path());
     let scene = scene::load(&path).unwrap();
     let rays = SceneRays::new(&scene);
     // Through the transparent right half: the box behind is the first thing hit.
@@ -496,15 +493,7 @@ fn alpha_settings_are_checked_and_survive_the_pvs_file() {
             .contains("alpha-card-polygons")
     );
     let dir = tempfile::tempdir().unwrap();
-    let path = write_scene(
-        dir.path(),
-        "half",
-        &[wall_card()],
-        &two_boxes(),
-        &half_opaque(),
-        true,
-        33071,
-    );
+    let path = half_scene(dir.path());
     let scene = scene::load(&path).unwrap();
     let s = BakeSettings {
         alpha_missing: AlphaMissing::Transparent,
@@ -630,20 +619,6 @@ fn random_cards_never_cull_a_box_seen_through_them() {
         hidden_total >= 10,
         "only {hidden_total} boxes hidden in all cases"
     );
-}
-
-fn shared_scenes() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes");
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI is set but {} is missing",
-        dir.display()
-    );
-    eprintln!("skipping: {} not found", dir.display());
-    None
 }
 
 #[test]

@@ -2,6 +2,9 @@
 //! detection, and the real scenes under `../shared/scenes` when present.
 #![cfg(feature = "bake")]
 
+mod common;
+
+use common::shared_scenes;
 use glam::Vec3;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
@@ -869,20 +872,6 @@ fn gltf_closed_cube_from_unindexed_triangles() {
 
 // ---------------------------------------------------------------------------------------
 // Real scenes
-
-fn shared_scenes() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes");
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI is set but {} is missing",
-        dir.display()
-    );
-    eprintln!("skipping: {} not found", dir.display());
-    None
-}
 
 fn load_timed(path: &Path) -> Scene {
     let t = Instant::now();

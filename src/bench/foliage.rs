@@ -551,17 +551,10 @@ fn build(
             (forest(&o)?, about)
         }
         Forest::Jacaranda => {
-            let shared = shared_folder(args)?;
-            let path = match shared_file(shared.as_deref(), "jacaranda", JACARANDA) {
-                Ok(p) => p,
+            let model = match shared_model(args, "jacaranda", JACARANDA)? {
+                Ok(m) => m,
                 Err(why) => return Ok(Err(why)),
             };
-            let model = TreeModel::from_scene(&crate::scene::load(&path).map_err(|source| {
-                BenchError::Scene {
-                    path: path.clone(),
-                    source,
-                }
-            })?);
             // `gen forest --preset coarse --tree-model FILE --trees N --model-split 8`: one
             // object per tree would leave nothing to cull (every tree is seen from every cell),
             // so each tree is 8 objects, like the procedural crowns' sectors.
@@ -588,17 +581,10 @@ fn build(
         }
         Forest::Textured(i) => {
             let (study, file, height, trees) = TEXTURED[i];
-            let shared = shared_folder(args)?;
-            let path = match shared_file(shared.as_deref(), study, file) {
-                Ok(p) => p,
+            let model = match shared_model(args, study, file)? {
+                Ok(m) => m,
                 Err(why) => return Ok(Err(why)),
             };
-            let model = TreeModel::from_scene(&crate::scene::load(&path).map_err(|source| {
-                BenchError::Scene {
-                    path: path.clone(),
-                    source,
-                }
-            })?);
             let o = ForestOptions {
                 seed,
                 trees,
@@ -632,6 +618,25 @@ fn build(
         truth: vec![None; n],
         about,
     }))
+}
+
+/// The tree model `file` of the shared scene folder for `study`; `Ok(Err(reason))` when the
+/// folder or the file is absent.
+fn shared_model(
+    args: &BenchOptions,
+    study: &str,
+    file: &str,
+) -> Result<Result<TreeModel, String>, BenchError> {
+    let shared = shared_folder(args)?;
+    let path = match shared_file(shared.as_deref(), study, file) {
+        Ok(p) => p,
+        Err(why) => return Ok(Err(why)),
+    };
+    let scene = crate::scene::load(&path).map_err(|source| BenchError::Scene {
+        path: path.clone(),
+        source,
+    })?;
+    Ok(Ok(TreeModel::from_scene(&scene)))
 }
 
 /// The indices of `n` of `len` items spread evenly (all of them when `n >= len`), as the

@@ -35,6 +35,22 @@ impl Lcg {
     }
 }
 
+/// `../shared/scenes` when present; otherwise prints why and returns `None`, except in CI
+/// (`CI` set), where it fails.
+pub fn shared_scenes() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes");
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "CI is set but {} is missing",
+        dir.display()
+    );
+    eprintln!("skipping: {} not found", dir.display());
+    None
+}
+
 /// A closed, outward-facing opaque box.
 pub fn cube(name: &str, min: [f32; 3], max: [f32; 3]) -> Obj {
     (
