@@ -14,7 +14,11 @@ fn main() {
         std::process::exit(2);
     };
     let max_polygons: usize = args.get(2).map_or(4, |s| s.parse().expect("a number"));
-    let min_share: f64 = args.get(3).map_or(0.01, |s| s.parse().expect("a number"));
+    let min_share: f64 = args
+        .get(3)
+        .map_or(umbrasweep::scene::alpha::MIN_POLYGON_SHARE, |s| {
+            s.parse().expect("a number")
+        });
     let scene = match umbrasweep::scene::load(std::path::Path::new(path)) {
         Ok(s) => s,
         Err(e) => {

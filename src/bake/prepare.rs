@@ -215,7 +215,7 @@ impl<'a> Prepared<'a> {
             crate::scene::alpha::CardOptions {
                 mips: (settings.alpha_mips > 0).then_some(settings.alpha_mips),
                 max_polygons: settings.alpha_card_polygons as usize,
-                min_share: 0.01,
+                min_share: crate::scene::alpha::MIN_POLYGON_SHARE,
             }
         });
         let occluders =

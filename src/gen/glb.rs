@@ -125,8 +125,8 @@ pub fn write_glb(path: &Path, g: &Generated) -> Result<(), GenError> {
                     if t.material as usize != m || face[3] != NO_VERTEX {
                         continue;
                     }
-                    for k in 0..3 {
-                        pos.extend(o.vertices[face[k] as usize].to_array());
+                    for (k, &v) in face[..3].iter().enumerate() {
+                        pos.extend(o.vertices[v as usize].to_array());
                         uv.extend(t.uv[k].to_array());
                         alpha.extend([1.0, 1.0, 1.0, t.vertex_alpha[k]]);
                     }

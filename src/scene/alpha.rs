@@ -49,6 +49,10 @@ const MAX_BLOCKS: usize = 256;
 /// Super-cells per axis kept in a coverage's summed-area table (larger textures group
 /// half-texel cells into squares that pass only when all their cells pass).
 const MAX_SUPER_CELLS: u32 = 2048;
+/// The smallest card polygon kept by default, as a share of its card's area: fragments below
+/// it add parts without hiding anything measurable. Leaves of branch-image atlases are about
+/// 0.1 % of their card each (the European beech), so this keeps them.
+pub const MIN_POLYGON_SHARE: f64 = 0.0005;
 /// How far polygons are moved inwards, in texels of level 0.
 const INSET_TEXELS: f64 = 1.0 / 64.0;
 
