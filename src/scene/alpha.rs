@@ -717,47 +717,72 @@ fn shrunk_hull(
             && (y as usize) < h
             && grid[y as usize * w + x as usize]
     };
-    let mut corners = Vec::with_capacity(4 * comp.len());
+    // The hull of the cells is the hull of each row's extreme cells' corners.
+    let mut rows: HashMap<usize, (usize, usize)> = HashMap::new();
     let mut centre = DVec2::ZERO;
     for &c in comp {
-        let p = DVec2::new((c % w) as f64, (c / w) as f64);
-        centre += p + 0.5;
-        corners.extend([p, p + DVec2::X, p + DVec2::Y, p + DVec2::ONE]);
+        let (x, y) = (c % w, c / w);
+        centre += DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+        let r = rows.entry(y).or_insert((x, x));
+        r.0 = r.0.min(x);
+        r.1 = r.1.max(x);
     }
     centre /= comp.len() as f64;
+    let mut corners = Vec::with_capacity(4 * rows.len());
+    for (&y, &(x0, x1)) in &rows {
+        let (y0, y1) = (y as f64, (y + 1) as f64);
+        let (x0, x1) = (x0 as f64, (x1 + 1) as f64);
+        corners.extend([
+            DVec2::new(x0, y0),
+            DVec2::new(x0, y1),
+            DVec2::new(x1, y0),
+            DVec2::new(x1, y1),
+        ]);
+    }
     let hull = hull(&corners);
     if hull.len() < 3 {
         return None;
     }
-    let fits = |s: f64| -> bool {
+    // The polygon at scale `s` and its cell range (which may leave the grid: cells outside
+    // are not opaque).
+    let scaled = |s: f64| -> (Vec<DVec2>, [i64; 4]) {
         let poly: Vec<DVec2> = hull.iter().map(|&p| centre + (p - centre) * s).collect();
         let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
         for &p in &poly {
             lo = lo.min(p);
             hi = hi.max(p);
         }
-        let (x0, y0) = (
+        let range = [
             (lo.x - margin).floor() as i64,
             (lo.y - margin).floor() as i64,
-        );
-        let (x1, y1) = (
             (hi.x + margin).floor() as i64,
             (hi.y + margin).floor() as i64,
-        );
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                if !at(x, y) && near_convex(&poly, DVec2::new(x as f64, y as f64), margin) {
-                    return false;
-                }
+        ];
+        (poly, range)
+    };
+    // The cells that are not opaque within reach of the largest polygon tried, listed once.
+    let [rx0, ry0, rx1, ry1] = scaled(2.0).1;
+    let mut closed = Vec::new();
+    for y in ry0..=ry1 {
+        for x in rx0..=rx1 {
+            if !at(x, y) {
+                closed.push((x, y));
             }
         }
-        true
+    }
+    let fits = |s: f64| -> bool {
+        let (poly, [x0, y0, x1, y1]) = scaled(s);
+        !closed.iter().any(|&(x, y)| {
+            (x0..=x1).contains(&x)
+                && (y0..=y1).contains(&y)
+                && near_convex(&poly, DVec2::new(x as f64, y as f64), margin)
+        })
     };
     let (mut good, mut bad) = (0.0, 2.0);
     if fits(2.0) {
         good = 2.0;
     } else {
-        for _ in 0..12 {
+        for _ in 0..8 {
             let mid = 0.5 * (good + bad);
             if fits(mid) {
                 good = mid;
