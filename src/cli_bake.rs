@@ -537,7 +537,8 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             bail!(
                 "{}: the bake needs about {} ({} triangles{}, {} threads) but {} {}: bake on a \
                  machine with more memory, use fewer threads (RAYON_NUM_THREADS), bake fewer \
-                 occluders (--occluders), or raise --max-memory if you know it fits",
+                 occluders (--occluders) or fewer card polygons (--alpha-card-polygons, \
+                 --alpha-cards ignore), or raise --max-memory if you know it fits",
                 a.scene.display(),
                 gib(need),
                 scene.triangles.len(),

@@ -517,6 +517,22 @@ fn alpha_settings_are_checked_and_survive_the_pvs_file() {
     assert_eq!(old.alpha_cards, AlphaCards::Ignore);
 }
 
+#[test]
+fn the_memory_estimate_counts_the_card_polygons() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene::load(&half_scene(dir.path())).unwrap();
+    let est = |s: &BakeSettings| bake::estimate_memory(&scene, s, 1);
+    let ignore = est(&settings(AlphaCards::Ignore, 0));
+    let four = est(&settings(AlphaCards::Coverage, 0));
+    let many = est(&BakeSettings {
+        alpha_card_polygons: 64,
+        ..settings(AlphaCards::Coverage, 0)
+    });
+    // Two card triangles: 4 and 64 polygons each at 600 bytes.
+    assert_eq!(four - ignore, 2 * 4 * bake::CARD_POLYGON_BYTES);
+    assert_eq!(many - ignore, 2 * 64 * bake::CARD_POLYGON_BYTES);
+}
+
 /// Random cards (blob textures, random poses, wrap modes and texture transforms of their
 /// coordinates) in front of random boxes: every box a bake hides stays hidden under rays
 /// aimed at it (`validate --hunt`), for mip 0 only and for levels 0..3.
