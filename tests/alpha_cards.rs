@@ -206,6 +206,23 @@ fn half_scene(dir: &Path) -> PathBuf {
     )
 }
 
+/// Runs the `umbrasweep` binary.
+fn umbrasweep(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Asserts that a run exited 0, showing its stderr otherwise.
+fn succeeded(run: &std::process::Output) {
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
 fn settings(cards: AlphaCards, mips: u32) -> BakeSettings {
     BakeSettings {
         alpha_cards: cards,
@@ -433,46 +450,29 @@ fn a_missing_image_is_an_error_naming_it_unless_kept_transparent() {
         r#"{"cells": [{"min": [-0.5, -0.5, -0.5], "max": [0.5, 0.5, 0.5]}]}"#,
     )
     .unwrap();
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
-        .args([
-            "bake",
-            path.to_str().unwrap(),
-            "--cells",
-            cells.to_str().unwrap(),
-        ])
-        .args(["--backend", "cpu", "-o", out.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let (p, c, o) = (
+        path.to_str().unwrap(),
+        cells.to_str().unwrap(),
+        out.to_str().unwrap(),
+    );
+    let run = umbrasweep(&["bake", p, "--cells", c, "--backend", "cpu", "-o", o]);
     assert_eq!(run.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&run.stderr).contains("tex.png"));
     assert!(!out.exists());
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
-        .args([
-            "bake",
-            path.to_str().unwrap(),
-            "--cells",
-            cells.to_str().unwrap(),
-        ])
-        .args(["--backend", "cpu", "--alpha-missing", "transparent", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    succeeded(&umbrasweep(&[
+        "bake",
+        p,
+        "--cells",
+        c,
+        "--backend",
+        "cpu",
+        "--alpha-missing",
+        "transparent",
+        "-o",
+        o,
+    ]));
     // The setting is recorded, so that validate reloads the scene the same way.
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
-        .args(["validate", path.to_str().unwrap(), out.to_str().unwrap()])
-        .args(["--rays", "2000"])
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    succeeded(&umbrasweep(&["validate", p, o, "--rays", "2000"]));
 }
 
 #[test]
@@ -753,19 +753,22 @@ fn gen_writes_textured_forests_as_glb_with_their_cards() {
     );
     let out = dir.path().join("forest.glb");
     let cells = dir.path().join("cells.json");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
-        .args(["gen", "forest", "--tree-model", model.to_str().unwrap()])
-        .args(["--trees", "12", "--seed", "4", "--cells", "2", "-o"])
-        .arg(&out)
-        .arg("--cells-out")
-        .arg(&cells)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    succeeded(&umbrasweep(&[
+        "gen",
+        "forest",
+        "--tree-model",
+        model.to_str().unwrap(),
+        "--trees",
+        "12",
+        "--seed",
+        "4",
+        "--cells",
+        "2",
+        "-o",
+        out.to_str().unwrap(),
+        "--cells-out",
+        cells.to_str().unwrap(),
+    ]));
     let source = scene::load(&model).unwrap();
     let forest = scene::load(&out).unwrap_or_else(|e| panic!("{e}"));
     let (a, b) = (
