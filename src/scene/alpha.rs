@@ -53,6 +53,11 @@ const MAX_SUPER_CELLS: u32 = 2048;
 /// it add parts without hiding anything measurable. Leaves of branch-image atlases are about
 /// 0.1 % of their card each (the European beech), so this keeps them.
 pub const MIN_POLYGON_SHARE: f64 = 0.0005;
+/// Triangles join one card only when each one's texture map puts the other's corners within
+/// this share of its size of where they are: a polygon mapped by one triangle's map then lies
+/// within `1e-6 × size` of the other's surface, a thousandth of a texel of a card that maps
+/// the texture once, well inside the inset.
+const MERGE_TOLERANCE: f64 = 1e-6;
 /// How far polygons are moved inwards, in texels of level 0.
 const INSET_TEXELS: f64 = 1.0 / 64.0;
 
@@ -1015,7 +1020,9 @@ pub fn card_occluders(
                             let size = (pts[i][1] - pts[i][0])
                                 .length()
                                 .max((pts[i][2] - pts[i][0]).length());
-                            (0..3).all(|v| (m.point(uvs[i][v]) - pts[i][v]).length() <= 1e-5 * size)
+                            (0..3).all(|v| {
+                                (m.point(uvs[i][v]) - pts[i][v]).length() <= MERGE_TOLERANCE * size
+                            })
                         };
                     if same {
                         let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
