@@ -1,5 +1,6 @@
 //! Small geometric types shared by every stage: axis-aligned boxes in single and double
-//! precision.
+//! precision, and two planar helpers (convex hull, half-plane clipping) used by the raster
+//! coverage and by the alpha-tested cards' polygons.
 
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -205,6 +206,63 @@ pub fn box_triangles(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
         .iter()
         .flat_map(|q| [[c(q[0]), c(q[1]), c(q[2])], [c(q[0]), c(q[2]), c(q[3])]])
         .collect()
+}
+
+/// 2D convex hull (Andrew's monotone chain), counter-clockwise, collinear points dropped.
+#[cfg(feature = "bake")]
+pub(crate) fn convex_hull(points: &[glam::DVec2], out: &mut Vec<glam::DVec2>) {
+    out.clear();
+    let mut pts: Vec<glam::DVec2> = points.to_vec();
+    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    pts.dedup();
+    if pts.len() < 3 {
+        out.extend_from_slice(&pts);
+        return;
+    }
+    let cross = |o: glam::DVec2, a: glam::DVec2, b: glam::DVec2| (a - o).perp_dot(b - o);
+    for &p in &pts {
+        while out.len() >= 2 && cross(out[out.len() - 2], out[out.len() - 1], p) <= 0.0 {
+            out.pop();
+        }
+        out.push(p);
+    }
+    let lower = out.len() + 1;
+    for &p in pts.iter().rev().skip(1) {
+        while out.len() >= lower && cross(out[out.len() - 2], out[out.len() - 1], p) <= 0.0 {
+            out.pop();
+        }
+        out.push(p);
+    }
+    out.pop();
+}
+
+/// Keeps the part of convex polygon `poly` on the left of the directed line `a → b`
+/// (Sutherland–Hodgman against one half-plane; shared by the CPU and GPU coverage and the
+/// cards' polygons).
+#[cfg(feature = "bake")]
+pub(crate) fn clip_half_plane(
+    poly: &[glam::DVec2],
+    a: glam::DVec2,
+    b: glam::DVec2,
+    out: &mut Vec<glam::DVec2>,
+) {
+    out.clear();
+    let d = b - a;
+    let side = |p: glam::DVec2| d.perp_dot(p - a);
+    let n = poly.len();
+    for i in 0..n {
+        let p = poly[i];
+        let q = poly[(i + 1) % n];
+        let sp = side(p);
+        let sq = side(q);
+        if sp >= 0.0 {
+            out.push(p);
+        }
+        if (sp >= 0.0) != (sq >= 0.0) {
+            let t = sp / (sp - sq);
+            out.push(p + (q - p) * t);
+        }
+    }
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@
 //! square is inside are set. [`contract_slack`] states the rule directly, without clipping, for
 //! tests of any backend.
 
+pub(crate) use crate::geom::{clip_half_plane, convex_hull};
 use crate::plane::{DepthMap, PlaneFrame};
 use glam::{DVec2, DVec3};
 
@@ -129,33 +130,6 @@ pub fn contract_slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> f64 {
     slack
 }
 
-/// 2D convex hull (Andrew's monotone chain), counter-clockwise, collinear points dropped.
-pub(crate) fn convex_hull(points: &[DVec2], out: &mut Vec<DVec2>) {
-    out.clear();
-    let mut pts: Vec<DVec2> = points.to_vec();
-    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    pts.dedup();
-    if pts.len() < 3 {
-        out.extend_from_slice(&pts);
-        return;
-    }
-    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
-    for &p in &pts {
-        while out.len() >= 2 && cross(out[out.len() - 2], out[out.len() - 1], p) <= 0.0 {
-            out.pop();
-        }
-        out.push(p);
-    }
-    let lower = out.len() + 1;
-    for &p in pts.iter().rev().skip(1) {
-        while out.len() >= lower && cross(out[out.len() - 2], out[out.len() - 1], p) <= 0.0 {
-            out.pop();
-        }
-        out.push(p);
-    }
-    out.pop();
-}
-
 /// Removes vertices within 1e-7 pixel of their predecessor (clipping leaves such pairs): an
 /// edge that short has a normal made of rounding noise, and its erosion could cut the polygon
 /// anywhere. Dropping a vertex of a convex polygon only shrinks it, so this stays conservative.
@@ -168,28 +142,6 @@ fn drop_near_duplicates(poly: &mut Vec<DVec2>) {
             poly.remove(next);
         } else {
             k += 1;
-        }
-    }
-}
-
-/// Keeps the part of convex polygon `poly` on the left of the directed line `a → b`
-/// (Sutherland–Hodgman against one half-plane; shared with the GPU backend's setup).
-pub(crate) fn clip_half_plane(poly: &[DVec2], a: DVec2, b: DVec2, out: &mut Vec<DVec2>) {
-    out.clear();
-    let d = b - a;
-    let side = |p: DVec2| d.perp_dot(p - a);
-    let n = poly.len();
-    for i in 0..n {
-        let p = poly[i];
-        let q = poly[(i + 1) % n];
-        let sp = side(p);
-        let sq = side(q);
-        if sp >= 0.0 {
-            out.push(p);
-        }
-        if (sp >= 0.0) != (sq >= 0.0) {
-            let t = sp / (sp - sq);
-            out.push(p + (q - p) * t);
         }
     }
 }

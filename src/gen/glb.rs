@@ -72,8 +72,9 @@ pub fn write_glb(path: &Path, g: &Generated) -> Result<(), GenError> {
         for opaque in [true, false] {
             let mut idx: Vec<u32> = Vec::new();
             for (f, face) in o.faces.iter().enumerate() {
+                // Cards are written below (a quad never is one: model faces are triangles).
                 let card = o.cards.get(f).copied().unwrap_or(NO_CARD);
-                if o.opaque[f] != opaque || card != NO_CARD {
+                if o.opaque[f] != opaque || (card != NO_CARD && face[3] == NO_VERTEX) {
                     continue;
                 }
                 idx.extend([face[0], face[1], face[2]]);

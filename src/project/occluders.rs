@@ -363,21 +363,20 @@ fn push_part(
     });
 }
 
-/// Distance from the vertex centroid of a convex polygon to its nearest edge line.
-fn polygon_inradius(pts: &[DVec3]) -> f64 {
+/// Distance from the vertex centroid of a convex polygon to its nearest edge line (0 when it
+/// has no edge of positive length); the sampler shrinks by it too.
+pub(crate) fn polygon_inradius(pts: &[DVec3]) -> f64 {
     let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
-    (0..pts.len())
-        .map(|i| {
-            let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
-            let d = b - a;
-            let l = d.length();
-            if l > 0.0 {
-                (c - a).cross(d).length() / l
-            } else {
-                0.0
-            }
-        })
-        .fold(f64::INFINITY, f64::min)
+    let mut r = f64::INFINITY;
+    for i in 0..pts.len() {
+        let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
+        let e = b - a;
+        let l = e.length();
+        if l > 0.0 {
+            r = r.min((c - a).cross(e).length() / l);
+        }
+    }
+    if r.is_finite() { r } else { 0.0 }
 }
 
 /// Connected components of triangles sharing a vertex, in the order of their first triangle,

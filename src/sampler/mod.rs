@@ -84,7 +84,7 @@ mod hemicube;
 pub use hemicube::{BoxTest, Hemicube, RenderStats};
 
 use crate::geom::{Aabb, DAabb};
-use crate::project::occluders::{Occluders, PartKind};
+use crate::project::occluders::{Occluders, PartKind, polygon_inradius};
 use crate::scene::{Scene, is_degenerate};
 use glam::{DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
@@ -171,13 +171,13 @@ impl SampleOccluders {
         // Triangles merged alone have no inradius recorded: take it from the geometry.
         for (i, r) in inradii.iter_mut().enumerate() {
             if *r <= 0.0 {
-                *r = inradius(out.poly_points(i));
+                *r = polygon_inradius(out.poly_points(i));
             }
         }
         if inradii.is_empty() {
             // Only raw triangles: their inradii from the geometry.
             inradii = (0..out.polys.len())
-                .map(|i| inradius(out.poly_points(i)))
+                .map(|i| polygon_inradius(out.poly_points(i)))
                 .collect();
         }
         if !inradii.is_empty() {
@@ -264,20 +264,4 @@ impl SampleOccluders {
         let p = self.polys[i];
         &self.points[p.start as usize..p.end as usize]
     }
-}
-
-/// Distance from the vertex centroid of a convex polygon to its nearest edge line.
-fn inradius(pts: &[DVec3]) -> f64 {
-    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
-    let mut r = f64::INFINITY;
-    for i in 0..pts.len() {
-        let a = pts[i];
-        let b = pts[(i + 1) % pts.len()];
-        let e = b - a;
-        let l = e.length();
-        if l > 0.0 {
-            r = r.min((c - a).cross(e).length() / l);
-        }
-    }
-    if r.is_finite() { r } else { 0.0 }
 }

@@ -37,6 +37,7 @@
 //! opaque point at all: its 1×1 level is that mean. That is the price of conservativeness for
 //! atlas-like leaf textures; `bake` prints the share of card area that stays opaque.
 
+use crate::geom::{clip_half_plane, convex_hull};
 use glam::{DVec2, DVec3, Vec2};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -512,22 +513,6 @@ fn largest_rectangle(grid: &[bool], w: usize, h: usize) -> Option<(usize, usize,
     best.map(|(_, r)| r)
 }
 
-/// Clips a convex polygon by the half-plane `n · p ≥ c` (Sutherland–Hodgman).
-fn clip(poly: &[DVec2], n: DVec2, c: f64) -> Vec<DVec2> {
-    let mut out = Vec::with_capacity(poly.len() + 2);
-    for i in 0..poly.len() {
-        let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
-        let (dp, dq) = (n.dot(p) - c, n.dot(q) - c);
-        if dp >= 0.0 {
-            out.push(p);
-        }
-        if (dp >= 0.0) != (dq >= 0.0) {
-            out.push(p + (q - p) * (dp / (dp - dq)));
-        }
-    }
-    out
-}
-
 /// Twice the signed area of a polygon.
 fn area2(poly: &[DVec2]) -> f64 {
     (0..poly.len())
@@ -591,13 +576,13 @@ pub fn card_polygons(
     let to_uv = |p: DVec2| (lo + p * bw) / scale;
     let uv_area = |poly: &[DVec2]| area2(poly).abs() / 2.0;
     let clip_card = |poly: Vec<DVec2>| -> Option<Vec<DVec2>> {
-        let mut poly = poly;
-        let mut k = 0;
-        while k < ccw.len() && poly.len() >= 3 {
-            let (a, b) = (ccw[k], ccw[(k + 1) % ccw.len()]);
-            let n = (b - a).perp();
-            poly = clip(&poly, n, n.dot(a));
-            k += 1;
+        let (mut poly, mut tmp) = (poly, Vec::new());
+        for k in 0..ccw.len() {
+            if poly.len() < 3 {
+                break;
+            }
+            clip_half_plane(&poly, ccw[k], ccw[(k + 1) % ccw.len()], &mut tmp);
+            std::mem::swap(&mut poly, &mut tmp);
         }
         (poly.len() >= 3 && uv_area(&poly) >= min_area).then_some(poly)
     };
@@ -744,7 +729,8 @@ fn shrunk_hull(
             DVec2::new(x1, y1),
         ]);
     }
-    let hull = hull(&corners);
+    let mut hull = Vec::new();
+    convex_hull(&corners, &mut hull);
     if hull.len() < 3 {
         return None;
     }
@@ -871,34 +857,6 @@ impl CardMap {
         let d = uv - self.uv0;
         self.origin + self.du * d.x + self.dv * d.y
     }
-}
-
-/// Convex hull (counter-clockwise, no collinear points) of texture-space points.
-fn hull(points: &[DVec2]) -> Vec<DVec2> {
-    let mut p: Vec<DVec2> = points.to_vec();
-    p.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    p.dedup();
-    if p.len() < 3 {
-        return p;
-    }
-    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
-    let mut h: Vec<DVec2> = Vec::with_capacity(2 * p.len());
-    for pass in 0..2 {
-        let start = h.len();
-        let iter: Box<dyn Iterator<Item = &DVec2>> = if pass == 0 {
-            Box::new(p.iter())
-        } else {
-            Box::new(p.iter().rev())
-        };
-        for &q in iter {
-            while h.len() >= start + 2 && cross(h[h.len() - 2], h[h.len() - 1], q) <= 0.0 {
-                h.pop();
-            }
-            h.push(q);
-        }
-        h.pop();
-    }
-    h
 }
 
 /// Surely opaque polygons of the cards of a scene, for the occluders.
@@ -1051,7 +1009,8 @@ pub fn card_occluders(
     group_list.sort_unstable();
     for g in group_list {
         let all: Vec<DVec2> = g.iter().flat_map(|&i| uvs[i]).collect();
-        let h = hull(&all);
+        let mut h = Vec::new();
+        convex_hull(&all, &mut h);
         let sum: f64 = g.iter().map(|&i| area2(&uvs[i]).abs()).sum();
         if g.len() > 1 && h.len() >= 3 && (area2(&h) - sum).abs() <= 1e-6 * sum {
             jobs.push((g[0], h));

@@ -441,15 +441,7 @@ fn load_buffers(
                 }
             },
             ::gltf::buffer::Source::Uri(uri) => {
-                if let Some(rest) = uri.strip_prefix("data:") {
-                    decode_data_uri(rest).map_err(|m| format!("buffer {i}: bad data URI: {m}"))?
-                } else if uri.contains("://") {
-                    return Err(format!("buffer {i}: external URL {uri} is not supported"));
-                } else {
-                    let file = dir.join(percent_decode(uri));
-                    std::fs::read(&file)
-                        .map_err(|e| format!("buffer {i}: cannot read {}: {e}", file.display()))?
-                }
+                read_uri(uri, dir).map_err(|m| format!("buffer {i}: {m}"))?
             }
         };
         if data.len() < buffer.length() {
@@ -936,19 +928,8 @@ impl Builder<'_> {
                 .map_err(|e| format!("{label}: {e}"))?
                 .to_vec()
         } else if let Some(uri) = &json.uri {
-            if let Some(rest) = uri.strip_prefix("data:") {
-                decode_data_uri(rest).map_err(|m| format!("{label}: bad data URI: {m}"))?
-            } else if uri.contains("://") {
-                return Err(format!("{label}: external URL {uri} is not supported"));
-            } else {
-                let file = self
-                    .path
-                    .parent()
-                    .unwrap_or(Path::new(""))
-                    .join(percent_decode(uri));
-                std::fs::read(&file)
-                    .map_err(|e| format!("{label}: cannot read {}: {e}", file.display()))?
-            }
+            read_uri(uri, self.path.parent().unwrap_or(Path::new("")))
+                .map_err(|m| format!("{label}: {m}"))?
         } else {
             return Err(format!("{label} has neither a uri nor a buffer view"));
         };
@@ -1029,8 +1010,22 @@ fn texture_transform(t: Option<&json::Value>) -> Mat3 {
 /// (visibility does not need them).
 fn missing_image_warnings(doc: &::gltf::Document, path: &Path) -> Vec<String> {
     let dir = path.parent().unwrap_or(Path::new(""));
+    // Images of MASK materials are read, and refused or warned about, where they are decoded.
+    let mut masked = vec![false; doc.as_json().images.len()];
+    for m in doc.materials() {
+        if m.alpha_mode() == ::gltf::material::AlphaMode::Mask
+            && let Some(info) = m.pbr_metallic_roughness().base_color_texture()
+        {
+            for i in texture_images(doc, info.texture().index()) {
+                masked[i] = true;
+            }
+        }
+    }
     let mut out = Vec::new();
     for (i, img) in doc.as_json().images.iter().enumerate() {
+        if masked[i] {
+            continue;
+        }
         if let Some(uri) = &img.uri
             && !uri.starts_with("data:")
             && !uri.contains("://")
@@ -1189,6 +1184,19 @@ fn read_accessor(a: &Accessor, buffers: &[Option<Vec<u8>>]) -> Result<Vec<f64>, 
         }
     }
     Ok(out)
+}
+
+/// The bytes a buffer's or image's URI names: a `data:` URI, or a file relative to `dir`
+/// (external URLs are refused).
+fn read_uri(uri: &str, dir: &Path) -> Result<Vec<u8>, String> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        decode_data_uri(rest).map_err(|m| format!("bad data URI: {m}"))
+    } else if uri.contains("://") {
+        Err(format!("external URL {uri} is not supported"))
+    } else {
+        let file = dir.join(percent_decode(uri));
+        std::fs::read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
+    }
 }
 
 /// Decodes the part of a `data:` URI after `data:`.
