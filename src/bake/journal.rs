@@ -70,7 +70,7 @@ pub enum JournalError {
 /// shard…). Two bakes with the same hash compute the same PVS.
 pub fn inputs_hash(scene: &Scene, cells: &[Aabb], settings: &BakeSettings, extra: &str) -> String {
     let mut h = Sha256::new();
-    h.update(b"umbrasweep-inputs 1\0");
+    h.update(b"umbrasweep-inputs 2\0");
     h.update((scene.vertices.len() as u64).to_le_bytes());
     for v in &scene.vertices {
         for c in v.to_array() {
@@ -91,6 +91,39 @@ pub fn inputs_hash(scene: &Scene, cells: &[Aabb], settings: &BakeSettings, extra
         h.update(o.triangles.start.to_le_bytes());
         h.update(o.triangles.end.to_le_bytes());
         h.update([o.closed as u8]);
+    }
+    // Alpha-tested cards: what decides where a card occludes (materials, texture alpha and
+    // wrap modes, texture coordinates, vertex alpha), so that a changed texture is a new bake.
+    match &scene.alpha {
+        None => h.update([0u8]),
+        Some(a) => {
+            h.update([1u8]);
+            h.update((a.materials.len() as u64).to_le_bytes());
+            for m in &a.materials {
+                h.update(m.cutoff.to_bits().to_le_bytes());
+                h.update(m.factor.to_bits().to_le_bytes());
+                h.update(m.texture.map_or(u32::MAX, |t| t).to_le_bytes());
+            }
+            h.update((a.textures.len() as u64).to_le_bytes());
+            for t in &a.textures {
+                h.update(t.width.to_le_bytes());
+                h.update(t.height.to_le_bytes());
+                h.update(t.wrap.map(|w| w as u8));
+                h.update(t.alpha.as_slice());
+            }
+            h.update((a.card_of.len() as u64).to_le_bytes());
+            for c in &a.card_of {
+                h.update(c.to_le_bytes());
+            }
+            h.update((a.cards.len() as u64).to_le_bytes());
+            for c in &a.cards {
+                h.update(c.material.to_le_bytes());
+                for x in c.uv.iter().flat_map(|v| v.to_array()).chain(c.vertex_alpha) {
+                    h.update(x.to_bits().to_le_bytes());
+                }
+            }
+            h.update((a.missing_transparent as u64).to_le_bytes());
+        }
     }
     h.update((cells.len() as u64).to_le_bytes());
     for c in cells {
@@ -299,6 +332,50 @@ mod tests {
                 Vec::new()
             },
         }
+    }
+
+    #[test]
+    fn a_changed_card_texture_changes_the_inputs_hash() {
+        use crate::scene::alpha::{AlphaCards, AlphaMaterial, AlphaTexture, CardTriangle, Wrap};
+        use glam::{Vec2, Vec3};
+        let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let mut scene = Scene::from_objects(
+            std::path::Path::new("t.obj"),
+            vec![("a".into(), vec![tri], true)],
+        );
+        let cells = [Aabb::new(Vec3::splat(2.0), Vec3::splat(3.0))];
+        let settings = BakeSettings::default();
+        let plain = inputs_hash(&scene, &cells, &settings, "");
+        let cards = |alpha: u8| AlphaCards {
+            materials: vec![AlphaMaterial {
+                name: "leaf".into(),
+                cutoff: 0.5,
+                factor: 1.0,
+                texture: Some(0),
+            }],
+            textures: vec![AlphaTexture {
+                label: "leaf.png".into(),
+                width: 2,
+                height: 1,
+                alpha: std::sync::Arc::new(vec![255, alpha]),
+                wrap: [Wrap::Repeat; 2],
+            }],
+            card_of: vec![0],
+            cards: vec![CardTriangle {
+                material: 0,
+                uv: [Vec2::ZERO, Vec2::X, Vec2::Y],
+                vertex_alpha: [1.0; 3],
+            }],
+            missing_transparent: 0,
+        };
+        scene.alpha = Some(cards(0));
+        let with_cards = inputs_hash(&scene, &cells, &settings, "");
+        scene.alpha = Some(cards(255));
+        let other_texture = inputs_hash(&scene, &cells, &settings, "");
+        assert_ne!(plain, with_cards);
+        assert_ne!(with_cards, other_texture, "one texel changed");
+        scene.alpha = Some(cards(0));
+        assert_eq!(with_cards, inputs_hash(&scene, &cells, &settings, ""));
     }
 
     #[test]

@@ -76,6 +76,11 @@ pub struct Occluders {
     pub bounds: DAabb,
     /// What the alpha-tested cards gave.
     pub cards: CardStats,
+    /// The cards' coverages (one per texture and threshold), for the sampler's per-pixel
+    /// texel-footprint test.
+    pub card_coverages: Vec<std::sync::Arc<alpha::Coverage>>,
+    /// Textured card triangles of occluder objects and their coverage in `card_coverages`.
+    pub card_triangles: Vec<(u32, u32)>,
 }
 
 /// What the alpha-tested cards gave, for the summary.
@@ -245,6 +250,8 @@ pub fn prepare_with(
             card_area: made.card_area,
             opaque_area: made.opaque_area,
         };
+        out.card_coverages = made.coverages;
+        out.card_triangles = made.textured;
         for (object, pts, normal) in made.polygons {
             let inradius = polygon_inradius(&pts);
             push_part(

@@ -7,9 +7,10 @@
 //! tested with outer-conservative rectangles at their nearest depth. The argument is in the
 //! parent module's docs.
 
-use super::SampleOccluders;
+use super::{SampleCard, SampleOccluders};
 use crate::geom::DAabb;
-use glam::DVec3;
+use crate::scene::alpha::Coverage;
+use glam::{DVec2, DVec3};
 
 /// Pixels per tile side (tiles keep the largest depth of their pixels).
 const TILE: usize = 8;
@@ -69,6 +70,67 @@ fn pixel_mask(ev: &[[f32; 4]], u0: f64, v0: f64, ps: f64, lmax: f64) -> u64 {
     mask
 }
 
+/// Whether the card `c` is surely opaque wherever a segment from the sampled region (within
+/// `reach` of the eye, whose distance to the card's plane is `h > reach`) to a point beyond
+/// the plane, in a direction of the pixel `[u0, u0 + ps] × [v0, v0 + ps]`, can cross the plane.
+/// `nv` is the plane's unit normal in view coordinates, pointing from the eye to the plane;
+/// `at(d)` is the scene point `eye + d` for a view-space offset `d`.
+///
+/// The ray from the eye in such a direction `w` (with `a = n·w > h`, `cos θ = a / |w|`)
+/// crosses the plane at `x0`, inside the convex hull `F` of the corner rays' crossings. The
+/// segment from `b = eye + δ` (`|δ| ≤ reach < h`) to `q = eye + w` crosses it at `x`, and
+/// `x − x0 = δ·(1 − s) − (n·δ)·(a − h)/(a·(a − n·δ))·w` with `s ∈ [0, 1]`, so
+/// `|x − x0| ≤ reach·(1 + 1/cos θ)`. Every crossing lies within that distance of `F`; its
+/// texture coordinates lie in the bounding box of `F`'s corners' widened by that distance
+/// times the gradients' lengths (the map is affine), and the texture is tested there.
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one pixel, one card: all scalars of the inner loop"
+)]
+fn footprint_opaque(
+    c: &SampleCard,
+    cov: &Coverage,
+    nv: DVec3,
+    h: f64,
+    reach: f64,
+    u0: f64,
+    v0: f64,
+    ps: f64,
+    at: impl Fn(DVec3) -> DVec3,
+) -> bool {
+    let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
+    let mut cos_min = f64::INFINITY;
+    for (du, dv) in [(0.0, 0.0), (ps, 0.0), (0.0, ps), (ps, ps)] {
+        let d = DVec3::new(u0 + du, v0 + dv, 1.0);
+        let a = nv.dot(d);
+        if a.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return false;
+        }
+        cos_min = cos_min.min(a);
+        let uv = c.uv(at(d * (h / a)));
+        lo = lo.min(uv);
+        hi = hi.max(uv);
+    }
+    // The least cos θ over the pixel: n·w is linear (least at a corner) and |w| convex
+    // (largest at a corner, at most √3 in a view).
+    let lmax = (0..4)
+        .map(|k| {
+            let d = DVec3::new(u0 + ps * f64::from(k & 1), v0 + ps * f64::from(k >> 1), 1.0);
+            d.length()
+        })
+        .fold(0.0, f64::max);
+    let cos = cos_min / lmax;
+    if cos.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return false;
+    }
+    let rho = reach * (1.0 + 1.0 / cos) * (1.0 + 1e-6);
+    // Texture-space widening, plus a relative margin for the rounding of the map.
+    let wide =
+        DVec2::new(c.gu.length(), c.gv.length()) * rho + (hi - lo + lo.abs() + hi.abs()) * 1e-9;
+    let (lo, hi) = (lo - wide, hi + wide);
+    cov.uv_rect_opaque([lo.x, hi.x], [lo.y, hi.y])
+}
+
 /// What [`Hemicube::test_box`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum BoxTest {
@@ -118,6 +180,10 @@ struct View {
 struct Rect {
     i: [usize; 2],
     j: [usize; 2],
+    /// The same bounds before rounding, in pixel units (`i` for `u`, `j` for `v`): every
+    /// direction of the box lies in `[pu[0], pu[1]] × [pv[0], pv[1]]`.
+    pu: [f64; 2],
+    pv: [f64; 2],
     z: f64,
 }
 
@@ -344,6 +410,8 @@ impl Hemicube {
             return Some(Rect {
                 i: [0, self.res],
                 j: [0, view.h],
+                pu: [0.0, self.res as f64],
+                pv: [0.0, view.h as f64],
                 z: 0.0,
             });
         }
@@ -363,6 +431,8 @@ impl Hemicube {
         (i0 < i1 && j0 < j1).then_some(Rect {
             i: [i0, i1],
             j: [j0, j1],
+            pu: [(u0 + 1.0) * half, (u1 + 1.0) * half],
+            pv: [(v0 - view.vmin) * half, (v1 - view.vmin) * half],
             z: zl,
         })
     }
@@ -461,7 +531,10 @@ impl Hemicube {
     fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize) -> bool {
         let mut q = std::mem::take(&mut self.scratch_q);
         let mut edges = std::mem::take(&mut self.scratch_edges);
-        let drawn = self.draw_poly_with(occ.poly_points(poly), &mut q, &mut edges);
+        let card = occ
+            .card(poly)
+            .map(|c| (c, &*occ.coverages[c.coverage as usize]));
+        let drawn = self.draw_poly_with(occ.poly_points(poly), card, &mut q, &mut edges);
         self.scratch_q = q;
         self.scratch_edges = edges;
         drawn
@@ -470,6 +543,7 @@ impl Hemicube {
     fn draw_poly_with(
         &mut self,
         pts: &[DVec3],
+        card: Option<(&SampleCard, &Coverage)>,
         q: &mut Vec<DVec3>,
         edges: &mut Vec<(DVec3, f64)>,
     ) -> bool {
@@ -541,7 +615,7 @@ impl Hemicube {
             if self.views[k].need[0] >= self.views[k].need[1] {
                 continue;
             }
-            drawn |= self.draw_in_view(k, q, edges, normal / nl);
+            drawn |= self.draw_in_view(k, q, edges, normal / nl, card);
         }
         drawn
     }
@@ -552,6 +626,7 @@ impl Hemicube {
         q: &[DVec3],
         edges: &[(DVec3, f64)],
         normal: DVec3,
+        card: Option<(&SampleCard, &Coverage)>,
     ) -> bool {
         let res = self.res;
         let ps = 2.0 / res as f64;
@@ -613,7 +688,16 @@ impl Hemicube {
         if pi0 >= pi1 || pj0 >= pj1 {
             return false;
         }
-        let subpixel = self.subpixel;
+        // A card triangle covers whole pixels only (where its texel footprint is opaque).
+        let subpixel = self.subpixel && card.is_none();
+        // The card's plane seen from the eye: its normal toward the plane, in view
+        // coordinates, and the plane's distance.
+        let card_plane = card.map(|_| {
+            let nv = to_view(normal);
+            if nv.dot(to_view(q[0])) < 0.0 { -nv } else { nv }
+        });
+        let plane_h = self.near;
+        let (eye, reach) = (self.eye, self.eps);
         // A narrow projection may cover sub-pixels of pixels none of whose corners pass:
         // all its pixels get masks. Otherwise only pixels with a passing corner do.
         let thin = subpixel && (pi1 - pi0 <= 4 || pj1 - pj0 <= 4);
@@ -689,7 +773,25 @@ impl Hemicube {
                     let corners = prev[ci] + prev[ci + 1] + pass[ci] + pass[ci + 1];
                     let (u0, v0) = (-1.0 + ci as f64 * ps, view.vmin + pj as f64 * ps);
                     let cover = if corners == 4 {
-                        u64::MAX
+                        match (card, card_plane) {
+                            (Some((c, cov)), Some(nv)) => {
+                                let unview = |d: DVec3| {
+                                    let mut w = DVec3::ZERO;
+                                    w[map[0].0] += map[0].1 * d.x;
+                                    w[map[1].0] += map[1].1 * d.y;
+                                    w[map[2].0] += map[2].1 * d.z;
+                                    w
+                                };
+                                if footprint_opaque(c, cov, nv, plane_h, reach, u0, v0, ps, |d| {
+                                    eye + unview(d)
+                                }) {
+                                    u64::MAX
+                                } else {
+                                    0
+                                }
+                            }
+                            _ => u64::MAX,
+                        }
                     } else if subpixel && (corners > 0 || thin) {
                         let lmax = row[ci].max(row[ci + 1]).max(prow[ci]).max(prow[ci + 1]);
                         pixel_mask(ev, u0, v0, ps, f64::from(lmax))
@@ -777,6 +879,34 @@ impl Hemicube {
         wrote
     }
 
+    /// Whether the box's part of pixel `(i, j)` (index `idx`) is covered nearer than `z` by
+    /// the pixel's partial mask: every sub-pixel that the box's directions can reach there
+    /// (its unrounded bounds rounded outward to whole sub-pixels) is set, and the mask's
+    /// depth is nearer. A set sub-pixel lies wholly inside the shrunk silhouette of a polygon
+    /// no deeper than the mask's depth, so each direction of the box in it is covered as a
+    /// fully covered pixel's would be.
+    fn sub_covered(&self, v: &View, idx: usize, r: &Rect, i: usize, j: usize, z: f64) -> bool {
+        let m = v.mask[idx];
+        if m == 0 || (v.wz[idx] as f64).partial_cmp(&z) != Some(std::cmp::Ordering::Less) {
+            return false;
+        }
+        // Sub-pixel indices of the bounds, widened by a millionth of a sub-pixel against the
+        // rounding of the subtraction and product (the bounds are at most `res` in size).
+        let span = |lo: f64, hi: f64, p: usize| -> (u32, u32) {
+            let a = ((lo - p as f64) * 8.0 - 1e-6).floor().clamp(0.0, 7.0) as u32;
+            let b = ((hi - p as f64) * 8.0 + 1e-6).floor().clamp(0.0, 7.0) as u32;
+            (a, b)
+        };
+        let (a0, a1) = span(r.pu[0], r.pu[1], i);
+        let (b0, b1) = span(r.pv[0], r.pv[1], j);
+        let row = ((1u64 << (a1 - a0 + 1)) - 1) << a0;
+        let mut need = 0u64;
+        for b in b0..=b1 {
+            need |= row << (8 * b);
+        }
+        m & need == need
+    }
+
     /// The share of the needed pixels that some polygon covers, and the median depth of the
     /// covered ones (for probes and tuning).
     pub fn coverage(&self) -> (f64, f64) {
@@ -801,6 +931,31 @@ impl Hemicube {
             .copied()
             .unwrap_or(f32::INFINITY);
         (c as f64 / n.max(1) as f64, f64::from(med))
+    }
+
+    /// The state of the pixel that direction `dir` (world space) falls in, for probes
+    /// (`examples/sampler_leaks.rs`): its depth, its partial mask and that mask's depth. None
+    /// when the direction is outside the hemisphere or outside the pixels drawn this render.
+    pub fn pixel_state(&self, dir: DVec3) -> Option<(f32, u64, f32)> {
+        let half = self.res as f64 / 2.0;
+        for v in &self.views {
+            let c = v.map.map(|(ax, s)| s * dir[ax]);
+            if c[2] <= 0.0 {
+                continue;
+            }
+            let (u, w) = (c[0] / c[2], c[1] / c[2]);
+            if !(-1.0..1.0).contains(&u) || w < v.vmin || w >= v.vmin + v.h as f64 / half {
+                continue;
+            }
+            let i = ((u + 1.0) * half) as usize;
+            let j = ((w - v.vmin) * half) as usize;
+            if i < v.need[0] || i >= v.need[1] || j < v.need[2] || j >= v.need[3] {
+                return None;
+            }
+            let idx = j * self.res + i;
+            return Some((v.depth[idx], v.mask[idx], v.wz[idx]));
+        }
+        None
     }
 
     /// Tests a box (an occludee) against what was drawn. Only boxes given to
@@ -840,8 +995,10 @@ impl Hemicube {
                     }
                     for j in (tj * TILE).max(r.j[0])..((tj + 1) * TILE).min(r.j[1]) {
                         for i in (ti * TILE).max(r.i[0])..((ti + 1) * TILE).min(r.i[1]) {
-                            if (v.depth[j * res + i] as f64).partial_cmp(&z)
+                            let idx = j * res + i;
+                            if (v.depth[idx] as f64).partial_cmp(&z)
                                 != Some(std::cmp::Ordering::Less)
+                                && !self.sub_covered(v, idx, &r, i, j, z)
                             {
                                 return open(i, j);
                             }

@@ -70,6 +70,19 @@
 //! Then every point `q` of the box seen through that view lies beyond a polygon whose shrunk
 //! silhouette holds the direction of `q`, and the claim hides `q` from all of `B`.
 //!
+//! **Occludees at sub-pixels.** A pixel that no depth covers nearer than the box still hides
+//! the box's part in it when every sub-pixel that part can reach (the box's unrounded `u`/`v`
+//! bounds, rounded outward to whole sub-pixels) is set in the pixel's mask and the mask's depth
+//! is nearer: each such direction lies in the shrunk silhouette of a polygon no deeper.
+//!
+//! **Cards** ([`SampleCard`]). A textured alpha-tested card triangle is drawn like a polygon,
+//! but a pixel inside its shrunk silhouette is covered only when the texture is surely opaque
+//! (`scene::alpha::Coverage`: at every trusted mip level) over the pixel's texel footprint,
+//! widened for the ball (`footprint_opaque` in `hemicube.rs` gives the bound). The claim above
+//! makes every segment from the ball cross the triangle; the footprint puts the crossing on a
+//! surely opaque texel, where every renderer draws the card. Card triangles get no sub-pixel
+//! masks.
+//!
 //! **The hemisphere.** A sample point lies on a face `F` of the cell with outward normal `n`;
 //! the five views (front, and the halves `v ≥ 0` of the four side views, `v` along `n`) cover
 //! every direction `d` with `d·n ≥ 0`, and a box is tested only with its part on the outer side
@@ -85,9 +98,11 @@ pub use hemicube::{BoxTest, Hemicube, RenderStats};
 
 use crate::geom::{Aabb, DAabb};
 use crate::project::occluders::{Occluders, PartKind, polygon_inradius};
+use crate::scene::alpha::Coverage;
 use crate::scene::{Scene, is_degenerate};
-use glam::{DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
+use std::sync::Arc;
 
 /// One convex planar occluder polygon of the sampler.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -114,6 +129,66 @@ pub struct SampleOccluders {
     pub(crate) bvh: Option<Bvh2>,
     /// Median in-plane inradius of the polygons about their centroids (for the default ε).
     pub median_inradius: f64,
+    /// Per polygon: its entry in `cards` when it is a textured card triangle, else
+    /// [`NO_CARD`].
+    pub card_of: Vec<u32>,
+    /// The textured card triangles' texture maps.
+    pub cards: Vec<SampleCard>,
+    /// The coverages the cards index.
+    pub coverages: Vec<Arc<Coverage>>,
+}
+
+/// [`SampleOccluders::card_of`] of a polygon that is not a card triangle.
+pub const NO_CARD: u32 = u32::MAX;
+
+/// A textured card triangle of the sampler: drawn only where the texture is surely opaque over
+/// each pixel's texel footprint (`Hemicube`'s docs). Its texture coordinates are the affine
+/// function `uv(x) = uv0 + (gu·(x − origin), gv·(x − origin))` of a point `x` of its plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleCard {
+    /// Its coverage in [`SampleOccluders::coverages`].
+    pub coverage: u32,
+    /// A point of the triangle (its first corner).
+    pub origin: DVec3,
+    /// Texture coordinates at `origin`.
+    pub uv0: DVec2,
+    /// Gradients of `u` and `v` in the triangle's plane.
+    pub gu: DVec3,
+    /// See `gu`.
+    pub gv: DVec3,
+}
+
+impl SampleCard {
+    /// The map of a triangle with corners `p` and texture coordinates `uv`; None when it is
+    /// degenerate in space or in texture space.
+    pub fn new(p: [DVec3; 3], uv: [DVec2; 3], coverage: u32) -> Option<SampleCard> {
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let (d1, d2) = (uv[1] - uv[0], uv[2] - uv[0]);
+        let n = e1.cross(e2);
+        let det = d1.perp_dot(d2);
+        if !(n.length_squared() > 0.0 && det != 0.0 && det.is_finite()) {
+            return None;
+        }
+        // The dual basis of (e1, e2) in the plane: b1·e1 = 1, b1·e2 = 0 and the reverse.
+        let b1 = e2.cross(n) / e1.dot(e2.cross(n));
+        let b2 = n.cross(e1) / e2.dot(n.cross(e1));
+        // uv(x) = uv0 + d1·(b1·(x − p0)) + d2·(b2·(x − p0)).
+        let gu = b1 * d1.x + b2 * d2.x;
+        let gv = b1 * d1.y + b2 * d2.y;
+        (gu.is_finite() && gv.is_finite()).then_some(SampleCard {
+            coverage,
+            origin: p[0],
+            uv0: uv[0],
+            gu,
+            gv,
+        })
+    }
+
+    /// Texture coordinates of a point of the plane.
+    pub fn uv(&self, x: DVec3) -> DVec2 {
+        let d = x - self.origin;
+        self.uv0 + DVec2::new(self.gu.dot(d), self.gv.dot(d))
+    }
 }
 
 impl std::fmt::Debug for SampleOccluders {
@@ -121,6 +196,7 @@ impl std::fmt::Debug for SampleOccluders {
         f.debug_struct("SampleOccluders")
             .field("polys", &self.polys.len())
             .field("median_inradius", &self.median_inradius)
+            .field("cards", &self.cards.len())
             .finish()
     }
 }
@@ -168,6 +244,20 @@ impl SampleOccluders {
                 out.push(&tri.map(Vec3::as_dvec3), o as u32);
             }
         }
+        // Textured card triangles, tested per pixel against their texel footprint (the card
+        // polygons above are their inner approximation for sub-pixel masks and the planes).
+        if let Some(a) = scene.alpha.as_ref() {
+            out.coverages = occ.card_coverages.clone();
+            for &(t, c) in &occ.card_triangles {
+                let Some(card) = a.card(t as usize) else {
+                    continue;
+                };
+                let p = scene.triangle(t as usize).map(Vec3::as_dvec3);
+                if let Some(sc) = SampleCard::new(p, card.uv.map(|u| u.as_dvec2()), c) {
+                    out.push_card(&p, sc, scene.triangle_object(t));
+                }
+            }
+        }
         // Triangles merged alone have no inradius recorded: take it from the geometry.
         for (i, r) in inradii.iter_mut().enumerate() {
             if *r <= 0.0 {
@@ -192,12 +282,50 @@ impl SampleOccluders {
     /// A set of polygons given directly (tests, tools). Each must be convex and exactly
     /// planar; degenerate ones are dropped.
     pub fn from_polygons(polys: &[(Vec<DVec3>, u32)]) -> Self {
+        Self::from_polygons_and_cards(polys, &[], Vec::new())
+    }
+
+    /// [`SampleOccluders::from_polygons`] with textured card triangles (corners, texture
+    /// coordinates, index into `coverages`, object) too.
+    pub fn from_polygons_and_cards(
+        polys: &[(Vec<DVec3>, u32)],
+        cards: &[([DVec3; 3], [DVec2; 3], u32, u32)],
+        coverages: Vec<Arc<Coverage>>,
+    ) -> Self {
         let mut out = SampleOccluders::default();
         for (pts, object) in polys {
             out.push(pts, *object);
         }
+        out.coverages = coverages;
+        for &(p, uv, c, object) in cards {
+            assert!(
+                (c as usize) < out.coverages.len(),
+                "coverage index in range"
+            );
+            if let Some(sc) = SampleCard::new(p, uv, c) {
+                out.push_card(&p, sc, object);
+            }
+        }
         out.build_bvh();
         out
+    }
+
+    fn push_card(&mut self, p: &[DVec3; 3], card: SampleCard, object: u32) {
+        let n = self.polys.len();
+        self.push(p, object);
+        if self.polys.len() > n {
+            self.card_of.resize(n, NO_CARD);
+            self.card_of.push(self.cards.len() as u32);
+            self.cards.push(card);
+        }
+    }
+
+    /// The card map of polygon `i`, when it is a textured card triangle.
+    pub fn card(&self, i: usize) -> Option<&SampleCard> {
+        match self.card_of.get(i) {
+            Some(&c) if c != NO_CARD => Some(&self.cards[c as usize]),
+            _ => None,
+        }
     }
 
     /// Builds the BVH over the polygons' boxes (none without polygons).
@@ -223,8 +351,13 @@ impl SampleOccluders {
         let mut points = Vec::with_capacity(self.points.len());
         let mut polys = Vec::with_capacity(self.polys.len());
         let mut bounds = Vec::with_capacity(self.bounds.len());
+        let mut card_of = Vec::new();
+        let any_card = !self.cards.is_empty();
         for slot in bvh.primitive_indices.iter_mut() {
             let p = self.polys[*slot as usize];
+            if any_card {
+                card_of.push(self.card_of.get(*slot as usize).copied().unwrap_or(NO_CARD));
+            }
             let start = points.len() as u32;
             points.extend_from_slice(&self.points[p.start as usize..p.end as usize]);
             bounds.push(self.bounds[*slot as usize]);
@@ -238,6 +371,7 @@ impl SampleOccluders {
         self.points = points;
         self.polys = polys;
         self.bounds = bounds;
+        self.card_of = card_of;
         self.bvh = Some(bvh);
     }
 

@@ -412,6 +412,26 @@ impl Coverage {
             - self.sat[(y1 + 1) * pw + x0]
     }
 
+    /// True when every point whose texture coordinates lie in `[u[0], u[1]] × [v[0], v[1]]`
+    /// is surely opaque (the half-texel cells holding the rectangle, its edges included, with
+    /// the texture's wrap modes). False for an empty, non-finite or huge rectangle.
+    pub fn uv_rect_opaque(&self, u: [f64; 2], v: [f64; 2]) -> bool {
+        let range = |lo: f64, hi: f64, n: u32| -> Option<(i64, i64)> {
+            let s = n as f64;
+            let (a, b) = (lo * s, hi * s);
+            // Rounded outward by a millionth of a super-cell (the products' rounding is far
+            // below it for any range this accepts).
+            (a.is_finite() && b.is_finite() && a <= b && b - a < 1e6 && a.abs() < 1e9)
+                .then(|| ((a - 1e-6).floor() as i64, (b + 1e-6).floor() as i64))
+        };
+        let cells_u = self.cells[0] / self.q;
+        let cells_v = self.cells[1] / self.q;
+        match (range(u[0], u[1], cells_u), range(v[0], v[1], cells_v)) {
+            (Some(x), Some(y)) => self.all_opaque(x, y),
+            _ => false,
+        }
+    }
+
     /// True when every super-cell of the unwrapped inclusive ranges is surely opaque.
     fn all_opaque(&self, x: (i64, i64), y: (i64, i64)) -> bool {
         let xs = segments(x, self.period[0] as i64, self.wrap[0]);
@@ -870,6 +890,11 @@ pub struct CardOccluders {
     pub card_area: f64,
     /// World-space area of the polygons.
     pub opaque_area: f64,
+    /// The coverages built (one per texture and threshold), for per-pixel tests.
+    pub coverages: Vec<std::sync::Arc<Coverage>>,
+    /// The textured card triangles and their coverage in `coverages` (scene triangle
+    /// indices; triangles of uniform alpha, degenerate texture maps or no alpha are not here).
+    pub textured: Vec<(u32, u32)>,
 }
 
 /// Options of [`card_occluders`].
@@ -1077,6 +1102,14 @@ pub fn card_occluders(
         }
     }
     out.triangles = tris.len();
+    for i in 0..n {
+        if let (Some(_), Some(c)) = (maps[i], cov_of[i])
+            && c != usize::MAX
+        {
+            out.textured.push((tris[i], c as u32));
+        }
+    }
+    out.coverages = covs.into_iter().map(std::sync::Arc::new).collect();
     // Card area of triangles never grouped (degenerate maps or no coverage).
     for i in 0..n {
         if maps[i].is_none() || cov_of[i].is_none() {
