@@ -249,9 +249,14 @@ impl SampleOccluders {
         if let Some(a) = scene.alpha.as_ref() {
             out.coverages = occ.card_coverages.clone();
             for &(t, c) in &occ.card_triangles {
+                // A texture with no surely opaque cell (a leaf atlas over all its mip levels)
+                // covers no pixel: leave its triangles out.
                 let Some(card) = a.card(t as usize) else {
                     continue;
                 };
+                if occ.card_coverages[c as usize].opaque_share <= 0.0 {
+                    continue;
+                }
                 let p = scene.triangle(t as usize).map(Vec3::as_dvec3);
                 if let Some(sc) = SampleCard::new(p, card.uv.map(|u| u.as_dvec2()), c) {
                     out.push_card(&p, sc, scene.triangle_object(t));
