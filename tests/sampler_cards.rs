@@ -11,20 +11,8 @@ use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube, SampleOccluders};
 use umbrasweep::scene::alpha::{AlphaTexture, Coverage, Wrap};
 
-/// A small deterministic generator (splitmix64).
-struct Rng(u64);
-impl Rng {
-    fn f(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn u(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.f()
-    }
-}
+mod common;
+use common::Lcg;
 
 const CUTOFF: f32 = 0.5;
 
@@ -127,7 +115,7 @@ fn crossing(a: DVec3, b: DVec3, t: &[DVec3; 3], tol: f64) -> Option<(f64, f64)> 
 /// Random textured cards before the eye, boxes behind; every box found hidden is checked
 /// with segments from points of the ball to points of the box. Returns (boxes, hidden).
 fn brute_force(seed: u64, scaled: bool) -> (usize, usize) {
-    let mut rng = Rng(seed);
+    let mut rng = Lcg(seed);
     let (scale, offset) = if scaled {
         (1e-3, DVec3::new(1e5, -1e5, 1e5))
     } else {
@@ -138,7 +126,13 @@ fn brute_force(seed: u64, scaled: bool) -> (usize, usize) {
     let mut textures = Vec::new();
     for k in 0..3 {
         let discs: Vec<(f64, f64, f64)> = (0..6)
-            .map(|_| (rng.u(0.0, 16.0), rng.u(0.0, 16.0), rng.u(2.0, 7.0)))
+            .map(|_| {
+                (
+                    rng.range(0.0, 16.0),
+                    rng.range(0.0, 16.0),
+                    rng.range(2.0, 7.0),
+                )
+            })
             .collect();
         let wrap = [Wrap::Repeat, Wrap::ClampToEdge, Wrap::MirroredRepeat][k];
         textures.push(texture(16, 16, wrap, |x, y| {
@@ -155,34 +149,46 @@ fn brute_force(seed: u64, scaled: bool) -> (usize, usize) {
     let mut cards = Vec::new();
     let n_cards = [2, 4, 8, 40][(seed % 4) as usize];
     for _ in 0..n_cards {
-        let c = DVec3::new(rng.u(-2.0, 2.0), rng.u(-2.0, 2.0), rng.u(0.6, 3.0));
+        let c = DVec3::new(
+            rng.range(-2.0, 2.0),
+            rng.range(-2.0, 2.0),
+            rng.range(0.6, 3.0),
+        );
         let s = if n_cards < 40 {
-            rng.u(2.0, 5.0)
+            rng.range(2.0, 5.0)
         } else {
-            rng.u(0.5, 2.5)
+            rng.range(0.5, 2.5)
         };
         let p: [DVec3; 3] = std::array::from_fn(|_| {
-            c + DVec3::new(rng.u(-s, s), rng.u(-s, s), rng.u(-0.3 * s, 0.3 * s))
+            c + DVec3::new(
+                rng.range(-s, s),
+                rng.range(-s, s),
+                rng.range(-0.3 * s, 0.3 * s),
+            )
         });
-        let o = DVec2::new(rng.u(-1.0, 1.0), rng.u(-1.0, 1.0));
+        let o = DVec2::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
         let uv: [DVec2; 3] =
-            std::array::from_fn(|_| o + DVec2::new(rng.u(-1.2, 1.2), rng.u(-1.2, 1.2)));
-        let tex = (rng.f() * 3.0) as u32 % 3;
+            std::array::from_fn(|_| o + DVec2::new(rng.range(-1.2, 1.2), rng.range(-1.2, 1.2)));
+        let tex = (rng.unit() * 3.0) as u32 % 3;
         cards.push((p.map(at), uv, tex, 0));
     }
     let occ = SampleOccluders::from_polygons_and_cards(&[], &cards, covs);
     let boxes: Vec<DAabb> = (0..60)
         .map(|_| {
-            let c = DVec3::new(rng.u(-2.5, 2.5), rng.u(-2.5, 2.5), rng.u(3.5, 6.0));
+            let c = DVec3::new(
+                rng.range(-2.5, 2.5),
+                rng.range(-2.5, 2.5),
+                rng.range(3.5, 6.0),
+            );
             let hs = if seed % 4 == 3 { 0.3 } else { 0.08 };
-            let h = DVec3::new(rng.u(0.0, hs), rng.u(0.0, hs), rng.u(0.0, hs));
+            let h = DVec3::new(rng.range(0.0, hs), rng.range(0.0, hs), rng.range(0.0, hs));
             DAabb {
                 min: at(c - h),
                 max: at(c + h),
             }
         })
         .collect();
-    let eps = rng.u(0.02, 0.25) * scale;
+    let eps = rng.range(0.02, 0.25) * scale;
     let eye = at(DVec3::ZERO);
     let mut hc = Hemicube::new(160);
     hc.begin(eye, 2, 1.0, eps, &boxes);
@@ -210,7 +216,11 @@ fn brute_force(seed: u64, scaled: bool) -> (usize, usize) {
             let d = if k % 40 < 26 {
                 dirs[k % 40]
             } else {
-                let d = DVec3::new(rng.u(-1.0, 1.0), rng.u(-1.0, 1.0), rng.u(-1.0, 1.0));
+                let d = DVec3::new(
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                );
                 if d.length() > 1e-3 {
                     d.normalize()
                 } else {
@@ -226,7 +236,7 @@ fn brute_force(seed: u64, scaled: bool) -> (usize, usize) {
                     if k & 4 == 0 { bx.min.z } else { bx.max.z },
                 )
             } else {
-                bx.min + (bx.max - bx.min) * DVec3::new(rng.f(), rng.f(), rng.f())
+                bx.min + (bx.max - bx.min) * DVec3::new(rng.unit(), rng.unit(), rng.unit())
             };
             let blocked = cards.iter().any(|(p, uv, tex, _)| {
                 crossing(b, q, p, 1e-9).is_some_and(|(w1, w2)| {
