@@ -94,21 +94,24 @@ fn traverse(prepared: &Prepared, cell: &Aabb, state: &mut CullState, drain: bool
         // the pixels' guards near (the result is conservative in any order).
         let mut pending: BinaryHeap<Reverse<(OrdF64, u32)>> = BinaryHeap::new();
         let mut buf: Vec<glam::DVec3> = Vec::new();
+        let mut insert = |p: u32, charts: &mut RayCharts| {
+            insert_part(
+                occ,
+                &prepared.rsf_edges,
+                p as usize,
+                &cell64,
+                &corners,
+                &mut buf,
+                charts,
+            );
+        };
         for &(d, o) in &order {
             while let Some(&Reverse((OrdF64(pd), p))) = pending.peek() {
                 if pd > d {
                     break;
                 }
                 pending.pop();
-                insert_part(
-                    occ,
-                    &prepared.rsf_edges,
-                    p as usize,
-                    &cell64,
-                    &corners,
-                    &mut buf,
-                    &mut charts,
-                );
+                insert(p, &mut charts);
             }
             let o = o as usize;
             if !known.is_some_and(|k| k[o]) && hidden(prepared, &charts, o) {
@@ -126,15 +129,7 @@ fn traverse(prepared: &Prepared, cell: &Aabb, state: &mut CullState, drain: bool
         }
         if drain {
             while let Some(Reverse((_, p))) = pending.pop() {
-                insert_part(
-                    occ,
-                    &prepared.rsf_edges,
-                    p as usize,
-                    &cell64,
-                    &corners,
-                    &mut buf,
-                    &mut charts,
-                );
+                insert(p, &mut charts);
             }
         }
         charts
