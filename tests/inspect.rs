@@ -430,6 +430,78 @@ fn report_is_a_self_contained_page() {
     );
 }
 
+/// The report of cell 0 of the wall scene baked with ray space factorization `rsf`.
+fn report_with_rsf(dir: &Path, rsf: umbrasweep::bake::SweepChoice) -> String {
+    let scene_path = dir.join("walls.obj");
+    write_obj(&scene_path, &wall_scene());
+    let scene = umbrasweep::scene::load(&scene_path).unwrap();
+    let cells = [unit_cell()];
+    let s = BakeSettings {
+        rsf,
+        rsf_resolution: 32,
+        ..settings()
+    };
+    let r = bake(&scene, &cells, &s, &CpuBackend::new(), None).unwrap();
+    let pvs = dir.join("walls.json");
+    umbrasweep::pvs::json::write(&pvs, &to_document(&scene, &cells, &r, &s)).unwrap();
+    let out = dir.join("report");
+    run_report(&scene_path, &pvs, &out, 0, false).unwrap();
+    std::fs::read_to_string(out.join("index.html")).unwrap()
+}
+
+#[test]
+fn report_pictures_the_ray_space_charts_when_the_bake_ran_them() {
+    let dir = tmp();
+    let html = report_with_rsf(dir.path(), umbrasweep::bake::SweepChoice::On);
+    let charts: Vec<&str> = html.split("<img class=\"chart\"").skip(1).collect();
+    assert_eq!(charts.len(), 4, "four charts");
+    for side in ["chart +x", "chart −x", "chart +z", "chart −z"] {
+        assert!(html.contains(side), "{side}");
+    }
+    // The wall across +z (in front of the cell) fills part of the +z chart, nothing fills the
+    // −z one (nothing stands behind the cell there).
+    let share = |side: &str| -> f64 {
+        let at = html.find(side).unwrap();
+        let rest = &html[at..];
+        let pct = rest.split(" · ").nth(2).unwrap();
+        pct.split(' ').next().unwrap().parse().unwrap()
+    };
+    assert!(share("chart +z") > 5.0, "{}", share("chart +z"));
+    assert_eq!(share("chart −z"), 0.0);
+    // The picture of a chart: its size, the checkerboard exactly where no pixel holds an
+    // umbra.
+    let scene = Scene::from_objects(Path::new("walls"), wall_scene());
+    let s = BakeSettings {
+        rsf: umbrasweep::bake::SweepChoice::On,
+        rsf_resolution: 32,
+        ..settings()
+    };
+    let charts = umbrasweep::bake::rsf_charts(&scene, &[unit_cell()], &[0], &s)
+        .unwrap()
+        .unwrap();
+    let charts = &charts[0].1;
+    let plus_z = (0..4).find(|&c| charts.chart_info(c).axis == 2 && charts.chart_info(c).positive);
+    let plus_z = plus_z.unwrap();
+    let img = umbrasweep::inspect::preview::rsf_chart_image(charts, plus_z);
+    assert_eq!(img.dimensions(), (32, 32));
+    let greys = umbrasweep::inspect::preview::UNCOVERED;
+    let mut coloured = 0;
+    for (x, y, p) in img.enumerate_pixels() {
+        let has = charts
+            .umbrae(plus_z, y as usize, x as usize)
+            .iter()
+            .any(|u| u.guard.is_finite());
+        assert_eq!(!greys.contains(&p.0), has, "pixel ({x}, {y})");
+        coloured += usize::from(has);
+    }
+    assert!(coloured > 50, "{coloured}");
+
+    let dir = tmp();
+    let html = report_with_rsf(dir.path(), umbrasweep::bake::SweepChoice::Off);
+    assert!(!html.contains("<img class=\"chart\""));
+    assert!(html.contains("Not run for this bake"));
+}
+
 #[test]
 fn report_refuses_a_pvs_of_another_scene_and_a_missing_cell() {
     let dir = tmp();

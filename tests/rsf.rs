@@ -298,6 +298,112 @@ fn a_slit_inside_one_pixel_and_on_a_chart_seam_stays_open() {
 }
 
 #[test]
+fn a_facade_in_two_stacked_parts_fuses_and_one_with_a_gap_stays_open() {
+    // A block across +x: its front wall's lower part stands on the ground at x = 8 up to 1.5
+    // (the cell spans heights 1 … 3), its upper part is set back half a unit (x = 8.5) and
+    // floats from 1.2 to 20, below the line from the cell's front top edge over the lower
+    // part (3 − X/4: 1.375 at X = 6.5). Behind them, a box the lower part alone cannot hide.
+    let lower = wall(8.0, -100.0, 8.0, 100.0, 0.0, 1.5);
+    let target = dbox([14.0, 0.0, -1.0], [15.0, 2.0, 1.0]);
+    check(
+        "lower part alone",
+        std::slice::from_ref(&lower),
+        target,
+        false,
+    );
+    let upper = wall(8.5, -100.0, 8.5, 100.0, 1.2, 20.0);
+    check("stacked facade", &[lower.clone(), upper], target, true);
+    // The upper part starting at 1.6 leaves a slit above that line, through which the cell's
+    // top edge sees down over the lower part to the ground at x = 14: the box stays visible.
+    let gapped = wall(8.5, -100.0, 8.5, 100.0, 1.6, 20.0);
+    check("slit between the parts", &[lower, gapped], target, false);
+}
+
+#[test]
+fn brute_force_stacked_and_floating_walls() {
+    // Walls in two parts, the upper one floating from a little below to a little above the
+    // lower one's top, sometimes set back or forward, and inserted after it: fusion of the
+    // floating parts onto the lower ones' umbrae, and the slits it must leave open.
+    let mut rng = Lcg(29);
+    let (mut hidden, mut cases, mut fused) = (0, 0, 0);
+    for case in 0..240 {
+        let cell = dbox(
+            [
+                -rng.range(0.5, 4.0),
+                rng.range(0.2, 2.0),
+                -rng.range(0.5, 4.0),
+            ],
+            [
+                rng.range(0.5, 4.0),
+                rng.range(2.5, 5.0),
+                rng.range(0.5, 4.0),
+            ],
+        );
+        let (mut lower, mut upper) = (Vec::new(), Vec::new());
+        for _ in 0..(2 + case % 5) {
+            let ang = rng.range(0.0, std::f64::consts::TAU);
+            let r = rng.range(5.0, 30.0);
+            let (cx, cz) = (r * ang.cos(), r * ang.sin());
+            let len = rng.range(4.0, 60.0);
+            let dir = rng.range(0.0, std::f64::consts::TAU);
+            let (dx, dz) = (0.5 * len * dir.cos(), 0.5 * len * dir.sin());
+            let split = rng.range(0.3, 4.0);
+            lower.push(wall(cx - dx, cz - dz, cx + dx, cz + dz, -0.5, split));
+            // Overlapping, touching or leaving a slit; set back by up to a unit either way.
+            let gap = [0.0, -0.2, 0.05, rng.range(-0.5, 0.5)][case % 4];
+            let back = if rng.unit() < 0.5 {
+                0.0
+            } else {
+                rng.range(-1.0, 1.0)
+            };
+            let (nx, nz) = (cx.signum() * back, cz.signum() * back);
+            upper.push(wall(
+                cx - dx + nx,
+                cz - dz + nz,
+                cx + dx + nx,
+                cz + dz + nz,
+                split + gap,
+                split + gap + rng.range(0.5, 30.0),
+            ));
+        }
+        let alone = charts(&cell, &lower, [16, 64, 256][case % 3]);
+        let occ: Vec<Occ> = lower.into_iter().chain(upper).collect();
+        let res = [16, 64, 256][case % 3];
+        let c = charts(&cell, &occ, res);
+        for _ in 0..20 {
+            let ang = rng.range(0.0, std::f64::consts::TAU);
+            let r = rng.range(6.0, 90.0);
+            let (cx, cz) = (r * ang.cos(), r * ang.sin());
+            let (hx, hz) = (rng.range(0.05, 3.0), rng.range(0.05, 3.0));
+            let y0 = rng.range(-0.5, 3.0);
+            let t = dbox(
+                [cx - hx, y0, cz - hz],
+                [cx + hx, y0 + rng.range(0.1, 12.0), cz + hz],
+            );
+            if cell.overlaps(&t) {
+                continue;
+            }
+            cases += 1;
+            if c.box_hidden(&t) {
+                hidden += 1;
+                fused += usize::from(!alone.box_hidden(&t));
+                if let Some((e, q)) = open_ray(&cell, &t, &occ, &mut rng, 12) {
+                    panic!(
+                        "case {case}: box {t:?} hidden at resolution {res}, but {e} sees {q} \
+                         (cell {cell:?}, occluders {occ:?})"
+                    );
+                }
+            }
+        }
+    }
+    // Boxes hidden only thanks to the floating parts: the fusion is exercised.
+    assert!(
+        fused >= 20 && hidden > cases / 40,
+        "{hidden} of {cases} boxes hidden, {fused} only with the floating parts"
+    );
+}
+
+#[test]
 fn brute_force_every_hidden_box_is_blocked_from_every_point_tried() {
     let mut rng = Lcg(11);
     let (mut hidden, mut cases) = (0, 0);

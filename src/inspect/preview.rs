@@ -14,6 +14,9 @@
 //!   half (`y = height / 2`); the rest is black. Levels of a stretched map after its short
 //!   side has reached one texel are left out. Colours as for Depth.
 //!
+//! - **Ray space factorization's charts** ([`rsf_chart_image`]): per chart pixel, the
+//!   elevation of its highest umbra line on the same ramp, the checkerboard where it has none.
+//!
 //! Pixel `(i, j)` of a map is image pixel `x = i, y = j` (the plane's `v` grows downward).
 
 use crate::hdm::Hdm;
@@ -93,6 +96,30 @@ pub fn mask_image(map: &DepthMap) -> RgbImage {
             image::Rgb([255, 255, 255])
         } else {
             image::Rgb([0, 0, 0])
+        }
+    })
+}
+
+/// One chart of ray space factorization's charts (`chart` 0..4, see
+/// [`crate::rsf::RayCharts::chart_info`]): image pixel `(x, y)` is the chart's column `x`
+/// (slope `m`, from −1 at the left) and row `y` (crossing `s`, growing downward). A pixel
+/// holding an umbra gets `ramp(½ − atan(v)/π)` of the highest line `v` of its two umbrae —
+/// the elevation of the line through the cell's front top edge under which it hides: yellow
+/// for lines climbing steeply (tall occluders near by), violet for lines falling steeply —
+/// and pixels without one the grey checkerboard.
+pub fn rsf_chart_image(charts: &crate::rsf::RayCharts, chart: usize) -> RgbImage {
+    let n = charts.resolution() as u32;
+    RgbImage::from_fn(n, n, |x, y| {
+        let best = charts
+            .umbrae(chart, y as usize, x as usize)
+            .iter()
+            .filter(|u| u.guard.is_finite())
+            .map(|u| u.slope as f64)
+            .fold(f64::NEG_INFINITY, f64::max);
+        if best == f64::NEG_INFINITY {
+            image::Rgb(uncovered(x, y))
+        } else {
+            image::Rgb(ramp(0.5 - best.atan() / std::f64::consts::PI))
         }
     })
 }

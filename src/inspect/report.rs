@@ -10,7 +10,10 @@
 //! - beside it, a per-cell table: index, bounds, PVS size, % of objects culled, bake time;
 //! - the chosen cell's planes, re-baked in-process on the CPU backend with the settings the
 //!   PVS document records: Depth preview and mask of each plane, with its frame, and the
-//!   colour legend (see [`super::preview`]).
+//!   colour legend (see [`super::preview`]);
+//! - when the bake ran ray space factorization for the chosen cell, its four charts as the
+//!   traversal leaves them ([`preview::rsf_chart_image`]), each with the side it leaves and the
+//!   share of its pixels holding an umbra.
 
 use super::preview;
 use crate::backend::cpu::CpuBackend;
@@ -119,6 +122,14 @@ pub enum ReportError {
     Write(String),
 }
 
+/// One ray-space chart of the report.
+struct ChartPreview {
+    info: crate::rsf::ChartInfo,
+    /// Pixels holding an umbra, and all pixels.
+    filled: (usize, usize),
+    png: Vec<u8>,
+}
+
 /// One plane preview of the report.
 struct PlanePreview {
     index: usize,
@@ -150,13 +161,55 @@ pub fn render(
         });
     }
     let topdown = draw_topdown(scene, doc, opts.cell)?;
-    let (previews, rebaked) = if opts.no_previews {
-        (Vec::new(), None)
+    let (previews, rebaked, charts) = if opts.no_previews {
+        (Vec::new(), None, None)
     } else {
         let (p, v) = rebake_cell(scene, doc, opts.cell)?;
-        (p, Some(v))
+        (p, Some(v), chart_previews(scene, doc, opts.cell)?)
     };
-    page(opts, doc, &topdown, &previews, rebaked.as_deref())
+    page(
+        opts,
+        doc,
+        &topdown,
+        &previews,
+        rebaked.as_deref(),
+        charts.as_deref(),
+    )
+}
+
+/// The chosen cell's ray-space charts, or `None` when the recorded settings do not run ray
+/// space factorization on this scene.
+fn chart_previews(
+    scene: &Scene,
+    doc: &PvsDocument,
+    cell: usize,
+) -> Result<Option<Vec<ChartPreview>>, ReportError> {
+    let settings = recorded_settings(doc)?;
+    let Some(charts) = bake::rsf_charts(scene, &[cell_box(&doc.cells[cell])], &[0], &settings)?
+    else {
+        return Ok(None);
+    };
+    let (_, charts) = &charts[0];
+    let n = charts.resolution();
+    (0..4)
+        .map(|c| {
+            let filled = (0..n * n)
+                .filter(|k| {
+                    charts
+                        .umbrae(c, k / n, k % n)
+                        .iter()
+                        .any(|u| u.guard.is_finite())
+                })
+                .count();
+            Ok(ChartPreview {
+                info: charts.chart_info(c),
+                filled: (filled, n * n),
+                png: preview::encode_png(&preview::rsf_chart_image(charts, c))
+                    .map_err(ReportError::Image)?,
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(Some)
 }
 
 /// Writes the page `html` as `dir/index.html` (atomically: temporary file, then rename),
@@ -397,6 +450,7 @@ fn page(
     topdown: &[u8],
     previews: &[PlanePreview],
     rebaked: Option<&[u32]>,
+    charts: Option<&[ChartPreview]>,
 ) -> Result<String, ReportError> {
     let n_obj = doc.objects.len().max(1);
     let chosen = &doc.cells[args.cell];
@@ -564,10 +618,50 @@ fn page(
             )?;
         }
         h.push_str("</div>\n");
+        chart_section(&mut h, charts)?;
     }
 
     h.push_str("</body></html>\n");
     Ok(h)
+}
+
+/// The ray-space charts' section of the page.
+fn chart_section(h: &mut String, charts: Option<&[ChartPreview]>) -> Result<(), ReportError> {
+    h.push_str("<h2>Ray space factorization of the chosen cell</h2>\n");
+    let Some(charts) = charts else {
+        h.push_str(
+            "<p class=\"meta\">Not run for this bake (the automatic rule or --no-rsf; \
+             --rsf forces it).</p>\n",
+        );
+        return Ok(());
+    };
+    h.push_str(
+        "<p class=\"meta\">One chart per side of the cell's footprint, as the traversal leaves \
+         it: column = slope m of the horizontal line (−1 at the left, +1 at the right), row = \
+         its crossing s of the side (growing downward). Colour: elevation of the pixel's \
+         highest umbra line (the legend's ramp from climbing steeply, yellow, to falling \
+         steeply, violet); checkerboard: no umbra.</p>\n<div class=\"planes\">\n",
+    );
+    let names = ["x", "y", "z"];
+    for c in charts {
+        let i = &c.info;
+        writeln!(
+            h,
+            "<figure><img class=\"chart\" alt=\"ray-space chart\" src=\"{}\"><figcaption>\
+             chart {}{} · s along {} in [{:.2}, {:.2}] · {:.1} % of {} pixels hold an umbra\
+             </figcaption></figure>",
+            data_uri(&c.png),
+            if i.positive { "+" } else { "−" },
+            names[i.axis.min(2)],
+            names[i.tangent.min(2)],
+            i.s_min,
+            i.s_max,
+            100.0 * c.filled.0 as f64 / (c.filled.1 as f64).max(1.0),
+            c.filled.1
+        )?;
+    }
+    h.push_str("</div>\n");
+    Ok(())
 }
 
 const CSS: &str = "body{font:14px/1.4 sans-serif;margin:16px;color:#222;background:#fff}\
@@ -579,6 +673,6 @@ img.top{width:100%;border:1px solid #ccc}\
 .scroll{max-height:620px;overflow-y:auto}img.legend{display:block;margin:8px 0}\
 .planes{display:flex;flex-wrap:wrap;gap:12px}\
 figure{margin:0;width:340px}figure img{width:160px;height:160px;image-rendering:pixelated;\
-border:1px solid #ccc;margin-right:4px}figcaption{font-size:12px;color:#444}\
+border:1px solid #ccc;margin-right:4px}figure img.chart{width:256px;height:256px}figcaption{font-size:12px;color:#444}\
 table{border-collapse:collapse}td,th{border:1px solid #ddd;padding:2px 8px;text-align:right}\
 tr.chosen{background:#ffe3c0;font-weight:bold}";

@@ -1,5 +1,5 @@
 //! Ray space factorization (Leyvand, Sorkine and Cohen-Or 2003), the half umbra of 2.5D
-//! occluders, on the CPU: the charts of horizontal lines leaving a cell, the occluder inserts
+//! occluders extended upwards by floating ones, on the CPU: the charts of horizontal lines leaving a cell, the occluder inserts
 //! and the occludee tests. The culler that drives it is `bake::rsf`.
 //!
 //! # The parameterisation
@@ -38,6 +38,15 @@
 //!   highest, `B` on the one whose highest corner height is lowest. An edge whose horizontal
 //!   direction lies in the pixel's slope range is never used there (the lines crossing it form
 //!   a double wedge, not a convex set); a pixel without two usable edges receives nothing.
+//! - **Floating occluders** (cut from a bottom point `B` above the cell's bottom up to `T`)
+//!   cast no half umbra of their own, but they extend one: when `B` lies, for every line of the
+//!   pixel, beyond an umbra's guard and under its line, the pixel gains the umbra with `T`'s
+//!   line, the larger guard and the old base ([`fuse`], which holds the proof). The occluders
+//!   behind a stored umbra thus form a chain — one standing on the ground, then floating ones
+//!   each resting in the umbra of the one before — and every segment from the cell to a point
+//!   that passes the umbra's tests crosses one of them. A bridge or an upper storey resting on
+//!   nothing inserted before it writes nothing (its own full umbra, bounded below too, is not
+//!   kept).
 //! - **Fusion.** A point hidden under one polygon's line is hidden; keeping per pixel the
 //!   highest line of several polygons, with the largest guard and base, keeps only points
 //!   that the polygon with that line hides. Two umbrae per pixel (a near one and a far one
@@ -199,6 +208,10 @@ pub struct ChartInfo {
     pub s_max: f64,
 }
 
+/// Floating occluders rising less than this share of the cell's height are not inserted
+/// (leaving an occluder out only loosens).
+const MIN_FLOATING_RISE: f64 = 0.25;
+
 /// What inserting polygons did, for the accounting.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RsfWork {
@@ -214,6 +227,10 @@ pub struct RayCharts {
     /// Per chart, per pixel (`j · res + i`, row `j` of `s`, column `i` of `m`), the near and
     /// the far umbra.
     umbrae: Vec<Vec<[Umbra; 2]>>,
+    /// Per chart, per column and (last) over the whole chart, the highest slope and the
+    /// nearest guard of any umbra written: a floating occluder whose bottom is above every
+    /// such line can fuse nowhere there.
+    reach: Vec<Vec<(f32, f32)>>,
     /// Counts of what was inserted.
     pub work: RsfWork,
 }
@@ -259,6 +276,7 @@ impl RayCharts {
         RayCharts {
             frames,
             umbrae,
+            reach: vec![vec![(f32::NEG_INFINITY, f32::INFINITY); res + 1]; 4],
             work: RsfWork::default(),
         }
     }
@@ -291,8 +309,9 @@ impl RayCharts {
     /// `None`) or a convex solid (its vertices, and its edges from [`hull_edges`], computed
     /// once per solid). It is written into every pixel
     /// whose lines all cut it from a point at or below the cell's bottom up to a higher point,
-    /// wholly beyond the face; occluders the vertical planes do not cut that way (roofs,
-    /// bridges) write nothing. Returns the pixels written.
+    /// wholly beyond the face, and, when its cut starts higher, into every pixel where that
+    /// bottom point lies in an umbra already there (fusion, see the module docs); flat ones
+    /// (roofs) and bridges over nothing write nothing. Returns the pixels written.
     pub fn insert(&mut self, pts: &[DVec3], hull_edges: Option<&[(usize, usize)]>) -> usize {
         if pts.len() < 3 {
             return 0;
@@ -307,8 +326,25 @@ impl RayCharts {
                 .iter()
                 .map(|p| fr.sign * (p[fr.a] - fr.face))
                 .fold(f64::INFINITY, f64::min);
-            if lo_h > fr.y0 || lo_x <= 0.0 {
+            if lo_x <= 0.0 {
                 continue;
+            }
+            // Above the cell's bottom: it can only extend a pixel's umbra upwards (fusion).
+            let floating = lo_h > fr.y0;
+            if floating {
+                let hi_h = pts
+                    .iter()
+                    .map(|p| p[fr.up])
+                    .fold(f64::NEG_INFINITY, f64::max);
+                let hi_x = pts
+                    .iter()
+                    .map(|p| fr.sign * (p[fr.a] - fr.face))
+                    .fold(f64::NEG_INFINITY, f64::max);
+                if hi_h - lo_h < MIN_FLOATING_RISE * (fr.y1 - fr.y0)
+                    || !may_reach(&fr, self.reach[c][fr.res], lo_x, hi_x, lo_h)
+                {
+                    continue;
+                }
             }
             // Local (X, Z, height) stored as (x, y, z).
             local.clear();
@@ -322,7 +358,13 @@ impl RayCharts {
                     segs.extend((0..n).map(|k| (local[k], local[(k + 1) % n])));
                 }
             }
-            written += insert_chart(&fr, &segs, &mut self.umbrae[c]);
+            written += insert_chart(
+                &fr,
+                &segs,
+                &mut self.umbrae[c],
+                floating,
+                &mut self.reach[c],
+            );
         }
         if written > 0 {
             self.work.polygons += 1;
@@ -454,7 +496,13 @@ pub fn hull_edges(pts: &[DVec3]) -> Vec<(usize, usize)> {
 
 /// Inserts one convex occluder (its segments, local points) into one chart; returns the
 /// pixels written.
-fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) -> usize {
+fn insert_chart(
+    fr: &Frame,
+    segs: &[(DVec3, DVec3)],
+    umbrae: &mut [[Umbra; 2]],
+    floating: bool,
+    reach: &mut [(f32, f32)],
+) -> usize {
     let mut written = 0;
     // The best umbra the occluder could cast anywhere: pixels whose umbra already beats it
     // are skipped before any crossing is computed.
@@ -475,9 +523,23 @@ fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) 
     };
     // An umbra of this occluder (guard ≥ x_lo, slope ≤ best_slope) can only raise the near
     // umbra's slope when its guard may be within the near one's, or the far umbra's slope
-    // (see `insert_umbra`): a pixel where neither can happen is skipped.
+    // (see `insert_umbra`): a pixel where neither can happen is skipped. An occluder above
+    // the cell's bottom only extends an umbra the pixel already has (`fuse`).
+    // A floating occluder's bottom point (at a height of at least `h_lo`, at `X` in
+    // `[x_lo, x_hi]`) must be beyond an umbra's guard and under its line, whose slope it
+    // must beat (`fuse`).
+    let may_fuse = |u: &Umbra| {
+        let v = u.slope as f64;
+        !u.is_none()
+            && u.guard as f64 <= x_hi
+            && best_slope > v
+            && fr.y1 + v * (if v >= 0.0 { x_hi } else { x_lo }) >= h_lo
+    };
     let beaten = |px: &[Umbra; 2]| {
         let [near, far] = px;
+        if floating {
+            return !(may_fuse(near) || may_fuse(far));
+        }
         let near_gains =
             near.is_none() || (x_lo <= near.guard as f64 && best_slope > near.slope as f64);
         let far_gains = far.is_none() || best_slope > far.slope as f64;
@@ -489,6 +551,9 @@ fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) 
     let mut orders = Orders::default();
     let (c0, c1) = fr.columns(segs.iter().flat_map(|&(p, q)| [(p.x, p.y), (q.x, q.y)]));
     for i in c0..=c1 {
+        if floating && !may_reach(fr, reach[i], x_lo, x_hi, h_lo) {
+            continue;
+        }
         let (m0, m1) = (fr.m_of(i), fr.m_of(i + 1));
         // Segments whose horizontal direction is within the column's slopes: the lines
         // crossing them there form a double wedge, not a convex set, so corners prove nothing.
@@ -557,14 +622,32 @@ fn insert_chart(fr: &Frame, segs: &[(DVec3, DVec3)], umbrae: &mut [[Umbra; 2]]) 
             if beaten(&umbrae[j * fr.res + i]) {
                 continue;
             }
-            let Some(u) = pixel_umbra(fr, &lin, &orders, fr.s_of(j), fr.s_of(j + 1)) else {
-                continue;
+            let px = &mut umbrae[j * fr.res + i];
+            let u = match pixel_umbra(fr, &lin, &orders, fr.s_of(j), fr.s_of(j + 1)) {
+                Some(PixelUmbra::Grounded(u)) => u,
+                Some(PixelUmbra::Floating(f)) => match fuse(fr, px, &f) {
+                    Some(u) => u,
+                    None => continue,
+                },
+                None => continue,
             };
-            insert_umbra(&mut umbrae[j * fr.res + i], u);
+            insert_umbra(px, u);
+            for r in [i, fr.res] {
+                reach[r].0 = reach[r].0.max(u.slope);
+                reach[r].1 = reach[r].1.min(u.guard);
+            }
             written += 1;
         }
     }
     written
+}
+
+/// False when no umbra with at most slope `reach.0` and at least guard `reach.1` can hold a
+/// floating occluder's bottom point (at `X` in `[x_lo, x_hi]`, no lower than `h_lo`): it would
+/// be before the guard or above the line.
+fn may_reach(fr: &Frame, reach: (f32, f32), x_lo: f64, x_hi: f64, h_lo: f64) -> bool {
+    let v = reach.0 as f64;
+    reach.1 as f64 <= x_hi && fr.y1 + v * (if v >= 0.0 { x_hi } else { x_lo }) >= h_lo
 }
 
 /// A segment's crossing by the lines `Z = s + m·X` of one slope `m`: crossed for `s` in
@@ -588,7 +671,7 @@ struct Lin {
 /// segment whose lowest corner height is highest, the bottom one on the segment whose highest
 /// corner height is lowest; the occluder's cut by any line of the pixel is convex and holds
 /// both points, hence the segment between them.
-fn pixel_umbra(fr: &Frame, lin: &[Lin], order: &Orders, sa: f64, sb: f64) -> Option<Umbra> {
+fn pixel_umbra(fr: &Frame, lin: &[Lin], order: &Orders, sa: f64, sb: f64) -> Option<PixelUmbra> {
     // (lowest height, X range) of the top candidate; (highest height, X range) of the bottom.
     let mut top: Option<(f64, f64, f64)> = None;
     let mut bot: Option<(f64, f64, f64)> = None;
@@ -655,13 +738,80 @@ fn corners_of(lin: &[Lin], k: usize, sa: f64, sb: f64) -> Option<(f64, f64, f64,
     }
 }
 
+/// What an occluder casts over one pixel ([`pixel_umbra`]).
+#[derive(Clone, Copy, Debug)]
+enum PixelUmbra {
+    /// Its cut by every line of the pixel reaches the cell's bottom: a half umbra.
+    Grounded(Umbra),
+    /// Its cut starts above the cell's bottom: it can only extend an umbra already there.
+    Floating(Floating),
+}
+
+/// An occluder's cut by every line of a pixel, from a bottom point above the cell's bottom to
+/// a top point: the half umbra its top would cast if the cut reached the ground (`top`: its
+/// `slope` and a `guard` beyond both points; no base), and where the bottom point is (the
+/// highest it can be over the pixel, and its `X` range), for [`fuse`].
+#[derive(Clone, Copy, Debug)]
+struct Floating {
+    top: Umbra,
+    bot_max: f64,
+    xb_min: f64,
+    xb_max: f64,
+}
+
+/// The umbra of a floating occluder's cut fused with one of the pixel's umbrae `u`: when the
+/// cut's bottom point lies in `u`'s umbra (beyond its guard, under its line) for every line of
+/// the pixel, the fused umbra has the cut's top line, the larger guard and `u`'s base; of the
+/// two umbrae the one giving the highest line is taken. `None` when neither fuses or the line
+/// would not rise.
+///
+/// Why it is sound. Every stored umbra's line is the top line of a *chain*: an occluder
+/// standing on the ground, then floating ones each fused onto the one before, with guard and
+/// base at most the stored ones (merging keeps one component's line with larger guard and
+/// base). The invariant: a segment `r` from a point `e` of the cell to a point `q` that passes
+/// the chain's guard and base tests and goes below the chain's last top point `T'` is blocked
+/// by the chain. It holds for a half umbra (`r` passes its bottom above, by the base test, and
+/// its top below). Fusing a floating cut `[B, T]` onto chain `u`: let `q` pass the fused tests;
+/// `r` passes `T` below (`T`'s top line, `q` beyond it). If `r` passes `B` above, `B` and `T`
+/// lie on opposite sides of `r`, which crosses the cut. Otherwise `r`'s point `p` at `B`'s `X`
+/// is no higher than `B`, hence under `u`'s line and beyond its guard, so the segment `ep`
+/// (part of `r`) passes `T'` below; `q` passes `u`'s base and guard tests; by the invariant
+/// `r` is blocked by `u`'s chain. So the fused umbra is a chain's, and is merged like any.
+fn fuse(fr: &Frame, px: &[Umbra; 2], f: &Floating) -> Option<Umbra> {
+    let mut best: Option<Umbra> = None;
+    for u in px {
+        if u.is_none() || f.top.slope <= u.slope || f.xb_min < u.guard as f64 {
+            continue;
+        }
+        let v = u.slope as f64;
+        let x = if v >= 0.0 { f.xb_min } else { f.xb_max };
+        let line = fr.y1 + v * x;
+        // `u`'s slope is rounded down, its line only lower than the exact one; the margin
+        // covers this evaluation's rounding.
+        let eps = 1e-9 * (line.abs().max(x.abs()).max(fr.y1.abs()).max(1.0));
+        if f.bot_max > line - eps {
+            continue;
+        }
+        let fused = Umbra {
+            slope: f.top.slope,
+            guard: u.guard.max(f.top.guard),
+            base: u.base,
+        };
+        if best.is_none_or(|b| fused.slope > b.slope) {
+            best = Some(fused);
+        }
+    }
+    best
+}
+
 /// The umbra of a top candidate (lowest height, X range) and a bottom one (highest height,
-/// X range), with margins for rounding; `None` when it does not stand on the ground.
+/// X range), with margins for rounding: a half umbra when the bottom is at or below the cell's
+/// bottom, else a [`Floating`] cut.
 fn finish_umbra(
     fr: &Frame,
     top: Option<(f64, f64, f64)>,
     bot: Option<(f64, f64, f64)>,
-) -> Option<Umbra> {
+) -> Option<PixelUmbra> {
     let (top_min, xt_min, xt_max) = top?;
     let (bot_max, xb_min, xb_max) = bot?;
     // A relative margin for the rounding of the crossings.
@@ -675,7 +825,7 @@ fn finish_umbra(
     let (xmin, xmax) = (xt_min.min(xb_min) - eps, xt_max.max(xb_max) + eps);
     let (top_min, bot_max) = (top_min - eps, bot_max + eps);
     let (xt_min, xt_max) = (xt_min - eps, xt_max + eps);
-    if xmin <= 0.0 || bot_max > fr.y0 || top_min <= bot_max {
+    if xmin <= 0.0 || top_min <= bot_max {
         return None;
     }
     let slope = if top_min >= fr.y1 {
@@ -683,11 +833,20 @@ fn finish_umbra(
     } else {
         (top_min - fr.y1) / xt_min
     };
-    Some(Umbra {
+    let umbra = Umbra {
         slope: f32_down(slope - 1e-12 * slope.abs()),
         guard: f32_up(xmax),
         base: f32_up(bot_max),
-    })
+    };
+    if bot_max <= fr.y0 {
+        return Some(PixelUmbra::Grounded(umbra));
+    }
+    Some(PixelUmbra::Floating(Floating {
+        top: umbra,
+        bot_max,
+        xb_min: xb_min - eps,
+        xb_max: xb_max + eps,
+    }))
 }
 
 /// Adds umbra `u` to a pixel's near and far umbrae (see the module docs).
@@ -790,6 +949,57 @@ mod tests {
             // Box corners differing in exactly one coordinate bit.
             assert_eq!((i ^ j).count_ones(), 1, "{i} {j}");
         }
+    }
+
+    /// A vertical wall across x = `x`, z in `[z0, z1]`, heights `[bottom, top]`.
+    fn floating_wall(x: f64, z0: f64, z1: f64, bottom: f64, top: f64) -> Vec<DVec3> {
+        let mut w = wall(x, z0, z1, top);
+        for p in &mut w {
+            if p.y < 0.0 {
+                p.y = bottom;
+            }
+        }
+        w
+    }
+
+    #[test]
+    fn a_floating_wall_resting_on_a_low_wall_extends_its_umbra_and_one_above_a_gap_does_not() {
+        // A low wall to height 1 at X = 4: its half umbra's line falls from the cell's top
+        // (2) by 1/4 per unit, to 0.5 at X = 6 (x = 8).
+        let low = wall(6.0, -200.0, 200.0, 1.0);
+        let behind = boxed([8.0, 0.0, -0.5], [9.0, 1.5, 0.5]);
+        let mut alone = RayCharts::new(&cell(), 1, 128);
+        alone.insert(&low, None);
+        assert!(!alone.box_hidden(&behind), "seen over the low wall");
+        // A second wall set back half a unit (X = 4.5, where the line is at 0.875) from 0.8
+        // to 10 (the facade's upper part): together they hide the box.
+        let upper = floating_wall(6.5, -200.0, 200.0, 0.8, 10.0);
+        let mut stacked = RayCharts::new(&cell(), 1, 128);
+        stacked.insert(&low, None);
+        assert!(stacked.insert(&upper, None) > 0);
+        assert!(stacked.box_hidden(&behind), "the stacked walls fuse");
+        // Inserted first, the floating wall has nothing to rest on and writes nothing.
+        let mut reversed = RayCharts::new(&cell(), 1, 128);
+        assert_eq!(reversed.insert(&upper, None), 0);
+        // Starting at 1 it leaves a slit above the line: the cell's top sees through it over
+        // the low wall, down to the ground at X = 8 (x = 10): a low box there stays visible.
+        let mut gap = RayCharts::new(&cell(), 1, 128);
+        gap.insert(&low, None);
+        gap.insert(&floating_wall(6.5, -200.0, 200.0, 1.0, 10.0), None);
+        assert!(!gap.box_hidden(&boxed([10.0, 0.0, -0.5], [11.0, 0.6, 0.5])));
+        // A floating wall behind the low one, its bottom under the low wall's line, fuses
+        // too: the line at X = 8 is at 0, the bottom at 0.8 is not under it; at X = 5 the
+        // line is at 0.75, a wall from 0.7 fuses.
+        let mut behind_wall = RayCharts::new(&cell(), 1, 128);
+        behind_wall.insert(&low, None);
+        assert!(behind_wall.insert(&floating_wall(7.0, -200.0, 200.0, 0.7, 10.0), None) > 0);
+        assert!(behind_wall.box_hidden(&boxed([9.0, 0.0, -0.5], [10.0, 1.5, 0.5])));
+        let mut too_high = RayCharts::new(&cell(), 1, 128);
+        too_high.insert(&low, None);
+        assert_eq!(
+            too_high.insert(&floating_wall(10.0, -200.0, 200.0, 0.8, 10.0), None),
+            0
+        );
     }
 
     #[test]
