@@ -32,6 +32,44 @@ fn round_up(z: f64) -> f32 {
 /// the pixel (its largest corner value: the root is convex). With `s ≥ 0` the linear test
 /// `e0·u + e1·v + e2 − s·lmax ≥ margin` implies the exact one at every point of the pixel,
 /// and a sub-pixel passes a linear test everywhere iff its worst corner does.
+/// The bits `aa` (0..8) of one sub-pixel row where `r + aa·du >= margin`, exactly as that
+/// test per bit: the values grow (or fall) with `aa` also in floating point (rounding is
+/// monotone), so the set bits are a run from one end; its end is estimated by a division and
+/// moved to where the test itself changes.
+fn row_bits(r: f64, du: f64, margin: f64) -> u64 {
+    let pass = |aa: i32| r + f64::from(aa) * du >= margin;
+    if du == 0.0 {
+        return if pass(0) { 0xff } else { 0 };
+    }
+    let t = (margin - r) / du;
+    let guess = if t.is_finite() {
+        t.clamp(-1.0, 8.0) as i32
+    } else {
+        0
+    };
+    if du > 0.0 {
+        // The first passing bit: bits from it to 7 are set.
+        let mut a = guess.clamp(0, 8);
+        while a > 0 && pass(a - 1) {
+            a -= 1;
+        }
+        while a < 8 && !pass(a) {
+            a += 1;
+        }
+        (0xffu64 << a) & 0xff
+    } else {
+        // The last passing bit: bits from 0 to it are set.
+        let mut a = guess.clamp(-1, 7);
+        while a < 7 && pass(a + 1) {
+            a += 1;
+        }
+        while a >= 0 && !pass(a) {
+            a -= 1;
+        }
+        (1u64 << (a + 1)) - 1
+    }
+}
+
 fn pixel_mask(ev: &[[f32; 4]], u0: f64, v0: f64, ps: f64, lmax: f64) -> u64 {
     let margin = f64::from(CORNER_MARGIN);
     let h = ps / 8.0;
@@ -56,11 +94,7 @@ fn pixel_mask(ev: &[[f32; 4]], u0: f64, v0: f64, ps: f64, lmax: f64) -> u64 {
         let mut em = 0u64;
         for bb in 0..8 {
             let r = c0 + f64::from(bb) * dv;
-            for aa in 0..8 {
-                if r + f64::from(aa) * du >= margin {
-                    em |= 1 << (bb * 8 + aa);
-                }
-            }
+            em |= row_bits(r, du, margin) << (bb * 8);
         }
         mask &= em;
         if mask == 0 {
@@ -688,6 +722,19 @@ impl Hemicube {
         if pi0 >= pi1 || pj0 >= pj1 {
             return false;
         }
+        let z = round_up(zmax);
+        // A polygon at one depth lowers no pixel when every tile it touches is already
+        // covered at least as near.
+        let deep = zmax - zmin > 0.05 * zmax;
+        if !deep {
+            let tw = res / TILE;
+            let lowers = (pj0 / TILE..pj1.div_ceil(TILE)).any(|tj| {
+                (pi0 / TILE..pi1.div_ceil(TILE)).any(|ti| view.tile_max[tj * tw + ti] > z)
+            });
+            if !lowers {
+                return false;
+            }
+        }
         // A card triangle covers whole pixels only (where its texel footprint is opaque).
         let subpixel = self.subpixel && card.is_none();
         // The card's plane seen from the eye: its normal toward the plane, in view
@@ -713,11 +760,10 @@ impl Hemicube {
             ]);
         }
         let ev = &ev_buf[..];
-        let z = round_up(zmax);
         // A polygon deep in this view (the ground, a wall seen at a slant) takes its plane's
         // depth per pixel instead: the largest of the pixel's corners (1/Z is affine over the
         // pixel, so Z is largest at a corner; a corner beyond the plane's horizon gives ∞).
-        let plane = if zmax - zmin > 0.05 * zmax {
+        let plane = if deep {
             let nv = to_view(normal);
             Some((nv, nv.dot(to_view(q[0]))))
         } else {
@@ -771,7 +817,25 @@ impl Hemicube {
                 let prow = &norms[pj * (res + 1)..];
                 for ci in pi0..pi1 {
                     let corners = prev[ci] + prev[ci + 1] + pass[ci] + pass[ci + 1];
+                    if corners == 0 && !thin {
+                        continue;
+                    }
                     let (u0, v0) = (-1.0 + ci as f64 * ps, view.vmin + pj as f64 * ps);
+                    let z = if plane.is_some() {
+                        let (u1, v1) = (u0 + ps, v0 + ps);
+                        let m = plane_depth(u0, v0)
+                            .max(plane_depth(u1, v0))
+                            .max(plane_depth(u0, v1))
+                            .max(plane_depth(u1, v1));
+                        round_up(m).min(z)
+                    } else {
+                        z
+                    };
+                    let idx = pj * res + ci;
+                    let d = view.depth[idx];
+                    if z >= d {
+                        continue;
+                    }
                     let cover = if corners == 4 {
                         match (card, card_plane) {
                             (Some((c, cov)), Some(nv)) => {
@@ -799,21 +863,6 @@ impl Hemicube {
                         0
                     };
                     if cover == 0 {
-                        continue;
-                    }
-                    let z = if plane.is_some() {
-                        let (u1, v1) = (u0 + ps, v0 + ps);
-                        let m = plane_depth(u0, v0)
-                            .max(plane_depth(u1, v0))
-                            .max(plane_depth(u0, v1))
-                            .max(plane_depth(u1, v1));
-                        round_up(m).min(z)
-                    } else {
-                        z
-                    };
-                    let idx = pj * res + ci;
-                    let d = view.depth[idx];
-                    if z >= d {
                         continue;
                     }
                     // A partial layer no nearer than the pixel's depth can no longer help.
@@ -1015,6 +1064,34 @@ impl Hemicube {
 mod tests {
     use super::*;
     use crate::sampler::SampleOccluders;
+
+    #[test]
+    fn row_bits_match_the_test_per_bit() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for k in 0..200_000 {
+            let scale = [1e-6, 1e-3, 1.0, 1e3][k % 4];
+            let (r, margin) = (rnd() * scale, [0.0, 1e-7, -1e-7][k % 3]);
+            let du = match k % 7 {
+                0 => 0.0,
+                1 => 1e-300 * rnd(),
+                _ => rnd() * scale / 4.0,
+            };
+            let want = (0..8).fold(0u64, |m, aa| {
+                m | (u64::from(r + f64::from(aa) * du >= margin) << aa)
+            });
+            assert_eq!(
+                row_bits(r, du, margin),
+                want,
+                "r {r} du {du} margin {margin}"
+            );
+        }
+    }
 
     fn wall(z: f64, half: f64) -> Vec<DVec3> {
         vec![
