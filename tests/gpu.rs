@@ -242,6 +242,90 @@ fn an_engine_device_renders_the_same_maps_as_new() {
     assert_eq!(again, first);
 }
 
+/// Every render pass is timed with the GPU's timestamps when the device has them (the
+/// backend's own device takes them wherever the adapter has them, lavapipe included), none on
+/// an engine's device that did not ask for them; the counters a benchmark reads follow.
+#[test]
+fn render_passes_are_timed_when_the_device_has_timestamps() {
+    if backend().is_none() {
+        return;
+    }
+    let own = GpuBackend::new().expect("a second device");
+    if std::env::var_os("CI").is_some() {
+        assert!(own.timestamps(), "lavapipe has TIMESTAMP_QUERY");
+    }
+    let jobs = mixed_jobs();
+    let before = own.counters().expect("the GPU backend keeps counters");
+    own.render(&jobs).unwrap();
+    let stats = own.last_stats();
+    let delta = own.counters().unwrap().since(&before);
+    assert!(
+        stats.passes > 0 && delta.passes == stats.passes,
+        "{stats:?} {delta:?}"
+    );
+    assert_eq!(delta.bytes_read_back, stats.bytes_read_back);
+    if own.timestamps() {
+        assert_eq!(stats.timed_passes, stats.passes, "{stats:?}");
+        assert!(stats.pass_time > std::time::Duration::ZERO, "{stats:?}");
+        assert_eq!(delta.pass_time, Some(stats.pass_time));
+    } else {
+        assert_eq!(stats.timed_passes, 0);
+        assert_eq!(delta.pass_time, None);
+    }
+    let Some((device, queue)) =
+        engine_device(GpuBackend::REQUIRED_FEATURES, wgpu::Limits::default())
+    else {
+        return;
+    };
+    let engine = GpuBackend::with_device(device, queue).expect("a backend on it");
+    assert!(!engine.timestamps());
+    engine.render(&jobs).unwrap();
+    assert_eq!(engine.last_stats().timed_passes, 0);
+    assert_eq!(engine.counters().unwrap().pass_time, None);
+}
+
+/// The bench's rows of the GPU backend say what the device did per cell (passes, bytes up and
+/// read back, setup, device and pass times), printed as a second table; the CPU's rows have
+/// none.
+#[test]
+fn the_bench_reports_the_device_per_cell() {
+    if backend().is_none() {
+        return;
+    }
+    let bench = umbrasweep::bench::collect(&umbrasweep::bench::BenchOptions {
+        quick: true,
+        scenes: Some(vec!["boxfield".into()]),
+        cells: Some(1),
+        gpu_cells: Some(1),
+        rays: Some(1000),
+        backend: umbrasweep::bench::BenchBackend::All,
+        ..Default::default()
+    })
+    .unwrap();
+    let gpu = bench.rows.iter().find(|r| r.backend == "gpu").unwrap();
+    let cpu = bench.rows.iter().find(|r| r.backend == "cpu").unwrap();
+    assert!(cpu.device.is_none());
+    let d = gpu.device.as_ref().expect("the GPU row's device figures");
+    assert!(
+        d.passes_per_cell > 0.0 && d.kib_down_per_cell > 0.0,
+        "{d:?}"
+    );
+    assert!(
+        d.kib_up_per_cell > 0.0 && d.device_ms_per_cell > 0.0,
+        "{d:?}"
+    );
+    let table = bench.table();
+    assert!(table.contains("Per cell on the device"), "{table}");
+    assert!(table.contains("KiB read back"), "{table}");
+    let json = serde_json::to_value(&bench).unwrap();
+    let rows = json["rows"].as_array().unwrap();
+    assert!(
+        rows.iter()
+            .any(|r| r["device"]["kib_down_per_cell"].is_number())
+    );
+    assert!(rows.iter().any(|r| r.get("device").is_none()));
+}
+
 /// On a device whose storage bindings hold only 256 words, a plane's occluders are drawn in
 /// several chunks (more draws than passes), with the same maps.
 #[test]

@@ -296,6 +296,39 @@ impl BackendError {
     }
 }
 
+/// What a backend did over its calls ([`RasterBackend::counters`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BackendCounters {
+    /// Render passes.
+    pub passes: usize,
+    /// Bytes sent to the device.
+    pub bytes_uploaded: u64,
+    /// Bytes read back from the device.
+    pub bytes_read_back: u64,
+    /// Wall time of the CPU's setup of the jobs.
+    pub setup: std::time::Duration,
+    /// Wall time of the device's section, from the first upload to the last read-back.
+    pub gpu: std::time::Duration,
+    /// GPU time of the render passes from the device's timestamps, where it has them.
+    pub pass_time: Option<std::time::Duration>,
+}
+
+impl BackendCounters {
+    /// What happened between `before` and `self` (counters of the same backend).
+    pub fn since(&self, before: &BackendCounters) -> BackendCounters {
+        BackendCounters {
+            passes: self.passes - before.passes,
+            bytes_uploaded: self.bytes_uploaded - before.bytes_uploaded,
+            bytes_read_back: self.bytes_read_back - before.bytes_read_back,
+            setup: self.setup.saturating_sub(before.setup),
+            gpu: self.gpu.saturating_sub(before.gpu),
+            pass_time: self
+                .pass_time
+                .map(|t| t.saturating_sub(before.pass_time.unwrap_or_default())),
+        }
+    }
+}
+
 /// The raster work of a bake.
 pub trait RasterBackend: Send + Sync {
     /// Short name for summaries: `cpu` or `gpu`.
@@ -307,6 +340,11 @@ pub trait RasterBackend: Send + Sync {
     /// A line of counters for the bake summary (passes, draws, bytes read back per cell), where
     /// the backend keeps them.
     fn stats_summary(&self, _cells: usize) -> Option<String> {
+        None
+    }
+    /// Totals over every call since the backend was created, where the backend keeps them
+    /// (the GPU backend): for benchmarks, which take the difference around a bake.
+    fn counters(&self) -> Option<BackendCounters> {
         None
     }
     /// Rasterises the jobs' occluder Projections and slices into one Depth Map per job, in

@@ -225,6 +225,42 @@ pub struct BenchRow {
     /// validator's ray index included; `VmHWM`, reset before the bake; None where that is
     /// not possible).
     pub peak_mib: Option<f64>,
+    /// Per cell, what the backend itself did (the GPU backend; absent for the CPU's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub device: Option<DeviceRow>,
+}
+
+/// Per cell, what a backend with a device did during one scene's bake (means over its cells).
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct DeviceRow {
+    /// Render passes.
+    pub passes_per_cell: f64,
+    /// KiB sent to the device.
+    pub kib_up_per_cell: f64,
+    /// KiB read back from it.
+    pub kib_down_per_cell: f64,
+    /// Wall ms of the CPU's setup of the jobs.
+    pub setup_ms_per_cell: f64,
+    /// Wall ms of the device's section, from the first upload to the last read-back.
+    pub device_ms_per_cell: f64,
+    /// GPU ms of the render passes from the device's timestamps (absent without them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pass_ms_per_cell: Option<f64>,
+}
+
+impl DeviceRow {
+    /// The means over `cells` cells of what `c` counts.
+    pub fn of(c: &crate::backend::BackendCounters, cells: usize) -> DeviceRow {
+        let n = cells.max(1) as f64;
+        DeviceRow {
+            passes_per_cell: c.passes as f64 / n,
+            kib_up_per_cell: c.bytes_uploaded as f64 / 1024.0 / n,
+            kib_down_per_cell: c.bytes_read_back as f64 / 1024.0 / n,
+            setup_ms_per_cell: c.setup.as_secs_f64() * 1e3 / n,
+            device_ms_per_cell: c.gpu.as_secs_f64() * 1e3 / n,
+            pass_ms_per_cell: c.pass_time.map(|t| t.as_secs_f64() * 1e3 / n),
+        }
+    }
 }
 
 /// A whole benchmark run: the `--json` document.
@@ -584,6 +620,7 @@ fn bench_scene(
             backend.name()
         );
         let reset = reset_peak();
+        let before = backend.counters();
         let result =
             bake(scene, cells, settings, backend, None).map_err(|source| BenchError::Bake {
                 scene: bs.name.clone(),
@@ -591,6 +628,10 @@ fn bench_scene(
                 source,
             })?;
         let peak = if reset { peak_mib() } else { None };
+        let device = backend
+            .counters()
+            .zip(before)
+            .map(|(after, before)| DeviceRow::of(&after.since(&before), cells.len()));
         say!(
             args.progress,
             "bench: {}: baked in {:.1} s; validating with {} rays per cell",
@@ -621,6 +662,7 @@ fn bench_scene(
             args.progress,
         );
         row.peak_mib = peak;
+        row.device = device;
         out.push(row);
     }
     Ok(out)
@@ -727,6 +769,7 @@ pub(crate) fn score(
         median_ms_per_cell: median(&ms),
         validate_ms_per_cell: median(&vms),
         peak_mib: None,
+        device: None,
         objects_culled_percent: reports
             .iter()
             .map(|r| r.objects_culled_percent)
@@ -804,6 +847,18 @@ pub const COLUMNS: [&str; 13] = [
     "peak MiB",
 ];
 
+/// The columns of the device table (rows of backends with a device).
+const DEVICE_COLUMNS: [&str; 8] = [
+    "scene",
+    "backend",
+    "passes",
+    "KiB up",
+    "KiB read back",
+    "CPU setup ms",
+    "device ms (wall)",
+    "GPU pass ms (timestamps)",
+];
+
 impl Bench {
     /// The table: a header line, then a Markdown table (one row per scene and backend), then
     /// the adapters and anything skipped.
@@ -861,6 +916,30 @@ impl Bench {
             .collect();
         adapters.dedup();
         out.push('\n');
+        let device: Vec<Vec<String>> = self
+            .rows
+            .iter()
+            .filter_map(|r| r.device.as_ref().map(|d| (r, d)))
+            .map(|(r, d)| {
+                vec![
+                    r.scene.clone(),
+                    r.backend.clone(),
+                    format!("{:.1}", d.passes_per_cell),
+                    format!("{:.0}", d.kib_up_per_cell),
+                    format!("{:.0}", d.kib_down_per_cell),
+                    format!("{:.1}", d.setup_ms_per_cell),
+                    format!("{:.1}", d.device_ms_per_cell),
+                    d.pass_ms_per_cell
+                        .map_or("n/a".into(), |p| format!("{p:.2}")),
+                ]
+            })
+            .collect();
+        if !device.is_empty() {
+            out.push_str("Per cell on the device:\n\n");
+            let left: Vec<bool> = (0..DEVICE_COLUMNS.len()).map(|k| k < 2).collect();
+            markdown_table(&mut out, &DEVICE_COLUMNS, &device, &left);
+            out.push('\n');
+        }
         for a in adapters {
             let _ = writeln!(out, "gpu adapter: {a}");
         }

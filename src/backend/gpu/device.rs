@@ -11,6 +11,9 @@ use std::sync::{Arc, Mutex};
 /// Features the backend needs from a device: `R32Float` render targets with blending (the
 /// Depth Map's `Min` blend).
 pub(super) const REQUIRED_FEATURES: wgpu::Features = wgpu::Features::FLOAT32_BLENDABLE;
+/// Features the backend's own device takes when the adapter has them: GPU timestamps at the
+/// start and end of each render pass ([`super::RenderStats::pass_time`]).
+pub(super) const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY;
 
 /// The first device loss or uncaptured error, as the error every later call returns.
 pub(super) type Failure = Arc<Mutex<Option<BackendError>>>;
@@ -88,8 +91,8 @@ pub(super) fn best_adapter() -> Result<wgpu::Adapter, BackendError> {
     })
 }
 
-/// The backend's own device on `adapter`: [`REQUIRED_FEATURES`] and every limit the adapter
-/// has, labelled `umbrasweep device`.
+/// The backend's own device on `adapter`: [`REQUIRED_FEATURES`], the [`OPTIONAL_FEATURES`] the
+/// adapter has and every limit the adapter has, labelled `umbrasweep device`.
 ///
 /// # Errors
 /// [`BackendError::CreateDevice`] when the adapter refuses.
@@ -98,7 +101,7 @@ pub(super) fn request_device(
 ) -> Result<(wgpu::Device, wgpu::Queue), BackendError> {
     pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("umbrasweep device"),
-        required_features: REQUIRED_FEATURES,
+        required_features: REQUIRED_FEATURES | (adapter.features() & OPTIONAL_FEATURES),
         required_limits: adapter.limits(),
         experimental_features: wgpu::ExperimentalFeatures::disabled(),
         memory_hints: wgpu::MemoryHints::Performance,

@@ -98,7 +98,11 @@
 //! bytes read back (rows padded to 256 bytes, i.e. `256 × h` bytes when `w < 64`). Each
 //! reprojection from a `sw × sh` source adds 1 draw and `sw × sh × 4 + 8·(w + h + 3)` bytes
 //! uploaded, and `sw × sh × 4` bytes of texture to the submission's memory budget. See
-//! [`GpuBackend::last_stats`].
+//! [`GpuBackend::last_stats`]. Where the device has [`wgpu::Features::TIMESTAMP_QUERY`]
+//! (the backend's own device takes it whenever the adapter has it), each render pass also
+//! writes GPU timestamps at its start and end, resolved and read back with the maps
+//! ([`RenderStats::pass_time`]); `umbrasweep bench` prints them per cell with the bytes up and
+//! down.
 //!
 //! # Device and work apart
 //!
@@ -174,6 +178,9 @@ pub struct GpuBackend {
     failure: Failure,
     limits: DeviceLimits,
     pool: Mutex<Pool>,
+    /// Nanoseconds per timestamp tick, when the device has
+    /// [`wgpu::Features::TIMESTAMP_QUERY`]: each render pass is then timed on the GPU.
+    timestamp_period: Option<f64>,
     stats: Mutex<RenderStats>,
     /// Sums over every call since creation.
     totals: Mutex<RenderStats>,
@@ -222,6 +229,11 @@ pub struct RenderStats {
     pub gpu: Duration,
     /// Wall time of the whole render, setup included.
     pub total: Duration,
+    /// GPU time of the timed render passes, from the GPU's own timestamps at the start and end
+    /// of each pass (zero without [`wgpu::Features::TIMESTAMP_QUERY`]).
+    pub pass_time: Duration,
+    /// Render passes timed with timestamps (0 when the device has none).
+    pub timed_passes: usize,
 }
 
 impl RenderStats {
@@ -241,6 +253,8 @@ impl RenderStats {
         self.setup += o.setup;
         self.gpu += o.gpu;
         self.total += o.total;
+        self.pass_time += o.pass_time;
+        self.timed_passes += o.timed_passes;
     }
 }
 
@@ -334,6 +348,10 @@ impl GpuBackend {
     ) -> Result<Self, BackendError> {
         let limits = DeviceLimits::check(device.features(), &device.limits())?;
         let pipelines = Pipelines::new(&device)?;
+        let timestamp_period = device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
+            .then(|| f64::from(queue.get_timestamp_period()));
         Ok(GpuBackend {
             adapter_name,
             device,
@@ -342,6 +360,7 @@ impl GpuBackend {
             failure,
             limits,
             pool: Mutex::default(),
+            timestamp_period,
             stats: Mutex::default(),
             totals: Mutex::default(),
         })
@@ -357,6 +376,14 @@ impl GpuBackend {
     #[doc(hidden)]
     pub fn simulate_device_loss(&self) {
         self.device.destroy();
+    }
+
+    /// True when the device has [`wgpu::Features::TIMESTAMP_QUERY`]: every render pass is
+    /// then timed on the GPU ([`RenderStats::pass_time`]). The backend's own device
+    /// ([`GpuBackend::new`]) takes the feature whenever the adapter has it; an engine's device
+    /// needs it requested.
+    pub fn timestamps(&self) -> bool {
+        self.timestamp_period.is_some()
     }
 
     /// Counters and timings summed over every call since the backend was created.
@@ -446,22 +473,43 @@ impl RasterBackend for GpuBackend {
     fn stats_summary(&self, cells: usize) -> Option<String> {
         let t = self.total_stats();
         let n = cells.max(1) as f64;
-        Some(format!(
-            "per cell: {:.1} passes, {:.1} draws, {:.1} submissions, {:.0} occluders ({:.0} triangles) drawn, {:.0} KB uploaded, {:.0} KB read back; GPU section {:.1} ms, CPU setup {:.1} ms",
-            t.passes as f64 / n,
-            t.draws as f64 / n,
-            t.submissions as f64 / n,
-            t.occluders as f64 / n,
-            t.triangles as f64 / n,
-            t.bytes_uploaded as f64 / n / 1024.0,
-            t.bytes_read_back as f64 / n / 1024.0,
-            t.gpu.as_secs_f64() * 1e3 / n,
-            t.setup.as_secs_f64() * 1e3 / n,
-        ))
+        Some(
+            format!(
+                "per cell: {:.1} passes, {:.1} draws, {:.1} submissions, {:.0} occluders ({:.0} triangles) drawn, {:.0} KB uploaded, {:.0} KB read back; GPU section {:.1} ms, CPU setup {:.1} ms",
+                t.passes as f64 / n,
+                t.draws as f64 / n,
+                t.submissions as f64 / n,
+                t.occluders as f64 / n,
+                t.triangles as f64 / n,
+                t.bytes_uploaded as f64 / n / 1024.0,
+                t.bytes_read_back as f64 / n / 1024.0,
+                t.gpu.as_secs_f64() * 1e3 / n,
+                t.setup.as_secs_f64() * 1e3 / n,
+            ) + &if t.timed_passes > 0 {
+                format!(
+                    ", GPU passes {:.2} ms (timestamps)",
+                    t.pass_time.as_secs_f64() * 1e3 / n
+                )
+            } else {
+                String::new()
+            },
+        )
     }
 
     fn name(&self) -> &'static str {
         "gpu"
+    }
+
+    fn counters(&self) -> Option<super::BackendCounters> {
+        let t = self.total_stats();
+        Some(super::BackendCounters {
+            passes: t.passes,
+            bytes_uploaded: t.bytes_uploaded,
+            bytes_read_back: t.bytes_read_back,
+            setup: t.setup,
+            gpu: t.gpu,
+            pass_time: (t.timed_passes > 0).then_some(t.pass_time),
+        })
     }
 
     fn adapter(&self) -> Option<String> {

@@ -273,11 +273,19 @@ impl GpuBackend {
         let buffers = WaveBuffers::of(pool);
         self.upload(pool, &buffers, &layout, jobs, prepared);
         layout.count(jobs, prepared, stats);
-        let commands = self.encode(pool, &buffers, &layout, prepared);
-        let (submission, mapped) = self.submit(pool, &layout, commands);
+        let timestamps = self
+            .timestamp_period
+            .map(|period| Timestamps::new(&self.device, layout.planes.len(), period));
+        let commands = self.encode(pool, &buffers, &layout, prepared, timestamps.as_ref());
+        let (submission, mapped) = self.submit(pool, &layout, commands, timestamps.as_ref());
         scope.check()?;
-        self.wait(submission, mapped, layout.planes.len())?;
+        let waited = layout.planes.len() + timestamps.as_ref().map_or(0, |t| t.sets.len());
+        self.wait(submission, mapped, waited)?;
         self.check_failure()?;
+        if let Some(t) = &timestamps {
+            stats.pass_time += t.read(layout.planes.len())?;
+            stats.timed_passes += layout.planes.len();
+        }
         read_back(pool, &layout, prepared, out)
     }
 
@@ -404,14 +412,26 @@ impl GpuBackend {
         buffers: &WaveBuffers,
         layout: &WaveLayout,
         prepared: &[Prepared],
+        timestamps: Option<&Timestamps>,
     ) -> wgpu::CommandBuffer {
         let mut encoder = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("umbrasweep planes"),
             });
-        for plane in &layout.planes {
-            self.encode_plane(&mut encoder, pool, buffers, plane, &prepared[plane.job]);
+        for (w, plane) in layout.planes.iter().enumerate() {
+            let writes = timestamps.map(|t| t.writes(w));
+            self.encode_plane(
+                &mut encoder,
+                pool,
+                buffers,
+                plane,
+                &prepared[plane.job],
+                writes,
+            );
+        }
+        if let Some(t) = timestamps {
+            t.resolve(&mut encoder);
         }
         encoder.finish()
     }
@@ -426,6 +446,7 @@ impl GpuBackend {
         buffers: &WaveBuffers,
         plane: &PlaneLayout,
         p: &Prepared,
+        timestamp_writes: Option<wgpu::RenderPassTimestampWrites>,
     ) {
         let (size, k) = plane.target;
         let target = &pool.targets[&size][k];
@@ -449,7 +470,7 @@ impl GpuBackend {
                     },
                 })],
                 depth_stencil_attachment: None,
-                timestamp_writes: None,
+                timestamp_writes,
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
@@ -582,9 +603,20 @@ impl GpuBackend {
         pool: &Pool,
         layout: &WaveLayout,
         commands: wgpu::CommandBuffer,
+        timestamps: Option<&Timestamps>,
     ) -> (wgpu::SubmissionIndex, Mapped) {
         let submission = self.queue.submit([commands]);
         let (tx, rx) = mpsc::channel();
+        if let Some(t) = timestamps {
+            // After the planes' mappings in the count the wait expects.
+            for (s, read) in t.read_back.iter().enumerate() {
+                let tx = tx.clone();
+                let w = layout.planes.len() + s;
+                read.map_async(wgpu::MapMode::Read, .., move |r| {
+                    let _ = tx.send((w, r));
+                });
+            }
+        }
         for (w, plane) in layout.planes.iter().enumerate() {
             let tx = tx.clone();
             let (size, k) = plane.target;
@@ -754,6 +786,115 @@ impl GpuBackend {
 
 /// The read-back mappings' reports: `(plane index in the wave, result)`.
 type Mapped = mpsc::Receiver<(usize, Result<(), wgpu::BufferAsyncError>)>;
+
+/// A wave's GPU timestamps: two per render pass (its start and end), in query sets of at most
+/// [`wgpu::QUERY_SET_MAX_QUERIES`], each resolved into a buffer and copied to a mappable one.
+struct Timestamps {
+    sets: Vec<wgpu::QuerySet>,
+    resolved: Vec<wgpu::Buffer>,
+    read_back: Vec<wgpu::Buffer>,
+    /// Queries per set.
+    counts: Vec<u32>,
+    /// Nanoseconds per tick.
+    period: f64,
+}
+
+impl Timestamps {
+    /// Query sets and buffers for `passes` render passes.
+    fn new(device: &wgpu::Device, passes: usize, period: f64) -> Self {
+        let per_set = wgpu::QUERY_SET_MAX_QUERIES as usize;
+        let total = 2 * passes;
+        let mut t = Timestamps {
+            sets: Vec::new(),
+            resolved: Vec::new(),
+            read_back: Vec::new(),
+            counts: Vec::new(),
+            period,
+        };
+        for start in (0..total).step_by(per_set) {
+            let count = (total - start).min(per_set) as u32;
+            let bytes = u64::from(count) * 8;
+            t.sets
+                .push(device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("render pass timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count,
+                }));
+            t.resolved
+                .push(device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("resolved timestamps"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }));
+            t.read_back
+                .push(device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamps read-back"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }));
+            t.counts.push(count);
+        }
+        t
+    }
+
+    /// The start and end timestamps of pass `w`.
+    fn writes(&self, w: usize) -> wgpu::RenderPassTimestampWrites<'_> {
+        let per_set = wgpu::QUERY_SET_MAX_QUERIES as usize;
+        let (s, i) = ((2 * w) / per_set, ((2 * w) % per_set) as u32);
+        wgpu::RenderPassTimestampWrites {
+            query_set: &self.sets[s],
+            beginning_of_pass_write_index: Some(i),
+            end_of_pass_write_index: Some(i + 1),
+        }
+    }
+
+    /// Resolves every set and copies it to its mappable buffer.
+    fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        for (k, set) in self.sets.iter().enumerate() {
+            encoder.resolve_query_set(set, 0..self.counts[k], &self.resolved[k], 0);
+            encoder.copy_buffer_to_buffer(
+                &self.resolved[k],
+                0,
+                &self.read_back[k],
+                0,
+                u64::from(self.counts[k]) * 8,
+            );
+        }
+    }
+
+    /// The summed GPU time of the `passes` passes (mapped buffers), unmapping them.
+    ///
+    /// # Errors
+    /// [`BackendError::ReadBack`] when a mapped range cannot be read.
+    fn read(&self, passes: usize) -> Result<Duration, BackendError> {
+        let mut ticks: Vec<u64> = Vec::with_capacity(2 * passes);
+        for buf in &self.read_back {
+            let bytes = buf
+                .slice(..)
+                .get_mapped_range()
+                .map_err(|e| BackendError::ReadBack {
+                    step: "read-back mapping",
+                    message: e.to_string(),
+                })?;
+            ticks.extend(
+                bytes
+                    .chunks_exact(8)
+                    .map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))),
+            );
+            drop(bytes);
+            buf.unmap();
+        }
+        let sum: u64 = ticks
+            .chunks_exact(2)
+            .map(|p| p[1].saturating_sub(p[0]))
+            .sum();
+        Ok(Duration::from_nanos(
+            (sum as f64 * self.period).round() as u64
+        ))
+    }
+}
 
 /// Read-back step: every plane's Depth Map from its mapped read-back buffer (padded rows
 /// dropped), the buffer unmapped, the slice mask merged, into `out[job]`.
