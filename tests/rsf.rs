@@ -297,6 +297,69 @@ fn a_slit_inside_one_pixel_and_on_a_chart_seam_stays_open() {
     );
 }
 
+/// A random cell of the brute forces: its footprint around the origin, its bottom above the
+/// ground.
+fn random_cell(rng: &mut Lcg) -> DAabb {
+    dbox(
+        [
+            -rng.range(0.5, 4.0),
+            rng.range(0.2, 2.0),
+            -rng.range(0.5, 4.0),
+        ],
+        [
+            rng.range(0.5, 4.0),
+            rng.range(2.5, 5.0),
+            rng.range(0.5, 4.0),
+        ],
+    )
+}
+
+/// Tests 20 random boxes around `cell` (bottoms from −0.5 to `y_max`) in the charts `c` of
+/// `occ` at resolution `res`: every box hidden must be blocked from every point tried
+/// ([`open_ray`]), and is passed to `on_hidden`. Returns the boxes tried and those hidden.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the case's cell, occluders, charts and generator, named in the failure message"
+)]
+fn check_random_boxes(
+    case: usize,
+    res: u32,
+    cell: &DAabb,
+    occ: &[Occ],
+    c: &RayCharts,
+    rng: &mut Lcg,
+    y_max: f64,
+    mut on_hidden: impl FnMut(&DAabb),
+) -> (usize, usize) {
+    let (mut cases, mut hidden) = (0, 0);
+    for _ in 0..20 {
+        let ang = rng.range(0.0, std::f64::consts::TAU);
+        let r = rng.range(6.0, 90.0);
+        let (cx, cz) = (r * ang.cos(), r * ang.sin());
+        let (hx, hz) = (rng.range(0.05, 3.0), rng.range(0.05, 3.0));
+        let y0 = rng.range(-0.5, y_max);
+        let t = dbox(
+            [cx - hx, y0, cz - hz],
+            [cx + hx, y0 + rng.range(0.1, 12.0), cz + hz],
+        );
+        if cell.overlaps(&t) {
+            continue;
+        }
+        cases += 1;
+        if c.box_hidden(&t) {
+            hidden += 1;
+            on_hidden(&t);
+            if let Some((e, q)) = open_ray(cell, &t, occ, rng, 12) {
+                panic!(
+                    "case {case}: box {t:?} hidden at resolution {res}, but {e} sees {q} \
+                     (cell {cell:?}, occluders {occ:?})"
+                );
+            }
+        }
+    }
+    (cases, hidden)
+}
+
 #[test]
 fn a_facade_in_two_stacked_parts_fuses_and_one_with_a_gap_stays_open() {
     // A block across +x: its front wall's lower part stands on the ground at x = 8 up to 1.5
@@ -327,18 +390,7 @@ fn brute_force_stacked_and_floating_walls() {
     let mut rng = Lcg(29);
     let (mut hidden, mut cases, mut fused) = (0, 0, 0);
     for case in 0..240 {
-        let cell = dbox(
-            [
-                -rng.range(0.5, 4.0),
-                rng.range(0.2, 2.0),
-                -rng.range(0.5, 4.0),
-            ],
-            [
-                rng.range(0.5, 4.0),
-                rng.range(2.5, 5.0),
-                rng.range(0.5, 4.0),
-            ],
-        );
+        let cell = random_cell(&mut rng);
         let (mut lower, mut upper) = (Vec::new(), Vec::new());
         for _ in 0..(2 + case % 5) {
             let ang = rng.range(0.0, std::f64::consts::TAU);
@@ -366,35 +418,15 @@ fn brute_force_stacked_and_floating_walls() {
                 split + gap + rng.range(0.5, 30.0),
             ));
         }
-        let alone = charts(&cell, &lower, [16, 64, 256][case % 3]);
-        let occ: Vec<Occ> = lower.into_iter().chain(upper).collect();
         let res = [16, 64, 256][case % 3];
+        let alone = charts(&cell, &lower, res);
+        let occ: Vec<Occ> = lower.into_iter().chain(upper).collect();
         let c = charts(&cell, &occ, res);
-        for _ in 0..20 {
-            let ang = rng.range(0.0, std::f64::consts::TAU);
-            let r = rng.range(6.0, 90.0);
-            let (cx, cz) = (r * ang.cos(), r * ang.sin());
-            let (hx, hz) = (rng.range(0.05, 3.0), rng.range(0.05, 3.0));
-            let y0 = rng.range(-0.5, 3.0);
-            let t = dbox(
-                [cx - hx, y0, cz - hz],
-                [cx + hx, y0 + rng.range(0.1, 12.0), cz + hz],
-            );
-            if cell.overlaps(&t) {
-                continue;
-            }
-            cases += 1;
-            if c.box_hidden(&t) {
-                hidden += 1;
-                fused += usize::from(!alone.box_hidden(&t));
-                if let Some((e, q)) = open_ray(&cell, &t, &occ, &mut rng, 12) {
-                    panic!(
-                        "case {case}: box {t:?} hidden at resolution {res}, but {e} sees {q} \
-                         (cell {cell:?}, occluders {occ:?})"
-                    );
-                }
-            }
-        }
+        let (tried, found) = check_random_boxes(case, res, &cell, &occ, &c, &mut rng, 3.0, |t| {
+            fused += usize::from(!alone.box_hidden(t));
+        });
+        cases += tried;
+        hidden += found;
     }
     // Boxes hidden only thanks to the floating parts: the fusion is exercised.
     assert!(
@@ -408,18 +440,7 @@ fn brute_force_every_hidden_box_is_blocked_from_every_point_tried() {
     let mut rng = Lcg(11);
     let (mut hidden, mut cases) = (0, 0);
     for case in 0..300 {
-        let cell = dbox(
-            [
-                -rng.range(0.5, 4.0),
-                rng.range(0.2, 2.0),
-                -rng.range(0.5, 4.0),
-            ],
-            [
-                rng.range(0.5, 4.0),
-                rng.range(2.5, 5.0),
-                rng.range(0.5, 4.0),
-            ],
-        );
+        let cell = random_cell(&mut rng);
         let mut occ = Vec::new();
         for _ in 0..(2 + case % 6) {
             // Walls at random angles, standing on the ground (sometimes not), and boxes.
@@ -447,30 +468,9 @@ fn brute_force_every_hidden_box_is_blocked_from_every_point_tried() {
         }
         let res = [16, 64, 256][case % 3];
         let c = charts(&cell, &occ, res);
-        for _ in 0..20 {
-            let ang = rng.range(0.0, std::f64::consts::TAU);
-            let r = rng.range(6.0, 90.0);
-            let (cx, cz) = (r * ang.cos(), r * ang.sin());
-            let (hx, hz) = (rng.range(0.05, 3.0), rng.range(0.05, 3.0));
-            let y0 = rng.range(-0.5, 2.0);
-            let t = dbox(
-                [cx - hx, y0, cz - hz],
-                [cx + hx, y0 + rng.range(0.1, 12.0), cz + hz],
-            );
-            if cell.overlaps(&t) {
-                continue;
-            }
-            cases += 1;
-            if c.box_hidden(&t) {
-                hidden += 1;
-                if let Some((e, q)) = open_ray(&cell, &t, &occ, &mut rng, 12) {
-                    panic!(
-                        "case {case}: box {t:?} hidden at resolution {res}, but {e} sees {q} \
-                         (cell {cell:?}, occluders {occ:?})"
-                    );
-                }
-            }
-        }
+        let (tried, found) = check_random_boxes(case, res, &cell, &occ, &c, &mut rng, 2.0, |_| {});
+        cases += tried;
+        hidden += found;
     }
     // The check must have something to check.
     assert!(hidden > cases / 20, "{hidden} of {cases} boxes hidden");
