@@ -314,12 +314,13 @@ pub struct BackendCounters {
 }
 
 impl BackendCounters {
-    /// What happened between `before` and `self` (counters of the same backend).
+    /// What happened between `before` and `self`, two snapshots of the same backend's
+    /// counters, `before` taken first (otherwise the differences saturate at zero).
     pub fn since(&self, before: &BackendCounters) -> BackendCounters {
         BackendCounters {
-            passes: self.passes - before.passes,
-            bytes_uploaded: self.bytes_uploaded - before.bytes_uploaded,
-            bytes_read_back: self.bytes_read_back - before.bytes_read_back,
+            passes: self.passes.saturating_sub(before.passes),
+            bytes_uploaded: self.bytes_uploaded.saturating_sub(before.bytes_uploaded),
+            bytes_read_back: self.bytes_read_back.saturating_sub(before.bytes_read_back),
             setup: self.setup.saturating_sub(before.setup),
             gpu: self.gpu.saturating_sub(before.gpu),
             pass_time: self

@@ -1,6 +1,7 @@
 //! Ray space factorization (Leyvand, Sorkine and Cohen-Or 2003), the half umbra of 2.5D
-//! occluders extended upwards by floating ones, on the CPU: the charts of horizontal lines leaving a cell, the occluder inserts
-//! and the occludee tests. The culler that drives it is `bake::rsf`.
+//! occluders extended upwards by floating ones, on the CPU: the charts of horizontal lines
+//! leaving a cell, the occluder inserts and the occludee tests. The culler that drives it is
+//! `bake::rsf`.
 //!
 //! # The parameterisation
 //! The cell's horizontal footprint is a rectangle; the up axis is `up` (y or z). For each of
@@ -524,10 +525,9 @@ fn insert_chart(
     // An umbra of this occluder (guard ≥ x_lo, slope ≤ best_slope) can only raise the near
     // umbra's slope when its guard may be within the near one's, or the far umbra's slope
     // (see `insert_umbra`): a pixel where neither can happen is skipped. An occluder above
-    // the cell's bottom only extends an umbra the pixel already has (`fuse`).
-    // A floating occluder's bottom point (at a height of at least `h_lo`, at `X` in
-    // `[x_lo, x_hi]`) must be beyond an umbra's guard and under its line, whose slope it
-    // must beat (`fuse`).
+    // the cell's bottom only extends an umbra the pixel already has (`fuse`): its bottom
+    // point (at a height of at least `h_lo`, at `X` in `[x_lo, x_hi]`) must be beyond that
+    // umbra's guard and under its line, whose slope it must beat.
     let may_fuse = |u: &Umbra| {
         let v = u.slope as f64;
         !u.is_none()
@@ -749,8 +749,8 @@ enum PixelUmbra {
 
 /// An occluder's cut by every line of a pixel, from a bottom point above the cell's bottom to
 /// a top point: the half umbra its top would cast if the cut reached the ground (`top`: its
-/// `slope` and a `guard` beyond both points; no base), and where the bottom point is (the
-/// highest it can be over the pixel, and its `X` range), for [`fuse`].
+/// `slope` and a `guard` beyond both points; its `base` is not used), and where the bottom
+/// point is (the highest it can be over the pixel, and its `X` range), for [`fuse`].
 #[derive(Clone, Copy, Debug)]
 struct Floating {
     top: Umbra,

@@ -26,12 +26,6 @@ fn round_up(z: f64) -> f32 {
     if f64::from(f) < m { f.next_up() } else { f }
 }
 
-/// The sub-pixels (8 × 8, bit `8·b + a` for column `a`, row `b`) of the pixel
-/// `[u0, u0 + ps] × [v0, v0 + ps]` that lie entirely inside every edge's region `ev`
-/// (`e0·u + e1·v + e2 − s·√(u²+v²+1) ≥ margin`), where `lmax` is at least `√(u²+v²+1)` over
-/// the pixel (its largest corner value: the root is convex). With `s ≥ 0` the linear test
-/// `e0·u + e1·v + e2 − s·lmax ≥ margin` implies the exact one at every point of the pixel,
-/// and a sub-pixel passes a linear test everywhere iff its worst corner does.
 /// The bits `aa` (0..8) of one sub-pixel row where `r + aa·du >= margin`, exactly as that
 /// test per bit: the values grow (or fall) with `aa` also in floating point (rounding is
 /// monotone), so the set bits are a run from one end; its end is estimated by a division and
@@ -70,6 +64,12 @@ fn row_bits(r: f64, du: f64, margin: f64) -> u64 {
     }
 }
 
+/// The sub-pixels (8 × 8, bit `8·b + a` for column `a`, row `b`) of the pixel
+/// `[u0, u0 + ps] × [v0, v0 + ps]` that lie entirely inside every edge's region `ev`
+/// (`e0·u + e1·v + e2 − s·√(u²+v²+1) ≥ margin`), where `lmax` is at least `√(u²+v²+1)` over
+/// the pixel (its largest corner value: the root is convex). With `s ≥ 0` the linear test
+/// `e0·u + e1·v + e2 − s·lmax ≥ margin` implies the exact one at every point of the pixel,
+/// and a sub-pixel passes a linear test everywhere iff its worst corner does.
 fn pixel_mask(ev: &[[f32; 4]], u0: f64, v0: f64, ps: f64, lmax: f64) -> u64 {
     let margin = f64::from(CORNER_MARGIN);
     let h = ps / 8.0;
