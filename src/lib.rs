@@ -4,7 +4,7 @@
 //! inside) umbrasweep computes the potentially visible set (PVS) of scene objects, using the
 //! extended projections of Durand et al. (SIGGRAPH 2000).
 //!
-//! Data flows one way: [`scene`] → [`cells`] → per-cell culling → [`pvs`] → files, and [`bake`]
+//! Data flows one way: [`scene`] → [`cells`] → per-cell culling → [`pvs`] → files, and [`bake`](mod@bake)
 //! ties the stages together. Per cell, [`project`] lays out the projection planes and the
 //! occlusion [`sweep`] carries umbra from one plane to the next; both describe their work as the
 //! data of the raster contract, [`plane`], which a [`backend`] (CPU or GPU) turns into Depth

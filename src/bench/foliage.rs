@@ -200,7 +200,7 @@ fn swept(sweep: SweepChoice) -> BakeSettings {
     }
 }
 
-/// Sample points per cell of the sampler rows ([`sampled`]): about ten minutes per cell on two
+/// Sample points per cell of the sampler rows (`sampled`): about ten minutes per cell on two
 /// cores.
 pub const SAMPLING_BENCH_POINTS: u64 = 2000;
 

@@ -5,7 +5,7 @@
 //! the coarse forest (path cells; 300 trees with `--quick`, all 1,500 otherwise), a boxfield —
 //! and, when the shared scene folder exists (`../shared/scenes` from the current directory,
 //! or `--shared DIR`), the real ones: `urban/sionna_munich.glb` and `urban/sionna_etoile.glb`
-//! (cells from [`free_cells`](crate::cells::free_cells), 4×2×4 m at 1 m), `levels/zdm2.obj`
+//! (cells from [`free_cells`], 4×2×4 m at 1 m), `levels/zdm2.obj`
 //! (a Cube 2 map in Cube units: cells 64×32×64 at 16 above the lowest point) and a small forest
 //! of `foliage/tree_poinciana.glb` instances ([`forest_of_models`]).
 //!

@@ -42,7 +42,7 @@
 //! - **Floating occluders** (cut from a bottom point `B` above the cell's bottom up to `T`)
 //!   cast no half umbra of their own, but they extend one: when `B` lies, for every line of the
 //!   pixel, beyond an umbra's guard and under its line, the pixel gains the umbra with `T`'s
-//!   line, the larger guard and the old base ([`fuse`], which holds the proof). The occluders
+//!   line, the larger guard and the old base (`fuse`, whose docs hold the proof). The occluders
 //!   behind a stored umbra thus form a chain — one standing on the ground, then floating ones
 //!   each resting in the umbra of the one before — and every segment from the cell to a point
 //!   that passes the umbra's tests crosses one of them. A bridge or an upper storey resting on
