@@ -48,6 +48,9 @@ pub(super) struct Pool {
     /// Reprojections' summed-area tables, one per reprojection of a submission, per source
     /// size.
     tables: HashMap<(u32, u32), Vec<SweepTable>>,
+    /// Timestamp query sets, each for [`TIMESTAMPS_PER_SET`] / 2 render passes of a
+    /// submission (with timestamps only).
+    timestamps: Vec<TimestampSet>,
 }
 
 /// One plane's render target and its read-back buffer.
@@ -273,9 +276,11 @@ impl GpuBackend {
         let buffers = WaveBuffers::of(pool);
         self.upload(pool, &buffers, &layout, jobs, prepared);
         layout.count(jobs, prepared, stats);
-        let timestamps = self
-            .timestamp_period
-            .map(|period| Timestamps::new(&self.device, layout.planes.len(), period));
+        let timestamps = self.timestamp_period.map(|period| Timestamps {
+            sets: &pool.timestamps[..timestamp_sets(layout.planes.len())],
+            passes: layout.planes.len(),
+            period,
+        });
         let commands = self.encode(pool, &buffers, &layout, prepared, timestamps.as_ref());
         let (submission, mapped) = self.submit(pool, &layout, commands, timestamps.as_ref());
         scope.check()?;
@@ -283,7 +288,7 @@ impl GpuBackend {
         self.wait(submission, mapped, waited)?;
         self.check_failure()?;
         if let Some(t) = &timestamps {
-            stats.pass_time += t.read(layout.planes.len())?;
+            stats.pass_time += t.read()?;
             stats.timed_passes += layout.planes.len();
         }
         read_back(pool, &layout, prepared, out)
@@ -295,6 +300,11 @@ impl GpuBackend {
     /// # Errors
     /// [`BackendError::BufferTooLarge`] when a buffer would exceed the device's largest.
     fn allocate(&self, pool: &mut Pool, layout: &WaveLayout) -> Result<(), BackendError> {
+        if self.timestamp_period.is_some() {
+            while pool.timestamps.len() < timestamp_sets(layout.planes.len()) {
+                pool.timestamps.push(TimestampSet::new(&self.device));
+            }
+        }
         if layout.window_bytes > 0 {
             self.ensure_buffer(
                 &mut pool.windows,
@@ -609,12 +619,13 @@ impl GpuBackend {
         let (tx, rx) = mpsc::channel();
         if let Some(t) = timestamps {
             // After the planes' mappings in the count the wait expects.
-            for (s, read) in t.read_back.iter().enumerate() {
+            for (k, set) in t.sets.iter().enumerate() {
                 let tx = tx.clone();
-                let w = layout.planes.len() + s;
-                read.map_async(wgpu::MapMode::Read, .., move |r| {
-                    let _ = tx.send((w, r));
-                });
+                let w = layout.planes.len() + k;
+                set.read_back
+                    .map_async(wgpu::MapMode::Read, ..t.bytes(k), move |r| {
+                        let _ = tx.send((w, r));
+                    });
             }
         }
         for (w, plane) in layout.planes.iter().enumerate() {
@@ -787,92 +798,99 @@ impl GpuBackend {
 /// The read-back mappings' reports: `(plane index in the wave, result)`.
 type Mapped = mpsc::Receiver<(usize, Result<(), wgpu::BufferAsyncError>)>;
 
-/// A wave's GPU timestamps: two per render pass (its start and end), in query sets of at most
-/// [`wgpu::QUERY_SET_MAX_QUERIES`], each resolved into a buffer and copied to a mappable one.
-struct Timestamps {
-    sets: Vec<wgpu::QuerySet>,
-    resolved: Vec<wgpu::Buffer>,
-    read_back: Vec<wgpu::Buffer>,
-    /// Queries per set.
-    counts: Vec<u32>,
+/// Timestamps one query set holds (wgpu's largest set): two per render pass, its start and
+/// end.
+const TIMESTAMPS_PER_SET: usize = wgpu::QUERY_SET_MAX_QUERIES as usize;
+
+/// The query sets a wave of `passes` render passes needs.
+fn timestamp_sets(passes: usize) -> usize {
+    (2 * passes).div_ceil(TIMESTAMPS_PER_SET)
+}
+
+/// One pooled query set of [`TIMESTAMPS_PER_SET`] timestamps, the buffer it is resolved into
+/// and the mappable copy read back.
+struct TimestampSet {
+    set: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    read_back: wgpu::Buffer,
+}
+
+impl TimestampSet {
+    fn new(device: &wgpu::Device) -> Self {
+        let bytes = TIMESTAMPS_PER_SET as u64 * 8;
+        let buffer = |label, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        TimestampSet {
+            set: device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("render pass timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: TIMESTAMPS_PER_SET as u32,
+            }),
+            resolved: buffer(
+                "resolved timestamps",
+                wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            ),
+            read_back: buffer(
+                "timestamps read-back",
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            ),
+        }
+    }
+}
+
+/// A wave's GPU timestamps: the pooled sets it uses, for its `passes` render passes.
+struct Timestamps<'a> {
+    sets: &'a [TimestampSet],
+    passes: usize,
     /// Nanoseconds per tick.
     period: f64,
 }
 
-impl Timestamps {
-    /// Query sets and buffers for `passes` render passes.
-    fn new(device: &wgpu::Device, passes: usize, period: f64) -> Self {
-        let per_set = wgpu::QUERY_SET_MAX_QUERIES as usize;
-        let total = 2 * passes;
-        let mut t = Timestamps {
-            sets: Vec::new(),
-            resolved: Vec::new(),
-            read_back: Vec::new(),
-            counts: Vec::new(),
-            period,
-        };
-        for start in (0..total).step_by(per_set) {
-            let count = (total - start).min(per_set) as u32;
-            let bytes = u64::from(count) * 8;
-            t.sets
-                .push(device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("render pass timestamps"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count,
-                }));
-            t.resolved
-                .push(device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("resolved timestamps"),
-                    size: bytes,
-                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                }));
-            t.read_back
-                .push(device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("timestamps read-back"),
-                    size: bytes,
-                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                }));
-            t.counts.push(count);
-        }
-        t
+impl Timestamps<'_> {
+    /// The timestamps the wave writes into set `k`.
+    fn queries(&self, k: usize) -> u32 {
+        (2 * self.passes - k * TIMESTAMPS_PER_SET).min(TIMESTAMPS_PER_SET) as u32
+    }
+
+    /// The bytes of set `k`'s timestamps.
+    fn bytes(&self, k: usize) -> u64 {
+        u64::from(self.queries(k)) * 8
     }
 
     /// The start and end timestamps of pass `w`.
     fn writes(&self, w: usize) -> wgpu::RenderPassTimestampWrites<'_> {
-        let per_set = wgpu::QUERY_SET_MAX_QUERIES as usize;
-        let (s, i) = ((2 * w) / per_set, ((2 * w) % per_set) as u32);
+        let (k, i) = ((2 * w) / TIMESTAMPS_PER_SET, (2 * w) % TIMESTAMPS_PER_SET);
         wgpu::RenderPassTimestampWrites {
-            query_set: &self.sets[s],
-            beginning_of_pass_write_index: Some(i),
-            end_of_pass_write_index: Some(i + 1),
+            query_set: &self.sets[k].set,
+            beginning_of_pass_write_index: Some(i as u32),
+            end_of_pass_write_index: Some(i as u32 + 1),
         }
     }
 
-    /// Resolves every set and copies it to its mappable buffer.
+    /// Resolves the wave's timestamps and copies them to the mappable buffers.
     fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
-        for (k, set) in self.sets.iter().enumerate() {
-            encoder.resolve_query_set(set, 0..self.counts[k], &self.resolved[k], 0);
-            encoder.copy_buffer_to_buffer(
-                &self.resolved[k],
-                0,
-                &self.read_back[k],
-                0,
-                u64::from(self.counts[k]) * 8,
-            );
+        for (k, s) in self.sets.iter().enumerate() {
+            encoder.resolve_query_set(&s.set, 0..self.queries(k), &s.resolved, 0);
+            encoder.copy_buffer_to_buffer(&s.resolved, 0, &s.read_back, 0, self.bytes(k));
         }
     }
 
-    /// The summed GPU time of the `passes` passes (mapped buffers), unmapping them.
+    /// The summed GPU time of the wave's passes (mapped buffers), unmapping them.
     ///
     /// # Errors
     /// [`BackendError::ReadBack`] when a mapped range cannot be read.
-    fn read(&self, passes: usize) -> Result<Duration, BackendError> {
-        let mut ticks: Vec<u64> = Vec::with_capacity(2 * passes);
-        for buf in &self.read_back {
-            let bytes = buf
-                .slice(..)
+    fn read(&self) -> Result<Duration, BackendError> {
+        let mut ticks: Vec<u64> = Vec::with_capacity(2 * self.passes);
+        for (k, s) in self.sets.iter().enumerate() {
+            let bytes = s
+                .read_back
+                .slice(..self.bytes(k))
                 .get_mapped_range()
                 .map_err(|e| BackendError::ReadBack {
                     step: "read-back mapping",
@@ -884,7 +902,7 @@ impl Timestamps {
                     .map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))),
             );
             drop(bytes);
-            buf.unmap();
+            s.read_back.unmap();
         }
         let sum: u64 = ticks
             .chunks_exact(2)
@@ -936,4 +954,27 @@ fn read_back(
         out[plane.job] = Some(map);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A wave of more passes than one query set holds spreads its timestamps over several,
+    /// the last one partly used.
+    #[test]
+    fn timestamps_fill_query_sets_in_order() {
+        assert_eq!(timestamp_sets(0), 0);
+        assert_eq!(timestamp_sets(1), 1);
+        assert_eq!(timestamp_sets(TIMESTAMPS_PER_SET / 2), 1);
+        assert_eq!(timestamp_sets(TIMESTAMPS_PER_SET / 2 + 1), 2);
+        let t = Timestamps {
+            sets: &[],
+            passes: TIMESTAMPS_PER_SET / 2 + 1,
+            period: 1.0,
+        };
+        assert_eq!(t.queries(0) as usize, TIMESTAMPS_PER_SET);
+        assert_eq!(t.queries(1), 2);
+        assert_eq!(t.bytes(1), 16);
+    }
 }
