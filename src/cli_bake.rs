@@ -769,10 +769,10 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             "rsf         {} — {}{}",
             if result.rsf { "yes" } else { "no" },
             result.rsf_reason,
-            if result.rsf && result.backend != "cpu" {
-                " (on the CPU: ray space factorization has no GPU half yet)"
-            } else {
-                ""
+            match (result.rsf, result.backend != "cpu", backend.rsf_on_device()) {
+                (true, true, true) => " (on the GPU)",
+                (true, true, false) => " (on the CPU: the device has no SHADER_F64)",
+                _ => "",
             }
         );
         eprintln!(

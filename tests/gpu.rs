@@ -35,10 +35,14 @@ fn shaders_validate_with_naga() {
     for &(path, source) in gpu::SHADERS {
         let module = naga::front::wgsl::parse_str(source)
             .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(source, path)));
-        let mut validator = naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::default(),
-        );
+        // Ray space factorization's charts compute in f64 (`SHADER_F64`); the other passes
+        // need nothing beyond the defaults.
+        let caps = if path == "shaders/rsf.wgsl" {
+            naga::valid::Capabilities::FLOAT64
+        } else {
+            naga::valid::Capabilities::default()
+        };
+        let mut validator = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), caps);
         if let Err(e) = validator.validate(&module) {
             panic!("{}", e.emit_to_string_with_path(source, path));
         }
@@ -1566,4 +1570,203 @@ fn bake_pvs_is_identical_on_analytic_scenes() {
         };
         assert_eq!(hidden > 0, hides, "hidden pairs: {hidden}");
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Ray space factorization: the GPU's charts against the CPU's
+
+use umbrasweep::backend::{RsfCharts, RsfOccluder};
+use umbrasweep::rsf::{RayCharts, hull_edges};
+
+/// An occluder of the chart test: points, and whether it is a solid.
+struct RsfOcc {
+    pts: Vec<DVec3>,
+    solid: bool,
+}
+
+/// Random occluders around a cell at the origin (`up` the up axis): walls standing below the
+/// cell's bottom, floating walls and upper storeys resting on them or above gaps, rotated
+/// polygons, boxes (solids), some crossing the cell's planes; scaled by `scale` and offset by
+/// `offset`.
+fn random_rsf_scene(rng: &mut Pcg64, up: usize, scale: f64, offset: DVec3) -> Vec<RsfOcc> {
+    let at = |x: f64, z: f64, h: f64| {
+        let p = if up == 1 {
+            DVec3::new(x, h, z)
+        } else {
+            DVec3::new(x, z, h)
+        };
+        p * scale + offset
+    };
+    let mut out = Vec::new();
+    for _ in 0..rng.random_range(20..60) {
+        let ang: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let r: f64 = rng.random_range(3.0..40.0);
+        let (cx, cz) = (r * ang.cos(), r * ang.sin());
+        let kind = rng.random_range(0..4);
+        let bottom = match kind {
+            // On or below the cell's bottom (0), or floating.
+            0 | 3 => rng.random_range(-1.0..0.0),
+            _ => rng.random_range(0.2..4.0),
+        };
+        let top = bottom + rng.random_range(0.5..8.0);
+        if kind == 3 {
+            let (hx, hz) = (rng.random_range(0.2..3.0), rng.random_range(0.2..3.0));
+            let mut pts = Vec::new();
+            for k in 0..8 {
+                let x = if k & 1 != 0 { cx + hx } else { cx - hx };
+                let z = if k & 2 != 0 { cz + hz } else { cz - hz };
+                let h = if k & 4 != 0 { top } else { bottom };
+                pts.push(at(x, z, h));
+            }
+            out.push(RsfOcc { pts, solid: true });
+        } else {
+            let dir: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+            let half: f64 = rng.random_range(0.5..6.0);
+            let (dx, dz) = (half * dir.cos(), half * dir.sin());
+            let lean: f64 = if kind == 2 {
+                rng.random_range(-0.5..0.5)
+            } else {
+                0.0
+            };
+            out.push(RsfOcc {
+                pts: vec![
+                    at(cx - dx, cz - dz, bottom),
+                    at(cx + dx, cz + dz, bottom),
+                    at(cx + dx + lean, cz + dz, top),
+                    at(cx - dx + lean, cz - dz, top),
+                ],
+                solid: false,
+            });
+        }
+    }
+    out
+}
+
+/// Random boxes around the cell, as the occludees of the chart test.
+fn random_rsf_boxes(rng: &mut Pcg64, up: usize, scale: f64, offset: DVec3) -> Vec<DAabb> {
+    (0..60)
+        .map(|_| {
+            let ang: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+            let r: f64 = rng.random_range(2.5..60.0);
+            let (cx, cz) = (r * ang.cos(), r * ang.sin());
+            let (hx, hz) = (rng.random_range(0.05..2.0), rng.random_range(0.05..2.0));
+            let y0: f64 = rng.random_range(-0.5..3.0);
+            let y1 = y0 + rng.random_range(0.1..6.0);
+            let (lo, hi) = if up == 1 {
+                (
+                    DVec3::new(cx - hx, y0, cz - hz),
+                    DVec3::new(cx + hx, y1, cz + hz),
+                )
+            } else {
+                (
+                    DVec3::new(cx - hx, cz - hz, y0),
+                    DVec3::new(cx + hx, cz + hz, y1),
+                )
+            };
+            DAabb {
+                min: lo * scale + offset,
+                max: hi * scale + offset,
+            }
+        })
+        .collect()
+}
+
+/// The GPU's charts (`shaders/rsf.wgsl`) against the CPU's `RayCharts` on random scenes:
+/// inserts in calls of several sizes, box tests between them, at three resolutions, both up
+/// axes, scaled ×10⁻³ and offset by 10⁵. The flags of every test and every pixel's umbrae
+/// must be the same, and the counters too.
+#[test]
+fn rsf_charts_match_the_cpu() {
+    let Some(b) = backend() else {
+        return;
+    };
+    if !b.rsf_on_gpu() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI's adapter ({}) must have SHADER_F64 for ray space factorization on the GPU",
+            b.adapter().unwrap_or_default()
+        );
+        eprintln!("the adapter has no SHADER_F64: ray space factorization stays on the CPU");
+        return;
+    }
+    let (mut hidden, mut written, mut tests) = (0, 0, 0);
+    for case in 0..12u64 {
+        let mut rng = Pcg64::seed_from_u64(0x5f5 + case);
+        let up = 1 + (case % 2) as usize;
+        let res = [32, 64, 96][(case % 3) as usize];
+        let (scale, offset) = if case % 4 == 3 {
+            (1e-3, DVec3::splat(1e5))
+        } else {
+            (1.0, DVec3::ZERO)
+        };
+        let e = |x: f64, h: f64, z: f64| {
+            if up == 1 {
+                DVec3::new(x, h, z)
+            } else {
+                DVec3::new(x, z, h)
+            }
+        };
+        let half: f64 = rng.random_range(0.5..3.0);
+        let cell = DAabb {
+            min: e(-half, 0.0, -rng.random_range(0.5..3.0)) * scale + offset,
+            max: e(half, rng.random_range(1.0..4.0), rng.random_range(0.5..3.0)) * scale + offset,
+        };
+        let occ = random_rsf_scene(&mut rng, up, scale, offset);
+        let edges: Vec<Vec<(usize, usize)>> = occ
+            .iter()
+            .map(|o| {
+                if o.solid {
+                    hull_edges(&o.pts)
+                } else {
+                    Vec::new()
+                }
+            })
+            .collect();
+        let occluders: Vec<RsfOccluder> = occ
+            .iter()
+            .zip(&edges)
+            .map(|(o, e)| RsfOccluder {
+                points: o.pts.as_slice().into(),
+                hull_edges: o.solid.then_some(e.as_slice()),
+            })
+            .collect();
+        let mut cpu = RayCharts::new(&cell, up, res);
+        let mut gpu = b.rsf_charts(&cell, up, res).unwrap();
+        let mut start = 0;
+        while start < occluders.len() {
+            let end = (start + 1 + rng.random_range(0..12)).min(occluders.len());
+            RsfCharts::insert(&mut cpu, &occluders[start..end]).unwrap();
+            gpu.insert(&occluders[start..end]).unwrap();
+            start = end;
+            let boxes = random_rsf_boxes(&mut rng, up, scale, offset);
+            // Objects of one box, then of a box with two pieces.
+            let mut groups: Vec<_> = (0..boxes.len() - 3).map(|k| k..k + 1).collect();
+            groups.push(boxes.len() - 3..boxes.len());
+            let c = RsfCharts::hidden(&mut cpu, &boxes, &groups).unwrap();
+            let g = gpu.hidden(&boxes, &groups).unwrap();
+            assert_eq!(c, g, "case {case}: the hidden flags after {end} occluders");
+            hidden += c.iter().filter(|&&h| h).count();
+            tests += c.len();
+        }
+        let (cs, gs) = (
+            RsfCharts::snapshot(&mut cpu).unwrap(),
+            gpu.snapshot().unwrap(),
+        );
+        assert_eq!(cs.len(), gs.len());
+        let differ = cs.iter().zip(&gs).filter(|(a, b)| a != b).count();
+        assert_eq!(
+            differ,
+            0,
+            "case {case}: {differ} of {} pixels differ; first: {:?}",
+            cs.len(),
+            cs.iter().zip(&gs).find(|(a, b)| a != b)
+        );
+        let (cw, gw) = (RsfCharts::work(&mut cpu).unwrap(), gpu.work().unwrap());
+        assert_eq!(cw, gw, "case {case}: the counters");
+        written += cw.pixels;
+    }
+    eprintln!("{tests} objects tested, {hidden} hidden; {written} pixels written");
+    // The scenes exercise both answers and the inserts.
+    assert!(hidden > 50 && hidden < tests - 50, "{hidden} of {tests}");
+    assert!(written > 10_000, "{written}");
 }

@@ -15,7 +15,12 @@ pub mod coverage;
 pub mod cpu;
 pub mod gpu;
 
+use crate::geom::DAabb;
 use crate::plane;
+use crate::rsf::{RayCharts, RsfWork, Umbra};
+use glam::DVec3;
+use std::borrow::Cow;
+use std::ops::Range;
 
 /// Why a backend could not start or could not render.
 ///
@@ -354,4 +359,103 @@ pub trait RasterBackend: Send + Sync {
     /// # Errors
     /// [`BackendError`] when the device fails; never a partial result.
     fn render(&self, jobs: &[plane::PlaneJob]) -> Result<Vec<plane::DepthMap>, BackendError>;
+    /// True when [`Self::rsf_charts`] gives charts on the device rather than the CPU's.
+    fn rsf_on_device(&self) -> bool {
+        false
+    }
+    /// Empty ray-space-factorization charts of `cell` ([`RayCharts::new`]'s arguments) on this
+    /// backend, for one cell's traversal. The default is the CPU's [`RayCharts`]; the GPU
+    /// backend has its own where the device computes in double precision.
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails.
+    fn rsf_charts(
+        &self,
+        cell: &DAabb,
+        up: usize,
+        resolution: u32,
+    ) -> Result<Box<dyn RsfCharts + '_>, BackendError> {
+        Ok(Box::new(RayCharts::new(cell, up, resolution)))
+    }
+}
+
+/// One occluder for ray space factorization's charts: a convex polygon (points in order,
+/// `hull_edges` `None`) or a convex solid (its points and the edges of their hull,
+/// [`crate::rsf::hull_edges`]).
+#[derive(Clone, Debug)]
+pub struct RsfOccluder<'a> {
+    /// The polygon's points in order, or the solid's points.
+    pub points: Cow<'a, [DVec3]>,
+    /// A solid's hull edges (pairs of indices into `points`).
+    pub hull_edges: Option<&'a [(usize, usize)]>,
+}
+
+/// The raster work of ray space factorization for one cell: its four charts, filled by
+/// inserts and read by box tests. Both backends give the same answers: each pixel sees the
+/// occluders of a call in their order, exactly as [`RayCharts::insert`] one after the other.
+pub trait RsfCharts {
+    /// Inserts the occluders, in order ([`RayCharts::insert`] for each).
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails.
+    fn insert(&mut self, occluders: &[RsfOccluder]) -> Result<(), BackendError>;
+    /// Per group of boxes (a range of `boxes`: an object's box, then its pieces), true when
+    /// the object is hidden from the cell: its box is, or it has pieces and all of them are
+    /// ([`RayCharts::box_hidden`]).
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails.
+    fn hidden(
+        &mut self,
+        boxes: &[DAabb],
+        groups: &[Range<usize>],
+    ) -> Result<Vec<bool>, BackendError>;
+    /// What the inserts did so far.
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails.
+    fn work(&mut self) -> Result<RsfWork, BackendError>;
+    /// Every pixel's near and far umbrae, chart by chart (0..4), row by row
+    /// ([`RayCharts::umbrae`]'s order): for tests and dumps.
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails.
+    fn snapshot(&mut self) -> Result<Vec<[Umbra; 2]>, BackendError>;
+}
+
+impl RsfCharts for RayCharts {
+    fn insert(&mut self, occluders: &[RsfOccluder]) -> Result<(), BackendError> {
+        for o in occluders {
+            RayCharts::insert(self, &o.points, o.hull_edges);
+        }
+        Ok(())
+    }
+
+    fn hidden(
+        &mut self,
+        boxes: &[DAabb],
+        groups: &[Range<usize>],
+    ) -> Result<Vec<bool>, BackendError> {
+        Ok(groups
+            .iter()
+            .map(|r| {
+                self.box_hidden(&boxes[r.start]) || {
+                    let pieces = &boxes[r.start + 1..r.end];
+                    !pieces.is_empty() && pieces.iter().all(|b| self.box_hidden(b))
+                }
+            })
+            .collect())
+    }
+
+    fn work(&mut self) -> Result<RsfWork, BackendError> {
+        Ok(self.work)
+    }
+
+    fn snapshot(&mut self) -> Result<Vec<[Umbra; 2]>, BackendError> {
+        let n = self.resolution();
+        Ok((0..4)
+            .flat_map(|c| (0..n * n).map(move |p| (c, p / n, p % n)))
+            .map(|(c, j, i)| self.umbrae(c, j, i))
+            .collect())
+    }
 }

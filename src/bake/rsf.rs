@@ -16,13 +16,14 @@
 use super::BakeError;
 use super::pipeline::{CullState, Culler, CullerWork};
 use super::prepare::Prepared;
-use crate::backend::RasterBackend;
+use crate::backend::{BackendError, RasterBackend, RsfCharts, RsfOccluder};
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::Hdm;
 use crate::plane::{DepthMap, PlaneJob};
 use crate::project::occluders::{Occluders, PartKind};
 use crate::project::planes::shrink_bent_polygon;
 use crate::rsf::RayCharts;
+use std::borrow::Cow;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
@@ -45,80 +46,122 @@ impl Culler for RsfCuller {
         &self,
         prepared: &Prepared,
         cell: &Aabb,
-        _backend: &dyn RasterBackend,
+        backend: &dyn RasterBackend,
         state: &mut CullState,
         _observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
     ) -> Result<CullerWork, BakeError> {
-        let charts = traverse(prepared, cell, state, false);
+        let settings = &prepared.settings;
+        let mut charts =
+            backend.rsf_charts(&cell.to_f64(), settings.up.index(), settings.rsf_resolution)?;
+        traverse(prepared, cell, state, charts.as_mut(), false)?;
         Ok(CullerWork {
-            occluders_projected: charts.work.polygons,
+            occluders_projected: charts.work()?.polygons,
             ..CullerWork::default()
         })
     }
 }
 
-/// The charts of one cell, as a bake without earlier cullers fills them, with the parts of
-/// the last objects inserted too (for dumps): what the traversal proves hidden is dropped.
+/// The charts of one cell, as a bake without earlier cullers fills them (on the CPU), with
+/// the parts of the last objects inserted too (for dumps): what the traversal proves hidden is
+/// dropped.
 pub fn cell_charts(prepared: &Prepared, cell: &Aabb) -> RayCharts {
     let mut state = CullState {
         hidden: vec![false; prepared.scene.objects.len()],
         known_visible: None,
     };
-    traverse(prepared, cell, &mut state, true)
+    let settings = &prepared.settings;
+    let mut charts = RayCharts::new(&cell.to_f64(), settings.up.index(), settings.rsf_resolution);
+    traverse(prepared, cell, &mut state, &mut charts, true).expect("the CPU's charts never fail");
+    charts
 }
 
-/// Ray space factorization's traversal of one cell: marks in `state.hidden` what it proves
-/// hidden and returns the charts it filled. Parts still waiting when the last object has been
-/// tested can hide nothing more; they are inserted only when `drain` (dumps).
-fn traverse(prepared: &Prepared, cell: &Aabb, state: &mut CullState, drain: bool) -> RayCharts {
-    {
-        let settings = &prepared.settings;
-        let cell64 = cell.to_f64();
-        let mut charts = RayCharts::new(&cell64, settings.up.index(), settings.rsf_resolution);
-        let scene = prepared.scene;
-        let mut order: Vec<(f64, u32)> = scene
-            .objects
-            .iter()
-            .enumerate()
-            .filter(|(o, ob)| !state.hidden[*o] && !ob.bounds.is_empty())
-            .map(|(o, ob)| (box_distance(&cell64, &ob.bounds.to_f64()), o as u32))
-            .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let known = state.known_visible;
-        let occ = &prepared.occluders;
-        // Occluder selection by solid angle, as the planes do.
-        let min_angle = settings.occluder_min_solid_angle;
-        let corners = cell64.corners();
-        // Parts of visible objects wait here, nearest first, until an object at least as far
-        // as they are is tested: umbrae are then inserted about front to back, which keeps
-        // the pixels' guards near (the result is conservative in any order).
-        let mut pending: BinaryHeap<Reverse<(OrdF64, u32)>> = BinaryHeap::new();
-        let mut buf: Vec<glam::DVec3> = Vec::new();
-        let mut insert = |p: u32, charts: &mut RayCharts| {
-            insert_part(
-                occ,
-                &prepared.rsf_edges,
-                p as usize,
-                &cell64,
-                &corners,
-                &mut buf,
-                charts,
-            );
-        };
-        for &(d, o) in &order {
-            while let Some(&Reverse((OrdF64(pd), p))) = pending.peek() {
-                if pd > d {
-                    break;
-                }
-                pending.pop();
-                insert(p, &mut charts);
+/// How many objects a wave tests together: one more than a [`WAVE_DIVISOR`]th of those
+/// tested before it. Objects of one wave cannot hide one another, so the first waves, where
+/// the nearest occluders are, hold one object each; later ones grow, so that a cell takes
+/// `O(WAVE_DIVISOR · ln n)` waves (each one insert and one test call on the backend).
+pub const WAVE_DIVISOR: usize = 32;
+
+/// Ray space factorization's traversal of one cell, in waves (the same on every backend, so
+/// that they give the same answers): per wave, the parts of visible objects at most as far as
+/// the wave's first object are inserted, then the wave's objects are tested (box, then
+/// pieces), and those still visible queue their parts. Marks in `state.hidden` what it proves
+/// hidden. Parts still waiting when the last object has been tested can hide nothing more;
+/// they are inserted only when `drain` (dumps).
+///
+/// # Errors
+/// The backend's, when its device fails.
+fn traverse(
+    prepared: &Prepared,
+    cell: &Aabb,
+    state: &mut CullState,
+    charts: &mut dyn RsfCharts,
+    drain: bool,
+) -> Result<(), BackendError> {
+    let settings = &prepared.settings;
+    let cell64 = cell.to_f64();
+    let scene = prepared.scene;
+    let mut order: Vec<(f64, u32)> = scene
+        .objects
+        .iter()
+        .enumerate()
+        .filter(|(o, ob)| !state.hidden[*o] && !ob.bounds.is_empty())
+        .map(|(o, ob)| (box_distance(&cell64, &ob.bounds.to_f64()), o as u32))
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let known = state.known_visible;
+    let occ = &prepared.occluders;
+    // Occluder selection by solid angle, as the planes do.
+    let min_angle = settings.occluder_min_solid_angle;
+    let corners = cell64.corners();
+    // Parts of visible objects wait here, nearest first, until a wave starts at an object at
+    // least as far as they are: umbrae are then inserted about front to back, which keeps the
+    // pixels' guards near (the result is conservative in any order).
+    let mut pending: BinaryHeap<Reverse<(OrdF64, u32)>> = BinaryHeap::new();
+    let mut batch: Vec<u32> = Vec::new();
+    let mut boxes: Vec<DAabb> = Vec::new();
+    let mut tested: Vec<(usize, std::ops::Range<usize>)> = Vec::new();
+    let mut done = 0;
+    while done < order.len() {
+        let wave = &order[done..(done + 1 + done / WAVE_DIVISOR).min(order.len())];
+        done += wave.len();
+        batch.clear();
+        while let Some(&Reverse((OrdF64(pd), p))) = pending.peek() {
+            if pd > wave[0].0 {
+                break;
             }
+            pending.pop();
+            batch.push(p);
+        }
+        insert_parts(prepared, &batch, &cell64, &corners, charts)?;
+        // Each object's box, then its pieces.
+        boxes.clear();
+        tested.clear();
+        for &(_, o) in wave {
             let o = o as usize;
-            if !known.is_some_and(|k| k[o]) && hidden(prepared, &charts, o) {
-                state.hidden[o] = true;
+            if known.is_some_and(|k| k[o]) {
                 continue;
             }
-            for &p in &prepared.object_parts[o] {
+            let start = boxes.len();
+            boxes.push(scene.objects[o].bounds.to_f64());
+            boxes.extend(
+                prepared.pieces[o]
+                    .clone()
+                    .map(|k| prepared.piece_boxes[k as usize]),
+            );
+            tested.push((o, start..boxes.len()));
+        }
+        let groups: Vec<_> = tested.iter().map(|(_, r)| r.clone()).collect();
+        if !groups.is_empty() {
+            let hid = charts.hidden(&boxes, &groups)?;
+            for ((o, _), h) in tested.iter().zip(hid) {
+                state.hidden[*o] = h;
+            }
+        }
+        for &(_, o) in wave {
+            if state.hidden[o as usize] {
+                continue;
+            }
+            for &p in &prepared.object_parts[o as usize] {
                 let b = &occ.parts[p as usize].bounds;
                 if min_angle > 0.0 && b.max_solid_angle_from(&cell64) < min_angle {
                     continue;
@@ -127,58 +170,61 @@ fn traverse(prepared: &Prepared, cell: &Aabb, state: &mut CullState, drain: bool
                 pending.push(Reverse((OrdF64(pd), p)));
             }
         }
-        if drain {
-            while let Some(Reverse((_, p))) = pending.pop() {
-                insert(p, &mut charts);
-            }
+    }
+    if drain {
+        batch.clear();
+        while let Some(Reverse((_, p))) = pending.pop() {
+            batch.push(p);
         }
-        charts
+        insert_parts(prepared, &batch, &cell64, &corners, charts)?;
     }
+    Ok(())
 }
 
-/// The object's box, else all its pieces, hidden in the charts.
-fn hidden(prepared: &Prepared, charts: &RayCharts, o: usize) -> bool {
-    let b = prepared.scene.objects[o].bounds.to_f64();
-    if charts.box_hidden(&b) {
-        return true;
-    }
-    let pieces = prepared.pieces[o].clone();
-    !pieces.is_empty()
-        && pieces
-            .map(|k| &prepared.piece_boxes[k as usize])
-            .all(|pb| charts.box_hidden(pb))
-}
-
-/// Inserts one occluder part: polygons (slightly bent ones shrunk in their plane so that
-/// every ray from the cell crossing them crosses the real triangles), and solids the cell is
-/// outside of.
-fn insert_part(
-    occ: &Occluders,
-    solid_edges: &[Vec<(usize, usize)>],
-    p: usize,
+/// Inserts occluder parts, in order: polygons (slightly bent ones shrunk in their plane so
+/// that every ray from the cell crossing them crosses the real triangles), and solids the cell
+/// is outside of.
+fn insert_parts(
+    prepared: &Prepared,
+    parts: &[u32],
     cell: &DAabb,
     corners: &[glam::DVec3; 8],
-    buf: &mut Vec<glam::DVec3>,
-    charts: &mut RayCharts,
-) {
-    let part = &occ.parts[p];
-    match part.kind {
-        PartKind::Polygon { normal } => {
-            if part.deviation == 0.0 {
-                charts.insert(occ.part_points(p), None);
-            } else {
-                buf.clear();
-                buf.extend_from_slice(occ.part_points(p));
-                if shrink_bent_polygon(buf, normal, part.deviation, part.inradius, corners) {
-                    charts.insert(buf, None);
+    charts: &mut dyn RsfCharts,
+) -> Result<(), BackendError> {
+    if parts.is_empty() {
+        return Ok(());
+    }
+    let occ = &prepared.occluders;
+    let mut out: Vec<RsfOccluder> = Vec::with_capacity(parts.len());
+    for &p in parts {
+        let p = p as usize;
+        let part = &occ.parts[p];
+        match part.kind {
+            PartKind::Polygon { normal } => {
+                if part.deviation == 0.0 {
+                    out.push(RsfOccluder {
+                        points: Cow::Borrowed(occ.part_points(p)),
+                        hull_edges: None,
+                    });
+                } else {
+                    let mut buf = occ.part_points(p).to_vec();
+                    if shrink_bent_polygon(&mut buf, normal, part.deviation, part.inradius, corners)
+                    {
+                        out.push(RsfOccluder {
+                            points: Cow::Owned(buf),
+                            hull_edges: None,
+                        });
+                    }
                 }
             }
+            PartKind::Solid { hull } if !hull.overlaps(cell) => out.push(RsfOccluder {
+                points: Cow::Borrowed(occ.part_points(p)),
+                hull_edges: Some(&prepared.rsf_edges[p]),
+            }),
+            PartKind::Solid { .. } => {}
         }
-        PartKind::Solid { hull } if !hull.overlaps(cell) => {
-            charts.insert(occ.part_points(p), Some(&solid_edges[p]));
-        }
-        PartKind::Solid { .. } => {}
     }
+    charts.insert(&out)
 }
 
 /// An f64 ordered by `total_cmp`, for the heap of pending parts.

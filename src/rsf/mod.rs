@@ -64,6 +64,8 @@
 //! - **Rounding.** Values are computed in f64 and stored in f32 rounded toward "visible":
 //!   slopes down, guards and bases up.
 
+pub mod pack;
+
 use crate::geom::{DAabb, f32_down, f32_up};
 use glam::DVec3;
 
@@ -194,6 +196,39 @@ impl Frame {
     }
 }
 
+/// The four charts' frames of `cell` (see [`RayCharts::new`]).
+fn frames(cell: &DAabb, up: usize, resolution: u32) -> Vec<Frame> {
+    assert!(up == 1 || up == 2, "the up axis is y (1) or z (2)");
+    assert!(resolution > 0, "a chart has at least one pixel");
+    let horiz: [usize; 2] = if up == 1 { [0, 2] } else { [0, 1] };
+    let res = resolution as usize;
+    let mut frames = Vec::with_capacity(4);
+    for (k, &a) in horiz.iter().enumerate() {
+        let b = horiz[1 - k];
+        for positive in [true, false] {
+            let w = cell.max[a] - cell.min[a];
+            let (z0, z1) = (cell.min[b], cell.max[b]);
+            let s0 = z0 - w;
+            frames.push(Frame {
+                up,
+                a,
+                b,
+                sign: if positive { 1.0 } else { -1.0 },
+                face: if positive { cell.max[a] } else { cell.min[a] },
+                w,
+                z0,
+                z1,
+                y0: cell.min[up],
+                y1: cell.max[up],
+                s0,
+                ds: ((z1 + w) - s0) / res as f64,
+                res,
+            });
+        }
+    }
+    frames
+}
+
 /// What one chart covers ([`RayCharts::chart_info`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ChartInfo {
@@ -242,34 +277,8 @@ impl RayCharts {
     /// # Panics
     /// When `up` is not 1 or 2, or the resolution is 0.
     pub fn new(cell: &DAabb, up: usize, resolution: u32) -> Self {
-        assert!(up == 1 || up == 2, "the up axis is y (1) or z (2)");
-        assert!(resolution > 0, "a chart has at least one pixel");
-        let horiz: [usize; 2] = if up == 1 { [0, 2] } else { [0, 1] };
+        let frames = frames(cell, up, resolution);
         let res = resolution as usize;
-        let mut frames = Vec::with_capacity(4);
-        for (k, &a) in horiz.iter().enumerate() {
-            let b = horiz[1 - k];
-            for positive in [true, false] {
-                let w = cell.max[a] - cell.min[a];
-                let (z0, z1) = (cell.min[b], cell.max[b]);
-                let s0 = z0 - w;
-                frames.push(Frame {
-                    up,
-                    a,
-                    b,
-                    sign: if positive { 1.0 } else { -1.0 },
-                    face: if positive { cell.max[a] } else { cell.min[a] },
-                    w,
-                    z0,
-                    z1,
-                    y0: cell.min[up],
-                    y1: cell.max[up],
-                    s0,
-                    ds: ((z1 + w) - s0) / res as f64,
-                    res,
-                });
-            }
-        }
         let umbrae = frames
             .iter()
             .map(|_| vec![[Umbra::NONE; 2]; res * res])
@@ -322,41 +331,13 @@ impl RayCharts {
         let mut local: Vec<DVec3> = Vec::with_capacity(pts.len());
         for c in 0..self.frames.len() {
             let fr = self.frames[c];
-            let lo_h = pts.iter().map(|p| p[fr.up]).fold(f64::INFINITY, f64::min);
-            let lo_x = pts
-                .iter()
-                .map(|p| fr.sign * (p[fr.a] - fr.face))
-                .fold(f64::INFINITY, f64::min);
-            if lo_x <= 0.0 {
+            let Some(floating) = chart_segments(&fr, pts, hull_edges, &mut local, &mut segs) else {
                 continue;
-            }
-            // Above the cell's bottom: it can only extend a pixel's umbra upwards (fusion).
-            let floating = lo_h > fr.y0;
+            };
             if floating {
-                let hi_h = pts
-                    .iter()
-                    .map(|p| p[fr.up])
-                    .fold(f64::NEG_INFINITY, f64::max);
-                let hi_x = pts
-                    .iter()
-                    .map(|p| fr.sign * (p[fr.a] - fr.face))
-                    .fold(f64::NEG_INFINITY, f64::max);
-                if hi_h - lo_h < MIN_FLOATING_RISE * (fr.y1 - fr.y0)
-                    || !may_reach(&fr, self.reach[c][fr.res], lo_x, hi_x, lo_h)
-                {
+                let b = PartBounds::of(&fr, &segs);
+                if !may_reach(&fr, self.reach[c][fr.res], b.x_lo, b.x_hi, b.h_lo) {
                     continue;
-                }
-            }
-            // Local (X, Z, height) stored as (x, y, z).
-            local.clear();
-            local.extend(pts.iter().map(|&p| fr.local(p)));
-            segs.clear();
-            match hull_edges {
-                // A convex solid's cut by a plane has its vertices on the solid's edges.
-                Some(e) => segs.extend(e.iter().map(|&(a, b)| (local[a], local[b]))),
-                None => {
-                    let n = local.len();
-                    segs.extend((0..n).map(|k| (local[k], local[(k + 1) % n])));
                 }
             }
             written += insert_chart(
@@ -495,6 +476,50 @@ pub fn hull_edges(pts: &[DVec3]) -> Vec<(usize, usize)> {
     out
 }
 
+/// The segments of a convex occluder in chart `fr`'s local frame (`(X, Z, height)` stored as
+/// `(x, y, z)`): a polygon's edges, a solid's hull edges (a convex solid's cut by a plane has
+/// its vertices on them). Returns whether it floats (starts above the cell's bottom: it can
+/// only extend a pixel's umbra upwards, see [`fuse`]), or `None` when it writes nothing in
+/// this chart: it reaches the face, or floats and rises less than [`MIN_FLOATING_RISE`] of
+/// the cell's height.
+fn chart_segments(
+    fr: &Frame,
+    pts: &[DVec3],
+    hull_edges: Option<&[(usize, usize)]>,
+    local: &mut Vec<DVec3>,
+    segs: &mut Vec<(DVec3, DVec3)>,
+) -> Option<bool> {
+    let lo_h = pts.iter().map(|p| p[fr.up]).fold(f64::INFINITY, f64::min);
+    let lo_x = pts
+        .iter()
+        .map(|p| fr.sign * (p[fr.a] - fr.face))
+        .fold(f64::INFINITY, f64::min);
+    if lo_x <= 0.0 {
+        return None;
+    }
+    let floating = lo_h > fr.y0;
+    if floating {
+        let hi_h = pts
+            .iter()
+            .map(|p| p[fr.up])
+            .fold(f64::NEG_INFINITY, f64::max);
+        if hi_h - lo_h < MIN_FLOATING_RISE * (fr.y1 - fr.y0) {
+            return None;
+        }
+    }
+    local.clear();
+    local.extend(pts.iter().map(|&p| fr.local(p)));
+    segs.clear();
+    match hull_edges {
+        Some(e) => segs.extend(e.iter().map(|&(a, b)| (local[a], local[b]))),
+        None => {
+            let n = local.len();
+            segs.extend((0..n).map(|k| (local[k], local[(k + 1) % n])));
+        }
+    }
+    Some(floating)
+}
+
 /// Inserts one convex occluder (its segments, local points) into one chart; returns the
 /// pixels written.
 fn insert_chart(
@@ -505,23 +530,12 @@ fn insert_chart(
     reach: &mut [(f32, f32)],
 ) -> usize {
     let mut written = 0;
-    // The best umbra the occluder could cast anywhere: pixels whose umbra already beats it
-    // are skipped before any crossing is computed.
-    let (mut x_lo, mut x_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    let (mut h_lo, mut h_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for &(p, q) in segs {
-        for e in [p, q] {
-            x_lo = x_lo.min(e.x);
-            x_hi = x_hi.max(e.x);
-            h_lo = h_lo.min(e.z);
-            h_hi = h_hi.max(e.z);
-        }
-    }
-    let best_slope = if h_hi >= fr.y1 {
-        (h_hi - fr.y1) / (x_lo + fr.w)
-    } else {
-        (h_hi - fr.y1) / x_hi
-    };
+    let PartBounds {
+        x_lo,
+        x_hi,
+        h_lo,
+        best_slope,
+    } = PartBounds::of(fr, segs);
     // An umbra of this occluder (guard ≥ x_lo, slope ≤ best_slope) can only raise the near
     // umbra's slope when its guard may be within the near one's, or the far umbra's slope
     // (see `insert_umbra`): a pixel where neither can happen is skipped. An occluder above
@@ -555,29 +569,12 @@ fn insert_chart(
             continue;
         }
         let (m0, m1) = (fr.m_of(i), fr.m_of(i + 1));
-        // Segments whose horizontal direction is within the column's slopes: the lines
-        // crossing them there form a double wedge, not a convex set, so corners prove nothing.
         live.clear();
-        live.extend((0..segs.len()).filter(|&k| {
-            let (p, q) = segs[k];
-            let (dx, dz) = (q.x - p.x, q.y - p.y);
-            let (l, h) = (dz - m0 * dx, dz - m1 * dx);
-            l * h > 0.0
-        }));
+        live.extend((0..segs.len()).filter(|&k| is_live(segs[k], m0, m1)));
         if live.is_empty() {
             continue;
         }
-        let (mut smin, mut smax) = (f64::INFINITY, f64::NEG_INFINITY);
-        for m in [m0, m1] {
-            for &(p, q) in segs {
-                for e in [p, q] {
-                    let s = e.y - m * e.x;
-                    smin = smin.min(s);
-                    smax = smax.max(s);
-                }
-            }
-        }
-        let Some((mut j0, mut j1)) = fr.rows(smin, smax) else {
+        let Some((mut j0, mut j1)) = column_rows(fr, segs, m0, m1) else {
             continue;
         };
         while j0 <= j1 && beaten(&umbrae[j0 * fr.res + i]) {
@@ -640,6 +637,67 @@ fn insert_chart(
         }
     }
     written
+}
+
+/// What the best umbra an occluder (its local segments, in one chart) could cast anywhere is
+/// bounded by: pixels whose umbrae already beat it are skipped before any crossing is
+/// computed.
+#[derive(Clone, Copy, Debug)]
+struct PartBounds {
+    x_lo: f64,
+    x_hi: f64,
+    h_lo: f64,
+    best_slope: f64,
+}
+
+impl PartBounds {
+    fn of(fr: &Frame, segs: &[(DVec3, DVec3)]) -> Self {
+        let (mut x_lo, mut x_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut h_lo, mut h_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &(p, q) in segs {
+            for e in [p, q] {
+                x_lo = x_lo.min(e.x);
+                x_hi = x_hi.max(e.x);
+                h_lo = h_lo.min(e.z);
+                h_hi = h_hi.max(e.z);
+            }
+        }
+        let best_slope = if h_hi >= fr.y1 {
+            (h_hi - fr.y1) / (x_lo + fr.w)
+        } else {
+            (h_hi - fr.y1) / x_hi
+        };
+        PartBounds {
+            x_lo,
+            x_hi,
+            h_lo,
+            best_slope,
+        }
+    }
+}
+
+/// True when a segment's horizontal direction is outside the slopes `[m0, m1]` of a column:
+/// inside, the lines crossing it form a double wedge, not a convex set, so corners prove
+/// nothing.
+fn is_live((p, q): (DVec3, DVec3), m0: f64, m1: f64) -> bool {
+    let (dx, dz) = (q.x - p.x, q.y - p.y);
+    let (l, h) = (dz - m0 * dx, dz - m1 * dx);
+    l * h > 0.0
+}
+
+/// The rows of the column of slopes `[m0, m1]` whose lines may cross the segments.
+fn column_rows(fr: &Frame, segs: &[(DVec3, DVec3)], m0: f64, m1: f64) -> Option<(usize, usize)> {
+    let (mut smin, mut smax) = (f64::INFINITY, f64::NEG_INFINITY);
+    for m in [m0, m1] {
+        for &(p, q) in segs {
+            for e in [p, q] {
+                let s = e.y - m * e.x;
+                smin = smin.min(s);
+                smax = smax.max(s);
+            }
+        }
+    }
+    fr.rows(smin, smax)
 }
 
 /// False when no umbra with at most slope `reach.0` and at least guard `reach.1` can hold a

@@ -133,6 +133,7 @@
 mod device;
 mod pipelines;
 mod prepare;
+mod rsf;
 pub mod setup;
 mod wave;
 
@@ -158,10 +159,15 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shaders/reproject.wgsl",
         include_str!("../../../shaders/reproject.wgsl"),
     ),
+    (
+        "shaders/rsf.wgsl",
+        include_str!("../../../shaders/rsf.wgsl"),
+    ),
 ];
 
 const PROJECTION_WGSL: &str = SHADERS[0].1;
 const REPROJECT_WGSL: &str = SHADERS[1].1;
+const RSF_WGSL: &str = SHADERS[2].1;
 
 /// Stride of per-plane uniforms (WebGPU's maximum `min_uniform_buffer_offset_alignment`).
 const UNIFORM_STRIDE: u64 = 256;
@@ -184,6 +190,10 @@ pub struct GpuBackend {
     stats: Mutex<RenderStats>,
     /// Sums over every call since creation.
     totals: Mutex<RenderStats>,
+    /// Ray space factorization's pipelines, where the device has `SHADER_F64`.
+    rsf_pipelines: Option<rsf::RsfPipelines>,
+    /// Ray space factorization's buffers, one set per cell in flight.
+    rsf_pool: Mutex<Vec<rsf::RsfBuffers>>,
 }
 
 impl std::fmt::Debug for GpuBackend {
@@ -352,6 +362,11 @@ impl GpuBackend {
             .features()
             .contains(wgpu::Features::TIMESTAMP_QUERY)
             .then(|| f64::from(queue.get_timestamp_period()));
+        let rsf_pipelines = if device.features().contains(wgpu::Features::SHADER_F64) {
+            Some(rsf::RsfPipelines::new(&device)?)
+        } else {
+            None
+        };
         Ok(GpuBackend {
             adapter_name,
             device,
@@ -363,6 +378,8 @@ impl GpuBackend {
             timestamp_period,
             stats: Mutex::default(),
             totals: Mutex::default(),
+            rsf_pipelines,
+            rsf_pool: Mutex::default(),
         })
     }
 
@@ -397,6 +414,19 @@ impl GpuBackend {
     /// Counters and timings of the last [`render`](RasterBackend::render) call (of any thread).
     pub fn last_stats(&self) -> RenderStats {
         self.stats.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// True when ray space factorization's charts run on this device
+    /// ([`RasterBackend::rsf_charts`]): it has [`wgpu::Features::SHADER_F64`] (the backend's
+    /// own device takes it whenever the adapter has it). Otherwise the CPU's charts are used.
+    pub fn rsf_on_gpu(&self) -> bool {
+        self.rsf_pipelines.is_some()
+    }
+
+    /// Adds work done outside [`RasterBackend::render`] (ray space factorization) to the
+    /// totals.
+    fn add_totals(&self, s: &RenderStats) {
+        self.totals.lock().unwrap_or_else(|e| e.into_inner()).add(s);
     }
 
     /// The first device loss or uncaptured error reported, as an error.
@@ -514,6 +544,36 @@ impl RasterBackend for GpuBackend {
 
     fn adapter(&self) -> Option<String> {
         Some(self.adapter_name.clone())
+    }
+
+    fn rsf_on_device(&self) -> bool {
+        self.rsf_on_gpu()
+    }
+
+    /// The charts on the GPU where the device has `SHADER_F64` and they fit one storage
+    /// binding; the CPU's otherwise.
+    fn rsf_charts(
+        &self,
+        cell: &crate::geom::DAabb,
+        up: usize,
+        resolution: u32,
+    ) -> Result<Box<dyn super::RsfCharts + '_>, BackendError> {
+        self.check_failure()?;
+        match &self.rsf_pipelines {
+            Some(p)
+                if rsf::GpuRsfCharts::chart_bytes(resolution)
+                    <= self
+                        .device
+                        .limits()
+                        .max_storage_buffer_binding_size
+                        .min(self.limits.max_buffer) =>
+            {
+                Ok(Box::new(rsf::GpuRsfCharts::new(
+                    self, p, cell, up, resolution,
+                )))
+            }
+            _ => Ok(Box::new(crate::rsf::RayCharts::new(cell, up, resolution))),
+        }
     }
 
     /// Checks the jobs, prepares them on the CPU in parallel outside the lock (other threads

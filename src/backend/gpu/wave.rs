@@ -29,9 +29,9 @@ const TARGET_BUDGET: u64 = 256 << 20;
 /// Bytes of vertex + record/edge data one submission may use (also capped by the device).
 const DATA_BUDGET: u64 = 512 << 20;
 /// How long one poll blocks before the device-lost flag and the deadline are checked again.
-const POLL_SLICE: Duration = Duration::from_millis(250);
+pub(super) const POLL_SLICE: Duration = Duration::from_millis(250);
 /// A submission not finished after this long is reported as a device failure.
-const DEADLINE: Duration = Duration::from_secs(600);
+pub(super) const DEADLINE: Duration = Duration::from_secs(600);
 /// Bytes of one vertex.
 const VERTEX_SIZE: u64 = std::mem::size_of::<Vertex>() as u64;
 
@@ -697,7 +697,7 @@ impl GpuBackend {
     ///
     /// # Errors
     /// [`BackendError::BufferTooLarge`] when `size` exceeds the device's largest buffer.
-    fn ensure_buffer(
+    pub(super) fn ensure_buffer(
         &self,
         slot: &mut Option<wgpu::Buffer>,
         size: u64,
