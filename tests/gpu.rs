@@ -328,6 +328,61 @@ fn the_bench_reports_the_device_per_cell() {
             .any(|r| r["device"]["kib_down_per_cell"].is_number())
     );
     assert!(rows.iter().any(|r| r.get("device").is_none()));
+    // Both rows time each culler of their pipeline.
+    for r in rows {
+        let cullers = r["culler_ms_per_cell"].as_array().unwrap();
+        assert!(!cullers.is_empty(), "{r}");
+        assert!(
+            cullers
+                .iter()
+                .all(|c| c["culler"].is_string() && c["median_ms"].is_number()),
+            "{r}"
+        );
+    }
+}
+
+/// A bake of a city on the GPU runs ray space factorization's charts on the device (lavapipe
+/// has `SHADER_F64`): its compute passes and bytes show in the backend's counters, and the
+/// bake's culler account says it hid objects, as many as the CPU's.
+#[test]
+fn a_city_bake_runs_the_charts_on_the_device() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a second device");
+    if !b.rsf_on_gpu() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI's adapter must have SHADER_F64"
+        );
+        return;
+    }
+    let city = generate::city(&CityOptions {
+        max_cells: Some(2),
+        ..CityOptions::with_blocks(3, 3)
+    })
+    .unwrap();
+    let scene = city.to_scene("city 3×3");
+    let settings = BakeSettings {
+        rsf: umbrasweep::bake::SweepChoice::On,
+        ..BakeSettings::default()
+    };
+    let before = b.counters().unwrap();
+    let g = bake(&scene, &city.cells, &settings, &b, None).unwrap();
+    let after = b.counters().unwrap().since(&before);
+    let c = bake(&scene, &city.cells, &settings, &CpuBackend::new(), None).unwrap();
+    let planes: usize = g.cells.iter().map(|c| c.planes).sum();
+    assert!(
+        after.passes > planes + 4 * g.cells.len(),
+        "compute passes beside the {planes} planes: {after:?}"
+    );
+    assert_eq!(g.cullers[0], "ray_space_factorization");
+    for (gc, cc) in g.cells.iter().zip(&c.cells) {
+        assert!(gc.cullers[0].hidden > 0, "it hid something");
+        assert_eq!(gc.cullers[0].hidden, cc.cullers[0].hidden);
+        assert_eq!(gc.cullers[0].work, cc.cullers[0].work);
+        assert_eq!(gc.visible, cc.visible);
+    }
 }
 
 /// On a device whose storage bindings hold only 256 words, a plane's occluders are drawn in

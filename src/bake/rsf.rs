@@ -1,8 +1,18 @@
 //! The ray-space-factorization culler (Leyvand et al. 2003, §4.1): per cell, the objects are
-//! visited nearest first; each one not already decided is tested against the four charts of
-//! [`crate::rsf::RayCharts`] (its box, then its pieces), and each one still visible inserts
-//! its occluder parts as half umbrae. It runs before the planes, which skip what it hid.
+//! visited nearest first, in *waves*; each one not already decided is tested against the four
+//! charts (its box, then its pieces), and each one still visible inserts its occluder parts as
+//! half umbrae before the next wave. It runs before the planes, which skip what it hid.
 //! `choose_rsf` decides per scene whether it runs by default.
+//!
+//! # Backends
+//! The charts are the backend's ([`RasterBackend::rsf_charts`]): the CPU's
+//! [`crate::rsf::RayCharts`], or the GPU's (`shaders/rsf.wgsl`), which give the same
+//! answers. The traversal is the same on both: a wave tests [`WAVE_DIVISOR`]⁻¹ of the
+//! objects tested before it (one object at first) in one call, after one call inserting the
+//! parts queued so far, so that the GPU takes one submission per wave rather than one per
+//! object. Objects of one wave cannot hide one another; on the bench's street cells (50 per
+//! scene, 20,000 rays) waves cost PVS/VS 2.48 → 2.49 on Munich and 1.93 → 1.94 on Etoile
+//! against one object per wave, and nothing on the city (divisor 8: 2.51 and 1.97).
 //!
 //! # Why it is conservative
 //! The charts' inserts and tests are conservative (see [`crate::rsf`]). Each pixel's umbra

@@ -228,6 +228,18 @@ pub struct BenchRow {
     /// Per cell, what the backend itself did (the GPU backend; absent for the CPU's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub device: Option<DeviceRow>,
+    /// Per culler of the pipeline, in its order: its name and the median over the cells of
+    /// the milliseconds it ran.
+    pub culler_ms_per_cell: Vec<CullerMs>,
+}
+
+/// One culler's median time per cell in a [`BenchRow`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CullerMs {
+    /// The culler's name ([`crate::bake::CULLER_NAMES`]).
+    pub culler: String,
+    /// The median over the cells of its milliseconds.
+    pub median_ms: f64,
 }
 
 /// Per cell, what a backend with a device did during one scene's bake (means over its cells).
@@ -784,6 +796,21 @@ pub(crate) fn score(
         false_culls,
         planes_per_cell: result.cells.iter().map(|c| c.planes as f64).sum::<f64>() / nc,
         rays_per_cell: rays,
+        culler_ms_per_cell: result
+            .cullers
+            .iter()
+            .enumerate()
+            .map(|(k, name)| CullerMs {
+                culler: (*name).to_string(),
+                median_ms: median(
+                    &result
+                        .cells
+                        .iter()
+                        .filter_map(|c| c.cullers.get(k).map(|s| s.ms))
+                        .collect::<Vec<_>>(),
+                ),
+            })
+            .collect(),
     }
 }
 
@@ -934,6 +961,32 @@ impl Bench {
                 ]
             })
             .collect();
+        let timed: Vec<Vec<String>> = self
+            .rows
+            .iter()
+            .filter(|r| !r.culler_ms_per_cell.is_empty())
+            .map(|r| {
+                vec![
+                    r.scene.clone(),
+                    r.backend.clone(),
+                    r.culler_ms_per_cell
+                        .iter()
+                        .map(|c| format!("{} {:.1}", c.culler, c.median_ms))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                ]
+            })
+            .collect();
+        if !timed.is_empty() {
+            out.push_str("Median ms per cell per culler:\n\n");
+            markdown_table(
+                &mut out,
+                &["scene", "backend", "cullers"],
+                &timed,
+                &[true, true, true],
+            );
+            out.push('\n');
+        }
         if !device.is_empty() {
             out.push_str("Per cell on the device:\n\n");
             let left: Vec<bool> = (0..DEVICE_COLUMNS.len()).map(|k| k < 2).collect();
@@ -980,12 +1033,29 @@ mod tests {
             .filter(|s| !s.is_empty())
             .collect();
         assert_eq!(cols, COLUMNS);
+        let (main, cullers) = table
+            .split_once("Median ms per cell per culler:")
+            .expect("the culler table");
         assert_eq!(
-            table
-                .lines()
-                .filter(|l| l.starts_with("| boxfield"))
-                .count(),
+            main.lines().filter(|l| l.starts_with("| boxfield")).count(),
             1
+        );
+        // Every row names its pipeline's cullers with a time.
+        for r in &bench.rows {
+            assert!(!r.culler_ms_per_cell.is_empty(), "{}", r.scene);
+            let line = cullers
+                .lines()
+                .find(|l| l.starts_with(&format!("| {}", r.scene)))
+                .unwrap_or_else(|| panic!("no culler line for {}", r.scene));
+            for c in &r.culler_ms_per_cell {
+                assert!(c.median_ms >= 0.0);
+                assert!(line.contains(&c.culler), "{line}");
+            }
+        }
+        let city = bench.rows.iter().find(|r| r.scene == "city").unwrap();
+        assert_eq!(
+            city.culler_ms_per_cell[0].culler, "ray_space_factorization",
+            "the city runs ray space factorization first"
         );
     }
 

@@ -1,7 +1,7 @@
 //! Ray space factorization (Leyvand, Sorkine and Cohen-Or 2003), the half umbra of 2.5D
 //! occluders extended upwards by floating ones, on the CPU: the charts of horizontal lines
-//! leaving a cell, the occluder inserts and the occludee tests. The culler that drives it is
-//! `bake::rsf`.
+//! leaving a cell, the occluder inserts and the occludee tests, and their packing for the GPU
+//! twin ([`pack`]). The culler that drives it is `bake::rsf`.
 //!
 //! # The parameterisation
 //! The cell's horizontal footprint is a rectangle; the up axis is `up` (y or z). For each of
@@ -63,6 +63,13 @@
 //!   over the footprint, which reach `X ≤ 0` in every chart.
 //! - **Rounding.** Values are computed in f64 and stored in f32 rounded toward "visible":
 //!   slopes down, guards and bases up.
+//!
+//! # The GPU twin
+//! [`pack`] lays out what [`RayCharts::insert`] and [`RayCharts::box_hidden`] compute per
+//! occluder, per column and per box — with the same functions — as flat arrays for
+//! `shaders/rsf.wgsl`, which repeats the per-pixel work in f64 (`backend::gpu`'s `rsf`
+//! module). Each pixel meets an insert call's occluders in their order, so the GPU's charts
+//! are these charts.
 
 pub mod pack;
 

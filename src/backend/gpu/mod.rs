@@ -104,6 +104,14 @@
 //! ([`RenderStats::pass_time`]); `umbrasweep bench` prints them per cell with the bytes up and
 //! down.
 //!
+//! # Ray space factorization
+//!
+//! [`RasterBackend::rsf_charts`] gives a cell's charts on the device (`rsf.rs`,
+//! `shaders/rsf.wgsl`: compute passes in `f64`, one submission per traversal wave, a flag per
+//! box read back) where it has [`wgpu::Features::SHADER_F64`], which the backend's own device
+//! takes whenever the adapter has it; they are the CPU's charts pixel for pixel. Its passes,
+//! bytes and wall time are added to [`GpuBackend::total_stats`].
+//!
 //! # Device and work apart
 //!
 //! As in wgpu's `hello_compute` example, creating the device is apart from the work done with
