@@ -1825,3 +1825,45 @@ fn rsf_charts_match_the_cpu() {
     assert!(hidden > 50 && hidden < tests - 50, "{hidden} of {tests}");
     assert!(written > 10_000, "{written}");
 }
+
+/// An engine's device without `SHADER_F64` keeps ray space factorization's charts on the
+/// CPU — the same PVS as the CPU backend's — and one with it runs them on the device.
+#[test]
+fn an_engine_device_without_f64_keeps_the_charts_on_the_cpu() {
+    let Some((device, queue)) =
+        engine_device(GpuBackend::REQUIRED_FEATURES, wgpu::Limits::default())
+    else {
+        return;
+    };
+    let engine = GpuBackend::with_device(device, queue).unwrap();
+    assert!(!engine.rsf_on_gpu());
+    assert!(!engine.rsf_on_device());
+    let city = generate::city(&CityOptions {
+        max_cells: Some(2),
+        ..CityOptions::with_blocks(2, 2)
+    })
+    .unwrap();
+    let scene = city.to_scene("city 2×2");
+    let settings = BakeSettings {
+        rsf: umbrasweep::bake::SweepChoice::On,
+        ..BakeSettings::default()
+    };
+    let before = engine.counters().unwrap();
+    let g = bake(&scene, &city.cells, &settings, &engine, None).unwrap();
+    let passes = engine.counters().unwrap().since(&before).passes;
+    let planes: usize = g.cells.iter().map(|c| c.planes).sum();
+    assert_eq!(
+        passes, planes,
+        "only the planes' render passes ran on the device"
+    );
+    let c = bake(&scene, &city.cells, &settings, &CpuBackend::new(), None).unwrap();
+    for (gc, cc) in g.cells.iter().zip(&c.cells) {
+        assert_eq!(gc.visible, cc.visible);
+    }
+    if let Some((device, queue)) = engine_device(
+        GpuBackend::REQUIRED_FEATURES | wgpu::Features::SHADER_F64,
+        wgpu::Limits::default(),
+    ) {
+        assert!(GpuBackend::with_device(device, queue).unwrap().rsf_on_gpu());
+    }
+}

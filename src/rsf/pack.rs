@@ -1,9 +1,9 @@
 //! Ray space factorization's work packed into flat arrays for the GPU twin
 //! (`backend::gpu::rsf`, `shaders/rsf.wgsl`): the charts' frames, each occluder's segments in
 //! each chart's local frame with the bounds its pixels' quick rejects use, the columns and
-//! rows it may write (the CPU's own per-column rejects, [`is_live`] and [`column_rows`]), and
+//! rows it may write (the CPU's own per-column rejects, `is_live` and `column_rows`), and
 //! the boxes of a test in each chart's frame. Everything is computed here in f64 with the very
-//! code [`RayCharts::insert`] and [`RayCharts::box_hidden`] run, so that the shader repeats
+//! code [`super::RayCharts::insert`] and [`super::RayCharts::box_hidden`] run, so that the shader repeats
 //! only the per-pixel part.
 
 use super::{Frame, PartBounds, chart_segments, column_rows, frames, is_live};
@@ -36,7 +36,7 @@ pub struct InsertPack {
     /// Per (occluder, chart) record: first segment, segment count, 1 when it floats, the
     /// occluder's index in the call.
     pub recs: Vec<u32>,
-    /// Per record: `x_lo`, `x_hi`, `h_lo`, the best slope ([`PartBounds`]).
+    /// Per record: `x_lo`, `x_hi`, `h_lo`, the best slope (the bounds of the pixels' quick rejects).
     pub rec_floats: Vec<f64>,
     /// Per segment, its two local points `(X, Z, height)`.
     pub segs: Vec<f64>,

@@ -110,7 +110,8 @@
 //! `shaders/rsf.wgsl`: compute passes in `f64`, one submission per traversal wave, a flag per
 //! box read back) where it has [`wgpu::Features::SHADER_F64`], which the backend's own device
 //! takes whenever the adapter has it; they are the CPU's charts pixel for pixel. Its passes,
-//! bytes and wall time are added to [`GpuBackend::total_stats`].
+//! bytes, wall time and (with timestamps) compute-pass times are added to
+//! [`GpuBackend::total_stats`].
 //!
 //! # Device and work apart
 //!

@@ -135,7 +135,13 @@ pub(super) struct RsfBuffers {
     counters: Option<wgpu::Buffer>,
     flags: Option<wgpu::Buffer>,
     staging: Option<wgpu::Buffer>,
+    /// With timestamps: a query set for the passes of one submission and the buffer it is
+    /// resolved into (then copied behind the payload in `staging`).
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
 }
+
+/// Timestamps of one submission: a start and an end per pass, at most four passes.
+const QUERIES: u32 = 2 * PARAM_SLOTS as u32;
 
 /// The per-dispatch parameters (`Params` in the shader).
 #[derive(Clone, Copy, Default)]
@@ -317,9 +323,27 @@ impl<'a> GpuRsfCharts<'a> {
             storage | wgpu::BufferUsages::COPY_SRC,
             "rsf flags",
         )?;
+        let timed = gpu.timestamp_period.is_some();
+        if timed && b.queries.is_none() {
+            b.queries = Some((
+                gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("rsf pass timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: QUERIES,
+                }),
+                gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("rsf resolved timestamps"),
+                    size: 8 * u64::from(QUERIES),
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+            ));
+        }
+        // The payload, then (with timestamps) 8 bytes per timestamp at an 8-byte offset.
+        let stamps_at = read_bytes.next_multiple_of(8);
         gpu.ensure_buffer(
             &mut b.staging,
-            read_bytes,
+            stamps_at + 8 * u64::from(QUERIES),
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             "rsf read-back",
         )?;
@@ -419,7 +443,8 @@ impl<'a> GpuRsfCharts<'a> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("rsf encoder"),
             });
-        let mut passes = 0;
+        let mut passes = 0u32;
+        let queries = b.queries.as_ref().filter(|_| timed);
         let mut pass = |encoder: &mut wgpu::CommandEncoder,
                         slot: usize,
                         pipeline: &wgpu::ComputePipeline,
@@ -427,7 +452,11 @@ impl<'a> GpuRsfCharts<'a> {
             let (x, y) = dispatch(steps[slot].1);
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(label),
-                timestamp_writes: None,
+                timestamp_writes: queries.map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(2 * passes),
+                    end_of_pass_write_index: Some(2 * passes + 1),
+                }),
             });
             cp.set_pipeline(pipeline);
             cp.set_bind_group(0, &bind_group, &[(slot as u64 * PARAM_SLOT) as u32]);
@@ -454,11 +483,26 @@ impl<'a> GpuRsfCharts<'a> {
         } else {
             encoder.copy_buffer_to_buffer(charts, 0, staging, 0, read_bytes);
         }
+        let stamp_bytes = if let Some((set, resolved)) = queries
+            && passes > 0
+        {
+            encoder.resolve_query_set(set, 0..2 * passes, resolved, 0);
+            let n = 16 * u64::from(passes);
+            encoder.copy_buffer_to_buffer(resolved, 0, staging, stamps_at, n);
+            n
+        } else {
+            0
+        };
+        let map_bytes = if stamp_bytes > 0 {
+            stamps_at + stamp_bytes
+        } else {
+            read_bytes
+        };
         let submission = queue.submit([encoder.finish()]);
         scope.check()?;
         let (tx, rx) = std::sync::mpsc::channel();
         staging
-            .slice(..read_bytes)
+            .slice(..map_bytes)
             .map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
             });
@@ -491,24 +535,38 @@ impl<'a> GpuRsfCharts<'a> {
                 });
             }
         }
-        let out: Vec<u32> = {
-            let view = staging
-                .slice(..read_bytes)
-                .get_mapped_range()
-                .map_err(|e| BackendError::ReadBack {
+        let (out, ticks): (Vec<u32>, u64) = {
+            let view = staging.slice(..map_bytes).get_mapped_range().map_err(|e| {
+                BackendError::ReadBack {
                     step: "ray-space flags mapping",
                     message: e.to_string(),
-                })?;
-            view.chunks_exact(4)
+                }
+            })?;
+            let out = view[..read_bytes as usize]
+                .chunks_exact(4)
                 .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect()
+                .collect();
+            let stamps: Vec<u64> = view[stamps_at.min(map_bytes) as usize..]
+                .chunks_exact(8)
+                .map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes")))
+                .collect();
+            let ticks = stamps
+                .chunks_exact(2)
+                .map(|p| p[1].saturating_sub(p[0]))
+                .sum();
+            (out, ticks)
         };
         staging.unmap();
+        let timed_passes = if stamp_bytes > 0 { passes as usize } else { 0 };
         gpu.add_totals(&super::RenderStats {
             submissions: 1,
-            passes,
+            passes: passes as usize,
+            pass_time: std::time::Duration::from_nanos(
+                (ticks as f64 * gpu.timestamp_period.unwrap_or(0.0)).round() as u64,
+            ),
+            timed_passes,
             bytes_uploaded: uploaded,
-            bytes_read_back: read_bytes,
+            bytes_read_back: map_bytes,
             gpu: t0.elapsed(),
             total: t0.elapsed(),
             ..super::RenderStats::default()
