@@ -273,10 +273,10 @@ pub enum BackendError {
     /// **When this occurs:** [`RasterBackend::render`], on a hung or far too slow device.
     ///
     /// **How to handle:** as [`DeviceLost`](Self::DeviceLost).
-    #[error("GPU error: the GPU did not finish {planes} planes within {deadline:?}")]
+    #[error("GPU error: the GPU did not finish {work} within {deadline:?}")]
     Timeout {
-        /// The planes of the wave.
-        planes: usize,
+        /// The work waited for (`3 planes`, `a ray-space wave`).
+        work: String,
         /// How long the backend waited.
         deadline: std::time::Duration,
     },

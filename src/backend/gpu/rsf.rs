@@ -26,7 +26,6 @@
 
 use super::GpuBackend;
 use super::device::ErrorScopes;
-use super::wave::{DEADLINE, POLL_SLICE};
 use crate::backend::{BackendError, RsfCharts, RsfOccluder};
 use crate::geom::DAabb;
 use crate::rsf::pack::{ChartGeometry, FRAME_FLOATS, InsertPack, REC_FLOATS};
@@ -506,35 +505,13 @@ impl<'a> GpuRsfCharts<'a> {
             .map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
             });
-        let start = Instant::now();
-        loop {
-            gpu.check_failure()?;
-            match gpu.device.poll(wgpu::PollType::Wait {
-                submission_index: Some(submission.clone()),
-                timeout: Some(POLL_SLICE),
-            }) {
-                Ok(_) | Err(wgpu::PollError::Timeout) => {}
-                Err(e) => {
-                    gpu.check_failure()?;
-                    return Err(BackendError::PollFailed {
-                        message: e.to_string(),
-                    });
-                }
-            }
-            if let Ok(r) = rx.try_recv() {
-                r.map_err(|e| BackendError::ReadBack {
-                    step: "ray-space flags",
-                    message: e.to_string(),
-                })?;
-                break;
-            }
-            if start.elapsed() > DEADLINE {
-                return Err(BackendError::Timeout {
-                    planes: 0,
-                    deadline: DEADLINE,
-                });
-            }
-        }
+        gpu.poll_until(&submission, "a ray-space wave", || match rx.try_recv() {
+            Ok(r) => r.map(|()| true).map_err(|e| BackendError::ReadBack {
+                step: "ray-space flags",
+                message: e.to_string(),
+            }),
+            Err(_) => Ok(false),
+        })?;
         let (out, ticks): (Vec<u32>, u64) = {
             let view = staging.slice(..map_bytes).get_mapped_range().map_err(|e| {
                 BackendError::ReadBack {

@@ -29,9 +29,9 @@ const TARGET_BUDGET: u64 = 256 << 20;
 /// Bytes of vertex + record/edge data one submission may use (also capped by the device).
 const DATA_BUDGET: u64 = 512 << 20;
 /// How long one poll blocks before the device-lost flag and the deadline are checked again.
-pub(super) const POLL_SLICE: Duration = Duration::from_millis(250);
+const POLL_SLICE: Duration = Duration::from_millis(250);
 /// A submission not finished after this long is reported as a device failure.
-pub(super) const DEADLINE: Duration = Duration::from_secs(600);
+const DEADLINE: Duration = Duration::from_secs(600);
 /// Bytes of one vertex.
 const VERTEX_SIZE: u64 = std::mem::size_of::<Vertex>() as u64;
 
@@ -644,20 +644,47 @@ impl GpuBackend {
     /// read-back buffers are mapped, checking for a lost device between slices.
     ///
     /// # Errors
-    /// The recorded failure ([`BackendError::DeviceLost`], [`BackendError::Uncaptured`]) on
-    /// the backend's own device; [`BackendError::PollFailed`] on a failed poll (an engine's
-    /// lost device); [`BackendError::ReadBack`] on a failed mapping; [`BackendError::Timeout`]
-    /// when [`DEADLINE`] passes — never a hang.
+    /// As [`Self::poll_until`].
     fn wait(
         &self,
         submission: wgpu::SubmissionIndex,
         mapped: Mapped,
         planes: usize,
     ) -> Result<(), BackendError> {
-        let start = Instant::now();
         let mut done = vec![false; planes];
         let mut remaining = planes;
-        while remaining > 0 {
+        self.poll_until(&submission, &format!("{planes} planes"), || {
+            while let Ok((w, r)) = mapped.try_recv() {
+                r.map_err(|e| BackendError::ReadBack {
+                    step: "read-back failed",
+                    message: e.to_string(),
+                })?;
+                if !done[w] {
+                    done[w] = true;
+                    remaining -= 1;
+                }
+            }
+            Ok(remaining == 0)
+        })
+    }
+
+    /// Polls the device in slices of [`POLL_SLICE`] until `done` says the work of
+    /// `submission` (its read-backs mapped) is over, checking for a lost device between
+    /// slices. `work` names the work in a timeout's message.
+    ///
+    /// # Errors
+    /// The recorded failure ([`BackendError::DeviceLost`], [`BackendError::Uncaptured`]) on
+    /// the backend's own device; [`BackendError::PollFailed`] on a failed poll (an engine's
+    /// lost device); `done`'s errors (a failed mapping); [`BackendError::Timeout`] when
+    /// [`DEADLINE`] passes — never a hang.
+    pub(super) fn poll_until(
+        &self,
+        submission: &wgpu::SubmissionIndex,
+        work: &str,
+        mut done: impl FnMut() -> Result<bool, BackendError>,
+    ) -> Result<(), BackendError> {
+        let start = Instant::now();
+        loop {
             self.check_failure()?;
             match self.device.poll(wgpu::PollType::Wait {
                 submission_index: Some(submission.clone()),
@@ -673,24 +700,16 @@ impl GpuBackend {
                     });
                 }
             }
-            while let Ok((w, r)) = mapped.try_recv() {
-                r.map_err(|e| BackendError::ReadBack {
-                    step: "read-back failed",
-                    message: e.to_string(),
-                })?;
-                if !done[w] {
-                    done[w] = true;
-                    remaining -= 1;
-                }
+            if done()? {
+                return Ok(());
             }
-            if remaining > 0 && start.elapsed() > DEADLINE {
+            if start.elapsed() > DEADLINE {
                 return Err(BackendError::Timeout {
-                    planes,
+                    work: work.to_string(),
                     deadline: DEADLINE,
                 });
             }
         }
-        Ok(())
     }
 
     /// Makes `slot` a buffer of at least `size` bytes (grown to a power of two, never shrunk).
