@@ -1875,3 +1875,58 @@ fn an_engine_device_without_f64_keeps_the_charts_on_the_cpu() {
         assert!(GpuBackend::with_device(device, queue).unwrap().rsf_on_gpu());
     }
 }
+
+/// `bake --backend gpu` says where ray space factorization's charts ran, and writes the same
+/// PVS as `--backend cpu`.
+#[test]
+fn the_bake_command_says_where_the_charts_run() {
+    let Some(b) = backend() else {
+        return;
+    };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::temp_dir().join(format!("umbrasweep-gpu-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cells: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("data/demo_city_cells.json")).unwrap(),
+    )
+    .unwrap();
+    let two = serde_json::json!({ "cells": cells["cells"].as_array().unwrap()[..2] });
+    let cells_path = dir.join("cells.json");
+    std::fs::write(&cells_path, two.to_string()).unwrap();
+    let mut pvs = Vec::new();
+    for backend in ["gpu", "cpu"] {
+        let out_path = dir.join(format!("{backend}.json"));
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
+            .arg("bake")
+            .arg(root.join("data/demo_city.obj"))
+            .arg("--cells")
+            .arg(&cells_path)
+            .args(["--backend", backend, "--rsf", "-o"])
+            .arg(&out_path)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{err}");
+        let line = err
+            .lines()
+            .find(|l| l.starts_with("rsf "))
+            .expect("the rsf line");
+        match (backend, b.rsf_on_gpu()) {
+            ("gpu", true) => assert!(line.ends_with("(on the GPU)"), "{line}"),
+            ("gpu", false) => assert!(line.contains("no SHADER_F64"), "{line}"),
+            _ => assert!(!line.contains("GPU"), "{line}"),
+        }
+        let doc: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out_path).unwrap()).unwrap();
+        pvs.push(
+            doc["cells"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c["visible"].clone())
+                .collect::<Vec<_>>(),
+        );
+    }
+    assert_eq!(pvs[0], pvs[1]);
+    std::fs::remove_dir_all(&dir).ok();
+}
