@@ -46,8 +46,11 @@
 //!   behind a stored umbra thus form a chain — one standing on the ground, then floating ones
 //!   each resting in the umbra of the one before — and every segment from the cell to a point
 //!   that passes the umbra's tests crosses one of them. A bridge or an upper storey resting on
-//!   nothing inserted before it writes nothing (its own full umbra, bounded below too, is not
-//!   kept).
+//!   nothing inserted before it writes nothing: its own full umbra, bounded below by the line
+//!   from the cell's front bottom edge through its bottom point, is not kept (measured as an
+//!   experiment, it hid one more object in 173 cells of four scenes, for up to 11× this
+//!   culler's time: nothing standing on the ground behind a floating occluder is above that
+//!   line).
 //! - **Fusion.** A point hidden under one polygon's line is hidden; keeping per pixel the
 //!   highest line of several polygons, with the largest guard and base, keeps only points
 //!   that the polygon with that line hides. Two umbrae per pixel (a near one and a far one
