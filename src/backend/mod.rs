@@ -1,5 +1,6 @@
-//! The raster work of a bake — occluder extended projections, Depth Maps — behind one trait,
-//! so that the CPU backend ([`cpu`]) and the wgpu backend ([`gpu`]) give the same answers.
+//! The raster work of a bake — occluder extended projections, Depth Maps, and ray space
+//! factorization's charts ([`RsfCharts`]) — behind one trait, so that the CPU backend
+//! ([`cpu`]) and the wgpu backend ([`gpu`]) give the same answers.
 //!
 //! Every backend implements the raster contract stated in [`crate::plane`]: a
 //! [`plane::PlaneJob`] in, a [`plane::DepthMap`] out, occluders covering only whole pixels
@@ -270,7 +271,8 @@ pub enum BackendError {
     },
     /// The GPU did not finish a wave of planes in time; never a hang.
     ///
-    /// **When this occurs:** [`RasterBackend::render`], on a hung or far too slow device.
+    /// **When this occurs:** [`RasterBackend::render`] or a GPU [`RsfCharts`] call, on a hung
+    /// or far too slow device.
     ///
     /// **How to handle:** as [`DeviceLost`](Self::DeviceLost).
     #[error("GPU error: the GPU did not finish {work} within {deadline:?}")]

@@ -164,7 +164,9 @@ fn traverse(
         if !groups.is_empty() {
             let hid = charts.hidden(&boxes, &groups)?;
             for ((o, _), h) in tested.iter().zip(hid) {
-                state.hidden[*o] = h;
+                if h {
+                    state.hidden[*o] = true;
+                }
             }
         }
         for &(_, o) in wave {

@@ -17,18 +17,27 @@
 //!   seen through and stop as soon as any pixel fails (the box's flag is set). Only these
 //!   flags, 4 bytes per box, are read back.
 //!
+//! # Why it is conservative
 //! Everything is computed in `f64` (the device must have [`wgpu::Features::SHADER_F64`]) with
-//! the CPU's expressions, margins and rounding to `f32`, so the charts are the CPU's except
+//! the CPU's expressions, margins and rounding to `f32` — whose conservativeness
+//! [`crate::rsf`] proves — so the charts are the CPU's except
 //! where a driver rounds an `f64` operation differently (contracting `a·b + c` into a fused
 //! multiply-add, say) and the difference crosses a threshold — a rounding error 10⁷ times
 //! smaller than the margins that keep both conservative. On a device without `SHADER_F64`
 //! the backend keeps the CPU's charts ([`GpuBackend::rsf_on_gpu`] says which).
+//! `tests/gpu.rs` compares every pixel of both backends' charts on random scenes.
+//!
+//! # Measured
+//! On lavapipe the charts are 25–100× slower than the CPU's (Munich: 2,149 against 66 ms per
+//! cell); about a quarter of that is GPU time (timestamps), the rest waiting on the ~90
+//! submissions of a cell. An insert that computes each part's crossings once per column in
+//! workgroup memory (two barriers per part) was 1.9× slower there and is not used.
 
 use super::GpuBackend;
 use super::device::ErrorScopes;
 use crate::backend::{BackendError, RsfCharts, RsfOccluder};
 use crate::geom::DAabb;
-use crate::rsf::pack::{ChartGeometry, FRAME_FLOATS, InsertPack, REC_FLOATS};
+use crate::rsf::pack::{self, ChartGeometry, FRAME_FLOATS, InsertPack, REC_FLOATS};
 use crate::rsf::{RsfWork, Umbra};
 use std::num::NonZeroU64;
 use std::ops::Range;
@@ -278,6 +287,7 @@ impl<'a> GpuRsfCharts<'a> {
             floats.extend_from_slice(b);
             test.n = n as u32;
         }
+        // Never an empty buffer (a wave without inserts).
         ints.push(0);
         let float_bytes: Vec<u8> = floats.iter().flat_map(|x| x.to_le_bytes()).collect();
         let int_bytes: Vec<u8> = ints.iter().flat_map(|x| x.to_le_bytes()).collect();
@@ -584,7 +594,7 @@ impl RsfCharts for GpuRsfCharts<'_> {
         boxes: &[DAabb],
         groups: &[Range<usize>],
     ) -> Result<Vec<bool>, BackendError> {
-        let mut packed = Vec::with_capacity(boxes.len() * 4 * crate::rsf::pack::BOX_FLOATS);
+        let mut packed = Vec::with_capacity(boxes.len() * 4 * pack::BOX_FLOATS);
         self.geom.pack_boxes(boxes, &mut packed);
         let visible = if boxes.is_empty() {
             Vec::new()
@@ -633,4 +643,12 @@ impl RsfCharts for GpuRsfCharts<'_> {
     }
 }
 
-const _: () = assert!(FRAME_FLOATS == 8 && REC_FLOATS == 4);
+// The shader indexes the packed arrays with these strides as literals.
+const _: () = assert!(
+    FRAME_FLOATS == 8
+        && REC_FLOATS == 4
+        && pack::REC_INTS == 4
+        && pack::COL_INTS == 6
+        && pack::ENTRY_INTS == 3
+        && pack::BOX_FLOATS == 6
+);
