@@ -246,6 +246,27 @@ fn an_engine_device_renders_the_same_maps_as_new() {
     assert_eq!(again, first);
 }
 
+/// Calls from several threads at once (each with a resource pool of its own) give the maps a
+/// lone call gives, and so do later calls that reuse the pools.
+#[test]
+fn concurrent_calls_give_the_same_maps() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a device of its own");
+    let jobs = mixed_jobs();
+    let (a, c) = jobs.split_at(jobs.len() / 2);
+    let alone = (b.render(a).unwrap(), b.render(c).unwrap());
+    for _ in 0..2 {
+        let both = std::thread::scope(|s| {
+            let ta = s.spawn(|| b.render(a).unwrap());
+            let tc = s.spawn(|| b.render(c).unwrap());
+            (ta.join().unwrap(), tc.join().unwrap())
+        });
+        assert!(both.0 == alone.0 && both.1 == alone.1);
+    }
+}
+
 /// Every render pass is timed with the GPU's timestamps when the device has them (the
 /// backend's own device takes them wherever the adapter has them, lavapipe included), none on
 /// an engine's device that did not ask for them; the counters a benchmark reads follow.

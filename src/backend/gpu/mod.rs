@@ -56,7 +56,7 @@
 //!
 //! The filter is [`Reprojection::mask`]'s window test — pixel `(i, j)` is set when every source
 //! pixel of the box `cols[i] × rows[j]` is in the umbra — evaluated with a summed-area table.
-//! During the setup (parallel, outside the lock) the CPU builds per reprojection the table of
+//! During the setup (parallel) the CPU builds per reprojection the table of
 //! its source's pixels *outside* the umbra (entry `(x, y)` counts those in `[0, x] × [0, y]`, with
 //! the CPU's `d <= 0` test, so NaNs are outside), one pass over the source it had to read
 //! anyway; the table is uploaded with `queue.write_texture` into a pooled `R32Uint` texture,
@@ -91,8 +91,9 @@
 //! sweep planes' maps are stretched, and a reprojection's source may differ from its target). Planes no
 //! occluder can cover and no reprojection can set skip the GPU. Jobs are split into several
 //! submissions only to bound memory (256 MiB of targets, read-back buffers and tables, 512 MiB
-//! of data). The CPU setup runs outside the backend's lock, so cells baked on several threads
-//! prepare their planes while another cell's are on the GPU.
+//! of data). Each call takes a resource pool of its own (the backend keeps one per call in
+//! flight), so cells baked on several threads prepare, upload, render and read back their
+//! planes at the same time, without a lock around the device section.
 //!
 //! Per `w × h` plane: 1 render pass, 1 draw (≈ 1.2 triangles per occluder drawn), `w × h × 4`
 //! bytes read back (rows padded to 256 bytes, i.e. `256 × h` bytes when `w < 64`). Each
@@ -192,7 +193,9 @@ pub struct GpuBackend {
     /// backend's own device ([`GpuBackend::new`]) reports into it.
     failure: Failure,
     limits: DeviceLimits,
-    pool: Mutex<Pool>,
+    /// Resource pools, one per `render` call in flight: a call takes one (or a new one) and
+    /// gives it back, so cells baked on several threads overlap on the device.
+    pools: Mutex<Vec<Pool>>,
     /// Nanoseconds per timestamp tick, when the device has
     /// [`wgpu::Features::TIMESTAMP_QUERY`]: each render pass is then timed on the GPU.
     timestamp_period: Option<f64>,
@@ -383,7 +386,7 @@ impl GpuBackend {
             pipelines,
             failure,
             limits,
-            pool: Mutex::default(),
+            pools: Mutex::default(),
             timestamp_period,
             stats: Mutex::default(),
             totals: Mutex::default(),
@@ -585,9 +588,9 @@ impl RasterBackend for GpuBackend {
         }
     }
 
-    /// Checks the jobs, prepares them on the CPU in parallel outside the lock (other threads
-    /// may render meanwhile), gives the planes that need no GPU their maps, and renders the
-    /// others in waves bounded in memory under the lock.
+    /// Checks the jobs, prepares them on the CPU in parallel, gives the planes that need no
+    /// GPU their maps, and renders the others in waves bounded in memory, with a resource pool
+    /// of its own (other threads' calls run meanwhile with theirs).
     fn render(&self, jobs: &[PlaneJob]) -> Result<Vec<DepthMap>, BackendError> {
         self.check_failure()?;
         self.check_jobs(jobs)?;
@@ -606,11 +609,22 @@ impl RasterBackend for GpuBackend {
         let waves = plan_waves(jobs, &prepared, &gpu_jobs, &self.limits);
         stats.gpu_planes = gpu_jobs.len();
         if !waves.is_empty() {
-            let mut pool = self.pool.lock().unwrap_or_else(|e| e.into_inner());
+            // A pool of this call's own: other threads' calls run meanwhile with theirs.
+            let mut pool = self
+                .pools
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .pop()
+                .unwrap_or_default();
             let t1 = Instant::now();
-            for wave in &waves {
-                self.render_wave(&mut pool, jobs, &prepared, wave, &mut out, &mut stats)?;
-            }
+            let done = waves.iter().try_for_each(|wave| {
+                self.render_wave(&mut pool, jobs, &prepared, wave, &mut out, &mut stats)
+            });
+            self.pools
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(pool);
+            done?;
             stats.gpu = t1.elapsed();
         }
         stats.total = t0.elapsed();
