@@ -1,14 +1,18 @@
 //! Ray space factorization (`umbrasweep::rsf`, the culler `bake::rsf`): the cases of issue 17
 //! built as scenes (fusion of two buildings' umbrae horizontally, a tall building seen over a
 //! low one, an occludee between two occluders, a bridge, slits on a chart seam and inside one
-//! pixel), each scaled and offset; a brute-force check of every box it hides against rays from
-//! points of the cell (corners, edges, inside) to points of the box; and the culler in a bake.
+//! pixel), each scaled and offset, on the CPU's charts and (where there is a GPU) the GPU's;
+//! a brute-force check of every box it hides against rays from points of the cell (corners,
+//! edges, inside) to points of the box; and the culler in a bake.
 
 mod common;
 
 use common::{Lcg, cube};
 use glam::{DVec3, Vec3};
+use std::sync::OnceLock;
 use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::backend::gpu::GpuBackend;
+use umbrasweep::backend::{RasterBackend, RsfOccluder};
 use umbrasweep::bake::{self, BakeSettings};
 use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::rsf::{RayCharts, hull_edges};
@@ -173,8 +177,52 @@ fn street_cell() -> DAabb {
     dbox([-2.0, 1.0, -2.0], [2.0, 3.0, 2.0])
 }
 
-/// Asserts that `target` is hidden (`hidden`) among `occ`, and, when hidden, that no ray of
-/// the brute force passes.
+/// The GPU backend whose charts run on the device, for the cases' second run; `None` (after
+/// printing why) without an adapter or `SHADER_F64`, which fails when `CI` is set (CI's
+/// lavapipe has both).
+fn gpu() -> Option<&'static GpuBackend> {
+    static GPU: OnceLock<Option<GpuBackend>> = OnceLock::new();
+    GPU.get_or_init(|| {
+        let why = match GpuBackend::new() {
+            Ok(b) if b.rsf_on_gpu() => return Some(b),
+            Ok(b) => format!("{} has no SHADER_F64", b.adapter().unwrap_or_default()),
+            Err(e) => e.to_string(),
+        };
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI must run the ray-space cases on the GPU too: {why}"
+        );
+        eprintln!("the ray-space cases run on the CPU only: {why}");
+        None
+    })
+    .as_ref()
+}
+
+/// `target` hidden or not by the GPU's charts of `occ` (same inserts as [`charts`]), where
+/// there is a GPU.
+fn gpu_hidden(cell: &DAabb, occ: &[Occ], res: u32, target: &DAabb) -> Option<bool> {
+    let b = gpu()?;
+    let pts: Vec<Vec<DVec3>> = occ.iter().map(Occ::points).collect();
+    let edges: Vec<Option<Vec<(usize, usize)>>> = occ
+        .iter()
+        .zip(&pts)
+        .map(|(o, p)| matches!(o, Occ::Solid(_)).then(|| hull_edges(p)))
+        .collect();
+    let occluders: Vec<RsfOccluder> = pts
+        .iter()
+        .zip(&edges)
+        .map(|(p, e)| RsfOccluder {
+            points: p.as_slice().into(),
+            hull_edges: e.as_deref(),
+        })
+        .collect();
+    let mut c = b.rsf_charts(cell, 1, res).unwrap();
+    c.insert(&occluders).unwrap();
+    Some(c.hidden(std::slice::from_ref(target), &[0..1]).unwrap()[0])
+}
+
+/// Asserts that `target` is hidden (`hidden`) among `occ`, on the CPU's charts and on the
+/// GPU's, and, when hidden, that no ray of the brute force passes.
 fn check(name: &str, occ: &[Occ], target: DAabb, hidden: bool) {
     for (t, f) in transforms() {
         let cell = mapped(&street_cell(), &f);
@@ -183,6 +231,12 @@ fn check(name: &str, occ: &[Occ], target: DAabb, hidden: bool) {
         let c = charts(&cell, &occ, 256);
         let got = c.box_hidden(&target);
         assert_eq!(got, hidden, "{name} ({t}): hidden {got}, expected {hidden}");
+        if let Some(g) = gpu_hidden(&cell, &occ, 256, &target) {
+            assert_eq!(
+                g, hidden,
+                "{name} ({t}) on the GPU: hidden {g}, expected {hidden}"
+            );
+        }
         if got {
             let mut rng = Lcg(3);
             assert_eq!(
