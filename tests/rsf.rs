@@ -218,7 +218,8 @@ fn gpu_hidden(cell: &DAabb, occ: &[Occ], res: u32, target: &DAabb) -> Option<boo
         .collect();
     let mut c = b.rsf_charts(cell, 1, res).unwrap();
     c.insert(&occluders).unwrap();
-    Some(c.hidden(std::slice::from_ref(target), &[0..1]).unwrap()[0])
+    let one = [std::ops::Range { start: 0, end: 1 }];
+    Some(c.hidden(std::slice::from_ref(target), &one).unwrap()[0])
 }
 
 /// Asserts that `target` is hidden (`hidden`) among `occ`, on the CPU's charts and on the
