@@ -362,6 +362,21 @@ fn the_bench_reports_the_device_per_cell() {
     }
 }
 
+/// A generated city of `blocks`² blocks with two street cells, and settings that run ray
+/// space factorization.
+fn rsf_city(blocks: u32) -> (Scene, Vec<Aabb>, BakeSettings) {
+    let city = generate::city(&CityOptions {
+        max_cells: Some(2),
+        ..CityOptions::with_blocks(blocks, blocks)
+    })
+    .unwrap();
+    let settings = BakeSettings {
+        rsf: umbrasweep::bake::SweepChoice::On,
+        ..BakeSettings::default()
+    };
+    (city.to_scene("city"), city.cells, settings)
+}
+
 /// A bake of a city on the GPU runs ray space factorization's charts on the device (lavapipe
 /// has `SHADER_F64`): its compute passes and bytes show in the backend's counters, and the
 /// bake's culler account says it hid objects, as many as the CPU's.
@@ -378,20 +393,11 @@ fn a_city_bake_runs_the_charts_on_the_device() {
         );
         return;
     }
-    let city = generate::city(&CityOptions {
-        max_cells: Some(2),
-        ..CityOptions::with_blocks(3, 3)
-    })
-    .unwrap();
-    let scene = city.to_scene("city 3×3");
-    let settings = BakeSettings {
-        rsf: umbrasweep::bake::SweepChoice::On,
-        ..BakeSettings::default()
-    };
+    let (scene, cells, settings) = rsf_city(3);
     let before = b.counters().unwrap();
-    let g = bake(&scene, &city.cells, &settings, &b, None).unwrap();
+    let g = bake(&scene, &cells, &settings, &b, None).unwrap();
     let after = b.counters().unwrap().since(&before);
-    let c = bake(&scene, &city.cells, &settings, &CpuBackend::new(), None).unwrap();
+    let c = bake(&scene, &cells, &settings, &CpuBackend::new(), None).unwrap();
     let planes: usize = g.cells.iter().map(|c| c.planes).sum();
     assert!(
         after.passes > planes + 4 * g.cells.len(),
@@ -1867,25 +1873,16 @@ fn an_engine_device_without_f64_keeps_the_charts_on_the_cpu() {
     let engine = GpuBackend::with_device(device, queue).unwrap();
     assert!(!engine.rsf_on_gpu());
     assert!(!engine.rsf_on_device());
-    let city = generate::city(&CityOptions {
-        max_cells: Some(2),
-        ..CityOptions::with_blocks(2, 2)
-    })
-    .unwrap();
-    let scene = city.to_scene("city 2×2");
-    let settings = BakeSettings {
-        rsf: umbrasweep::bake::SweepChoice::On,
-        ..BakeSettings::default()
-    };
+    let (scene, cells, settings) = rsf_city(2);
     let before = engine.counters().unwrap();
-    let g = bake(&scene, &city.cells, &settings, &engine, None).unwrap();
+    let g = bake(&scene, &cells, &settings, &engine, None).unwrap();
     let passes = engine.counters().unwrap().since(&before).passes;
     let planes: usize = g.cells.iter().map(|c| c.planes).sum();
     assert_eq!(
         passes, planes,
         "only the planes' render passes ran on the device"
     );
-    let c = bake(&scene, &city.cells, &settings, &CpuBackend::new(), None).unwrap();
+    let c = bake(&scene, &cells, &settings, &CpuBackend::new(), None).unwrap();
     for (gc, cc) in g.cells.iter().zip(&c.cells) {
         assert_eq!(gc.visible, cc.visible);
     }
