@@ -493,7 +493,8 @@ fn columns(fr: Frame, x0: f64, x1: f64, z0: f64, z1: f64) -> vec3<u32> {
         }
     }
     let n = f64(P.res);
-    if lo > hi || lo > 1.0lf || hi < -1.0lf {
+    // As the CPU: no column when the range is empty or not a number.
+    if !(lo <= hi) || lo > 1.0lf || hi < -1.0lf {
         return vec3<u32>(0u, 0u, 0u);
     }
     let a = clamp(floor((lo + 1.0lf) * 0.5lf * n) - 1.0lf, 0.0lf, n - 1.0lf);

@@ -129,7 +129,9 @@ fn traverse(
     let mut pending: BinaryHeap<Reverse<(OrdF64, u32)>> = BinaryHeap::new();
     let mut batch: Vec<u32> = Vec::new();
     let mut boxes: Vec<DAabb> = Vec::new();
-    let mut tested: Vec<(usize, std::ops::Range<usize>)> = Vec::new();
+    // The objects of a wave tested, and each one's boxes (a range of `boxes`).
+    let mut tested: Vec<usize> = Vec::new();
+    let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
     let mut done = 0;
     while done < order.len() {
         let wave = &order[done..(done + 1 + done / WAVE_DIVISOR).min(order.len())];
@@ -146,6 +148,7 @@ fn traverse(
         // Each object's box, then its pieces.
         boxes.clear();
         tested.clear();
+        groups.clear();
         for &(_, o) in wave {
             let o = o as usize;
             if known.is_some_and(|k| k[o]) {
@@ -158,14 +161,14 @@ fn traverse(
                     .clone()
                     .map(|k| prepared.piece_boxes[k as usize]),
             );
-            tested.push((o, start..boxes.len()));
+            tested.push(o);
+            groups.push(start..boxes.len());
         }
-        let groups: Vec<_> = tested.iter().map(|(_, r)| r.clone()).collect();
         if !groups.is_empty() {
             let hid = charts.hidden(&boxes, &groups)?;
-            for ((o, _), h) in tested.iter().zip(hid) {
+            for (&o, h) in tested.iter().zip(hid) {
                 if h {
-                    state.hidden[*o] = true;
+                    state.hidden[o] = true;
                 }
             }
         }

@@ -152,7 +152,8 @@ pub(super) struct RsfBuffers {
 const QUERIES: u32 = 2 * PARAM_SLOTS as u32;
 
 /// The per-dispatch parameters (`Params` in the shader).
-#[derive(Clone, Copy, Default)]
+#[repr(C)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
     res: u32,
     n: u32,
@@ -162,26 +163,6 @@ struct Params {
     recf_off: u32,
     seg_off: u32,
     groups_x: u32,
-}
-
-impl Params {
-    fn bytes(&self) -> [u8; 32] {
-        let mut out = [0u8; 32];
-        let v = [
-            self.res,
-            self.n,
-            self.rec_off,
-            self.col_off,
-            self.ent_off,
-            self.recf_off,
-            self.seg_off,
-            self.groups_x,
-        ];
-        for (k, x) in v.iter().enumerate() {
-            out[4 * k..4 * k + 4].copy_from_slice(&x.to_le_bytes());
-        }
-        out
-    }
 }
 
 /// What a submission without a test reads back.
@@ -270,7 +251,6 @@ impl<'a> GpuRsfCharts<'a> {
             floats.extend_from_slice(&p.rec_floats);
             ins.seg_off = floats.len() as u32;
             floats.extend_from_slice(&p.segs);
-            ins.rec_off = 0;
             ints.extend_from_slice(&p.recs);
             ins.col_off = ints.len() as u32;
             ints.extend_from_slice(&p.cols);
@@ -289,8 +269,8 @@ impl<'a> GpuRsfCharts<'a> {
         }
         // Never an empty buffer (a wave without inserts).
         ints.push(0);
-        let float_bytes: Vec<u8> = floats.iter().flat_map(|x| x.to_le_bytes()).collect();
-        let int_bytes: Vec<u8> = ints.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let float_bytes: &[u8] = bytemuck::cast_slice(&floats);
+        let int_bytes: &[u8] = bytemuck::cast_slice(&ints);
         let occluders = pending.as_ref().map_or(0, |p| p.occluders);
         let n_flags = occluders.max(boxes.map_or(0, |b| b.1)).max(1) as u64;
         let read_bytes = match (boxes, read) {
@@ -377,8 +357,8 @@ impl<'a> GpuRsfCharts<'a> {
             unreachable!("every buffer was just ensured");
         };
         let queue = &gpu.queue;
-        queue.write_buffer(fbuf, 0, &float_bytes);
-        queue.write_buffer(ibuf, 0, &int_bytes);
+        queue.write_buffer(fbuf, 0, float_bytes);
+        queue.write_buffer(ibuf, 0, int_bytes);
         let pixels = 4 * self.res * self.res;
         let clear = Params {
             res: self.res,
@@ -402,7 +382,7 @@ impl<'a> GpuRsfCharts<'a> {
                 groups_x: dispatch(*groups).0,
                 ..*p
             };
-            queue.write_buffer(params, k as u64 * PARAM_SLOT, &p.bytes());
+            queue.write_buffer(params, k as u64 * PARAM_SLOT, bytemuck::bytes_of(&p));
             uploaded += 32;
         }
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
