@@ -95,12 +95,8 @@ fn main() {
             let ob = &scene.objects[o];
             let mut all = true;
             for t in ob.triangles.clone() {
-                let [a, bb, c] = scene.triangle(t as usize).map(|p| p.as_dvec3());
-                let tb = DAabb {
-                    min: a.min(bb).min(c),
-                    max: a.max(bb).max(c),
-                };
-                if let BoxTest::Open { direction } = hc.test_box(&tb) {
+                let tri = scene.triangle(t as usize).map(|p| p.as_dvec3());
+                if let BoxTest::Open { direction } = hc.test_triangle(tri) {
                     all = false;
                     let e = (direction.y / direction.length()).asin().to_degrees();
                     leaf_open_elev[((e + 90.0) / 10.0).clamp(0.0, 18.0) as usize] += 1;

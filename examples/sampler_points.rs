@@ -103,11 +103,8 @@ fn main() {
             }
             let ob = &scene.objects[o];
             let all = ob.triangles.clone().all(|t| {
-                let [a, bb, c] = scene.triangle(t as usize).map(|p| p.as_dvec3());
-                hc.test_box(&DAabb {
-                    min: a.min(bb).min(c),
-                    max: a.max(bb).max(c),
-                }) == BoxTest::Hidden
+                hc.test_triangle(scene.triangle(t as usize).map(|p| p.as_dvec3()))
+                    == BoxTest::Hidden
             });
             if !all {
                 open[o] += 1;

@@ -115,12 +115,8 @@ fn main() {
                 continue;
             }
             let all = o.triangles.clone().all(|t| {
-                let [a, bb, c] = scene.triangle(t as usize).map(|p| p.as_dvec3());
-                let tb = umbrasweep::geom::DAabb {
-                    min: a.min(bb).min(c),
-                    max: a.max(bb).max(c),
-                };
-                hc.test_box(&tb) == BoxTest::Hidden
+                hc.test_triangle(scene.triangle(t as usize).map(|p| p.as_dvec3()))
+                    == BoxTest::Hidden
             });
             if all {
                 tri_hidden += 1;

@@ -902,6 +902,8 @@ struct Config {
     res: u32,
     polys: Vec<(Vec<DVec3>, u32)>,
     boxes: Vec<DAabb>,
+    /// Occludee triangles, tested with `Hemicube::test_triangle` (one per box, inside it).
+    tris: Vec<[DVec3; 3]>,
 }
 
 fn to_world(
@@ -934,6 +936,37 @@ fn to_world(
             .map(|(i, p)| (p.iter().map(|&v| f.point(v)).collect(), i as u32))
             .collect(),
         boxes: l.boxes.iter().map(|b| f.aabb(b)).collect(),
+        tris: Vec::new(),
+    }
+}
+
+/// A triangle inside the box: three random points, three corners (slanted across it), a
+/// sliver, or one in a face of the box.
+fn tri_in_box(rng: &mut Rng, b: &DAabb) -> [DVec3; 3] {
+    let at = |t: DVec3| (b.min + (b.max - b.min) * t).clamp(b.min, b.max);
+    let r3 = |rng: &mut Rng| DVec3::new(rng.f(), rng.f(), rng.f());
+    match rng.below(4) {
+        0 => [at(r3(rng)), at(r3(rng)), at(r3(rng))],
+        1 => {
+            let c =
+                |i: usize| DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64);
+            let (i, j) = (rng.below(8), rng.below(8));
+            [at(c(i)), at(c(j)), at(c(7 - i))]
+        }
+        2 => {
+            let a = r3(rng);
+            let d = DVec3::new(rng.u(-1.0, 1.0), rng.u(-1.0, 1.0), rng.u(-1.0, 1.0)) * 1e-3;
+            [at(a), at(a + d), at(r3(rng))]
+        }
+        _ => {
+            let k = rng.below(3);
+            let side = rng.below(2) as f64;
+            let mut p = [r3(rng), r3(rng), r3(rng)];
+            for q in &mut p {
+                q[k] = side;
+            }
+            p.map(at)
+        }
     }
 }
 
@@ -1195,9 +1228,14 @@ struct Stats {
     /// Hidden boxes with no part on the outer side of the face plane (nothing to check).
     vacuous: usize,
     segments: u64,
-    /// Hidden boxes with a segment not blocked (only counted when rendering with a smaller
-    /// ball than the one checked).
+    /// Hidden boxes and triangles with a segment not blocked (only counted when rendering with
+    /// a smaller ball than the one checked).
     violations: usize,
+    /// Occludee triangles tested, found hidden (with something on the outer side), and of
+    /// those, triangles whose box the same render left open.
+    tris: usize,
+    tris_hidden: usize,
+    tris_hidden_box_open: usize,
 }
 
 /// Checks every segment for the hidden box `bi` of `cfg`.
@@ -1219,7 +1257,69 @@ fn check_box(
     if lo[a] > hi[a] {
         return Ok(false);
     }
-    // Polygons that can meet a segment from the ball to the box part.
+    let qs = box_points(rng, lo, hi);
+    check_points(rng, cfg, polys, &qs, st).map_err(|(b, q)| Violation { bx: bi, b, q })?;
+    Ok(true)
+}
+
+/// Checks every segment for the hidden triangle `ti` of `cfg`: from the ball's (or
+/// rectangle's) points to the triangle's vertices, points of its edges, inside it and where
+/// its edges cross the face plane, those on the outer side. Ok(false) when no part of it is
+/// there; Err with the segment's ends when one is not blocked.
+fn check_tri(
+    rng: &mut Rng,
+    cfg: &Config,
+    polys: &[RelPoly],
+    ti: usize,
+    st: &mut Stats,
+) -> Result<bool, (DVec3, DVec3)> {
+    let t = cfg.tris[ti].map(|p| p - cfg.eye);
+    let a = cfg.axis;
+    let mut qs: Vec<DVec3> = t.to_vec();
+    for i in 0..3 {
+        let (p, q) = (t[i], t[(i + 1) % 3]);
+        for f in [0.5, rng.f(), rng.f()] {
+            qs.push(p + (q - p) * f);
+        }
+        if (p[a] < 0.0) != (q[a] < 0.0) {
+            let mut x = p + (q - p) * (p[a] / (p[a] - q[a]));
+            x[a] = 0.0;
+            qs.push(x);
+        }
+    }
+    qs.push((t[0] + t[1] + t[2]) / 3.0);
+    for _ in 0..10 {
+        let (mut x, mut y) = (rng.f(), rng.f());
+        if x + y > 1.0 {
+            (x, y) = (1.0 - x, 1.0 - y);
+        }
+        qs.push(t[0] + (t[1] - t[0]) * x + (t[2] - t[0]) * y);
+    }
+    qs.retain(|q| cfg.sign * q[a] >= 0.0);
+    if qs.is_empty() {
+        return Ok(false);
+    }
+    check_points(rng, cfg, polys, &qs, st)?;
+    Ok(true)
+}
+
+/// Checks the segments from the ball's (or rectangle's) points, and for balls the targeted
+/// points of each `q`, to the points `qs` (relative to the eye): Err with the first segment
+/// that crosses no polygon.
+fn check_points(
+    rng: &mut Rng,
+    cfg: &Config,
+    polys: &[RelPoly],
+    qs: &[DVec3],
+    st: &mut Stats,
+) -> Result<(), (DVec3, DVec3)> {
+    let a = cfg.axis;
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for &q in qs {
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    // Polygons that can meet a segment from the ball to the points.
     let (ulo, uhi) = (
         lo.min(DVec3::splat(-cfg.eps)),
         hi.max(DVec3::splat(cfg.eps)),
@@ -1239,10 +1339,9 @@ fn check_box(
         None => ball_points(rng, cfg.eps, a),
         Some(half) => rect_points(rng, half, a),
     };
-    let qs = box_points(rng, lo, hi);
     let mut targeted = Vec::new();
     let mut last = usize::MAX;
-    for &q in &qs {
+    for &q in qs {
         if cfg.patch.is_none() {
             targeted_points(q, cfg.eps, &cand, polys, &mut targeted);
         }
@@ -1256,11 +1355,11 @@ fn check_box(
             });
             match hit {
                 Some(k) => last = k,
-                None => return Err(Violation { bx: bi, b, q }),
+                None => return Err((b, q)),
             }
         }
     }
-    Ok(true)
+    Ok(())
 }
 
 /// Renders `cfg` with its ball (or rectangle) scaled by `factor` and tests its boxes.
@@ -1283,6 +1382,20 @@ fn render(
     }
     hc.draw(&occ);
     cfg.boxes.iter().map(|b| hc.test_box(b)).collect()
+}
+
+/// [`render`], then tests the configuration's triangles.
+fn render_tris(
+    hc: &mut Hemicube,
+    cfg: &Config,
+    polys: &[(Vec<DVec3>, u32)],
+    factor: f64,
+) -> (Vec<BoxTest>, Vec<BoxTest>) {
+    let boxes = render(hc, cfg, polys, factor);
+    (
+        boxes,
+        cfg.tris.iter().map(|t| hc.test_triangle(*t)).collect(),
+    )
 }
 
 fn hidden_with(cfg: &Config, polys: &[(Vec<DVec3>, u32)], bi: usize) -> bool {
@@ -1419,7 +1532,8 @@ fn run_family(
             }
         };
         cubes[k].set_subpixel(subpixel);
-        let results = render(&mut cubes[k], &cfg, &cfg.polys, render_eps);
+        cfg.tris = cfg.boxes.iter().map(|b| tri_in_box(&mut rng, b)).collect();
+        let (results, tri_results) = render_tris(&mut cubes[k], &cfg, &cfg.polys, render_eps);
         let rel = rel_polys(&cfg);
         st.configs += 1;
         st.polygons += cfg.polys.len();
@@ -1435,16 +1549,54 @@ fn run_family(
                 Err(v) => panic!("{}", report(&cfg, &v, true)),
             }
         }
+        for (ti, r) in tri_results.iter().enumerate() {
+            st.tris += 1;
+            if *r != BoxTest::Hidden {
+                continue;
+            }
+            match check_tri(&mut rng, &cfg, &rel, ti, &mut st) {
+                Ok(true) => {
+                    st.tris_hidden += 1;
+                    if results[ti] != BoxTest::Hidden {
+                        st.tris_hidden_box_open += 1;
+                    }
+                }
+                Ok(false) => {}
+                Err(_) if render_eps < 1.0 => st.violations += 1,
+                Err((b, q)) => panic!(
+                    "VIOLATION in family `{}`, configuration {} (seed {:#x}): triangle {ti} {:?} \
+                     reported Hidden but the segment b -> q is not blocked.\n  b - eye = {}, \
+                     q - eye = {}\n  eye = {}, axis = {}, sign = {:?}, eps = {:?}, patch = {:?}, \
+                     res = {}, {} polygons",
+                    cfg.family,
+                    cfg.index,
+                    cfg.seed,
+                    cfg.tris[ti],
+                    fmt_v(b),
+                    fmt_v(q),
+                    fmt_v(cfg.eye),
+                    cfg.axis,
+                    cfg.sign,
+                    cfg.eps,
+                    cfg.patch,
+                    cfg.res,
+                    cfg.polys.len()
+                ),
+            }
+        }
     }
     eprintln!(
         "sampler_proof family {name} (rendered with eps x {render_eps}): {} configurations, {} \
-         polygons, {} boxes, {} hidden (+{} with nothing on the outer side), {} segments checked, \
-         {} violations, {:.2} s",
+         polygons, {} boxes, {} hidden (+{} with nothing on the outer side), {} triangles, {} \
+         hidden ({} of them in open boxes), {} segments checked, {} violations, {:.2} s",
         st.configs,
         st.polygons,
         st.boxes,
         st.hidden,
         st.vacuous,
+        st.tris,
+        st.tris_hidden,
+        st.tris_hidden_box_open,
         st.segments,
         st.violations,
         start.elapsed().as_secs_f64()
@@ -1452,8 +1604,18 @@ fn run_family(
     st
 }
 
-/// Asserts that a family hid at least `min_share` of its boxes (with something to check).
+/// Asserts that a family hid at least `min_share` of its boxes and of its triangles (with
+/// something to check), and some triangles whose box it left open (the triangle test is not
+/// the box test).
 fn assert_meaningful(name: &str, st: &Stats, min_share: f64) {
+    let tri_share = st.tris_hidden as f64 / st.tris.max(1) as f64;
+    assert!(
+        st.tris_hidden >= 3 && tri_share >= min_share && st.tris_hidden_box_open > 0,
+        "family {name} hid only {} of {} triangles ({} in open boxes): the check is too weak",
+        st.tris_hidden,
+        st.tris,
+        st.tris_hidden_box_open
+    );
     let share = st.hidden as f64 / st.boxes.max(1) as f64;
     assert!(
         st.hidden >= 3 && share >= min_share,
@@ -1881,6 +2043,7 @@ fn polygon_within_eps_is_left_out() {
                 min: DVec3::new(-0.5, -0.5, 3.0),
                 max: DVec3::new(0.5, 0.5, 4.0),
             }],
+            tris: Vec::new(),
         };
         let mut hc = Hemicube::new(64);
         assert!(

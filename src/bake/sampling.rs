@@ -20,7 +20,7 @@
 //!    every point of the rectangle looking out through `F`. The reported ε of a rectangle is
 //!    its half diagonal (the ball holding it); each edge is shrunk for the rectangle's extent
 //!    across it, at most that. Its pieces may be tested instead of its box (their
-//!    union holds all its triangles).
+//!    union holds all its triangles), and a piece's triangles instead of the piece.
 //! 4. **Refinement only decides more.** An object still undecided at a ball is re-tested in
 //!    the ball's four children; an object undecided at the finest ε, or when the budget runs
 //!    out, stays visible. An object is culled only when every leaf rectangle of every face
@@ -409,8 +409,8 @@ impl Shared<'_> {
         }
     }
 
-    /// Tests piece `k` of an object: its box, and when that is open, the box of each of its
-    /// triangles (the union of which holds the piece).
+    /// Tests piece `k` of an object: its box, and when that is open, each of its triangles
+    /// (whose union is the piece) pixel by pixel ([`Hemicube::test_triangle`]).
     fn test_piece(&self, hc: &Hemicube, k: usize) -> BoxTest {
         let p = self.prepared;
         let open = hc.test_box(&p.piece_boxes[k]);
@@ -421,11 +421,7 @@ impl Shared<'_> {
         for &t in &p.piece_triangles
             [p.piece_triangle_ranges[k].start as usize..p.piece_triangle_ranges[k].end as usize]
         {
-            let [a, b, c] = scene.triangle(t as usize).map(|v| v.as_dvec3());
-            let tb = hc.test_box(&DAabb {
-                min: a.min(b).min(c),
-                max: a.max(b).max(c),
-            });
+            let tb = hc.test_triangle(scene.triangle(t as usize).map(|v| v.as_dvec3()));
             if tb != BoxTest::Hidden {
                 return tb;
             }

@@ -165,6 +165,90 @@ fn footprint_opaque(
     cov.uv_rect_opaque([lo.x, hi.x], [lo.y, hi.y])
 }
 
+/// Partial layers a pixel keeps: sub-pixel masks, each with the largest depth of the polygons
+/// whose bits it holds, sorted nearest first.
+const LAYERS: usize = 8;
+
+/// Adds the sub-pixels `bits` of a polygon at depth `z` to a pixel's partial layers (`masks`,
+/// `wz`; sorted nearest first, empty layers last) whose pixel depth is `d > z`. Layers no
+/// nearer than `d` are dropped first; bits at a depth some layer already has join it; with
+/// every layer in use the two farthest merge (their union at the larger depth, which only
+/// loses). When the layers up to some depth together hold all 64 sub-pixels, the pixel is
+/// covered at that depth: it is returned and the layers from there on are dropped.
+fn add_layer(
+    masks: &mut [u64; LAYERS],
+    wz: &mut [f32; LAYERS],
+    bits: u64,
+    z: f32,
+    d: f32,
+) -> Option<f32> {
+    let mut n = 0;
+    while n < LAYERS && masks[n] != 0 && wz[n] < d {
+        n += 1;
+    }
+    masks[n..].fill(0);
+    wz[n..].fill(0.0);
+    if let Some(k) = (0..n).find(|&k| wz[k] == z) {
+        masks[k] |= bits;
+    } else {
+        if n == LAYERS {
+            masks[LAYERS - 2] |= masks[LAYERS - 1];
+            wz[LAYERS - 2] = wz[LAYERS - 2].max(wz[LAYERS - 1]);
+            n -= 1;
+        }
+        let pos = (0..n).find(|&k| wz[k] > z).unwrap_or(n);
+        for k in (pos..n).rev() {
+            masks[k + 1] = masks[k];
+            wz[k + 1] = wz[k];
+        }
+        masks[pos] = bits;
+        wz[pos] = z;
+        n += 1;
+    }
+    let mut acc = 0u64;
+    for k in 0..n {
+        acc |= masks[k];
+        if acc == u64::MAX {
+            let depth = wz[k];
+            masks[k..].fill(0);
+            wz[k..].fill(0.0);
+            return Some(depth);
+        }
+    }
+    None
+}
+
+/// Clips the convex polygon `poly` (view coordinates) to the half-space `n·p ≥ 0`, in place
+/// (`tmp` is scratch).
+fn clip(poly: &mut Vec<DVec3>, n: DVec3, tmp: &mut Vec<DVec3>) {
+    if poly.is_empty() {
+        return;
+    }
+    tmp.clear();
+    let m = poly.len();
+    for i in 0..m {
+        let (a, b) = (poly[i], poly[(i + 1) % m]);
+        let (fa, fb) = (n.dot(a), n.dot(b));
+        if fa >= 0.0 {
+            tmp.push(a);
+        }
+        if (fa >= 0.0) != (fb >= 0.0) {
+            tmp.push(a + (b - a) * (fa / (fa - fb)));
+        }
+    }
+    std::mem::swap(poly, tmp);
+}
+
+/// The least and largest of `f` over the points.
+fn bounds(points: &[DVec3], f: impl Fn(&DVec3) -> f64) -> [f64; 2] {
+    points
+        .iter()
+        .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], p| {
+            let x = f(p);
+            [lo.min(x), hi.max(x)]
+        })
+}
+
 /// What [`Hemicube::test_box`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum BoxTest {
@@ -202,9 +286,13 @@ struct View {
     /// Per pixel, the sub-pixels (8 × 8, bit `8·b + a`) covered by polygons drawn so far that
     /// did not cover the whole pixel, and the largest depth of those polygons (`wz`, 0 when
     /// the mask is empty). A full mask covers the pixel at `wz`.
-    mask: Vec<u64>,
-    wz: Vec<f32>,
+    mask: Vec<[u64; LAYERS]>,
+    wz: Vec<[f32; LAYERS]>,
     tile_max: Vec<f32>,
+    /// Per tile, the largest farthest depth of the occludee boxes whose pixels reach it this
+    /// render (0 where none does): a polygon no nearer than that in every tile it touches
+    /// can change no test (of the boxes, their pieces or their triangles).
+    need_z: Vec<f32>,
     /// The pixels that matter this render: `[i0, i1) × [j0, j1)` (empty when `i0 ≥ i1`).
     need: [usize; 4],
 }
@@ -350,9 +438,10 @@ impl Hemicube {
                         h,
                         vmin: if k == 0 { -1.0 } else { 0.0 },
                         depth: vec![f32::INFINITY; res * h],
-                        mask: vec![0; res * h],
-                        wz: vec![0.0; res * h],
+                        mask: vec![[0; LAYERS]; res * h],
+                        wz: vec![[0.0; LAYERS]; res * h],
                         tile_max: vec![f32::INFINITY; (res / TILE) * (h / TILE)],
+                        need_z: vec![0.0; (res / TILE) * (h / TILE)],
                         need: [0; 4],
                     }
                 })
@@ -366,7 +455,9 @@ impl Hemicube {
         for (k, v) in self.views.iter_mut().enumerate() {
             v.map = maps[k];
             v.need = [usize::MAX, 0, usize::MAX, 0];
+            v.need_z.fill(0.0);
         }
+        let tw = res / TILE;
         for bx in boxes {
             let far = (bx.min - eye).abs().max((bx.max - eye).abs()).length();
             self.max_dist = self.max_dist.max(far);
@@ -378,6 +469,17 @@ impl Hemicube {
                     n[1] = n[1].max(r.i[1]);
                     n[2] = n[2].min(r.j[0]);
                     n[3] = n[3].max(r.j[1]);
+                    // Its pieces and triangles are tested at their own depths, up to its
+                    // farthest.
+                    let z = round_up(self.view_box(k, bx)[2][1]);
+                    let v = &mut self.views[k];
+                    for tj in r.j[0] / TILE..r.j[1].div_ceil(TILE) {
+                        for t in
+                            &mut v.need_z[tj * tw + r.i[0] / TILE..tj * tw + r.i[1].div_ceil(TILE)]
+                        {
+                            *t = t.max(z);
+                        }
+                    }
                 }
             }
         }
@@ -392,8 +494,8 @@ impl Hemicube {
                 for row in tj * TILE..(tj + 1) * TILE {
                     let span = row * res + ti0 * TILE..row * res + ti1 * TILE;
                     v.depth[span.clone()].fill(f32::INFINITY);
-                    v.mask[span.clone()].fill(0);
-                    v.wz[span].fill(0.0);
+                    v.mask[span.clone()].fill([0; LAYERS]);
+                    v.wz[span].fill([0.0; LAYERS]);
                 }
                 v.tile_max[tj * (res / TILE) + ti0..tj * (res / TILE) + ti1].fill(f32::INFINITY);
             }
@@ -551,7 +653,7 @@ impl Hemicube {
             let z = r.z as f32;
             for tj in j0 / TILE..j1.div_ceil(TILE) {
                 for ti in i0 / TILE..i1.div_ceil(TILE) {
-                    if v.tile_max[tj * tw + ti] > z {
+                    if v.tile_max[tj * tw + ti] > z && v.need_z[tj * tw + ti] > z {
                         return true;
                     }
                 }
@@ -726,10 +828,18 @@ impl Hemicube {
         // A polygon at one depth lowers no pixel when every tile it touches is already
         // covered at least as near.
         let deep = zmax - zmin > 0.05 * zmax;
-        if !deep {
+        {
+            // A deep polygon's pixel depths are at least about its nearest vertex's (a skip
+            // decided on a rounded bound only loses coverage, never soundness).
+            let zs = if deep {
+                (zmin as f32).next_down().max(0.0)
+            } else {
+                z
+            };
             let tw = res / TILE;
             let lowers = (pj0 / TILE..pj1.div_ceil(TILE)).any(|tj| {
-                (pi0 / TILE..pi1.div_ceil(TILE)).any(|ti| view.tile_max[tj * tw + ti] > z)
+                (pi0 / TILE..pi1.div_ceil(TILE))
+                    .any(|ti| view.tile_max[tj * tw + ti] > zs && view.need_z[tj * tw + ti] > zs)
             });
             if !lowers {
                 return false;
@@ -865,29 +975,10 @@ impl Hemicube {
                     if cover == 0 {
                         continue;
                     }
-                    // A partial layer no nearer than the pixel's depth can no longer help.
-                    if view.mask[idx] != 0 && view.wz[idx] >= d {
-                        view.mask[idx] = 0;
-                        view.wz[idx] = 0.0;
-                    }
                     let new_depth = if cover == u64::MAX {
                         Some(z)
                     } else {
-                        let m = view.mask[idx] | cover;
-                        let wz = if view.mask[idx] == 0 {
-                            z
-                        } else {
-                            view.wz[idx].max(z)
-                        };
-                        if m == u64::MAX {
-                            view.mask[idx] = 0;
-                            view.wz[idx] = 0.0;
-                            (wz < d).then_some(wz)
-                        } else {
-                            view.mask[idx] = m;
-                            view.wz[idx] = wz;
-                            None
-                        }
+                        add_layer(&mut view.mask[idx], &mut view.wz[idx], cover, z, d)
                     };
                     if let Some(nd) = new_depth {
                         view.depth[idx] = nd;
@@ -935,8 +1026,15 @@ impl Hemicube {
     /// no deeper than the mask's depth, so each direction of the box in it is covered as a
     /// fully covered pixel's would be.
     fn sub_covered(&self, v: &View, idx: usize, r: &Rect, i: usize, j: usize, z: f64) -> bool {
-        let m = v.mask[idx];
-        if m == 0 || (v.wz[idx] as f64).partial_cmp(&z) != Some(std::cmp::Ordering::Less) {
+        // The layers are sorted nearest first: those nearer than `z` are a prefix.
+        let mut m = 0u64;
+        for (&bits, &wz) in v.mask[idx].iter().zip(&v.wz[idx]) {
+            if bits == 0 || (wz as f64).partial_cmp(&z) != Some(std::cmp::Ordering::Less) {
+                break;
+            }
+            m |= bits;
+        }
+        if m == 0 {
             return false;
         }
         // Sub-pixel indices of the bounds, widened by a millionth of a sub-pixel against the
@@ -1002,7 +1100,13 @@ impl Hemicube {
                 return None;
             }
             let idx = j * self.res + i;
-            return Some((v.depth[idx], v.mask[idx], v.wz[idx]));
+            let m = v.mask[idx].iter().fold(0, |a, b| a | b);
+            let wz = v.mask[idx]
+                .iter()
+                .zip(&v.wz[idx])
+                .filter(|(b, _)| **b != 0)
+                .fold(0.0f32, |a, (_, z)| a.max(*z));
+            return Some((v.depth[idx], m, wz));
         }
         None
     }
@@ -1058,6 +1162,120 @@ impl Hemicube {
         }
         BoxTest::Hidden
     }
+
+    /// Tests a triangle (an occludee's) against what was drawn: like [`Hemicube::test_box`],
+    /// but pixel by pixel with the triangle's own part in each pixel rather than its box's
+    /// rectangle and nearest depth. Per view, the triangle is clipped to the view's frustum,
+    /// then to each pixel row's and each pixel's pyramid of directions (every plane widened
+    /// outward, so each clipped polygon holds the triangle's part there despite rounding); a
+    /// pixel the part reaches must hold a depth strictly nearer than the part's nearest view
+    /// depth, or be covered that near by its sub-pixel mask over the part's bounds. A triangle
+    /// reaching the eye is tested by its box. Only triangles inside the boxes given to
+    /// [`Hemicube::begin`] may be tested.
+    pub fn test_triangle(&self, tri: [DVec3; 3]) -> BoxTest {
+        let res = self.res;
+        let ps = 2.0 / res as f64;
+        let half = res as f64 / 2.0;
+        // Widening of every clipping plane's slope: far above the rounding of the clips.
+        const W: f64 = 1e-9;
+        let mut poly: Vec<DVec3> = Vec::with_capacity(16);
+        let mut row: Vec<DVec3> = Vec::with_capacity(16);
+        let mut px: Vec<DVec3> = Vec::with_capacity(16);
+        let mut tmp: Vec<DVec3> = Vec::with_capacity(16);
+        for k in 0..5 {
+            let v = &self.views[k];
+            let map = v.map;
+            poly.clear();
+            poly.extend(tri.iter().map(|p| {
+                let q = *p - self.eye;
+                DVec3::new(
+                    map[0].1 * q[map[0].0],
+                    map[1].1 * q[map[1].0],
+                    map[2].1 * q[map[2].0],
+                )
+            }));
+            // The view's frustum, widened: u ∈ [−1, 1], v ∈ [vmin, vmax].
+            let vmax = v.vmin + v.h as f64 * ps;
+            for n in [
+                DVec3::new(1.0, 0.0, 1.0 + W),
+                DVec3::new(-1.0, 0.0, 1.0 + W),
+                DVec3::new(0.0, 1.0, -v.vmin + W),
+                DVec3::new(0.0, -1.0, vmax + W),
+            ] {
+                clip(&mut poly, n, &mut tmp);
+            }
+            if poly.is_empty() {
+                continue;
+            }
+            if poly
+                .iter()
+                .any(|p| p.z.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater))
+            {
+                // Reaches the eye: the box test decides.
+                return self.test_box(&DAabb {
+                    min: tri[0].min(tri[1]).min(tri[2]),
+                    max: tri[0].max(tri[1]).max(tri[2]),
+                });
+            }
+            let vrange = bounds(&poly, |p| p.y / p.z);
+            let to_j = |w: f64| ((w - v.vmin) * half).clamp(0.0, v.h as f64);
+            let j0 = to_j(vrange[0] - W).floor() as usize;
+            let j1 = (to_j(vrange[1] + W).floor() as usize + 1).min(v.h);
+            let open = |i: usize, j: usize| {
+                let (u, vv) = (-1.0 + (i as f64 + 0.5) * ps, v.vmin + (j as f64 + 0.5) * ps);
+                let mut d = DVec3::ZERO;
+                d[map[0].0] += map[0].1 * u;
+                d[map[1].0] += map[1].1 * vv;
+                d[map[2].0] += map[2].1;
+                BoxTest::Open { direction: d }
+            };
+            for j in j0..j1 {
+                // The row's pyramid: v ∈ [s0, s1], widened.
+                let (s0, s1) = (v.vmin + j as f64 * ps, v.vmin + (j + 1) as f64 * ps);
+                row.clear();
+                row.extend_from_slice(&poly);
+                clip(&mut row, DVec3::new(0.0, 1.0, -s0 + W), &mut tmp);
+                clip(&mut row, DVec3::new(0.0, -1.0, s1 + W), &mut tmp);
+                if row.is_empty() {
+                    continue;
+                }
+                let urange = bounds(&row, |p| p.x / p.z);
+                let to_i = |u: f64| ((u + 1.0) * half).clamp(0.0, res as f64);
+                let i0 = to_i(urange[0] - W).floor() as usize;
+                let i1 = (to_i(urange[1] + W).floor() as usize + 1).min(res);
+                if i0 < v.need[0] || i1 > v.need[1] || j < v.need[2] || j >= v.need[3] {
+                    return open(i0, j);
+                }
+                for i in i0..i1 {
+                    let (t0, t1) = (-1.0 + i as f64 * ps, -1.0 + (i + 1) as f64 * ps);
+                    px.clear();
+                    px.extend_from_slice(&row);
+                    clip(&mut px, DVec3::new(1.0, 0.0, -t0 + W), &mut tmp);
+                    clip(&mut px, DVec3::new(-1.0, 0.0, t1 + W), &mut tmp);
+                    if px.is_empty() {
+                        continue;
+                    }
+                    let z = px.iter().map(|p| p.z).fold(f64::INFINITY, f64::min) * (1.0 - 1e-9);
+                    let idx = j * res + i;
+                    if (v.depth[idx] as f64).partial_cmp(&z) == Some(std::cmp::Ordering::Less) {
+                        continue;
+                    }
+                    let (pu, pv) = (bounds(&px, |p| p.x / p.z), bounds(&px, |p| p.y / p.z));
+                    let r = Rect {
+                        i: [i, i + 1],
+                        j: [j, j + 1],
+                        pu: [(pu[0] - W + 1.0) * half, (pu[1] + W + 1.0) * half],
+                        pv: [(pv[0] - W - v.vmin) * half, (pv[1] + W - v.vmin) * half],
+                        z,
+                    };
+                    if !self.sub_covered(v, idx, &r, i, j, z) {
+                        return open(i, j);
+                    }
+                }
+            }
+        }
+        BoxTest::Hidden
+    }
 }
 
 #[cfg(test)]
@@ -1100,6 +1318,43 @@ mod tests {
             DVec3::new(half, half, z),
             DVec3::new(-half, half, z),
         ]
+    }
+
+    #[test]
+    fn a_triangle_is_tested_by_its_own_pixels_not_its_box() {
+        // A right triangle in front covers the half x + y ≤ 0 of its square; a smaller one
+        // behind projects inside it, but the corner of its box does not.
+        let front = vec![
+            DVec3::new(-1.0, -1.0, 2.0),
+            DVec3::new(1.0, -1.0, 2.0),
+            DVec3::new(-1.0, 1.0, 2.0),
+        ];
+        let occ = SampleOccluders::from_polygons(&[(front, 0)]);
+        let tri = [
+            DVec3::new(-0.5, -0.5, 5.0),
+            DVec3::new(0.1, -0.5, 5.0),
+            DVec3::new(-0.5, 0.1, 5.0),
+        ];
+        // The same triangle turned to the other half, and one nearer than the occluder.
+        let across = tri.map(|p| DVec3::new(-p.x, -p.y, p.z));
+        let nearer = tri.map(|p| DVec3::new(p.x * 0.2, p.y * 0.2, 1.0));
+        let bx = DAabb {
+            min: DVec3::new(-0.5, -0.5, 1.0),
+            max: DVec3::new(0.5, 0.5, 5.0),
+        };
+        for res in [128, 256] {
+            let mut hc = Hemicube::new(res);
+            hc.begin(DVec3::ZERO, 2, 1.0, 0.01, &[bx]);
+            hc.draw(&occ);
+            let tri_box = DAabb {
+                min: tri[0].min(tri[1]).min(tri[2]),
+                max: tri[0].max(tri[1]).max(tri[2]),
+            };
+            assert!(matches!(hc.test_box(&tri_box), BoxTest::Open { .. }));
+            assert_eq!(hc.test_triangle(tri), BoxTest::Hidden, "res {res}");
+            assert!(matches!(hc.test_triangle(across), BoxTest::Open { .. }));
+            assert!(matches!(hc.test_triangle(nearer), BoxTest::Open { .. }));
+        }
     }
 
     #[test]

@@ -57,11 +57,14 @@
 //! `l_max` is the largest of `√(u²+v²+1)` at the pixel's corners (the root is convex, so that
 //! is its maximum over the pixel, and `s ≥ 0`): wherever the linear test holds the exact one
 //! does. A sub-pixel passes a linear test everywhere iff its worst corner does, so a set bit
-//! means the whole sub-pixel lies inside `L`'s shrunk silhouette. The pixel's mask collects
-//! the bits of every polygon drawn into it (nearer than its depth so far) with the largest of
-//! their depths; when all 64 bits are set, every direction of the pixel lies in the shrunk
-//! silhouette of some polygon no deeper than that, and the pixel is covered at it. Seams
-//! between leaves and leaves narrower than a pixel fuse at eight times the resolution.
+//! means the whole sub-pixel lies inside `L`'s shrunk silhouette. The pixel keeps up to eight
+//! partial **layers**, nearest first, each a mask with the largest depth of the polygons whose
+//! bits it holds (bits at a layer's exact depth join it; with all eight in use the two farthest
+//! merge into their union at the larger depth, which only loses). When the layers up to some
+//! depth together hold all 64 bits, every direction of the pixel lies in the shrunk silhouette
+//! of some polygon no deeper than that, and the pixel is covered at it. Seams between leaves
+//! and leaves narrower than a pixel fuse at eight times the resolution; the layers keep a near
+//! leaf's bits from taking the depth of a far one drawn into the same pixel.
 //!
 //! **Occludees.** A box is tested with every pixel its directions can reach (the box cut to
 //! the half-space `Z ≥ dist(p, box)/√3`, which holds the box's part inside the view's
@@ -72,8 +75,21 @@
 //!
 //! **Occludees at sub-pixels.** A pixel that no depth covers nearer than the box still hides
 //! the box's part in it when every sub-pixel that part can reach (the box's unrounded `u`/`v`
-//! bounds, rounded outward to whole sub-pixels) is set in the pixel's mask and the mask's depth
-//! is nearer: each such direction lies in the shrunk silhouette of a polygon no deeper.
+//! bounds, rounded outward to whole sub-pixels) is set in the union of the pixel's layers
+//! nearer than the box: each such direction lies in the shrunk silhouette of a polygon no
+//! deeper.
+//!
+//! **Occludee triangles** ([`Hemicube::test_triangle`]). An object whose box and pieces stay
+//! open is tested triangle by triangle, each with its own part in each pixel instead of its
+//! box's rectangle. Per view, the triangle is clipped to the view's frustum, then to each
+//! pixel row's and each pixel's pyramid of directions, every clipping plane's slope widened
+//! by 1e-9 so that each clipped polygon holds the triangle's part there despite rounding (a
+//! point of the triangle in the closed pyramid passes every widened test). The pixel must
+//! hold a depth strictly nearer than the clipped part's nearest view depth (less a relative
+//! 1e-9), or its layers nearer than that must hold every sub-pixel of the part's `u`/`v`
+//! bounds. Then each point of the triangle seen through the pixel lies beyond a polygon whose
+//! shrunk silhouette holds its direction, as for boxes. On the coarse forest, a triangle's box
+//! reaches pixels around the leaf where only farther leaves show; this test does not.
 //!
 //! **Cards** ([`SampleCard`]). A textured alpha-tested card triangle is drawn like a polygon,
 //! but a pixel inside its shrunk silhouette is covered only when the texture is surely opaque
