@@ -1407,6 +1407,20 @@ fn fmt_v(v: DVec3) -> String {
     format!("DVec3::new({:?}, {:?}, {:?})", v.x, v.y, v.z)
 }
 
+/// The render's parameters of a configuration, for violation reports.
+fn describe(cfg: &Config) -> String {
+    format!(
+        "eye = {}, axis = {}, sign = {:?}, eps = {:?}, patch (begin_patch half sides) = {:?}, \
+         res = {}",
+        fmt_v(cfg.eye),
+        cfg.axis,
+        cfg.sign,
+        cfg.eps,
+        cfg.patch,
+        cfg.res
+    )
+}
+
 /// Reduces the polygons of a failing configuration (the box staying hidden; removing
 /// polygons cannot block the violating segment) and describes the result.
 fn report(cfg: &Config, v: &Violation, reused_state: bool) -> String {
@@ -1457,15 +1471,9 @@ fn report(cfg: &Config, v: &Violation, reused_state: bool) -> String {
     }
     let b = cfg.boxes[v.bx];
     msg += &format!(
-        "  eye = {}, axis = {}, sign = {:?}, eps = {:?}, patch (begin_patch half sides) = {:?}, \
-         res = {}\n  boxes given to begin: {} \
+        "  {}\n  boxes given to begin: {} \
          (the failing one: min {}, max {})\n  {} of {} polygons needed:\n",
-        fmt_v(cfg.eye),
-        cfg.axis,
-        cfg.sign,
-        cfg.eps,
-        cfg.patch,
-        cfg.res,
+        describe(cfg),
         cfg.boxes.len(),
         fmt_v(b.min),
         fmt_v(b.max),
@@ -1566,20 +1574,14 @@ fn run_family(
                 Err((b, q)) => panic!(
                     "VIOLATION in family `{}`, configuration {} (seed {:#x}): triangle {ti} {:?} \
                      reported Hidden but the segment b -> q is not blocked.\n  b - eye = {}, \
-                     q - eye = {}\n  eye = {}, axis = {}, sign = {:?}, eps = {:?}, patch = {:?}, \
-                     res = {}, {} polygons",
+                     q - eye = {}\n  {}, {} polygons",
                     cfg.family,
                     cfg.index,
                     cfg.seed,
                     cfg.tris[ti],
                     fmt_v(b),
                     fmt_v(q),
-                    fmt_v(cfg.eye),
-                    cfg.axis,
-                    cfg.sign,
-                    cfg.eps,
-                    cfg.patch,
-                    cfg.res,
+                    describe(&cfg),
                     cfg.polys.len()
                 ),
             }

@@ -297,6 +297,22 @@ struct View {
     need: [usize; 4],
 }
 
+impl View {
+    /// The world direction (not normalised) through the centre of pixel `(i, j)`, `ps` the
+    /// pixel size in `u`/`v`.
+    fn pixel_direction(&self, ps: f64, i: usize, j: usize) -> DVec3 {
+        let (u, v) = (
+            -1.0 + (i as f64 + 0.5) * ps,
+            self.vmin + (j as f64 + 0.5) * ps,
+        );
+        let mut d = DVec3::ZERO;
+        d[self.map[0].0] += self.map[0].1 * u;
+        d[self.map[1].0] += self.map[1].1 * v;
+        d[self.map[2].0] += self.map[2].1;
+        d
+    }
+}
+
 /// A pixel rectangle `[i0, i1) × [j0, j1)` and the nearest view depth of what it bounds.
 #[derive(Clone, Copy, Debug)]
 struct Rect {
@@ -1124,14 +1140,8 @@ impl Hemicube {
             };
             let v = &self.views[k];
             let z = r.z * (1.0 - 1e-9);
-            let open = |i: usize, j: usize| {
-                let map = v.map;
-                let (u, vv) = (-1.0 + (i as f64 + 0.5) * ps, v.vmin + (j as f64 + 0.5) * ps);
-                let mut d = DVec3::ZERO;
-                d[map[0].0] += map[0].1 * u;
-                d[map[1].0] += map[1].1 * vv;
-                d[map[2].0] += map[2].1;
-                BoxTest::Open { direction: d }
+            let open = |i: usize, j: usize| BoxTest::Open {
+                direction: v.pixel_direction(ps, i, j),
             };
             if r.z <= 0.0
                 || r.i[0] < v.need[0]
@@ -1221,13 +1231,8 @@ impl Hemicube {
             let to_j = |w: f64| ((w - v.vmin) * half).clamp(0.0, v.h as f64);
             let j0 = to_j(vrange[0] - W).floor() as usize;
             let j1 = (to_j(vrange[1] + W).floor() as usize + 1).min(v.h);
-            let open = |i: usize, j: usize| {
-                let (u, vv) = (-1.0 + (i as f64 + 0.5) * ps, v.vmin + (j as f64 + 0.5) * ps);
-                let mut d = DVec3::ZERO;
-                d[map[0].0] += map[0].1 * u;
-                d[map[1].0] += map[1].1 * vv;
-                d[map[2].0] += map[2].1;
-                BoxTest::Open { direction: d }
+            let open = |i: usize, j: usize| BoxTest::Open {
+                direction: v.pixel_direction(ps, i, j),
             };
             for j in j0..j1 {
                 // The row's pyramid: v ∈ [s0, s1], widened.

@@ -106,7 +106,8 @@
 //!
 //! Everything else only makes fewer pixels covered or more pixels tested: polygons left out
 //! (near `p`, not planar, skipped by the BVH traversal because they can no longer lower any
-//! pixel that matters), bounding rectangles, `f32` rounding with margins.
+//! pixel that matters, or no nearer than the farthest occludee reaching any tile they touch),
+//! bounding rectangles, `f32` rounding with margins.
 
 mod hemicube;
 
