@@ -283,9 +283,10 @@ struct View {
     /// `v` at the bottom edge of row 0 (−1 front, 0 sides).
     vmin: f64,
     depth: Vec<f32>,
-    /// Per pixel, the sub-pixels (8 × 8, bit `8·b + a`) covered by polygons drawn so far that
-    /// did not cover the whole pixel, and the largest depth of those polygons (`wz`, 0 when
-    /// the mask is empty). A full mask covers the pixel at `wz`.
+    /// Per pixel, up to [`LAYERS`] partial layers ([`add_layer`]), nearest first: the
+    /// sub-pixels (8 × 8, bit `8·b + a`) covered by polygons drawn so far that did not cover
+    /// the whole pixel, each layer with the largest depth of its polygons (`wz`; a layer with
+    /// an empty mask is unused, and so are all after it).
     mask: Vec<[u64; LAYERS]>,
     wz: Vec<[f32; LAYERS]>,
     tile_max: Vec<f32>,
@@ -1035,12 +1036,12 @@ impl Hemicube {
         wrote
     }
 
-    /// Whether the box's part of pixel `(i, j)` (index `idx`) is covered nearer than `z` by
-    /// the pixel's partial mask: every sub-pixel that the box's directions can reach there
-    /// (its unrounded bounds rounded outward to whole sub-pixels) is set, and the mask's
-    /// depth is nearer. A set sub-pixel lies wholly inside the shrunk silhouette of a polygon
-    /// no deeper than the mask's depth, so each direction of the box in it is covered as a
-    /// fully covered pixel's would be.
+    /// Whether the box's (or triangle's) part of pixel `(i, j)` (index `idx`) is covered
+    /// nearer than `z` by the pixel's partial layers: every sub-pixel that its directions can
+    /// reach there (the unrounded bounds `r.pu`, `r.pv` rounded outward to whole sub-pixels)
+    /// is set in the union of the layers nearer than `z`. A set sub-pixel of a layer lies
+    /// wholly inside the shrunk silhouette of a polygon no deeper than the layer's depth, so
+    /// each direction of the part in it is covered as a fully covered pixel's would be.
     fn sub_covered(&self, v: &View, idx: usize, r: &Rect, i: usize, j: usize, z: f64) -> bool {
         // The layers are sorted nearest first: those nearer than `z` are a prefix.
         let mut m = 0u64;
