@@ -99,6 +99,21 @@
 //! OBJ re-imports to bit-identical positions and writing stays fast (formatting runs on all
 //! cores, in order). Files are written through a temporary file and a rename: a failed run
 //! leaves no file behind.
+//!
+//! [`forest`]: crate::generate::forest()
+//! [`forest_of_models`]: crate::generate::forest_of_models()
+//! [`city`]: crate::generate::city()
+//! [`boxfield`]: crate::generate::boxfield()
+//! [`Generated`]: crate::generate::Generated
+//! [`Generated::to_scene`]: crate::generate::Generated::to_scene
+//! [`Scene`]: crate::scene::Scene
+//! [`write_obj`]: crate::generate::write_obj()
+//! [`write_glb`]: crate::generate::write_glb()
+//! [`GenError`]: crate::generate::GenError
+//! [`ForestOptions::coarse`]: crate::generate::ForestOptions::coarse
+//! [`ForestOptions::fine`]: crate::generate::ForestOptions::fine
+//! [`ForestOptions::paper`]: crate::generate::ForestOptions::paper
+//! [`ForestOptions::default`]: crate::generate::ForestOptions::default
 
 mod boxfield;
 mod city;
