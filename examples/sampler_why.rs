@@ -3,7 +3,11 @@
 //! face with the sampler's shrink (`EPS`) and without it (a tiny ε), and the pixel where the
 //! first open triangle shows classified: nothing covers it, a partial sub-pixel mask, or a
 //! covering depth that is not nearer than the triangle. `cargo run --release --example
-//! sampler_why -- SCENE CELLS CELL PVS.json EPS RES RAYS`.
+//! sampler_why -- SCENE CELLS CELL PVS.json EPS RES RAYS [--box] [--show] [--write-tight
+//! OUT.json]`: `--box` tests triangles by their boxes (as the sampler did before
+//! `Hemicube::test_triangle`), `--show` prints the first open pixels of the plain render with
+//! the exact ray through them, `--write-tight` only writes the PVS without its loose objects
+//! (`validate --hunt` on it finds which of them are really visible).
 
 use std::collections::HashSet;
 use umbrasweep::bake::{BakeSettings, SamplerData};
@@ -13,9 +17,18 @@ use umbrasweep::sampler::{BoxTest, Hemicube};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 8 {
-        eprintln!("usage: sampler_why SCENE CELLS CELL PVS.json EPS RES RAYS");
+        eprintln!(
+            "usage: sampler_why SCENE CELLS CELL PVS.json EPS RES RAYS [--box] [--show] \
+             [--write-tight OUT.json]"
+        );
         std::process::exit(2);
     }
+    let flag = |f: &str| args[8..].iter().any(|a| a == f);
+    let (by_box, show) = (flag("--box"), flag("--show"));
+    let write_tight = args[8..]
+        .iter()
+        .position(|a| a == "--write-tight")
+        .map(|k| args.get(9 + k).expect("--write-tight OUT.json").clone());
     let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
     let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
     let ci: usize = args[3].parse().expect("cell");
@@ -48,9 +61,7 @@ fn main() {
         .filter(|o| !vs.contains(o) && !scene.objects[*o as usize].bounds.to_f64().overlaps(&cell))
         .collect();
     println!("PVS {} VS {} loose {}", pvs.len(), vs.len(), loose.len());
-    if let Ok(out) = std::env::var("US_WRITE_TIGHT") {
-        // The PVS without its loose objects: `validate --hunt` on it finds which loose objects
-        // are really visible.
+    if let Some(out) = write_tight {
         let mut doc = doc.clone();
         let keep: Vec<u32> = pvs.iter().copied().filter(|o| !loose.contains(o)).collect();
         doc["cells"][ci]["visible"] = serde_json::json!(keep);
@@ -104,10 +115,10 @@ fn main() {
                         min: a.min(b).min(c),
                         max: a.max(b).max(c),
                     };
-                    let test = if std::env::var("US_TRI").is_ok() {
-                        hc.test_triangle([a, b, c])
-                    } else {
+                    let test = if by_box {
                         hc.test_box(&tb)
+                    } else {
+                        hc.test_triangle([a, b, c])
                     };
                     if let BoxTest::Open { direction } = test {
                         open = Some((direction, (tb.center() - eye).length()));
@@ -119,7 +130,7 @@ fn main() {
                     continue;
                 };
                 open_any.entry(o).or_default()[k] = true;
-                if k == 1 && std::env::var("US_SHOW").is_ok() && shown < 12 {
+                if k == 1 && show && shown < 12 {
                     shown += 1;
                     let st = hc.pixel_state(dir);
                     let hits = data.rays.trace(eye.as_vec3(), dir.as_vec3(), false);
@@ -163,17 +174,14 @@ fn main() {
                     }
                 }
                 match hc.pixel_state(dir) {
-                    Some((d, m, _)) if d.is_infinite() && m == 0 => classes[k][1] += 1,
-                    Some((d, m, _)) if d.is_infinite() || f64::from(d) >= dist * 0.5 => {
-                        if m != 0 && d.is_infinite() {
-                            classes[k][2] += 1;
-                            if k == 0 {
-                                mask_bits[m.count_ones() as usize] += 1;
-                            }
-                        } else {
-                            classes[k][3] += 1;
+                    Some((d, 0, _)) if d.is_infinite() => classes[k][1] += 1,
+                    Some((d, m, _)) if d.is_infinite() => {
+                        classes[k][2] += 1;
+                        if k == 0 {
+                            mask_bits[m.count_ones() as usize] += 1;
                         }
                     }
+                    // Covered, but not nearer than the triangle (or outside the drawn pixels).
                     _ => classes[k][3] += 1,
                 }
             }
