@@ -229,6 +229,11 @@ pub struct BakeArgs {
     /// are not sampled (0 turns this off).
     #[arg(long, default_value_t = BakeSettings::default_settings().sampling_settings.rays)]
     pub sampling_rays: u64,
+    /// The sampler renders each point once per band of occludee distance, the bands' farthest
+    /// distances growing by this ratio, with leaves shrunk only as much as that band's
+    /// occludees need: more culled for more renders. 0: one render per point.
+    #[arg(long, value_name = "RATIO", default_value_t = BakeSettings::default_settings().sampling_settings.band_ratio)]
+    pub sampling_band_ratio: f64,
     /// Split every object larger than SIZE (scene units) along some axis into clusters that
     /// fit: its connected components, grouped or cut along the longest axis. For files whose
     /// objects span the level (materials, one ground mesh, one mesh per tree). The PVS lists
@@ -446,6 +451,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         levels: a.sampling_levels,
         resolution: a.sampling_resolution,
         rays: a.sampling_rays,
+        band_ratio: a.sampling_band_ratio,
         ..BakeSettings::default_settings().sampling_settings
     };
     if let Some(b) = &a.sampling_budget {

@@ -26,7 +26,7 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Bake the potentially visible set of every view cell of a scene.
-    Bake(cli_bake::BakeArgs),
+    Bake(Box<cli_bake::BakeArgs>),
     /// Find view cells automatically (above walkable floors, or in a box); write a cells file.
     Cells(cli_cells::CellsArgs),
     /// Check a PVS against ray-sampled ground truth (exit 0: no false cull, 1: false culls).

@@ -74,7 +74,7 @@ pub struct BakeSettings {
     pub sampling: SamplingChoice,
     /// The sampler's finest ε, budget, resolution and certification rays (recorded as
     /// `sampling_eps`, `sampling_levels`, `sampling_budget_points`, `sampling_budget_seconds`,
-    /// `sampling_resolution`, `sampling_rays`).
+    /// `sampling_resolution`, `sampling_rays`, `sampling_band_ratio`).
     #[serde(flatten)]
     pub sampling_settings: SamplingSettings,
     /// Adaptive subdivision: a cell whose PVS holds more triangles than this is split in two
@@ -207,6 +207,12 @@ pub struct SamplingSettings {
     /// visible for sure and are not sampled. Default 100,000.
     #[serde(rename = "sampling_rays")]
     pub rays: u64,
+    /// Occludee distance bands per sample point: the objects are rendered for in groups whose
+    /// farthest distances from the point grow by at most this ratio, each group with its edges
+    /// shrunk only as much as occludees that near need (leaves near an occludee shrink
+    /// little). 0 renders once per point for all of them. Default √2 (≈ 1.41).
+    #[serde(rename = "sampling_band_ratio")]
+    pub band_ratio: f64,
 }
 
 impl SamplingSettings {
@@ -222,6 +228,7 @@ impl SamplingSettings {
             budget_seconds: None,
             resolution: 256,
             rays: 100_000,
+            band_ratio: std::f64::consts::SQRT_2,
         }
     }
 }
@@ -498,6 +505,13 @@ impl BakeSettings {
                 "sampling-resolution",
                 sa.resolution,
                 "must be between 16 and 2048 pixels per 90° view (e.g. 128)",
+            ));
+        }
+        if !(sa.band_ratio == 0.0 || (sa.band_ratio > 1.0 && sa.band_ratio <= 16.0)) {
+            return Err(SettingsError::new(
+                "sampling-band-ratio",
+                sa.band_ratio,
+                "must be 0 (one render per sample point) or a ratio above 1 and at most 16 (e.g. 1.41)",
             ));
         }
         if self.max_pvs_triangles == Some(0) {

@@ -312,6 +312,37 @@ fn gen_fine_foliage(rng: &mut Rng) -> Local {
     l
 }
 
+/// Depth-bounded shrinking: occludee boxes just behind or inside a cluster of leaves (some
+/// leaves beyond them), all at about the same distance, so that the render shrinks each edge
+/// only as much as occludees that near need; balls of a third of a pixel to 8 pixels at the
+/// cluster, which without the bound would leave little of the leaves.
+fn gen_depth_bounded(rng: &mut Rng) -> Local {
+    let d = rng.u(1.5, 8.0);
+    let dir = rng.unit_up(0.15);
+    let c = dir * d;
+    let res = rng.pick(&[64, 128, 256]);
+    let px = 2.0 / res as f64 * d;
+    let s = rng.u(3.0, 12.0) * px / 2.0;
+    let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
+    let tau = rng.u(4.0, 12.0);
+    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(200, 2000);
+    let mut l = Local {
+        eps: px * rng.log_u(0.3, 8.0),
+        res,
+        ..Local::default()
+    };
+    cluster(rng, &mut l.polys, c, dir, r, n, s);
+    for _ in 0..6 {
+        let t = d + r * rng.u(-0.3, 1.5);
+        let lat = rng.in_ball() * r * 0.4;
+        let lat = lat - dir * lat.dot(dir);
+        let h = r * rng.u(0.02, 0.2);
+        let hv = jitter_half(rng, h);
+        l.boxes.push(cube(dir * t + lat, hv));
+    }
+    l
+}
+
 /// Grazing angles: "blinds" (overlapping slats seen 0.5°–20° from edge-on) and leaves and
 /// strips whose planes pass just beyond ε from the eye.
 fn gen_grazing(rng: &mut Rng) -> Local {
@@ -1498,6 +1529,19 @@ fn rel_polys(cfg: &Config) -> Vec<RelPoly> {
         .collect()
 }
 
+/// How the hemicube renders: the default (sub-pixel masks, edges shrunk only as much as the
+/// boxes given need) or without one of them, for comparisons.
+#[derive(Clone, Copy)]
+struct Variant {
+    subpixel: bool,
+    depth_bounded: bool,
+}
+
+const DEFAULT: Variant = Variant {
+    subpixel: true,
+    depth_bounded: true,
+};
+
 /// Runs `n` configurations of a family and checks every hidden box.
 #[expect(
     clippy::too_many_arguments,
@@ -1511,7 +1555,7 @@ fn run_family(
     patch: bool,
     generate: &dyn Fn(&mut Rng) -> Local,
     render_eps: f64,
-    subpixel: bool,
+    variant: Variant,
 ) -> Stats {
     let start = std::time::Instant::now();
     let mut st = Stats::default();
@@ -1539,7 +1583,8 @@ fn run_family(
                 cubes.len() - 1
             }
         };
-        cubes[k].set_subpixel(subpixel);
+        cubes[k].set_subpixel(variant.subpixel);
+        cubes[k].set_depth_bounded(variant.depth_bounded);
         cfg.tris = cfg.boxes.iter().map(|b| tri_in_box(&mut rng, b)).collect();
         let (results, tri_results) = render_tris(&mut cubes[k], &cfg, &cfg.polys, render_eps);
         let rel = rel_polys(&cfg);
@@ -1654,8 +1699,9 @@ fn gen_patch(rng: &mut Rng) -> Local {
 
 /// Any family's generator, chosen at random (for the scaled family).
 fn gen_any(rng: &mut Rng) -> Local {
-    let gens: [fn(&mut Rng) -> Local; 8] = [
+    let gens: [fn(&mut Rng) -> Local; 9] = [
         gen_foliage,
+        gen_depth_bounded,
         gen_fine_foliage,
         gen_grazing,
         gen_near,
@@ -1668,7 +1714,16 @@ fn gen_any(rng: &mut Rng) -> Local {
     g(rng)
 }
 
-const FAMILIES: [Family; 11] = [
+const FAMILIES: [Family; 12] = [
+    Family {
+        name: "depth_bounded",
+        seed: 0xDE_B0DED,
+        configs: 800,
+        scaled: false,
+        patch: false,
+        generate: gen_depth_bounded,
+        min_hidden: 0.05,
+    },
     Family {
         name: "fine_foliage",
         seed: 0xF1_0E1A6E,
@@ -1781,7 +1836,7 @@ fn family(name: &str) {
         f.patch,
         &f.generate,
         1.0,
-        true,
+        DEFAULT,
     );
     assert_meaningful(f.name, &st, f.min_hidden);
 }
@@ -1815,13 +1870,56 @@ fn sub_pixel_masks_fuse_what_whole_pixels_cannot() {
             false,
             &f.generate,
             1.0,
-            sub,
+            Variant {
+                subpixel: sub,
+                ..DEFAULT
+            },
         )
     };
     let (with, without) = (run(true), run(false));
     assert!(
         with.hidden >= 2 * without.hidden + 10,
         "sub-pixel masks hid {} boxes, whole pixels {}: masks must hide far more",
+        with.hidden,
+        without.hidden
+    );
+}
+
+/// Occludees just behind or among leaves: hidden from the whole ball with edges shrunk only
+/// for their distance.
+#[test]
+fn occludees_near_the_leaves_with_depth_bounded_shrinks() {
+    family("depth_bounded");
+}
+
+/// Depth-bounded shrinks are what hides those occludees: shrunk for occludees at any distance,
+/// far fewer are hidden, from the same configurations.
+#[test]
+fn depth_bounded_shrinks_fuse_what_unbounded_ones_cannot() {
+    let f = FAMILIES
+        .iter()
+        .find(|f| f.name == "depth_bounded")
+        .expect("family");
+    let n = count(f.configs / 3);
+    let run = |depth_bounded: bool| {
+        run_family(
+            f.name,
+            f.seed ^ 0xB0,
+            n,
+            false,
+            false,
+            &f.generate,
+            1.0,
+            Variant {
+                depth_bounded,
+                ..DEFAULT
+            },
+        )
+    };
+    let (with, without) = (run(true), run(false));
+    assert!(
+        2 * with.hidden >= 3 * without.hidden + 20,
+        "depth-bounded shrinks hid {} boxes, unbounded ones {}: the bound must hide far more",
         with.hidden,
         without.hidden
     );
@@ -1885,7 +1983,7 @@ fn check_catches_a_render_with_less_shrink() {
                 f.patch,
                 &f.generate,
                 factor,
-                true,
+                DEFAULT,
             );
             total += st.violations;
             if ["near", "general", "patch"].contains(&f.name) {

@@ -21,6 +21,9 @@
 //!    its half diagonal (the ball holding it); each edge is shrunk for the rectangle's extent
 //!    across it, at most that. Its pieces may be tested instead of its box (their
 //!    union holds all its triangles), and a piece's triangles instead of the piece.
+//!    A rectangle may take several renders, one per band of the objects' farthest distance
+//!    from its centre (`sampling_band_ratio`), each testing only its band's objects with edges
+//!    shrunk for them (depth-bounded shrinks): every object is tested in exactly one of them.
 //! 4. **Refinement only decides more.** An object still undecided at a ball is re-tested in
 //!    the ball's four children; an object undecided at the finest ε, or when the budget runs
 //!    out, stays visible. An object is culled only when every leaf rectangle of every face
@@ -281,6 +284,33 @@ impl Culler for SamplingCuller {
     }
 }
 
+/// The candidates' indices grouped by their boxes' farthest distance from `eye`: each group's
+/// farthest distance is at most `ratio` times the nearest of them (bands `(f·ratio^k,
+/// f·ratio^(k+1)]` above the nearest, `f`), nearest group first. With `ratio` 0, one group.
+/// [`Hemicube::begin_patch`] shrinks each group's render only as much as its farthest box
+/// needs.
+fn distance_bands(eye: DVec3, boxes: &[DAabb], ratio: f64) -> Vec<Vec<usize>> {
+    if ratio <= 1.0 || boxes.len() < 2 {
+        return vec![(0..boxes.len()).collect()];
+    }
+    let far: Vec<f64> = boxes
+        .iter()
+        .map(|b| (b.min - eye).abs().max((b.max - eye).abs()).length())
+        .collect();
+    let nearest = far.iter().copied().fold(f64::INFINITY, f64::min).max(1e-9);
+    let lr = ratio.ln();
+    let mut bands: Vec<Vec<usize>> = Vec::new();
+    for (i, &f) in far.iter().enumerate() {
+        let k = ((f / nearest).ln() / lr).max(0.0) as usize;
+        if bands.len() <= k {
+            bands.resize_with(k + 1, Vec::new);
+        }
+        bands[k].push(i);
+    }
+    bands.retain(|b| !b.is_empty());
+    bands
+}
+
 /// A seed for the cell's certifying rays, from its coordinates (same cell, same rays).
 fn cell_seed(cell: &Aabb) -> u64 {
     let mut h: u64 = 0x9e37_79b9_7f4a_7c15;
@@ -343,45 +373,50 @@ impl Shared<'_> {
             .iter()
             .map(|&o| scene.objects[o as usize].bounds.to_f64())
             .collect();
-        hc.begin_patch(
-            eye,
-            f.axis,
-            f.sign,
-            [hb * (1.0 + 1e-9), hcx * (1.0 + 1e-9)],
-            &boxes,
-        );
-        let st = hc.draw(&self.data.occluders);
-        self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
+        let half = [hb * (1.0 + 1e-9), hcx * (1.0 + 1e-9)];
         let mut open: Vec<u32> = Vec::new();
         let mut rays = 0usize;
-        for (&o, bx) in list.iter().zip(&boxes) {
-            let test = match hc.test_box(bx) {
-                BoxTest::Hidden => continue,
-                BoxTest::Open { direction } => {
-                    let pieces = self.prepared.pieces[o as usize].clone();
-                    let mut first = None;
-                    for k in pieces.clone() {
-                        if let BoxTest::Open { direction } = self.test_piece(hc, k as usize) {
-                            first = Some(direction);
-                            break;
+        for band in distance_bands(eye, &boxes, self.data.settings.band_ratio) {
+            let band_boxes: Vec<DAabb> = band.iter().map(|&i| boxes[i]).collect();
+            hc.begin_patch(eye, f.axis, f.sign, half, &band_boxes);
+            let st = hc.draw(&self.data.occluders);
+            self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
+            for &i in &band {
+                let (o, bx) = (list[i], &boxes[i]);
+                if self.done[o as usize].load(Ordering::Relaxed) {
+                    // Certified visible by another point's rays meanwhile.
+                    continue;
+                }
+                let test = match hc.test_box(bx) {
+                    BoxTest::Hidden => continue,
+                    BoxTest::Open { direction } => {
+                        let pieces = self.prepared.pieces[o as usize].clone();
+                        let mut first = None;
+                        for k in pieces.clone() {
+                            if let BoxTest::Open { direction } = self.test_piece(hc, k as usize) {
+                                first = Some(direction);
+                                break;
+                            }
+                        }
+                        if pieces.is_empty() {
+                            Some(direction)
+                        } else {
+                            first
                         }
                     }
-                    if pieces.is_empty() {
-                        Some(direction)
-                    } else {
-                        first
-                    }
+                };
+                let Some(direction) = test else { continue };
+                // Undecided here: try to certify it with real rays from the eye.
+                if rays < CERTIFY_PER_POINT {
+                    rays += self.certify(eye, o, direction);
                 }
-            };
-            let Some(direction) = test else { continue };
-            // Undecided here: try to certify it with real rays from the eye.
-            if rays < CERTIFY_PER_POINT {
-                rays += self.certify(eye, o, direction);
-            }
-            if !self.done[o as usize].load(Ordering::Relaxed) {
-                open.push(o);
+                if !self.done[o as usize].load(Ordering::Relaxed) {
+                    open.push(o);
+                }
             }
         }
+        // Certification may have reached objects found open earlier.
+        open.retain(|&o| !self.done[o as usize].load(Ordering::Relaxed));
         if open.is_empty() {
             return;
         }

@@ -355,6 +355,9 @@ pub struct Hemicube {
     scratch_ev: Vec<[f32; 4]>,
     /// Whether partly covered pixels keep sub-pixel masks ([`Hemicube::set_subpixel`]).
     subpixel: bool,
+    /// Whether edges are shrunk only as much as occludees no farther than `max_dist` need
+    /// ([`Hemicube::set_depth_bounded`]).
+    depth_bounded: bool,
 }
 
 impl Hemicube {
@@ -392,7 +395,18 @@ impl Hemicube {
             scratch_edges: Vec::new(),
             scratch_ev: Vec::new(),
             subpixel: true,
+            depth_bounded: true,
         }
+    }
+
+    /// Whether each edge is shrunk only as much as the occludees of this render need (on by
+    /// default): every point tested lies within the farthest corner of the boxes given to
+    /// [`Hemicube::begin`], at distance `D`, and an edge line at distance `r` then needs the
+    /// shrink `(ε/r)·|1 − r/D| / (1 − √2·ε/√(r·D))` instead of `ε/r` (the smaller of the two
+    /// is used; see the module docs). Leaves near the occludees shrink little. Off, edges are
+    /// shrunk for occludees at any distance (for comparisons).
+    pub fn set_depth_bounded(&mut self, on: bool) {
+        self.depth_bounded = on;
     }
 
     /// Turns sub-pixel masks on (the default) or off. With them, a pixel that no single
@@ -761,7 +775,16 @@ impl Hemicube {
                 m = -m;
             }
             let r = cl / el;
-            edges[k] = (m, edges[k].1 / r * (1.0 + 1e-6));
+            let reach = edges[k].1;
+            let mut s = reach / r;
+            if self.depth_bounded {
+                let dd = self.max_dist * (1.0 + 1e-9);
+                let den = 1.0 - std::f64::consts::SQRT_2 * reach / (r * dd).sqrt();
+                if den > 0.0 {
+                    s = s.min(s * (1.0 - r / dd).abs() / den);
+                }
+            }
+            edges[k] = (m, s * (1.0 + 1e-6));
         }
         let mut drawn = false;
         for k in 0..5 {
@@ -1128,9 +1151,30 @@ impl Hemicube {
         None
     }
 
+    /// Whether the box spanned by `pts` reaches farther from the eye than the farthest corner
+    /// of the boxes given to [`Hemicube::begin`], for which the edges were shrunk.
+    fn beyond_bound(&self, pts: &[DVec3]) -> bool {
+        if !self.depth_bounded {
+            return false;
+        }
+        let mut lo = DVec3::INFINITY;
+        let mut hi = DVec3::NEG_INFINITY;
+        for &p in pts {
+            lo = lo.min(p - self.eye);
+            hi = hi.max(p - self.eye);
+        }
+        lo.abs().max(hi.abs()).length() > self.max_dist
+    }
+
     /// Tests a box (an occludee) against what was drawn. Only boxes given to
-    /// [`Hemicube::begin`] (or inside their union of pixels) may be tested.
+    /// [`Hemicube::begin`] (or inside their union of pixels) may be tested; a box reaching
+    /// farther than the farthest of them is open (the shrink was chosen for those).
     pub fn test_box(&self, bx: &DAabb) -> BoxTest {
+        if self.beyond_bound(&[bx.min, bx.max]) {
+            return BoxTest::Open {
+                direction: bx.center() - self.eye,
+            };
+        }
         let res = self.res;
         let tw = res / TILE;
         let ps = 2.0 / res as f64;
@@ -1184,6 +1228,11 @@ impl Hemicube {
     /// reaching the eye is tested by its box. Only triangles inside the boxes given to
     /// [`Hemicube::begin`] may be tested.
     pub fn test_triangle(&self, tri: [DVec3; 3]) -> BoxTest {
+        if self.beyond_bound(&tri) {
+            return BoxTest::Open {
+                direction: (tri[0] + tri[1] + tri[2]) / 3.0 - self.eye,
+            };
+        }
         let res = self.res;
         let ps = 2.0 / res as f64;
         let half = res as f64 / 2.0;

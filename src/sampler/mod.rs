@@ -43,6 +43,24 @@
 //! shrunk by `ε_e / r_e` instead, and a polygon is left out unless its plane is farther than
 //! every `ε_e`; then every segment from a point of `R` to `q` crosses `L`.
 //!
+//! **Depth-bounded shrinks** ([`Hemicube::set_depth_bounded`], on by default). The last step
+//! needs `r_e·sin φ ≥ ε` only at the angles `φ` that tested points reach. Every point a render
+//! tests lies within `D` of `p`, the farthest corner of the boxes given to `begin` (a test of
+//! anything reaching farther answers open), so its projection along `ℓ_e` lies within `D` of
+//! `p`'s. `φ` grows with the distance along the ray, so `φ ∈ [φ_x, φ_D]`, `φ_D` the angle at
+//! the ray's point `q_D` at projected distance `D`, and by concavity
+//! `sin φ ≥ min(sin φ_x, sin φ_D)`. In the triangle `p, E, q_D` (angle `θ` at `p`):
+//! `r_e·sin φ_D = dist(p, line E q_D) = r_e·D·sin θ / |E q_D|`, and
+//! `|E q_D|² = (D − r_e)² + 4·r_e·D·sin²(θ/2)`, so for `θ ≤ π/2` (where
+//! `2·sin(θ/2) ≤ √2·sin θ`) `|E q_D| ≤ |D − r_e| + √2·√(r_e·D)·sin θ`, and `r_e·sin φ_D ≥ ε`
+//! whenever `sin θ ≥ (ε/r_e)·|1 − r_e/D| / (1 − √2·ε/√(r_e·D))` (a positive denominator). For
+//! `θ > π/2`, `φ_D ≤ π − θ < π/2`, so `sin φ_D ≥ sin φ_x` and nothing more is needed. Each edge
+//! is therefore shrunk by the smaller of `ε/r_e` and that bound (with `D` rounded up), and the
+//! claim holds for every point within `D`. Leaves near the occludees (`r_e` near `D`) shrink
+//! little; `bake::sampling` renders each sample point once per band of occludee distance, so
+//! that each band's `D` is tight (`tests/sampler_proof.rs`, family `depth_bounded`, checks
+//! occludees just behind and among leaves).
+//!
 //! **Pixels.** A pixel of a hemicube view is the set of directions `(u, v, 1)` (view
 //! coordinates) over a closed square of the image plane. For one edge, the directions
 //! satisfying its condition meet the image plane in `{(u, v) : a·u + b·v + c ≥ s·√(u²+v²+1)}`,
