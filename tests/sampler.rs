@@ -123,8 +123,9 @@ fn sampler_hides(scene: &umbrasweep::Scene, cell: &Aabb) -> Vec<bool> {
         .unwrap();
     assert!(work.points > 0, "the sampler rendered no point");
     if state.hidden[0] {
-        // Hiding the target takes the finest balls.
-        assert!(work.finest_eps.is_some_and(|e| e <= 0.1 * (1.0 + 1e-6)));
+        // Balls no larger than the coarsest level (2 × the finest ε) hid it; with
+        // depth-bounded shrinks the coarse level may already suffice.
+        assert!(work.finest_eps.is_some_and(|e| e <= 0.2 * (1.0 + 1e-6)));
     }
     state.hidden
 }
