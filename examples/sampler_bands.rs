@@ -5,8 +5,9 @@
 //! sampler_bands -- SCENE CELLS CELL EPS RES [FACE [RATIO]]` (RATIO: of one band's
 //! farthest distance to the last's, default 2).
 
+mod common;
+
 use std::time::Instant;
-use umbrasweep::bake::{BakeSettings, SamplerData};
 use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube};
 
@@ -17,47 +18,13 @@ fn main() {
     let ci: usize = args[3].parse().expect("cell");
     let eps: f64 = args[4].parse().expect("eps");
     let res: u32 = args[5].parse().expect("res");
-    let face = args.get(6).map_or("+x", String::as_str);
+    let face = common::Face::parse(args.get(6).map_or("+x", String::as_str));
+    let (axis, sign) = (face.axis, face.sign);
     let ratio: f64 = args.get(7).map_or(2.0, |s| s.parse().expect("ratio"));
-    let sign = if face.starts_with('-') { -1.0 } else { 1.0 };
-    let axis = match &face[1..] {
-        "x" => 0,
-        "y" => 1,
-        _ => 2,
-    };
-    let settings = BakeSettings::default();
-    let occ = umbrasweep::project::occluders::prepare_with(
-        &scene,
-        &vec![true; scene.objects.len()],
-        false,
-        None,
-    );
-    let data = SamplerData::new(&occ, &scene, &settings);
+    let data = common::sampler_data(&scene);
     let cell = cells[ci].to_f64();
-    let mut eye = cell.center();
-    eye[axis] = if sign > 0.0 {
-        cell.max[axis]
-    } else {
-        cell.min[axis]
-    };
-    let objs: Vec<usize> = (0..scene.objects.len())
-        .filter(|&o| {
-            let b = scene.objects[o].bounds;
-            !b.is_empty() && {
-                let b = b.to_f64();
-                !b.overlaps(&cell)
-                    && if sign > 0.0 {
-                        b.max[axis] >= eye[axis]
-                    } else {
-                        b.min[axis] <= eye[axis]
-                    }
-            }
-        })
-        .collect();
-    let boxes: Vec<DAabb> = objs
-        .iter()
-        .map(|&o| scene.objects[o].bounds.to_f64())
-        .collect();
+    let eye = face.centre(&cell);
+    let (objs, boxes) = face.beyond(&scene, &cell);
     let far = |b: &DAabb| (b.min - eye).abs().max((b.max - eye).abs()).length();
     let hidden = |hc: &Hemicube, o: usize, b: &DAabb| -> bool {
         match hc.test_box(b) {

@@ -6,9 +6,10 @@
 //! cards trusted (0, the default: all) and `polygons` to draw cards only as their opaque
 //! polygons (not also per pixel at their texel footprint).
 
+mod common;
+
 use std::time::Instant;
 use umbrasweep::bake::{BakeSettings, SamplerData};
-use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube};
 
 fn main() {
@@ -18,13 +19,8 @@ fn main() {
     let ci: usize = args[3].parse().expect("cell");
     let eps: f64 = args[4].parse().expect("eps");
     let res: u32 = args[5].parse().expect("res");
-    let face = args.get(6).map_or("+x", String::as_str);
-    let sign = if face.starts_with('-') { -1.0 } else { 1.0 };
-    let axis = match &face[1..] {
-        "x" => 0,
-        "y" => 1,
-        _ => 2,
-    };
+    let face = common::Face::parse(args.get(6).map_or("+x", String::as_str));
+    let (axis, sign) = (face.axis, face.sign);
     // Alpha-tested cards: trusted mip levels (0 = all) and whether the sampler also tests
     // card triangles per pixel against their texel footprint (`pixels`) or only uses the
     // cards' opaque polygons (`polygons`).
@@ -46,30 +42,8 @@ fn main() {
     }
     let data = SamplerData::new(&occ, &scene, &settings);
     let cell = cells[ci].to_f64();
-    let mut eye = cell.center();
-    eye[axis] = if sign > 0.0 {
-        cell.max[axis]
-    } else {
-        cell.min[axis]
-    };
-    let objs: Vec<usize> = (0..scene.objects.len())
-        .filter(|&o| {
-            let b = scene.objects[o].bounds;
-            !b.is_empty() && {
-                let b = b.to_f64();
-                !b.overlaps(&cell)
-                    && if sign > 0.0 {
-                        b.max[axis] >= eye[axis]
-                    } else {
-                        b.min[axis] <= eye[axis]
-                    }
-            }
-        })
-        .collect();
-    let boxes: Vec<DAabb> = objs
-        .iter()
-        .map(|&o| scene.objects[o].bounds.to_f64())
-        .collect();
+    let eye = face.centre(&cell);
+    let (objs, boxes) = face.beyond(&scene, &cell);
     let mut hc = Hemicube::new(res);
     let t = Instant::now();
     hc.begin(eye, axis, sign, eps, &boxes);

@@ -2,10 +2,10 @@
 //! many points it is open (box and triangles tested). `cargo run --release --example
 //! sampler_points -- SCENE CELLS CELL EPS RES N [whole]`.
 
+mod common;
+
 use glam::DVec3;
 use std::time::Instant;
-use umbrasweep::bake::{BakeSettings, SamplerData};
-use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube};
 
 fn main() {
@@ -16,9 +16,7 @@ fn main() {
     let eps: f64 = args[4].parse().unwrap();
     let res: u32 = args[5].parse().unwrap();
     let n: usize = args[6].parse().unwrap();
-    let occ =
-        umbrasweep::project::occluders::prepare(&scene, &vec![true; scene.objects.len()], false);
-    let data = SamplerData::new(&occ, &scene, &BakeSettings::default());
+    let data = common::sampler_data(&scene);
     let cell = cells[ci].to_f64();
     let mut open = vec![0u32; scene.objects.len()];
     let mut seen_from = vec![0u32; scene.objects.len()];
@@ -34,34 +32,14 @@ fn main() {
     };
     let t = Instant::now();
     for k in 0..n {
-        let face = k % 6;
-        let (axis, sign) = (face / 2, if face % 2 == 0 { -1.0 } else { 1.0 });
+        let face = common::Face::from_index(k % 6);
+        let (axis, sign) = (face.axis, face.sign);
         let mut eye = DVec3::ZERO;
         for a in 0..3 {
             eye[a] = cell.min[a] + rnd() * (cell.max[a] - cell.min[a]);
         }
-        eye[axis] = if sign > 0.0 {
-            cell.max[axis]
-        } else {
-            cell.min[axis]
-        };
-        let ids: Vec<usize> = (0..scene.objects.len())
-            .filter(|&o| {
-                let b = scene.objects[o].bounds;
-                !b.is_empty() && !b.to_f64().overlaps(&cell) && {
-                    let b = b.to_f64();
-                    if sign > 0.0 {
-                        b.max[axis] >= eye[axis]
-                    } else {
-                        b.min[axis] <= eye[axis]
-                    }
-                }
-            })
-            .collect();
-        let boxes: Vec<DAabb> = ids
-            .iter()
-            .map(|&o| scene.objects[o].bounds.to_f64())
-            .collect();
+        let eye = face.onto(&cell, eye);
+        let (ids, boxes) = face.beyond(&scene, &cell);
         hc.begin(eye, axis, sign, eps, &boxes);
         hc.draw(&data.occluders);
         let mut opened = 0;

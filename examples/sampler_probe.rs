@@ -2,6 +2,8 @@
 //! per render, objects hidden. `cargo run --release --example sampler_probe -- SCENE CELLS
 //! [CELL] [EPS] [RES]`.
 
+mod common;
+
 use glam::DVec3;
 use std::time::Instant;
 use umbrasweep::bake::{BakeSettings, SamplerData};
@@ -34,22 +36,12 @@ fn main() {
         .collect();
     let mut hc = Hemicube::new(res);
     for (axis, sign) in [(0, 1.0), (0, -1.0), (2, 1.0), (1, 1.0)] {
-        let mut eye = cell.center();
-        eye[axis] = if sign > 0.0 {
-            cell.max[axis]
-        } else {
-            cell.min[axis]
-        };
+        let face = common::Face { axis, sign };
+        let eye = face.centre(&cell);
         let list: Vec<_> = boxes
             .iter()
             .copied()
-            .filter(|b| {
-                if sign > 0.0 {
-                    b.max[axis] >= eye[axis]
-                } else {
-                    b.min[axis] <= eye[axis]
-                }
-            })
+            .filter(|b| face.reaches(&cell, b))
             .collect();
         {
             let mut ts = Vec::new();
@@ -103,11 +95,7 @@ fn main() {
                 continue;
             }
             let b = o.bounds.to_f64();
-            if !(if sign > 0.0 {
-                b.max[axis] >= eye[axis]
-            } else {
-                b.min[axis] <= eye[axis]
-            }) {
+            if !face.reaches(&cell, &b) {
                 continue;
             }
             if hc.test_box(&b) == BoxTest::Hidden {

@@ -9,8 +9,9 @@
 //! the exact ray through them, `--write-tight` only writes the PVS without its loose objects
 //! (`validate --hunt` on it finds which of them are really visible).
 
+mod common;
+
 use std::collections::HashSet;
-use umbrasweep::bake::{BakeSettings, SamplerData};
 use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube};
 
@@ -43,14 +44,7 @@ fn main() {
         .iter()
         .map(|v| v.as_u64().expect("id") as u32)
         .collect();
-    let settings = BakeSettings::default();
-    let occ = umbrasweep::project::occluders::prepare_with(
-        &scene,
-        &vec![true; scene.objects.len()],
-        false,
-        None,
-    );
-    let data = SamplerData::new(&occ, &scene, &settings);
+    let data = common::sampler_data(&scene);
     let cell = cells[ci].to_f64();
     let sample =
         umbrasweep::validate::sample_cell(&data.rays, &scene, cells[ci], rays, 7, 0, false);
@@ -75,25 +69,14 @@ fn main() {
     let mut shown = 0;
     // Per loose object: open from some face centre [shrunk, plain], seen by a ray from one.
     let mut open_any = std::collections::HashMap::<u32, [bool; 3]>::new();
-    for face in 0..6 {
-        let (axis, sign) = (face / 2, if face % 2 == 0 { -1.0 } else { 1.0 });
-        let mut eye = cell.center();
-        eye[axis] = if sign > 0.0 {
-            cell.max[axis]
-        } else {
-            cell.min[axis]
-        };
+    for k in 0..6 {
+        let face = common::Face::from_index(k);
+        let (axis, sign) = (face.axis, face.sign);
+        let eye = face.centre(&cell);
         let objs: Vec<u32> = loose
             .iter()
             .copied()
-            .filter(|&o| {
-                let b = scene.objects[o as usize].bounds.to_f64();
-                if sign > 0.0 {
-                    b.max[axis] >= eye[axis]
-                } else {
-                    b.min[axis] <= eye[axis]
-                }
-            })
+            .filter(|&o| face.reaches(&cell, &scene.objects[o as usize].bounds.to_f64()))
             .collect();
         if objs.is_empty() {
             continue;
@@ -140,7 +123,7 @@ fn main() {
                         .map(|x| format!("t {:.3} obj {}", x.t * dir.length() as f32, x.object))
                         .collect();
                     println!(
-                        "  face {face} obj {o} dist {dist:.2}: pixel {:?} (mask bits {}); ray through the centre: {}",
+                        "  face {k} obj {o} dist {dist:.2}: pixel {:?} (mask bits {}); ray through the centre: {}",
                         st.map(|s| (s.0, s.2)),
                         st.map_or(0, |s| s.1.count_ones()),
                         first.join(", ")
@@ -148,7 +131,7 @@ fn main() {
                 }
                 if k == 1 {
                     // Rays from the face centre at random points of the object's triangles.
-                    let mut h = u64::from(o) * 0x9e37_79b9_7f4a_7c15 + face as u64;
+                    let mut h = u64::from(o) * 0x9e37_79b9_7f4a_7c15 + k as u64;
                     let mut rnd = || {
                         h = h
                             .wrapping_mul(6364136223846793005)

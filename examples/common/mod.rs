@@ -1,0 +1,102 @@
+//! Setup shared by the sampler's probe examples (`sampler_bands`, `sampler_leaks`,
+//! `sampler_points`, `sampler_probe`, `sampler_why`): which face of a cell a probe looks out
+//! of, the eye on it, the objects beyond it, and the sampler's per-scene data. Each example
+//! uses part of it.
+#![allow(dead_code, reason = "each example uses part of this module")]
+
+use glam::DVec3;
+use umbrasweep::bake::{BakeSettings, SamplerData};
+use umbrasweep::geom::DAabb;
+use umbrasweep::scene::Scene;
+
+/// One face of a cell: outward normal `sign × e_axis`.
+#[derive(Clone, Copy, Debug)]
+pub struct Face {
+    pub axis: usize,
+    pub sign: f64,
+}
+
+impl Face {
+    /// `+x -x +y -y +z -z`.
+    ///
+    /// # Panics
+    /// On any other name.
+    pub fn parse(name: &str) -> Face {
+        let sign = match name.as_bytes().first() {
+            Some(b'+') => 1.0,
+            Some(b'-') => -1.0,
+            _ => panic!("face {name:?}: expected one of +x -x +y -y +z -z"),
+        };
+        let axis = match &name[1..] {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            _ => panic!("face {name:?}: expected one of +x -x +y -y +z -z"),
+        };
+        Face { axis, sign }
+    }
+
+    /// Faces numbered as the sampler numbers them: −x, +x, −y, +y, −z, +z.
+    pub fn from_index(k: usize) -> Face {
+        Face {
+            axis: k / 2,
+            sign: if k.is_multiple_of(2) { -1.0 } else { 1.0 },
+        }
+    }
+
+    /// The coordinate of the face's plane along its axis.
+    pub fn plane(self, cell: &DAabb) -> f64 {
+        if self.sign > 0.0 {
+            cell.max[self.axis]
+        } else {
+            cell.min[self.axis]
+        }
+    }
+
+    /// `p` moved onto the face's plane along the face's axis.
+    pub fn onto(self, cell: &DAabb, mut p: DVec3) -> DVec3 {
+        p[self.axis] = self.plane(cell);
+        p
+    }
+
+    /// The centre of the face.
+    pub fn centre(self, cell: &DAabb) -> DVec3 {
+        self.onto(cell, cell.center())
+    }
+
+    /// Whether a box reaches the outer side of the face's plane (closed half-space).
+    pub fn reaches(self, cell: &DAabb, b: &DAabb) -> bool {
+        if self.sign > 0.0 {
+            b.max[self.axis] >= self.plane(cell)
+        } else {
+            b.min[self.axis] <= self.plane(cell)
+        }
+    }
+
+    /// The objects a probe on this face tests, as the sampler picks them: non-empty, not
+    /// meeting the cell, reaching the outer side of the face. Their indices and boxes.
+    pub fn beyond(self, scene: &Scene, cell: &DAabb) -> (Vec<usize>, Vec<DAabb>) {
+        (0..scene.objects.len())
+            .filter_map(|o| {
+                let b = scene.objects[o].bounds;
+                if b.is_empty() {
+                    return None;
+                }
+                let b = b.to_f64();
+                (!b.overlaps(cell) && self.reaches(cell, &b)).then_some((o, b))
+            })
+            .unzip()
+    }
+}
+
+/// The sampler's data for a scene with every object an occluder, no alpha-tested cards and
+/// the default settings.
+pub fn sampler_data(scene: &Scene) -> SamplerData {
+    let occ = umbrasweep::project::occluders::prepare_with(
+        scene,
+        &vec![true; scene.objects.len()],
+        false,
+        None,
+    );
+    SamplerData::new(&occ, scene, &BakeSettings::default())
+}
