@@ -69,8 +69,8 @@ fn main() {
     let mut shown = 0;
     // Per loose object: open from some face centre [shrunk, plain], seen by a ray from one.
     let mut open_any = std::collections::HashMap::<u32, [bool; 3]>::new();
-    for k in 0..6 {
-        let face = common::Face::from_index(k);
+    for fi in 0..6 {
+        let face = common::Face::from_index(fi);
         let (axis, sign) = (face.axis, face.sign);
         let eye = face.centre(&cell);
         let objs: Vec<u32> = loose
@@ -123,7 +123,7 @@ fn main() {
                         .map(|x| format!("t {:.3} obj {}", x.t * dir.length() as f32, x.object))
                         .collect();
                     println!(
-                        "  face {k} obj {o} dist {dist:.2}: pixel {:?} (mask bits {}); ray through the centre: {}",
+                        "  face {fi} obj {o} dist {dist:.2}: pixel {:?} (mask bits {}); ray through the centre: {}",
                         st.map(|s| (s.0, s.2)),
                         st.map_or(0, |s| s.1.count_ones()),
                         first.join(", ")
@@ -131,7 +131,7 @@ fn main() {
                 }
                 if k == 1 {
                     // Rays from the face centre at random points of the object's triangles.
-                    let mut h = u64::from(o) * 0x9e37_79b9_7f4a_7c15 + k as u64;
+                    let mut h = u64::from(o) * 0x9e37_79b9_7f4a_7c15 + fi as u64;
                     let mut rnd = || {
                         h = h
                             .wrapping_mul(6364136223846793005)
