@@ -872,6 +872,12 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 "culler      {}: hid {:.1} objects per cell ({:.1} only it), {:.1} ms per cell{points}",
                 c.name, c.hidden, c.only, c.ms
             );
+            for (k, l) in c.levels.iter().enumerate() {
+                eprintln!(
+                    "  level {k}   ε ≤ {:.4}: {:.0} points, {:.1} s, {:.1} objects hidden (mean per cell, all levels so far)",
+                    l.eps, l.points, l.seconds, l.hidden
+                );
+            }
         }
         if a.reproducible {
             eprintln!(

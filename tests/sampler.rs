@@ -194,6 +194,19 @@ fn the_document_records_the_sampler_per_cell_and_in_the_summary() {
     assert_eq!(cell_cullers[1]["name"], "shrunk_sampling");
     assert!(cell_cullers[1]["points"].as_u64().unwrap() > 0);
     assert!(cell_cullers[1]["finest_eps"].as_f64().unwrap() > 0.0);
+    // Its cost curve: the last level holds all its points and what it hid.
+    let levels = cell_cullers[1]["levels"].as_array().unwrap();
+    let last = levels.last().unwrap();
+    assert_eq!(last["points"], cell_cullers[1]["points"]);
+    assert_eq!(last["hidden"], cell_cullers[1]["hidden"]);
+    assert!(last["seconds"].as_f64().unwrap() > 0.0);
+    assert_eq!(
+        json["summary"]["cullers"][1]["levels"]
+            .as_array()
+            .unwrap()
+            .len(),
+        levels.len()
+    );
     let summary = &json["summary"]["cullers"][1];
     assert_eq!(summary["name"], "shrunk_sampling");
     assert!(summary["points"].as_f64().unwrap() > 0.0);
@@ -227,4 +240,119 @@ fn the_default_leaves_the_sampler_off_and_says_why() {
         "{}",
         p.sampling_reason
     );
+}
+
+/// A wall quad at x = −2 hides a small target behind it from the coarsest balls already; a
+/// layer of leaves at z ∈ [3, 3.4] hides a second target only with fine balls. With a budget of
+/// points that covers the coarsest level of every face and little more, the wall's target must
+/// be culled (refinement is breadth-first: a budget that runs out leaves the finest levels
+/// unsampled, never a whole face) and the leaves' target stays visible; both checked by brute
+/// force where culled.
+#[test]
+fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
+    let (leafy, cell) = scene(None);
+    // The leaves scene's OBJ plus the wall and the target behind it.
+    let mut obj = String::new();
+    let mut nv = 0;
+    cube(
+        &mut obj,
+        &mut nv,
+        "walled",
+        DVec3::new(-5.0, -0.4, -0.4),
+        DVec3::new(-4.0, 0.4, 0.4),
+    );
+    writeln!(obj, "o wall").unwrap();
+    for (y, z) in [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)] {
+        writeln!(obj, "v -2 {y} {z}").unwrap();
+    }
+    writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
+    nv += 4;
+    for o in &leafy.objects {
+        writeln!(obj, "o {}", o.name).unwrap();
+        for t in o.triangles.clone() {
+            for p in leafy.triangle(t as usize) {
+                writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
+            }
+            writeln!(obj, "f {} {} {}", nv + 1, nv + 2, nv + 3).unwrap();
+            nv += 3;
+        }
+    }
+    let path = std::env::temp_dir().join(format!("umbrasweep-budget-{}.obj", std::process::id()));
+    std::fs::write(&path, obj).unwrap();
+    let scene = umbrasweep::scene::load(&path).unwrap();
+    let _ = std::fs::remove_file(&path);
+    let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+    let id = |n: &str| names.iter().position(|&m| m == n).unwrap();
+    let run = |budget_points: u64| {
+        let s = BakeSettings {
+            sampling: SweepChoice::On,
+            sampling_settings: SamplingSettings {
+                eps: Some(0.05),
+                levels: 3,
+                resolution: 64,
+                rays: 0,
+                budget_points,
+                ..SamplingSettings::default()
+            },
+            ..BakeSettings::default()
+        };
+        let prepared = Prepared::new(&scene, &s, &[cell]).unwrap();
+        let mut state = CullState {
+            hidden: vec![false; scene.objects.len()],
+            known_visible: None,
+        };
+        let work = SamplingCuller
+            .cull(
+                &prepared,
+                &cell,
+                &CpuBackend::new(),
+                &mut state,
+                &mut |_, _, _| {},
+            )
+            .unwrap();
+        // The cost curve: one entry per level, coarsest first, each counting what was
+        // proved by then; the last is what the sampler did.
+        let l = &work.levels;
+        assert!(!l.is_empty());
+        for w in l.windows(2) {
+            assert!(
+                w[1].points >= w[0].points && w[1].hidden >= w[0].hidden,
+                "{l:?}"
+            );
+            assert!(
+                (w[1].eps - 0.5 * w[0].eps).abs() < 1e-9,
+                "halved each level: {l:?}"
+            );
+        }
+        let last = l.last().unwrap();
+        assert_eq!(last.points, work.points);
+        assert_eq!(
+            last.hidden as usize,
+            state.hidden.iter().filter(|&&h| h).count()
+        );
+        assert!(l[0].eps <= 0.4 && l[0].eps > 0.2, "{l:?}");
+        (state.hidden, work.points, l[0])
+    };
+    // Faces are sampled first with balls of 2³ × 0.05 = 0.4: 2 × 2 rectangles on each of the
+    // six faces, 24 points; 30 leave the finer levels almost all unsampled.
+    let (hidden, points, first) = run(30);
+    assert_eq!(points, 30, "the budget is spent");
+    assert!(first.points <= 30 && first.hidden >= 1, "{first:?}");
+    assert!(
+        hidden[id("walled")],
+        "the coarsest level proves the walled target hidden: a budget must not lose it"
+    );
+    assert!(
+        !hidden[id("target")],
+        "the leaves' target needs finer balls"
+    );
+    for o in ["open", "leaves", "wall"] {
+        assert!(!hidden[id(o)], "{o} is visible");
+    }
+    brute_force_hidden(&scene, &cell, id("walled") as u32);
+    // Without the budget the finer levels hide the leaves' target too.
+    let (hidden, points, _) = run(50_000);
+    assert!(points > 30);
+    assert!(hidden[id("walled")] && hidden[id("target")]);
+    brute_force_hidden(&scene, &cell, id("target") as u32);
 }

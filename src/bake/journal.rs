@@ -319,6 +319,12 @@ mod tests {
                     points: 5,
                     polygons: 6,
                     finest_eps: Some(0.0123),
+                    levels: vec![crate::pvs::SamplingLevel {
+                        eps: 0.5,
+                        points: 5,
+                        seconds: 0.25,
+                        hidden: k,
+                    }],
                 },
             }],
             // A subdivided cell's halves travel with it.

@@ -338,6 +338,9 @@ impl BakeResult {
             c.ms = 0.0;
             for s in &mut c.cullers {
                 s.ms = 0.0;
+                for l in &mut s.work.levels {
+                    l.seconds = 0.0;
+                }
             }
             stack.extend(c.children.iter_mut().map(|h| &mut h.result));
         }
@@ -528,6 +531,7 @@ pub fn document(
                             ms: s.ms,
                             points: s.work.points,
                             finest_eps: s.work.finest_eps,
+                            levels: s.work.levels.clone(),
                         })
                         .collect()
                 } else {
@@ -588,6 +592,37 @@ pub fn culler_summary(result: &BakeResult) -> Vec<PvsCullerSummary> {
                     .iter()
                     .filter_map(|c| c.cullers.get(k).and_then(|s| s.work.finest_eps))
                     .reduce(f64::min),
+                levels: level_summary(
+                    &result
+                        .cells
+                        .iter()
+                        .filter_map(|c| c.cullers.get(k))
+                        .map(|s| &s.work.levels[..])
+                        .filter(|l| !l.is_empty())
+                        .collect::<Vec<_>>(),
+                ),
+            }
+        })
+        .collect()
+}
+
+/// The mean cost curve of the cells with one: level `k` is the mean over them of what a
+/// budget that ran out after level `k` gives, a cell that stopped before it counting with its
+/// last level; ε is the largest.
+fn level_summary(curves: &[&[crate::pvs::SamplingLevel]]) -> Vec<crate::pvs::PvsLevelSummary> {
+    let levels = curves.iter().map(|c| c.len()).max().unwrap_or(0);
+    let n = curves.len().max(1) as f64;
+    (0..levels)
+        .map(|k| {
+            let at = |c: &&[crate::pvs::SamplingLevel]| c[k.min(c.len() - 1)];
+            let mean = |f: &dyn Fn(&crate::pvs::SamplingLevel) -> f64| {
+                curves.iter().map(|c| f(&at(c))).sum::<f64>() / n
+            };
+            crate::pvs::PvsLevelSummary {
+                eps: curves.iter().map(|c| at(c).eps).fold(0.0, f64::max),
+                points: mean(&|l| l.points as f64),
+                seconds: mean(&|l| l.seconds),
+                hidden: mean(&|l| f64::from(l.hidden)),
             }
         })
         .collect()

@@ -29,7 +29,7 @@ pub struct CullState<'k> {
 }
 
 /// What one culler did in one (sub-)cell, besides hiding objects.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CullerWork {
     /// Planes rasterised.
     pub planes: usize,
@@ -41,10 +41,14 @@ pub struct CullerWork {
     pub polygons: u64,
     /// The finest ε rendered (the sampler; `None` when it rendered nothing).
     pub finest_eps: Option<f64>,
+    /// The sampler's cost curve, one entry per level it sampled (empty for other cullers and
+    /// for a cell baked in sub-cells).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub levels: Vec<crate::pvs::SamplingLevel>,
 }
 
 impl CullerWork {
-    /// Adds `o`'s work (the finest ε is the smaller).
+    /// Adds `o`'s work (the finest ε is the smaller; the cost curve is the first one's).
     pub fn add(&mut self, o: &CullerWork) {
         self.planes += o.planes;
         self.occluders_projected += o.occluders_projected;
@@ -54,11 +58,14 @@ impl CullerWork {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         };
+        if self.levels.is_empty() {
+            self.levels.clone_from(&o.levels);
+        }
     }
 }
 
 /// One culler's account for one cell.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CullerStats {
     /// Objects culled from the cell that this culler proved hidden (in some sub-cell).
     pub hidden: u32,
@@ -148,6 +155,8 @@ pub fn cullers(
 pub(super) struct CellAccount {
     stats: Vec<CullerStats>,
     hid_by: Vec<u64>,
+    /// Pipeline runs added up (sub-cells).
+    runs: usize,
 }
 
 impl CellAccount {
@@ -157,6 +166,7 @@ impl CellAccount {
         CellAccount {
             stats: vec![CullerStats::default(); cullers],
             hid_by: vec![0; objects],
+            runs: 0,
         }
     }
 
@@ -214,6 +224,11 @@ pub(super) fn run(
         let s = &mut account.stats[k];
         s.ms += start.elapsed().as_secs_f64() * 1e3;
         s.work.add(&work);
+        if account.runs > 0 {
+            // Sub-cells' cost curves do not add up (an object is culled only when every
+            // sub-cell hid it): the cell has none.
+            s.work.levels.clear();
+        }
         for (o, (&now, &was)) in state.hidden.iter().zip(&before).enumerate() {
             debug_assert!(now || !was, "{} unmarked object {o}", culler.name());
             if now && !was {
@@ -221,5 +236,6 @@ pub(super) fn run(
             }
         }
     }
+    account.runs += 1;
     Ok(state.hidden)
 }

@@ -27,7 +27,9 @@
 //! 4. **Refinement only decides more.** An object still undecided at a ball is re-tested in
 //!    the ball's four children; an object undecided at the finest ε, or when the budget runs
 //!    out, stays visible. An object is culled only when every leaf rectangle of every face
-//!    proved it hidden.
+//!    proved it hidden. Levels are sampled breadth-first (every rectangle of a level before
+//!    any of the next), so a budget that runs out costs the finest levels, not whole faces;
+//!    the order never changes which rectangles cover a face, only how many are sampled.
 //! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
 //!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
 //!    candidate list; that can only keep objects in the PVS.
@@ -42,6 +44,7 @@ use crate::backend::RasterBackend;
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::Hdm;
 use crate::plane::{DepthMap, PlaneJob};
+use crate::pvs::SamplingLevel;
 use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
 use crate::settings::SamplingSettings;
 use crate::validate::SceneRays;
@@ -123,6 +126,30 @@ struct Patch {
     face: usize,
     b: [f64; 2],
     c: [f64; 2],
+}
+
+impl Patch {
+    /// Half its diagonal: the radius of the ball around its centre that holds it.
+    fn half_diagonal(&self) -> f64 {
+        0.5 * (self.b[1] - self.b[0]).hypot(self.c[1] - self.c[0])
+    }
+
+    /// The four rectangles that split this one at its midpoints (they cover it exactly).
+    fn quadrants(&self) -> impl Iterator<Item = Patch> + use<> {
+        let (p, bm, cm) = (
+            *self,
+            0.5 * (self.b[0] + self.b[1]),
+            0.5 * (self.c[0] + self.c[1]),
+        );
+        [
+            ([p.b[0], bm], [p.c[0], cm]),
+            ([bm, p.b[1]], [p.c[0], cm]),
+            ([p.b[0], bm], [cm, p.c[1]]),
+            ([bm, p.b[1]], [cm, p.c[1]]),
+        ]
+        .into_iter()
+        .map(move |(b, c)| Patch { face: p.face, b, c })
+    }
 }
 
 /// One face of the cell: outward normal `sign × e_axis`, its plane coordinate.
@@ -265,10 +292,46 @@ impl Culler for SamplingCuller {
                 }
             }
         }
-        top.par_iter().for_each_init(
-            || Hemicube::new(s.resolution),
-            |hc, (patch, list)| shared.patch(hc, *patch, list),
-        );
+        // Breadth-first: every rectangle of one level (in parallel) before any of the next, so
+        // that a budget that runs out leaves only the finest levels unsampled, never a face.
+        let mut level = top;
+        let mut curve: Vec<SamplingLevel> = Vec::new();
+        let mut undecided = vec![false; n];
+        while !level.is_empty() {
+            let level_eps = level
+                .iter()
+                .map(|(p, _)| p.half_diagonal())
+                .fold(0.0, f64::max);
+            let open: Vec<Option<Arc<Vec<u32>>>> = level
+                .par_iter()
+                .map_init(
+                    || Hemicube::new(s.resolution),
+                    |hc, (patch, list)| shared.patch(hc, *patch, list),
+                )
+                .collect();
+            // The cost curve: what a budget that ran out here would have culled.
+            undecided.fill(false);
+            for &o in open.iter().flatten().flat_map(|l| l.iter()) {
+                undecided[o as usize] = true;
+            }
+            curve.push(SamplingLevel {
+                eps: level_eps,
+                points: shared.points.load(Ordering::Relaxed),
+                seconds: shared.start.elapsed().as_secs_f64(),
+                hidden: candidates
+                    .iter()
+                    .filter(|&&o| {
+                        !undecided[o as usize] && !shared.done[o as usize].load(Ordering::Relaxed)
+                    })
+                    .count() as u32,
+            });
+            level = level
+                .iter()
+                .zip(open)
+                .filter_map(|((patch, _), open)| open.map(|o| (patch, o)))
+                .flat_map(|(patch, o)| patch.quadrants().map(move |q| (q, o.clone())))
+                .collect();
+        }
         for &o in &candidates {
             if !shared.done[o as usize].load(Ordering::Relaxed) {
                 state.hidden[o as usize] = true;
@@ -279,6 +342,7 @@ impl Culler for SamplingCuller {
             points: shared.points.load(Ordering::Relaxed),
             polygons: shared.polygons.load(Ordering::Relaxed),
             finest_eps: finest.is_finite().then_some(finest),
+            levels: curve,
             ..CullerWork::default()
         })
     }
@@ -344,19 +408,20 @@ impl Shared<'_> {
         }
     }
 
-    /// Samples one patch and, where objects stay undecided, its quadrants.
-    fn patch(&self, hc: &mut Hemicube, patch: Patch, list: &[u32]) {
+    /// Samples one patch. Returns the objects still undecided there when its quadrants should
+    /// be sampled for them (none: all decided, or given up at the finest ε or the budget).
+    fn patch(&self, hc: &mut Hemicube, patch: Patch, list: &[u32]) -> Option<Arc<Vec<u32>>> {
         let list: Vec<u32> = list
             .iter()
             .copied()
             .filter(|&o| !self.done[o as usize].load(Ordering::Relaxed))
             .collect();
         if list.is_empty() {
-            return;
+            return None;
         }
         if !self.take_point() {
             self.give_up(&list);
-            return;
+            return None;
         }
         let f = self.faces[patch.face];
         let (b, c) = ((f.axis + 1) % 3, (f.axis + 2) % 3);
@@ -418,30 +483,13 @@ impl Shared<'_> {
         // Certification may have reached objects found open earlier.
         open.retain(|&o| !self.done[o as usize].load(Ordering::Relaxed));
         if open.is_empty() {
-            return;
+            return None;
         }
         if eps <= self.data.eps * (1.0 + 1e-6) {
             self.give_up(&open);
-            return;
+            return None;
         }
-        let bm = 0.5 * (patch.b[0] + patch.b[1]);
-        let cm = 0.5 * (patch.c[0] + patch.c[1]);
-        for (b, c) in [
-            ([patch.b[0], bm], [patch.c[0], cm]),
-            ([bm, patch.b[1]], [patch.c[0], cm]),
-            ([patch.b[0], bm], [cm, patch.c[1]]),
-            ([bm, patch.b[1]], [cm, patch.c[1]]),
-        ] {
-            self.patch(
-                hc,
-                Patch {
-                    face: patch.face,
-                    b,
-                    c,
-                },
-                &open,
-            );
-        }
+        Some(Arc::new(open))
     }
 
     /// Tests piece `k` of an object: its box, and when that is open, each of its triangles

@@ -139,6 +139,26 @@ pub struct PvsCellCuller {
     /// The finest ε it rendered (the sampler), in scene units.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub finest_eps: Option<f64>,
+    /// The sampler's cost curve: one entry per refinement level it sampled, coarsest first
+    /// (absent for other cullers and for cells baked in sub-cells).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub levels: Vec<SamplingLevel>,
+}
+
+/// One refinement level of the shrunk-occluder sampler in one cell: what a budget that ran
+/// out right after this level would have given. Levels are sampled breadth-first, so these
+/// are the points of the cell's cost curve (budget → objects culled).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SamplingLevel {
+    /// The largest ε of the level's sample points (their rectangles' half diagonals).
+    pub eps: f64,
+    /// Sample points rendered up to the end of this level (all levels so far).
+    pub points: u64,
+    /// Seconds of sampling up to the end of this level (0 with `--reproducible`).
+    pub seconds: f64,
+    /// Objects the sampler had proved hidden from every face by the end of this level (the
+    /// last level's count is what it hid).
+    pub hidden: u32,
 }
 
 fn is_zero(v: &u64) -> bool {
@@ -214,6 +234,25 @@ pub struct PvsCullerSummary {
     /// The finest ε it rendered in any cell (the sampler; not kept in `.pvs` files).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub finest_eps: Option<f64>,
+    /// The sampler's mean cost curve over the cells ([`SamplingLevel`] per level; not kept in
+    /// `.pvs` files).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub levels: Vec<PvsLevelSummary>,
+}
+
+/// One level of the sampler's mean cost curve: means over the cells of their
+/// [`SamplingLevel`] at that level (a cell whose sampling stopped earlier counts with its
+/// last level), and the largest ε.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PvsLevelSummary {
+    /// The largest ε of the level's sample points in any cell.
+    pub eps: f64,
+    /// Sample points up to the end of the level, mean per cell.
+    pub points: f64,
+    /// Seconds of sampling up to the end of the level, mean per cell.
+    pub seconds: f64,
+    /// Objects proved hidden by the end of the level, mean per cell.
+    pub hidden: f64,
 }
 
 fn is_zero_f64(v: &f64) -> bool {
