@@ -615,7 +615,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         let b = indicatif::ProgressBar::new(which.len() as u64);
         b.set_style(
             indicatif::ProgressStyle::with_template(
-                "{spinner} baking [{bar:40}] {pos}/{len} cells, {elapsed} elapsed, eta {eta}",
+                "{spinner} baking [{bar:40}] {pos}/{len} cells, {elapsed} elapsed, eta {eta}{msg}",
             )
             .expect("valid template")
             .progress_chars("=> "),
@@ -642,18 +642,42 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     let journal = std::sync::Mutex::new(journal);
     let on_cell =
         |ci: usize, r: &bake::CellResult| journal.lock().expect("not poisoned").append(ci, r);
-    let mut result = bake::bake_cells(
-        &scene,
-        &cells,
-        &todo,
-        &settings,
-        backend,
-        bake::BakeHooks {
-            progress: Some(&progress),
-            observe: dumping.then_some(&observe as bake::PlaneObserver),
-            on_cell: Some(&on_cell),
-        },
-    )?;
+    // The sampler takes minutes per cell: the bar counts its sample points meanwhile.
+    let sample_points = std::sync::atomic::AtomicU64::new(0);
+    let baking = std::sync::atomic::AtomicBool::new(true);
+    let mut result = std::thread::scope(|s| {
+        let ticker = (!a.quiet).then(|| {
+            s.spawn(|| {
+                use std::sync::atomic::Ordering::Relaxed;
+                while baking.load(Relaxed) {
+                    let n = sample_points.load(Relaxed);
+                    if n > 0 {
+                        bar.set_message(format!(", {n} sample points"));
+                    }
+                    bar.tick();
+                    std::thread::park_timeout(std::time::Duration::from_millis(500));
+                }
+            })
+        });
+        let r = bake::bake_cells(
+            &scene,
+            &cells,
+            &todo,
+            &settings,
+            backend,
+            bake::BakeHooks {
+                progress: Some(&progress),
+                observe: dumping.then_some(&observe as bake::PlaneObserver),
+                on_cell: Some(&on_cell),
+                sample_points: Some(&sample_points),
+            },
+        );
+        baking.store(false, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = ticker {
+            t.thread().unpark();
+        }
+        r
+    })?;
     bar.finish_and_clear();
     if let Some(e) = dump_error.into_inner().expect("not poisoned") {
         bail!("dumping the planes: {e}");

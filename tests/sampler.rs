@@ -356,3 +356,35 @@ fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
     assert!(hidden[id("walled")] && hidden[id("target")]);
     brute_force_hidden(&scene, &cell, id("target") as u32);
 }
+
+/// `BakeHooks::sample_points` counts the sampler's points as it renders them (the bake's
+/// progress bar shows it inside long cells): at the end it holds every cell's points.
+#[test]
+fn the_sample_point_hook_counts_every_point() {
+    let (scene, cell) = scene(None);
+    let cells = [
+        cell,
+        Aabb::new(Vec3::new(0.5, -0.5, -0.5), Vec3::new(1.5, 0.5, 0.5)),
+    ];
+    let counter = std::sync::atomic::AtomicU64::new(0);
+    let r = bake::bake_cells(
+        &scene,
+        &cells,
+        &[0, 1],
+        &settings(),
+        &CpuBackend::new(),
+        bake::BakeHooks {
+            sample_points: Some(&counter),
+            ..bake::BakeHooks::default()
+        },
+    )
+    .unwrap();
+    let k = r
+        .cullers
+        .iter()
+        .position(|&c| c == "shrunk_sampling")
+        .unwrap();
+    let points: u64 = r.cells.iter().map(|c| c.cullers[k].work.points).sum();
+    assert!(points > 0);
+    assert_eq!(counter.load(std::sync::atomic::Ordering::Relaxed), points);
+}

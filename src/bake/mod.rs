@@ -241,6 +241,7 @@ pub fn bake_observed(
             progress,
             observe,
             on_cell: None,
+            sample_points: None,
         },
     )
 }
@@ -258,6 +259,9 @@ pub struct BakeHooks<'a> {
     /// Every finished cell, by its index in `cells`, from the worker that baked it (the
     /// journal); an error stops the bake.
     pub on_cell: Option<CellObserver<'a>>,
+    /// The shrunk-occluder sampler adds each sample point it renders here, so that a caller
+    /// can show progress inside cells that take minutes.
+    pub sample_points: Option<&'a std::sync::atomic::AtomicU64>,
 }
 
 /// Bakes the cells `which` (indices into `cells`) of a bake of all `cells`: the per-scene
@@ -284,7 +288,8 @@ pub fn bake_cells(
             expected: format!("cell indices below {}", cells.len()),
         }));
     }
-    let prepared = Prepared::new(scene, settings, cells)?;
+    let mut prepared = Prepared::new(scene, settings, cells)?;
+    prepared.sample_points = hooks.sample_points;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cells_out: Result<Vec<CellResult>, BakeError> = which
         .par_iter()

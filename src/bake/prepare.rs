@@ -56,6 +56,8 @@ pub struct Prepared<'a> {
     /// A box holding every object: planes' rectangles stop where no ray toward it passes
     /// ([`crate::project::planes::DirectionPlan::relevant_rect`]).
     pub(super) bounds: DAabb,
+    /// Where the sampler counts its sample points for progress ([`super::BakeHooks`]).
+    pub(super) sample_points: Option<&'a std::sync::atomic::AtomicU64>,
 }
 
 /// Objects with at least this many triangles are also tested as pieces.
@@ -292,6 +294,7 @@ impl<'a> Prepared<'a> {
             Vec::new()
         };
         Ok(Prepared {
+            sample_points: None,
             cullers: pipeline::cullers(settings, rsf, sweep, sampling),
             rsf_edges,
             rsf,

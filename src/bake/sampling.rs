@@ -325,6 +325,13 @@ impl Culler for SamplingCuller {
                     })
                     .count() as u32,
             });
+            if shared.spent() {
+                // The next level would sample nothing: what it would test stays visible.
+                for l in open.iter().flatten() {
+                    shared.give_up(l);
+                }
+                break;
+            }
             level = level
                 .iter()
                 .zip(open)
@@ -386,18 +393,28 @@ fn cell_seed(cell: &Aabb) -> u64 {
 }
 
 impl Shared<'_> {
+    /// Whether the budget is spent (no point can be taken).
+    fn spent(&self) -> bool {
+        let s = &self.data.settings;
+        self.points.load(Ordering::Relaxed) >= s.budget_points || !self.in_time()
+    }
+
+    fn in_time(&self) -> bool {
+        (self.data.settings.budget_seconds).is_none_or(|t| self.start.elapsed().as_secs_f64() < t)
+    }
+
     /// Takes one sample point from the budget; false (and nothing taken) when it is spent.
     fn take_point(&self) -> bool {
         let s = &self.data.settings;
-        let in_time = s
-            .budget_seconds
-            .is_none_or(|t| self.start.elapsed().as_secs_f64() < t);
-        if !in_time {
+        if !self.in_time() {
             return false;
         }
         if self.points.fetch_add(1, Ordering::Relaxed) >= s.budget_points {
             self.points.fetch_sub(1, Ordering::Relaxed);
             return false;
+        }
+        if let Some(c) = self.prepared.sample_points {
+            c.fetch_add(1, Ordering::Relaxed);
         }
         true
     }

@@ -26,44 +26,6 @@ fn round_up(z: f64) -> f32 {
     if f64::from(f) < m { f.next_up() } else { f }
 }
 
-/// The bits `aa` (0..8) of one sub-pixel row where `r + aa·du >= margin`, exactly as that
-/// test per bit: the values grow (or fall) with `aa` also in floating point (rounding is
-/// monotone), so the set bits are a run from one end; its end is estimated by a division and
-/// moved to where the test itself changes.
-fn row_bits(r: f64, du: f64, margin: f64) -> u64 {
-    let pass = |aa: i32| r + f64::from(aa) * du >= margin;
-    if du == 0.0 {
-        return if pass(0) { 0xff } else { 0 };
-    }
-    let t = (margin - r) / du;
-    let guess = if t.is_finite() {
-        t.clamp(-1.0, 8.0) as i32
-    } else {
-        0
-    };
-    if du > 0.0 {
-        // The first passing bit: bits from it to 7 are set.
-        let mut a = guess.clamp(0, 8);
-        while a > 0 && pass(a - 1) {
-            a -= 1;
-        }
-        while a < 8 && !pass(a) {
-            a += 1;
-        }
-        (0xffu64 << a) & 0xff
-    } else {
-        // The last passing bit: bits from 0 to it are set.
-        let mut a = guess.clamp(-1, 7);
-        while a < 7 && pass(a + 1) {
-            a += 1;
-        }
-        while a >= 0 && !pass(a) {
-            a -= 1;
-        }
-        (1u64 << (a + 1)) - 1
-    }
-}
-
 /// The sub-pixels (8 × 8, bit `8·b + a` for column `a`, row `b`) of the pixel
 /// `[u0, u0 + ps] × [v0, v0 + ps]` that lie entirely inside every edge's region `ev`
 /// (`e0·u + e1·v + e2 − s·√(u²+v²+1) ≥ margin`), where `lmax` is at least `√(u²+v²+1)` over
@@ -91,10 +53,15 @@ fn pixel_mask(ev: &[[f32; 4]], u0: f64, v0: f64, ps: f64, lmax: f64) -> u64 {
         if c0 + 7.0 * (du.max(0.0) + dv.max(0.0)) < margin {
             return 0;
         }
+        // Every sub-pixel's test, without branches (the compiler vectorises the rows).
         let mut em = 0u64;
         for bb in 0..8 {
             let r = c0 + f64::from(bb) * dv;
-            em |= row_bits(r, du, margin) << (bb * 8);
+            let mut row = 0u64;
+            for aa in 0..8 {
+                row |= u64::from(r + f64::from(aa) * du >= margin) << aa;
+            }
+            em |= row << (bb * 8);
         }
         mask &= em;
         if mask == 0 {
@@ -1338,8 +1305,10 @@ mod tests {
     use super::*;
     use crate::sampler::SampleOccluders;
 
+    /// A sub-pixel is set only when the exact (curved) test holds all over it, and with
+    /// straight edges (`s` = 0) exactly when it holds at its four corners.
     #[test]
-    fn row_bits_match_the_test_per_bit() {
+    fn pixel_masks_hold_their_edges_tests_and_no_more() {
         let mut x = 0x9e37_79b9_7f4a_7c15u64;
         let mut rnd = || {
             x ^= x << 13;
@@ -1347,22 +1316,61 @@ mod tests {
             x ^= x << 17;
             (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
         };
-        for k in 0..200_000 {
-            let scale = [1e-6, 1e-3, 1.0, 1e3][k % 4];
-            let (r, margin) = (rnd() * scale, [0.0, 1e-7, -1e-7][k % 3]);
-            let du = match k % 7 {
-                0 => 0.0,
-                1 => 1e-300 * rnd(),
-                _ => rnd() * scale / 4.0,
+        let margin = f64::from(CORNER_MARGIN);
+        for k in 0..20_000 {
+            let ps = [2.0 / 256.0, 2.0 / 16.0, 1e-4][k % 3];
+            let (u0, v0) = (rnd(), rnd());
+            let straight = k % 2 == 0;
+            let ev: Vec<[f32; 4]> = (0..1 + k % 3)
+                .map(|_| {
+                    let a = rnd() as f32;
+                    let b = rnd() as f32;
+                    // Through the pixel (mostly), so that masks are partial.
+                    let c = -(a * u0 as f32 + b * v0 as f32) + (rnd() * ps * 2.0) as f32;
+                    let s = if straight {
+                        0.0
+                    } else {
+                        (rnd().abs() * 0.01) as f32
+                    };
+                    [a, b, c + s * 2.0, s]
+                })
+                .collect();
+            let lmax = [(u0, v0), (u0 + ps, v0), (u0, v0 + ps), (u0 + ps, v0 + ps)]
+                .iter()
+                .map(|&(u, v)| (u * u + v * v + 1.0f64).sqrt())
+                .fold(0.0, f64::max);
+            let mask = pixel_mask(&ev, u0, v0, ps, lmax);
+            let h = ps / 8.0;
+            let holds = |u: f64, v: f64, exact: bool| {
+                ev.iter().all(|e| {
+                    let (a, b, c, s) = e.map(f64::from).into();
+                    let l = if exact {
+                        (u * u + v * v + 1.0).sqrt()
+                    } else {
+                        lmax
+                    };
+                    a * u + b * v + c - s * l >= margin - 1e-12
+                })
             };
-            let want = (0..8).fold(0u64, |m, aa| {
-                m | (u64::from(r + f64::from(aa) * du >= margin) << aa)
-            });
-            assert_eq!(
-                row_bits(r, du, margin),
-                want,
-                "r {r} du {du} margin {margin}"
-            );
+            for bit in 0..64 {
+                let (aa, bb) = (f64::from(bit % 8), f64::from(bit / 8));
+                let (su, sv) = (u0 + aa * h, v0 + bb * h);
+                let corners = [(su, sv), (su + h, sv), (su, sv + h), (su + h, sv + h)];
+                if mask >> bit & 1 == 1 {
+                    for (fu, fv) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)] {
+                        let (u, v) = (su + fu * h, sv + fv * h);
+                        assert!(
+                            holds(u, v, true),
+                            "case {k}: sub-pixel {bit} set, fails at ({u}, {v})"
+                        );
+                    }
+                } else if straight {
+                    assert!(
+                        corners.iter().any(|&(u, v)| !holds(u, v, false)),
+                        "case {k}: sub-pixel {bit} left out though its corners pass"
+                    );
+                }
+            }
         }
     }
 
