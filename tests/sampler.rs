@@ -8,7 +8,7 @@ use glam::{DVec3, Vec3};
 use std::fmt::Write as _;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::bake::{
-    self, BakeSettings, CullState, Culler, Prepared, SamplingCuller, SweepChoice,
+    self, BakeSettings, CullState, Culler, CullerWork, Prepared, SamplingCuller, SweepChoice,
 };
 use umbrasweep::geom::Aabb;
 use umbrasweep::settings::SamplingSettings;
@@ -105,9 +105,13 @@ fn settings() -> BakeSettings {
     }
 }
 
-/// Runs the sampler alone on the cell (nothing hidden before it).
-fn sampler_hides(scene: &umbrasweep::Scene, cell: &Aabb) -> Vec<bool> {
-    let prepared = Prepared::new(scene, &settings(), &[*cell]).unwrap();
+/// Runs the sampler alone on the cell (nothing hidden before it): what it hid, its work.
+fn run_sampler(
+    scene: &umbrasweep::Scene,
+    cell: &Aabb,
+    settings: &BakeSettings,
+) -> (Vec<bool>, CullerWork) {
+    let prepared = Prepared::new(scene, settings, &[*cell]).unwrap();
     let mut state = CullState {
         hidden: vec![false; scene.objects.len()],
         known_visible: None,
@@ -121,13 +125,19 @@ fn sampler_hides(scene: &umbrasweep::Scene, cell: &Aabb) -> Vec<bool> {
             &mut |_, _, _| {},
         )
         .unwrap();
+    (state.hidden, work)
+}
+
+/// The sampler alone with [`settings`]: what it hid.
+fn sampler_hides(scene: &umbrasweep::Scene, cell: &Aabb) -> Vec<bool> {
+    let (hidden, work) = run_sampler(scene, cell, &settings());
     assert!(work.points > 0, "the sampler rendered no point");
-    if state.hidden[0] {
+    if hidden[0] {
         // Balls no larger than the coarsest level (2 × the finest ε) hid it; with
         // depth-bounded shrinks the coarse level may already suffice.
         assert!(work.finest_eps.is_some_and(|e| e <= 0.2 * (1.0 + 1e-6)));
     }
-    state.hidden
+    hidden
 }
 
 /// Every segment from random points of the cell to random points of the object's triangles
@@ -296,20 +306,7 @@ fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
             },
             ..BakeSettings::default()
         };
-        let prepared = Prepared::new(&scene, &s, &[cell]).unwrap();
-        let mut state = CullState {
-            hidden: vec![false; scene.objects.len()],
-            known_visible: None,
-        };
-        let work = SamplingCuller
-            .cull(
-                &prepared,
-                &cell,
-                &CpuBackend::new(),
-                &mut state,
-                &mut |_, _, _| {},
-            )
-            .unwrap();
+        let (hidden, work) = run_sampler(&scene, &cell, &s);
         // The cost curve: one entry per level, coarsest first, each counting what was
         // proved by then; the last is what the sampler did.
         let l = &work.levels;
@@ -326,12 +323,9 @@ fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
         }
         let last = l.last().unwrap();
         assert_eq!(last.points, work.points);
-        assert_eq!(
-            last.hidden as usize,
-            state.hidden.iter().filter(|&&h| h).count()
-        );
+        assert_eq!(last.hidden as usize, hidden.iter().filter(|&&h| h).count());
         assert!(l[0].eps <= 0.4 && l[0].eps > 0.2, "{l:?}");
-        (state.hidden, work.points, l[0])
+        (hidden, work.points, l[0])
     };
     // Faces are sampled first with balls of 2³ × 0.05 = 0.4: 2 × 2 rectangles on each of the
     // six faces, 24 points; 30 leave the finer levels almost all unsampled.
