@@ -48,7 +48,8 @@ pub struct CullerWork {
 }
 
 impl CullerWork {
-    /// Adds `o`'s work (the finest ε is the smaller; the cost curve is the first one's).
+    /// Adds `o`'s work (the finest ε is the smaller). Cost curves do not add up and are left
+    /// as they are (the pipeline keeps a cell's curve only when the cell ran once).
     pub fn add(&mut self, o: &CullerWork) {
         self.planes += o.planes;
         self.occluders_projected += o.occluders_projected;
@@ -58,9 +59,6 @@ impl CullerWork {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         };
-        if self.levels.is_empty() {
-            self.levels.clone_from(&o.levels);
-        }
     }
 }
 
@@ -224,11 +222,13 @@ pub(super) fn run(
         let s = &mut account.stats[k];
         s.ms += start.elapsed().as_secs_f64() * 1e3;
         s.work.add(&work);
-        if account.runs > 0 {
-            // Sub-cells' cost curves do not add up (an object is culled only when every
-            // sub-cell hid it): the cell has none.
-            s.work.levels.clear();
-        }
+        // Sub-cells' cost curves do not add up (an object is culled only when every sub-cell
+        // hid it): a cell baked in sub-cells has none.
+        s.work.levels = if account.runs == 0 {
+            work.levels
+        } else {
+            Vec::new()
+        };
         for (o, (&now, &was)) in state.hidden.iter().zip(&before).enumerate() {
             debug_assert!(now || !was, "{} unmarked object {o}", culler.name());
             if now && !was {
