@@ -222,6 +222,12 @@ pub struct BakeArgs {
     /// finest ε, and a ball is split in four only where objects are still undecided.
     #[arg(long, default_value_t = BakeSettings::default_settings().sampling_settings.levels)]
     pub sampling_levels: u32,
+    /// The coarsest ε the sampler renders: coarser levels are split without sampling (the
+    /// finest level always runs). Default: every level is sampled (on the coarse forest the
+    /// coarsest level proves nothing cell-wide but its per-rectangle results prune the next
+    /// level enough to pay for it).
+    #[arg(long, value_name = "E")]
+    pub sampling_max_eps: Option<f64>,
     /// Pixels across each 90° view of the hemicube the sampler renders per point.
     #[arg(long, default_value_t = BakeSettings::default_settings().sampling_settings.resolution)]
     pub sampling_resolution: u32,
@@ -449,6 +455,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     let mut sampling_settings = umbrasweep::settings::SamplingSettings {
         eps: a.sampling_eps,
         levels: a.sampling_levels,
+        max_eps: a.sampling_max_eps,
         resolution: a.sampling_resolution,
         rays: a.sampling_rays,
         band_ratio: a.sampling_band_ratio,

@@ -73,8 +73,9 @@ pub struct BakeSettings {
     #[serde(default = "sampling_of_old_documents")]
     pub sampling: SamplingChoice,
     /// The sampler's finest ε, budget, resolution and certification rays (recorded as
-    /// `sampling_eps`, `sampling_levels`, `sampling_budget_points`, `sampling_budget_seconds`,
-    /// `sampling_resolution`, `sampling_rays`, `sampling_band_ratio`).
+    /// `sampling_eps`, `sampling_levels`, `sampling_max_eps`, `sampling_budget_points`,
+    /// `sampling_budget_seconds`, `sampling_resolution`, `sampling_rays`,
+    /// `sampling_band_ratio`).
     #[serde(flatten)]
     pub sampling_settings: SamplingSettings,
     /// Adaptive subdivision: a cell whose PVS holds more triangles than this is split in two
@@ -191,6 +192,13 @@ pub struct SamplingSettings {
     /// and a ball is split in four only where some object is still undecided. Default 2.
     #[serde(rename = "sampling_levels")]
     pub levels: u32,
+    /// The coarsest ε that is sampled: a level whose balls are larger is not rendered, its
+    /// rectangles are split at once (the finest level is always sampled). `None` (the
+    /// default) samples every level: on the coarse forest the coarsest level proves no object
+    /// hidden from the cell, but what it proves per rectangle prunes the next level's lists,
+    /// and skipping it cost time (4×2×4 cell: 742 s instead of 680 s; 1×1×1: 61 s, 59 s).
+    #[serde(rename = "sampling_max_eps")]
+    pub max_eps: Option<f64>,
     /// At most this many sample points per cell; objects still undecided then stay visible.
     /// Default 50,000.
     #[serde(rename = "sampling_budget_points")]
@@ -224,6 +232,7 @@ impl SamplingSettings {
         SamplingSettings {
             eps: None,
             levels: 2,
+            max_eps: None,
             budget_points: 50_000,
             budget_seconds: None,
             resolution: 256,
@@ -475,6 +484,15 @@ impl BakeSettings {
                 "sampling-eps",
                 e,
                 "must be a positive distance in scene units (e.g. 0.05 for leaves 0.5 across)",
+            ));
+        }
+        if let Some(e) = sa.max_eps
+            && !(e.is_finite() && e > 0.0)
+        {
+            return Err(SettingsError::new(
+                "sampling-max-eps",
+                e,
+                "must be a positive distance in scene units (e.g. 0.2 for leaves 0.5 across)",
             ));
         }
         if sa.levels > 12 {

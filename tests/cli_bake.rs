@@ -182,6 +182,7 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
         (&["--sampling-budget", "0s"][..], "seconds"),
         (&["--sampling-eps", "0"][..], "--sampling-eps 0"),
         (&["--sampling-eps", "nan"][..], "--sampling-eps"),
+        (&["--sampling-max-eps", "0"][..], "--sampling-max-eps 0"),
         (
             &["--sampling-resolution", "8"][..],
             "--sampling-resolution 8",
@@ -212,6 +213,8 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
             "40,60s",
             "--sampling-eps",
             "0.5",
+            "--sampling-max-eps",
+            "2",
         ])
         .arg("-o")
         .arg(&out)
@@ -223,6 +226,10 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
         stderr.contains("sampling    yes — --sampling; finest ε 0.5"),
         "{stderr}"
     );
+    assert!(
+        stderr.contains("levels coarser than ε 2.0000 split unsampled (--sampling-max-eps)"),
+        "{stderr}"
+    );
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let s = &doc["settings"];
@@ -230,6 +237,7 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
     assert_eq!(s["sampling_budget_points"], serde_json::json!(40));
     assert_eq!(s["sampling_budget_seconds"], serde_json::json!(60.0));
     assert_eq!(s["sampling_eps"], serde_json::json!(0.5));
+    assert_eq!(s["sampling_max_eps"], serde_json::json!(2.0));
     for cell in doc["cells"].as_array().unwrap() {
         // The sampler runs last (after ray space factorization where it runs, and the planes).
         let cullers = cell["cullers"].as_array().unwrap();

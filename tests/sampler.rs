@@ -382,3 +382,44 @@ fn the_sample_point_hook_counts_every_point() {
     assert!(points > 0);
     assert_eq!(counter.load(std::sync::atomic::Ordering::Relaxed), points);
 }
+
+/// `--sampling-max-eps`: levels whose balls are coarser are split without being rendered, so
+/// the cost curve starts at the first level sampled and the faces stay covered (the leaves'
+/// target is still culled, and checked by brute force); the finest level is sampled even when
+/// it is coarser than the limit.
+#[test]
+fn levels_coarser_than_the_largest_sampled_eps_are_split_unsampled() {
+    let (scene, cell) = scene(None);
+    let run = |max_eps: Option<f64>| {
+        let mut s = settings();
+        s.sampling_settings.levels = 3;
+        s.sampling_settings.eps = Some(0.05);
+        s.sampling_settings.max_eps = max_eps;
+        run_sampler(&scene, &cell, &s)
+    };
+    // Every level sampled: the unit cube's faces are cut 2 × 2 (ε 0.354), then 0.177, …
+    let top = 0.5f64.hypot(0.5) / 2.0;
+    let (all_hidden, all) = run(Some(1.0));
+    assert!((all.levels[0].eps - top).abs() < 1e-12, "{:?}", all.levels);
+    assert!(all.levels[0].points <= 24);
+    // Levels 0.354 and 0.177 split unsampled: the first sampled has 4 × 4 rectangles per
+    // face, more points than the whole top level could take.
+    let (hidden, some) = run(Some(0.15));
+    assert!(
+        (some.levels[0].eps - top / 4.0).abs() < 1e-12,
+        "{:?}",
+        some.levels
+    );
+    assert!(some.levels[0].points > 24, "{:?}", some.levels);
+    assert!(
+        hidden[0] && all_hidden[0],
+        "the fused leaves hide the target"
+    );
+    assert!(!hidden[1] && !hidden[2]);
+    brute_force_hidden(&scene, &cell, 0);
+    // A limit below the finest ε still samples the finest level (0.044), and only it.
+    let (_, finest) = run(Some(0.01));
+    assert_eq!(finest.levels.len(), 1, "{:?}", finest.levels);
+    assert!((finest.levels[0].eps - top / 8.0).abs() < 1e-12);
+    assert!(finest.levels[0].points > some.levels[0].points);
+}

@@ -270,6 +270,13 @@ impl<'a> Prepared<'a> {
                 "{sampling_reason}; finest ε {:.4} ({})",
                 d.eps, d.eps_reason
             );
+            if d.max_eps.is_finite() {
+                sampling_reason = format!(
+                    "{sampling_reason}; levels coarser than ε {:.4} split unsampled \
+                     (--sampling-max-eps)",
+                    d.max_eps
+                );
+            }
             d
         });
         let Pieces {

@@ -30,6 +30,8 @@
 //!    proved it hidden. Levels are sampled breadth-first (every rectangle of a level before
 //!    any of the next), so a budget that runs out costs the finest levels, not whole faces;
 //!    the order never changes which rectangles cover a face, only how many are sampled.
+//!    Levels coarser than `--sampling-max-eps` are split without being sampled: their
+//!    quadrants cover them exactly and inherit every candidate.
 //! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
 //!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
 //!    candidate list; that can only keep objects in the PVS.
@@ -64,6 +66,9 @@ pub struct SamplerData {
     pub eps: f64,
     /// Where `eps` came from, one line for the summary.
     pub eps_reason: String,
+    /// The coarsest ε sampled (`--sampling-max-eps`, infinite by default); coarser levels are
+    /// split without rendering.
+    pub max_eps: f64,
     /// The sampler's settings.
     pub settings: SamplingSettings,
 }
@@ -73,6 +78,7 @@ impl std::fmt::Debug for SamplerData {
         f.debug_struct("SamplerData")
             .field("occluders", &self.occluders)
             .field("eps", &self.eps)
+            .field("max_eps", &self.max_eps)
             .finish()
     }
 }
@@ -101,7 +107,9 @@ impl SamplerData {
             }
             None => (1.0, "no occluder polygons".into()),
         };
+        let max_eps = s.max_eps.unwrap_or(f64::INFINITY);
         SamplerData {
+            max_eps,
             occluders,
             rays: SceneRays::new(scene),
             eps,
@@ -302,6 +310,15 @@ impl Culler for SamplingCuller {
                 .iter()
                 .map(|(p, _)| p.half_diagonal())
                 .fold(0.0, f64::max);
+            if level_eps > data.max_eps && level_eps > data.eps * (1.0 + 1e-6) {
+                // Coarser than `--sampling-max-eps`: split without sampling (the quadrants
+                // cover each rectangle exactly, so the faces stay covered).
+                level = level
+                    .into_iter()
+                    .flat_map(|(patch, list)| patch.quadrants().map(move |q| (q, list.clone())))
+                    .collect();
+                continue;
+            }
             let open: Vec<Option<Arc<Vec<u32>>>> = level
                 .par_iter()
                 .map_init(

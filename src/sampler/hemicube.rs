@@ -18,6 +18,68 @@ const TILE: usize = 8;
 /// `|u|, |v| ≤ 1`, `√(u²+v²+1) ≤ √3`).
 const CORNER_MARGIN: f32 = 4e-6;
 
+/// The pixels `[i0, i1) × [j0, j1)` of `px` (a view's, `ps` the pixel size, `vmin` the
+/// view's lowest `v`) that can meet the silhouette shrunk by the edges `ev`
+/// (`[a, b, c, s]`: a direction `(u, v, 1)` passes when `a·u + b·v + c ≥ s·√(u²+v²+1)`), or
+/// `None` when none can. Over the rectangle `√(u²+v²+1) ≥ l`, its value at the point nearest
+/// the view's centre, and `s ≥ 0`, so every passing direction of the rectangle lies in the
+/// convex polygon `a·u + b·v + c ≥ s·l` (loosened by a margin far above rounding): the
+/// rectangle clipped by each such half-plane. Its bound, rounded outward to whole pixels, holds
+/// every pixel with a passing point.
+fn shrunk_bound(
+    ev: &[[f32; 4]],
+    px: [usize; 4],
+    ps: f64,
+    vmin: f64,
+    poly: &mut [Vec<DVec2>; 2],
+) -> Option<[usize; 4]> {
+    let [i0, i1, j0, j1] = px;
+    let (u0, u1) = (-1.0 + i0 as f64 * ps, -1.0 + i1 as f64 * ps);
+    let (v0, v1) = (vmin + j0 as f64 * ps, vmin + j1 as f64 * ps);
+    let (nu, nv) = (0f64.clamp(u0, u1), 0f64.clamp(v0, v1));
+    let l = (nu * nu + nv * nv + 1.0).sqrt();
+    let [cur, next] = poly;
+    cur.clear();
+    cur.extend([
+        DVec2::new(u0, v0),
+        DVec2::new(u1, v0),
+        DVec2::new(u1, v1),
+        DVec2::new(u0, v1),
+    ]);
+    for e in ev {
+        let [a, b, c, s] = e.map(f64::from);
+        let k = c - s * l + 1e-5;
+        let f = |p: DVec2| a * p.x + b * p.y + k;
+        next.clear();
+        for i in 0..cur.len() {
+            let (p, q) = (cur[i], cur[(i + 1) % cur.len()]);
+            let (fp, fq) = (f(p), f(q));
+            if fp >= 0.0 {
+                next.push(p);
+            }
+            if (fp >= 0.0) != (fq >= 0.0) {
+                next.push(p + (q - p) * (fp / (fp - fq)));
+            }
+        }
+        std::mem::swap(cur, next);
+        if cur.is_empty() {
+            return None;
+        }
+    }
+    let (mut lo, mut hi) = (cur[0], cur[0]);
+    for &p in cur.iter() {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    let to_px = |t: f64, min: f64| ((t - min) / ps - 1e-6).floor();
+    let to_px_up = |t: f64, min: f64| ((t - min) / ps + 1e-6).ceil();
+    let bi0 = (to_px(lo.x, -1.0).max(i0 as f64) as usize).min(i1);
+    let bi1 = (to_px_up(hi.x, -1.0).min(i1 as f64) as usize).max(bi0);
+    let bj0 = (to_px(lo.y, vmin).max(j0 as f64) as usize).min(j1);
+    let bj1 = (to_px_up(hi.y, vmin).min(j1 as f64) as usize).max(bj0);
+    (bi0 < bi1 && bj0 < bj1).then_some([bi0, bi1, bj0, bj1])
+}
+
 /// `z` rounded up to `f32` with a relative margin of 1e-6 (far above the rounding of the
 /// depth computations); infinity stays infinity.
 fn round_up(z: f64) -> f32 {
@@ -313,6 +375,8 @@ pub struct Hemicube {
     near: f64,
     max_dist: f64,
     stack: Vec<u32>,
+    /// Scratch polygons of [`shrunk_bound`].
+    scratch_clip: [Vec<DVec2>; 2],
     pass: Vec<u8>,
     prev: Vec<u8>,
     /// Scratch per polygon: its vertices relative to the eye, its edges' planes and shrinks,
@@ -356,6 +420,7 @@ impl Hemicube {
             near: 0.0,
             max_dist: 0.0,
             stack: Vec::new(),
+            scratch_clip: [Vec::new(), Vec::new()],
             pass: vec![0; res + 1],
             prev: vec![0; res + 1],
             scratch_q: Vec::new(),
@@ -862,9 +927,6 @@ impl Hemicube {
         });
         let plane_h = self.near;
         let (eye, reach) = (self.eye, self.eps);
-        // A narrow projection may cover sub-pixels of pixels none of whose corners pass:
-        // all its pixels get masks. Otherwise only pixels with a passing corner do.
-        let thin = subpixel && (pi1 - pi0 <= 4 || pj1 - pj0 <= 4);
         let mut ev_buf = std::mem::take(&mut self.scratch_ev);
         ev_buf.clear();
         for &(m, s) in edges {
@@ -877,6 +939,23 @@ impl Hemicube {
             ]);
         }
         let ev = &ev_buf[..];
+        // Only pixels that meet the shrunk silhouette can be covered, and it lies inside the
+        // straight-edged polygon of the edges' tests with `√(u²+v²+1)` replaced by its least
+        // value over the pixels' rectangle: scan the bound of that polygon alone (none: the
+        // silhouette is empty here).
+        let Some([pi0, pi1, pj0, pj1]) = shrunk_bound(
+            ev,
+            [pi0, pi1, pj0, pj1],
+            ps,
+            view.vmin,
+            &mut self.scratch_clip,
+        ) else {
+            self.scratch_ev = ev_buf;
+            return false;
+        };
+        // A narrow silhouette may cover sub-pixels of pixels none of whose corners pass: all
+        // its pixels get masks. Otherwise only pixels with a passing corner do.
+        let thin = subpixel && (pi1 - pi0 <= 4 || pj1 - pj0 <= 4);
         // A polygon deep in this view (the ground, a wall seen at a slant) takes its plane's
         // depth per pixel instead: the largest of the pixel's corners (1/Z is affine over the
         // pixel, so Z is largest at a corner; a corner beyond the plane's horizon gives ∞).
@@ -1372,6 +1451,101 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `shrunk_bound` may only drop pixels that no test can cover: every passing corner
+    /// and every set sub-pixel of the rectangle it was given lies in the bound it returns
+    /// (and with `None`, none exists); and it must drop something often, or it is useless.
+    #[test]
+    fn the_shrunk_bound_keeps_every_pixel_a_test_can_cover() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let (res, vmin) = (64usize, -1.0);
+        let ps = 2.0 / res as f64;
+        let mut scratch = [Vec::new(), Vec::new()];
+        let (mut smaller, mut none) = (0, 0);
+        let cases = 3000;
+        for k in 0..cases {
+            let corners: Vec<DVec3> = (0..3 + k % 2)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * (i as f64 + 0.4 * rnd()) / (3 + k % 2) as f64;
+                    let (cu, cv, r) = (0.5 * rnd(), 0.5 * rnd(), 0.05 + 0.5 * rnd().abs());
+                    DVec3::new(cu + r * a.cos(), cv + r * a.sin(), 1.0)
+                })
+                .collect();
+            let centroid = corners.iter().sum::<DVec3>() / corners.len() as f64;
+            let ev: Vec<[f32; 4]> = (0..corners.len())
+                .map(|i| {
+                    let mut m = corners[i]
+                        .cross(corners[(i + 1) % corners.len()])
+                        .normalize();
+                    if m.dot(centroid) < 0.0 {
+                        m = -m;
+                    }
+                    let s = rnd().abs() * [0.0, 0.01, 0.05][k % 3];
+                    [m.x as f32, m.y as f32, m.z as f32, s as f32]
+                })
+                .collect();
+            let i0 = ((rnd() * 0.5 + 0.5) * res as f64 * 0.5) as usize;
+            let j0 = ((rnd() * 0.5 + 0.5) * res as f64 * 0.5) as usize;
+            let px = [
+                i0,
+                (i0 + 4 + k % 40).min(res),
+                j0,
+                (j0 + 4 + k % 37).min(res),
+            ];
+            let bound = shrunk_bound(&ev, px, ps, vmin, &mut scratch);
+            let inside = |i: usize, j: usize, corner: bool| match bound {
+                None => false,
+                Some([bi0, bi1, bj0, bj1]) => {
+                    let (ie, je) = if corner {
+                        (bi1 + 1, bj1 + 1)
+                    } else {
+                        (bi1, bj1)
+                    };
+                    (bi0..ie).contains(&i) && (bj0..je).contains(&j)
+                }
+            };
+            match bound {
+                None => none += 1,
+                Some(b) if b != px => smaller += 1,
+                _ => {}
+            }
+            for j in px[2]..=px[3] {
+                for i in px[0]..=px[1] {
+                    let (u, v) = (-1.0 + i as f64 * ps, vmin + j as f64 * ps);
+                    let l = (u * u + v * v + 1.0).sqrt() as f32;
+                    let (uf, vf) = (u as f32, v as f32);
+                    let passes = ev
+                        .iter()
+                        .all(|e| e[0] * uf + e[1] * vf + e[2] - e[3] * l >= CORNER_MARGIN);
+                    assert!(
+                        !passes || inside(i, j, true),
+                        "case {k}: corner ({i}, {j}) passes outside {bound:?} of {px:?}"
+                    );
+                    if i < px[1] && j < px[3] && !inside(i, j, false) {
+                        let lmax = [(0.0, 0.0), (ps, 0.0), (0.0, ps), (ps, ps)]
+                            .iter()
+                            .map(|&(du, dv)| ((u + du).powi(2) + (v + dv).powi(2) + 1.0).sqrt())
+                            .fold(0.0, f64::max);
+                        assert_eq!(
+                            pixel_mask(&ev, u, v, ps, lmax),
+                            0,
+                            "case {k}: pixel ({i}, {j}) has sub-pixels outside {bound:?}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            smaller + none > cases / 2,
+            "the bound dropped pixels in only {smaller} + {none} of {cases} cases"
+        );
     }
 
     fn wall(z: f64, half: f64) -> Vec<DVec3> {

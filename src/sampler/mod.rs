@@ -69,6 +69,11 @@
 //! error). Such a pixel is covered by `L` at depth `z_max(L)`, the largest view depth of its
 //! vertices rounded up: every ray in the pixel crosses `L` no deeper. A pixel keeps the nearest
 //! depth of the polygons covering it, so different polygons cover different pixels: fusion.
+//! Only the pixels that meet the straight-edged polygon `a·u + b·v + c ≥ s·l` (all edges,
+//! `l` the least `√(u²+v²+1)` over the pixels the projection touches) are scanned: every
+//! direction passing the exact tests lies in it, since there `√(u²+v²+1) ≥ l` and `s ≥ 0`.
+//! When it is empty the polygon is skipped in that view (large ε shrinks most leaves to
+//! nothing; skipping only ever leaves pixels uncovered, so this cannot make a test unsound).
 //!
 //! **Sub-pixels.** A pixel no single polygon covers is split into 8 × 8 sub-pixels. For each
 //! edge the condition is relaxed to the linear `a·u + b·v + c − s·l_max ≥ margin`, where
