@@ -1384,17 +1384,21 @@ mod tests {
     use super::*;
     use crate::sampler::SampleOccluders;
 
-    /// A sub-pixel is set only when the exact (curved) test holds all over it, and with
-    /// straight edges (`s` = 0) exactly when it holds at its four corners.
-    #[test]
-    fn pixel_masks_hold_their_edges_tests_and_no_more() {
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = || {
+    /// A seeded xorshift generator of numbers uniform in `[-1, 1)`.
+    fn uniform(mut x: u64) -> impl FnMut() -> f64 {
+        move || {
             x ^= x << 13;
             x ^= x >> 7;
             x ^= x << 17;
             (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        }
+    }
+
+    /// A sub-pixel is set only when the exact (curved) test holds all over it, and with
+    /// straight edges (`s` = 0) exactly when it holds at its four corners.
+    #[test]
+    fn pixel_masks_hold_their_edges_tests_and_no_more() {
+        let mut rnd = uniform(0x9e37_79b9_7f4a_7c15u64);
         let margin = f64::from(CORNER_MARGIN);
         for k in 0..20_000 {
             let ps = [2.0 / 256.0, 2.0 / 16.0, 1e-4][k % 3];
@@ -1458,13 +1462,7 @@ mod tests {
     /// (and with `None`, none exists); and it must drop something often, or it is useless.
     #[test]
     fn the_shrunk_bound_keeps_every_pixel_a_test_can_cover() {
-        let mut x = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = uniform(0x2545_f491_4f6c_dd1du64);
         let (res, vmin) = (64usize, -1.0);
         let ps = 2.0 / res as f64;
         let mut scratch = [Vec::new(), Vec::new()];
