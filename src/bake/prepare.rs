@@ -270,11 +270,10 @@ impl<'a> Prepared<'a> {
                 "{sampling_reason}; finest ε {:.4} ({})",
                 d.eps, d.eps_reason
             );
-            if d.max_eps.is_finite() {
+            if let Some(m) = settings.sampling_settings.max_eps {
                 sampling_reason = format!(
-                    "{sampling_reason}; levels coarser than ε {:.4} split unsampled \
-                     (--sampling-max-eps)",
-                    d.max_eps
+                    "{sampling_reason}; levels coarser than ε {m:.4} split unsampled \
+                     (--sampling-max-eps)"
                 );
             }
             d

@@ -66,9 +66,6 @@ pub struct SamplerData {
     pub eps: f64,
     /// Where `eps` came from, one line for the summary.
     pub eps_reason: String,
-    /// The coarsest ε sampled (`--sampling-max-eps`, infinite by default); coarser levels are
-    /// split without rendering.
-    pub max_eps: f64,
     /// The sampler's settings.
     pub settings: SamplingSettings,
 }
@@ -78,7 +75,6 @@ impl std::fmt::Debug for SamplerData {
         f.debug_struct("SamplerData")
             .field("occluders", &self.occluders)
             .field("eps", &self.eps)
-            .field("max_eps", &self.max_eps)
             .finish()
     }
 }
@@ -107,9 +103,7 @@ impl SamplerData {
             }
             None => (1.0, "no occluder polygons".into()),
         };
-        let max_eps = s.max_eps.unwrap_or(f64::INFINITY);
         SamplerData {
-            max_eps,
             occluders,
             rays: SceneRays::new(scene),
             eps,
@@ -310,7 +304,7 @@ impl Culler for SamplingCuller {
                 .iter()
                 .map(|(p, _)| p.half_diagonal())
                 .fold(0.0, f64::max);
-            if level_eps > data.max_eps && level_eps > data.eps * (1.0 + 1e-6) {
+            if s.max_eps.is_some_and(|m| level_eps > m) && level_eps > data.eps * (1.0 + 1e-6) {
                 // Coarser than `--sampling-max-eps`: split without sampling (the quadrants
                 // cover each rectangle exactly, so the faces stay covered).
                 level = level

@@ -24,14 +24,14 @@ const CORNER_MARGIN: f32 = 4e-6;
 /// `None` when none can. Over the rectangle `√(u²+v²+1) ≥ l`, its value at the point nearest
 /// the view's centre, and `s ≥ 0`, so every passing direction of the rectangle lies in the
 /// convex polygon `a·u + b·v + c ≥ s·l` (loosened by a margin far above rounding): the
-/// rectangle clipped by each such half-plane. Its bound, rounded outward to whole pixels, holds
-/// every pixel with a passing point.
+/// rectangle clipped by each such half-plane ([`clip`] on the points `(u, v, 1)`). Its bound,
+/// rounded outward to whole pixels, holds every pixel with a passing point.
 fn shrunk_bound(
     ev: &[[f32; 4]],
     px: [usize; 4],
     ps: f64,
     vmin: f64,
-    poly: &mut [Vec<DVec2>; 2],
+    poly: &mut [Vec<DVec3>; 2],
 ) -> Option<[usize; 4]> {
     let [i0, i1, j0, j1] = px;
     let (u0, u1) = (-1.0 + i0 as f64 * ps, -1.0 + i1 as f64 * ps);
@@ -41,27 +41,14 @@ fn shrunk_bound(
     let [cur, next] = poly;
     cur.clear();
     cur.extend([
-        DVec2::new(u0, v0),
-        DVec2::new(u1, v0),
-        DVec2::new(u1, v1),
-        DVec2::new(u0, v1),
+        DVec3::new(u0, v0, 1.0),
+        DVec3::new(u1, v0, 1.0),
+        DVec3::new(u1, v1, 1.0),
+        DVec3::new(u0, v1, 1.0),
     ]);
     for e in ev {
         let [a, b, c, s] = e.map(f64::from);
-        let k = c - s * l + 1e-5;
-        let f = |p: DVec2| a * p.x + b * p.y + k;
-        next.clear();
-        for i in 0..cur.len() {
-            let (p, q) = (cur[i], cur[(i + 1) % cur.len()]);
-            let (fp, fq) = (f(p), f(q));
-            if fp >= 0.0 {
-                next.push(p);
-            }
-            if (fp >= 0.0) != (fq >= 0.0) {
-                next.push(p + (q - p) * (fp / (fp - fq)));
-            }
-        }
-        std::mem::swap(cur, next);
+        clip(cur, DVec3::new(a, b, c - s * l + 1e-5), next);
         if cur.is_empty() {
             return None;
         }
@@ -376,7 +363,7 @@ pub struct Hemicube {
     max_dist: f64,
     stack: Vec<u32>,
     /// Scratch polygons of [`shrunk_bound`].
-    scratch_clip: [Vec<DVec2>; 2],
+    scratch_clip: [Vec<DVec3>; 2],
     pass: Vec<u8>,
     prev: Vec<u8>,
     /// Scratch per polygon: its vertices relative to the eye, its edges' planes and shrinks,
