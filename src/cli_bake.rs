@@ -228,9 +228,13 @@ pub struct BakeArgs {
     /// level enough to pay for it).
     #[arg(long, value_name = "E")]
     pub sampling_max_eps: Option<f64>,
-    /// Pixels across each 90° view of the hemicube the sampler renders per point.
-    #[arg(long, default_value_t = BakeSettings::default_settings().sampling_settings.resolution)]
-    pub sampling_resolution: u32,
+    /// Pixels across each 90° view of the hemicube the sampler renders per point, at every
+    /// level; `auto` (the default) picks per cell and level the power of two nearest
+    /// 8 × h/ε, h the median distance at which the cell's rays first hit something, within
+    /// 256–2048 (a pixel about a quarter of a leaf's shrink at that distance). The summary
+    /// prints the resolutions used.
+    #[arg(long, value_name = "N|auto")]
+    pub sampling_resolution: Option<String>,
     /// Rays cast from each cell before sampling: objects they see are visible for sure and
     /// are not sampled (0 turns this off).
     #[arg(long, default_value_t = BakeSettings::default_settings().sampling_settings.rays)]
@@ -456,7 +460,15 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         eps: a.sampling_eps,
         levels: a.sampling_levels,
         max_eps: a.sampling_max_eps,
-        resolution: a.sampling_resolution,
+        resolution: match a.sampling_resolution.as_deref() {
+            None | Some("auto") => None,
+            Some(v) => match v.parse::<u32>() {
+                Ok(n) => Some(n),
+                Err(_) => bail!(
+                    "--sampling-resolution {v:?}: expected pixels per 90° view (e.g. 512) or `auto`"
+                ),
+            },
+        },
         rays: a.sampling_rays,
         band_ratio: a.sampling_band_ratio,
         ..BakeSettings::default_settings().sampling_settings
@@ -905,8 +917,8 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             );
             for (k, l) in c.levels.iter().enumerate() {
                 eprintln!(
-                    "  level {k}   ε ≤ {:.4}: {:.0} points, {:.1} s, {:.1} objects hidden (mean per cell, all levels so far)",
-                    l.eps, l.points, l.seconds, l.hidden
+                    "  level {k}   ε ≤ {:.4}, {} px: {:.0} points, {:.1} s, {:.1} objects hidden (mean per cell, all levels so far)",
+                    l.eps, l.resolution, l.points, l.seconds, l.hidden
                 );
             }
         }

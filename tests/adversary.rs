@@ -353,7 +353,7 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
                 sampling_settings: umbrasweep::settings::SamplingSettings {
                     rays: 0,
                     budget_points: 400,
-                    resolution: 32,
+                    resolution: Some(32),
                     ..Default::default()
                 },
                 ..BakeSettings::default()

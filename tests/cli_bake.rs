@@ -187,6 +187,10 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
             &["--sampling-resolution", "8"][..],
             "--sampling-resolution 8",
         ),
+        (
+            &["--sampling-resolution", "lots"][..],
+            "--sampling-resolution \"lots\"",
+        ),
         (&["--sampling-levels", "40"][..], "--sampling-levels 40"),
         (&["--sampling", "--no-sampling"][..], "--no-sampling"),
     ] {
@@ -215,6 +219,9 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
             "0.5",
             "--sampling-max-eps",
             "2",
+            // No certifying rays: the sampler tests every object the planes left.
+            "--sampling-rays",
+            "0",
         ])
         .arg("-o")
         .arg(&out)
@@ -238,19 +245,74 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
     assert_eq!(s["sampling_budget_seconds"], serde_json::json!(60.0));
     assert_eq!(s["sampling_eps"], serde_json::json!(0.5));
     assert_eq!(s["sampling_max_eps"], serde_json::json!(2.0));
+    // The resolution is chosen per cell and level (recorded as null in the settings).
+    assert_eq!(s["sampling_resolution"], serde_json::Value::Null);
+    let mut levels = 0;
     for cell in doc["cells"].as_array().unwrap() {
         // The sampler runs last (after ray space factorization where it runs, and the planes).
         let cullers = cell["cullers"].as_array().unwrap();
         let sampler = cullers.last().unwrap();
         assert_eq!(sampler["name"], "shrunk_sampling");
         assert!(sampler["points"].as_u64().unwrap_or(0) <= 40, "{sampler}");
+        for l in sampler["levels"].as_array().into_iter().flatten() {
+            let r = l["resolution"].as_u64().unwrap();
+            assert!(
+                r.is_power_of_two() && (256..=2048).contains(&r),
+                "{sampler}"
+            );
+            levels += 1;
+        }
     }
+    assert!(levels > 0, "no cell sampled a level");
+    assert!(stderr.contains(" px: "), "{stderr}");
+    assert!(
+        stderr.contains("pixels per view chosen per cell and level"),
+        "{stderr}"
+    );
     // The target behind the wall stays culled, the triangle beside it visible from cell 1.
     assert!(
         !doc["cells"][0]["visible"]
             .as_array()
             .unwrap()
             .contains(&serde_json::json!(1))
+    );
+}
+
+/// `--sampling-resolution N` renders every level at N pixels, recorded in the settings and
+/// in each level of the cost curve.
+#[test]
+fn a_given_sampling_resolution_is_used_at_every_level() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut cmd, out) = wall_bake(dir.path());
+    let r = cmd
+        .args(["--backend", "cpu", "--sampling", "--sampling-eps", "0.5"])
+        .args(["--sampling-budget", "40", "--sampling-resolution", "64"])
+        .args(["--sampling-rays", "0", "--no-rsf"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{stderr}");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        doc["settings"]["sampling_resolution"],
+        serde_json::json!(64)
+    );
+    let levels: Vec<u64> = doc["cells"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|c| c["cullers"].as_array().unwrap().clone())
+        .filter(|c| c["name"] == "shrunk_sampling")
+        .flat_map(|c| c["levels"].as_array().cloned().unwrap_or_default())
+        .map(|l| l["resolution"].as_u64().unwrap())
+        .collect();
+    assert!(!levels.is_empty(), "{doc}");
+    assert!(levels.iter().all(|&r| r == 64), "{levels:?}");
+    assert!(stderr.contains(", 64 px: "), "{stderr}");
+    assert!(
+        stderr.contains("64 px per view (--sampling-resolution)"),
+        "{stderr}"
     );
 }
 

@@ -305,7 +305,7 @@ fn run_placed(build: impl Fn(Xf) -> Case) {
             sampling_settings: umbrasweep::settings::SamplingSettings {
                 rays: 0,
                 budget_points: 3000,
-                resolution: 64,
+                resolution: Some(64),
                 ..Default::default()
             },
             ..BakeSettings::default()

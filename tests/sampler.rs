@@ -97,7 +97,7 @@ fn settings() -> BakeSettings {
         sampling_settings: SamplingSettings {
             eps: Some(0.1),
             levels: 1,
-            resolution: 64,
+            resolution: Some(64),
             rays: 0,
             ..SamplingSettings::default()
         },
@@ -299,7 +299,7 @@ fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
             sampling_settings: SamplingSettings {
                 eps: Some(0.05),
                 levels: 3,
-                resolution: 64,
+                resolution: Some(64),
                 rays: 0,
                 budget_points,
                 ..SamplingSettings::default()

@@ -321,6 +321,7 @@ mod tests {
                     finest_eps: Some(0.0123),
                     levels: vec![crate::pvs::SamplingLevel {
                         eps: 0.5,
+                        resolution: 512,
                         points: 5,
                         seconds: 0.25,
                         hidden: k,

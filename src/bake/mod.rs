@@ -625,6 +625,7 @@ fn level_summary(curves: &[&[crate::pvs::SamplingLevel]]) -> Vec<crate::pvs::Pvs
             };
             crate::pvs::PvsLevelSummary {
                 eps: curves.iter().map(|c| at(c).eps).fold(0.0, f64::max),
+                resolution: curves.iter().map(|c| at(c).resolution).max().unwrap_or(0),
                 points: mean(&|l| l.points as f64),
                 seconds: mean(&|l| l.seconds),
                 hidden: mean(&|l| f64::from(l.hidden)),

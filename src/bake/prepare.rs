@@ -276,6 +276,16 @@ impl<'a> Prepared<'a> {
                      (--sampling-max-eps)"
                 );
             }
+            sampling_reason = match settings.sampling_settings.resolution {
+                Some(r) => format!("{sampling_reason}; {r} px per view (--sampling-resolution)"),
+                None => format!(
+                    "{sampling_reason}; pixels per view chosen per cell and level ({} × the \
+                     median ray hit distance / ε, {}–{})",
+                    crate::settings::SamplingSettings::AUTO_PIXELS,
+                    crate::settings::SamplingSettings::AUTO_RESOLUTION.0,
+                    crate::settings::SamplingSettings::AUTO_RESOLUTION.1
+                ),
+            };
             d
         });
         let Pieces {

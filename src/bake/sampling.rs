@@ -50,7 +50,7 @@ use crate::pvs::SamplingLevel;
 use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
 use crate::settings::SamplingSettings;
 use crate::validate::SceneRays;
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -240,6 +240,17 @@ impl Culler for SamplingCuller {
         });
         let s = data.settings;
         let eps0 = data.eps * f64::from(1u32 << s.levels.min(20));
+        // The automatic resolution's scale: where the cell's rays first hit (NaN: never).
+        let hit_distance = if s.resolution.is_none() {
+            median_hit_distance(
+                &data.rays,
+                cell,
+                cell_seed(cell) ^ 0x5eed,
+                prepared.settings.alpha_occluders,
+            )
+        } else {
+            f64::NAN
+        };
         let shared = Shared {
             data,
             prepared,
@@ -313,10 +324,13 @@ impl Culler for SamplingCuller {
                     .collect();
                 continue;
             }
+            let resolution = s
+                .resolution
+                .unwrap_or_else(|| SamplingSettings::auto_resolution(hit_distance, level_eps));
             let open: Vec<Option<Arc<Vec<u32>>>> = level
                 .par_iter()
                 .map_init(
-                    || Hemicube::new(s.resolution),
+                    || Hemicube::new(resolution),
                     |hc, (patch, list)| shared.patch(hc, *patch, list),
                 )
                 .collect();
@@ -327,6 +341,7 @@ impl Culler for SamplingCuller {
             }
             curve.push(SamplingLevel {
                 eps: level_eps,
+                resolution,
                 points: shared.points.load(Ordering::Relaxed),
                 seconds: shared.start.elapsed().as_secs_f64(),
                 hidden: candidates
@@ -391,6 +406,42 @@ fn distance_bands(eye: DVec3, boxes: &[DAabb], ratio: f64) -> Vec<Vec<usize>> {
     }
     bands.retain(|b| !b.is_empty());
     bands
+}
+
+/// Rays [`median_hit_distance`] casts per cell.
+const HIT_RAYS: usize = 4096;
+
+/// The median distance at which rays from random points of `cell` in random directions first
+/// hit a blocking triangle (rays that hit nothing left out), or NaN when none hits: the scale
+/// of the automatic sampling resolution ([`SamplingSettings::auto_resolution`]). Deterministic
+/// per cell (`seed`).
+fn median_hit_distance(rays: &SceneRays, cell: &Aabb, seed: u64, alpha_blocks: bool) -> f64 {
+    let mut state = seed | 1;
+    let mut uniform = move || {
+        // xorshift64*: plenty for choosing ray origins and directions.
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let mut hits: Vec<f32> = Vec::with_capacity(HIT_RAYS);
+    for _ in 0..HIT_RAYS {
+        let origin = cell.min + (cell.max - cell.min) * Vec3::new(uniform(), uniform(), uniform());
+        let direction = loop {
+            let d = Vec3::new(uniform(), uniform(), uniform()) * 2.0 - Vec3::ONE;
+            if (0.01..=1.0).contains(&d.length_squared()) {
+                break d;
+            }
+        };
+        if let Some(h) = rays.trace(origin, direction, alpha_blocks).last() {
+            hits.push(h.t * direction.length());
+        }
+    }
+    if hits.is_empty() {
+        return f64::NAN;
+    }
+    let mid = hits.len() / 2;
+    f64::from(*hits.select_nth_unstable_by(mid, f32::total_cmp).1)
 }
 
 /// A seed for the cell's certifying rays, from its coordinates (same cell, same rays).

@@ -152,6 +152,10 @@ pub struct PvsCellCuller {
 pub struct SamplingLevel {
     /// The largest ε of the level's sample points (their rectangles' half diagonals).
     pub eps: f64,
+    /// Pixels across each 90° view of the hemicubes rendered at this level (0 in documents
+    /// written before it was recorded).
+    #[serde(default)]
+    pub resolution: u32,
     /// Sample points rendered up to the end of this level (all levels so far).
     pub points: u64,
     /// Seconds of sampling up to the end of this level (0 with `--reproducible`).
@@ -247,6 +251,10 @@ pub struct PvsCullerSummary {
 pub struct PvsLevelSummary {
     /// The largest ε of the level's sample points in any cell.
     pub eps: f64,
+    /// The largest resolution rendered at the level in any cell (pixels across each 90°
+    /// view; 0 in documents written before it was recorded).
+    #[serde(default)]
+    pub resolution: u32,
     /// Sample points up to the end of the level, mean per cell.
     pub points: f64,
     /// Seconds of sampling up to the end of the level, mean per cell.
