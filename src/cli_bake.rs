@@ -228,6 +228,12 @@ pub struct BakeArgs {
     /// level enough to pay for it).
     #[arg(long, value_name = "E")]
     pub sampling_max_eps: Option<f64>,
+    /// Each level but the finest is first sampled at every 16th rectangle (at least 8); when
+    /// those prove hidden less than this fraction of the objects they test, the rest of the
+    /// level is split without sampling (on fine foliage the coarse levels hide nothing and
+    /// cost as much per point as the finest). 0 samples every level whole.
+    #[arg(long, value_name = "FRACTION", default_value_t = BakeSettings::default_settings().sampling_settings.probe)]
+    pub sampling_probe: f64,
     /// Pixels across each 90° view of the hemicube the sampler renders per point, at every
     /// level; `auto` (the default) picks per cell and level the power of two nearest
     /// 8 × h/ε, h the median distance at which the cell's rays first hit something, within
@@ -460,6 +466,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         eps: a.sampling_eps,
         levels: a.sampling_levels,
         max_eps: a.sampling_max_eps,
+        probe: a.sampling_probe,
         resolution: match a.sampling_resolution.as_deref() {
             None | Some("auto") => None,
             Some(v) => match v.parse::<u32>() {
@@ -916,8 +923,16 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 c.name, c.hidden, c.only, c.ms
             );
             for (k, l) in c.levels.iter().enumerate() {
+                let probe = if l.probe_only > 0.0 {
+                    format!(
+                        "; in {:.0} % of the cells only its probe was sampled (--sampling-probe)",
+                        100.0 * l.probe_only
+                    )
+                } else {
+                    String::new()
+                };
                 eprintln!(
-                    "  level {k}   ε ≤ {:.4}, {} px: {:.0} points, {:.1} s, {:.1} objects hidden (mean per cell, all levels so far)",
+                    "  level {k}   ε ≤ {:.4}, {} px: {:.0} points, {:.1} s, {:.1} objects hidden (mean per cell, all levels so far){probe}",
                     l.eps, l.resolution, l.points, l.seconds, l.hidden
                 );
             }

@@ -73,7 +73,8 @@ pub struct BakeSettings {
     #[serde(default = "sampling_of_old_documents")]
     pub sampling: SamplingChoice,
     /// The sampler's finest ε, budget, resolution and certification rays (recorded as
-    /// `sampling_eps`, `sampling_levels`, `sampling_max_eps`, `sampling_budget_points`,
+    /// `sampling_eps`, `sampling_levels`, `sampling_max_eps`, `sampling_probe`,
+    /// `sampling_budget_points`,
     /// `sampling_budget_seconds`, `sampling_resolution`, `sampling_rays`,
     /// `sampling_band_ratio`).
     #[serde(flatten)]
@@ -199,6 +200,12 @@ pub struct SamplingSettings {
     /// and skipping it cost time (4×2×4 cell: 742 s instead of 680 s; 1×1×1: 61 s, 59 s).
     #[serde(rename = "sampling_max_eps")]
     pub max_eps: Option<f64>,
+    /// Levels other than the finest are first sampled at a probe of their rectangles (every
+    /// [`SamplingSettings::PROBE_STRIDE`]-th, at least [`SamplingSettings::PROBE_MIN`]); when
+    /// the probe proves hidden less than this fraction of the objects it tests, the rest of the
+    /// level is split without sampling. Default 0.01; 0 samples every level whole.
+    #[serde(rename = "sampling_probe", default = "default_probe")]
+    pub probe: f64,
     /// At most this many sample points per cell; objects still undecided then stay visible.
     /// Default 50,000.
     #[serde(rename = "sampling_budget_points")]
@@ -227,6 +234,11 @@ pub struct SamplingSettings {
 impl SamplingSettings {
     /// The default finest ε is this × the median inradius of the occluder polygons.
     pub const EPS_PER_INRADIUS: f64 = 0.35;
+
+    /// A level's probe takes every this-many-th rectangle ([`SamplingSettings::probe`]).
+    pub const PROBE_STRIDE: usize = 16;
+    /// A level's probe takes at least this many rectangles (all when it has fewer).
+    pub const PROBE_MIN: usize = 8;
 
     /// The automatic resolution's pixels per unit of `h/ε` (see [`Self::auto_resolution`]).
     pub const AUTO_PIXELS: f64 = 8.0;
@@ -274,6 +286,7 @@ impl SamplingSettings {
             eps: None,
             levels: 2,
             max_eps: None,
+            probe: 0.01,
             budget_points: 50_000,
             budget_seconds: None,
             resolution: None,
@@ -287,6 +300,11 @@ impl Default for SamplingSettings {
     fn default() -> Self {
         Self::default_settings()
     }
+}
+
+/// Documents written before level probes sampled every level whole.
+fn default_probe() -> f64 {
+    0.0
 }
 
 fn square_maps() -> u32 {
@@ -525,6 +543,13 @@ impl BakeSettings {
                 "sampling-eps",
                 e,
                 "must be a positive distance in scene units (e.g. 0.05 for leaves 0.5 across)",
+            ));
+        }
+        if !(0.0..=1.0).contains(&sa.probe) {
+            return Err(SettingsError::new(
+                "sampling-probe",
+                sa.probe,
+                "must be a fraction between 0 (sample every level whole) and 1 (e.g. 0.01)",
             ));
         }
         if let Some(e) = sa.max_eps

@@ -183,6 +183,7 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
         (&["--sampling-eps", "0"][..], "--sampling-eps 0"),
         (&["--sampling-eps", "nan"][..], "--sampling-eps"),
         (&["--sampling-max-eps", "0"][..], "--sampling-max-eps 0"),
+        (&["--sampling-probe", "2"][..], "--sampling-probe 2"),
         (
             &["--sampling-resolution", "8"][..],
             "--sampling-resolution 8",

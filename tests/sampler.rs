@@ -423,3 +423,41 @@ fn levels_coarser_than_the_largest_sampled_eps_are_split_unsampled() {
     assert!((finest.levels[0].eps - top / 8.0).abs() < 1e-12);
     assert!(finest.levels[0].points > some.levels[0].points);
 }
+
+/// A level whose probe (every few rectangles) proves nothing hidden is split without sampling
+/// the rest; the finest level is always sampled whole, and the result is the same.
+#[test]
+fn a_level_whose_probe_proves_nothing_is_split_unsampled() {
+    let (scene, cell) = scene(None);
+    let run = |probe: f64| {
+        let mut s = settings();
+        s.sampling_settings.levels = 3;
+        s.sampling_settings.eps = Some(0.05);
+        s.sampling_settings.probe = probe;
+        run_sampler(&scene, &cell, &s)
+    };
+    // Level 0 (ε 0.354, 2 × 2 rectangles per face; the probe takes every third, 8, less
+    // those with nothing beyond them): the shrink leaves nothing of the ~1-unit leaves.
+    let (whole_hidden, whole) = run(0.0);
+    let (probed_hidden, probed) = run(0.01);
+    assert!(
+        whole.levels.iter().all(|l| !l.probe_only),
+        "{:?}",
+        whole.levels
+    );
+    let (w0, p0) = (whole.levels[0], probed.levels[0]);
+    assert_eq!(w0.hidden, 0, "{:?}", whole.levels);
+    assert!(p0.probe_only, "{:?}", probed.levels);
+    assert!(
+        p0.points > 0 && p0.points <= SamplingSettings::PROBE_MIN as u64 && p0.points < w0.points,
+        "{:?} {:?}",
+        probed.levels,
+        whole.levels
+    );
+    // The finest level is sampled whole, never cut short by its probe.
+    assert!(!probed.levels.last().unwrap().probe_only);
+    // The same objects culled: the fused leaves hide the target, nothing else.
+    assert_eq!(probed_hidden, whole_hidden);
+    assert!(probed_hidden[0] && !probed_hidden[1]);
+    brute_force_hidden(&scene, &cell, 0);
+}

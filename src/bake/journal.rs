@@ -325,6 +325,7 @@ mod tests {
                         points: 5,
                         seconds: 0.25,
                         hidden: k,
+                        probe_only: k.is_multiple_of(2),
                     }],
                 },
             }],

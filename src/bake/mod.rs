@@ -629,6 +629,7 @@ fn level_summary(curves: &[&[crate::pvs::SamplingLevel]]) -> Vec<crate::pvs::Pvs
                 points: mean(&|l| l.points as f64),
                 seconds: mean(&|l| l.seconds),
                 hidden: mean(&|l| f64::from(l.hidden)),
+                probe_only: mean(&|l| f64::from(u8::from(l.probe_only))),
             }
         })
         .collect()

@@ -31,7 +31,10 @@
 //!    any of the next), so a budget that runs out costs the finest levels, not whole faces;
 //!    the order never changes which rectangles cover a face, only how many are sampled.
 //!    Levels coarser than `--sampling-max-eps` are split without being sampled: their
-//!    quadrants cover them exactly and inherit every candidate.
+//!    quadrants cover them exactly and inherit every candidate. So is the rest of a level
+//!    (never the finest) whose probe, every 16th of its rectangles, proves hidden less than
+//!    `--sampling-probe` of the objects it tests: the probed rectangles pass on what they
+//!    left open, the others every candidate still undecided.
 //! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
 //!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
 //!    candidate list; that can only keep objects in the PVS.
@@ -173,6 +176,10 @@ struct Shared<'a> {
     polygons: AtomicU64,
     /// The smallest ε rendered, as f64 bits (positive floats order like their bits).
     finest: AtomicU64,
+    /// Object tests at a sample point so far, and those that proved the object hidden there
+    /// (a level's probe compares them).
+    tested: AtomicU64,
+    hid: AtomicU64,
     start: Instant,
 }
 
@@ -259,6 +266,8 @@ impl Culler for SamplingCuller {
             points: AtomicU64::new(0),
             polygons: AtomicU64::new(0),
             finest: AtomicU64::new(f64::INFINITY.to_bits()),
+            tested: AtomicU64::new(0),
+            hid: AtomicU64::new(0),
             start: Instant::now(),
         };
         // Top-level patches: a grid per face whose rectangles' half diagonals are at most eps0.
@@ -327,13 +336,56 @@ impl Culler for SamplingCuller {
             let resolution = s
                 .resolution
                 .unwrap_or_else(|| SamplingSettings::auto_resolution(hit_distance, level_eps));
-            let open: Vec<Option<Arc<Vec<u32>>>> = level
-                .par_iter()
-                .map_init(
-                    || Hemicube::new(resolution),
-                    |hc, (patch, list)| shared.patch(hc, *patch, list),
-                )
-                .collect();
+            let sample = |indices: &[usize]| -> Vec<Option<Arc<Vec<u32>>>> {
+                indices
+                    .par_iter()
+                    .map_init(
+                        || Hemicube::new(resolution),
+                        |hc, &i| shared.patch(hc, level[i].0, &level[i].1),
+                    )
+                    .collect()
+            };
+            // Every level but the finest starts with a probe of its rectangles; when that
+            // proves too little the rest is split unsampled (their quadrants inherit every
+            // candidate, as for `--sampling-max-eps`).
+            let finest_level = level_eps <= data.eps * (1.0 + 1e-6);
+            let stride = SamplingSettings::PROBE_STRIDE
+                .min(level.len() / SamplingSettings::PROBE_MIN)
+                .max(1);
+            let mut open: Vec<Option<Arc<Vec<u32>>>> = vec![None; level.len()];
+            let mut probe_only = false;
+            if s.probe > 0.0 && !finest_level && stride > 1 {
+                let probe: Vec<usize> = (0..level.len()).step_by(stride).collect();
+                let (t0, h0) = (
+                    shared.tested.load(Ordering::Relaxed),
+                    shared.hid.load(Ordering::Relaxed),
+                );
+                for (&i, o) in probe.iter().zip(sample(&probe)) {
+                    open[i] = o;
+                }
+                let tested = shared.tested.load(Ordering::Relaxed) - t0;
+                let hid = shared.hid.load(Ordering::Relaxed) - h0;
+                let rest: Vec<usize> = (0..level.len()).filter(|i| i % stride != 0).collect();
+                if (hid as f64) < s.probe * tested as f64 && !shared.spent() {
+                    probe_only = true;
+                    for i in rest {
+                        let list = &level[i].1;
+                        let list: Vec<u32> = list
+                            .iter()
+                            .copied()
+                            .filter(|&o| !shared.done[o as usize].load(Ordering::Relaxed))
+                            .collect();
+                        open[i] = (!list.is_empty()).then(|| Arc::new(list));
+                    }
+                } else {
+                    for (i, o) in rest.iter().zip(sample(&rest)) {
+                        open[*i] = o;
+                    }
+                }
+            } else {
+                let all: Vec<usize> = (0..level.len()).collect();
+                open = sample(&all);
+            }
             // The cost curve: what a budget that ran out here would have culled.
             undecided.fill(false);
             for &o in open.iter().flatten().flat_map(|l| l.iter()) {
@@ -350,6 +402,7 @@ impl Culler for SamplingCuller {
                         !undecided[o as usize] && !shared.done[o as usize].load(Ordering::Relaxed)
                     })
                     .count() as u32,
+                probe_only,
             });
             if shared.spent() {
                 // The next level would sample nothing: what it would test stays visible.
@@ -531,8 +584,12 @@ impl Shared<'_> {
                     // Certified visible by another point's rays meanwhile.
                     continue;
                 }
+                self.tested.fetch_add(1, Ordering::Relaxed);
                 let test = match hc.test_box(bx) {
-                    BoxTest::Hidden => continue,
+                    BoxTest::Hidden => {
+                        self.hid.fetch_add(1, Ordering::Relaxed);
+                        continue;
+                    }
                     BoxTest::Open { direction } => {
                         let pieces = self.prepared.pieces[o as usize].clone();
                         let mut first = None;
@@ -549,7 +606,10 @@ impl Shared<'_> {
                         }
                     }
                 };
-                let Some(direction) = test else { continue };
+                let Some(direction) = test else {
+                    self.hid.fetch_add(1, Ordering::Relaxed);
+                    continue;
+                };
                 // Undecided here: try to certify it with real rays from the eye.
                 if rays < CERTIFY_PER_POINT {
                     rays += self.certify(eye, o, direction);

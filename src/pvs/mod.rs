@@ -163,6 +163,10 @@ pub struct SamplingLevel {
     /// Objects the sampler had proved hidden from every face by the end of this level (the
     /// last level's count is what it hid).
     pub hidden: u32,
+    /// Only the level's probe was sampled: it proved too little (`sampling_probe`), and the
+    /// rest of the level was split without sampling.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub probe_only: bool,
 }
 
 fn is_zero(v: &u64) -> bool {
@@ -261,6 +265,10 @@ pub struct PvsLevelSummary {
     pub seconds: f64,
     /// Objects proved hidden by the end of the level, mean per cell.
     pub hidden: f64,
+    /// The share of those cells where only the level's probe was sampled
+    /// ([`SamplingLevel::probe_only`]; 0 in documents written before probes).
+    #[serde(default)]
+    pub probe_only: f64,
 }
 
 fn is_zero_f64(v: &f64) -> bool {
