@@ -237,7 +237,7 @@ pub struct BakeArgs {
     /// Pixels across each 90° view of the hemicube the sampler renders per point, at every
     /// level; `auto` (the default) picks per cell and level the power of two nearest
     /// 8 × h/ε, h the median distance at which the cell's rays first hit something, within
-    /// 256–2048 (a pixel about a quarter of a leaf's shrink at that distance). The summary
+    /// 256–1024 (a pixel about a quarter of a leaf's shrink at that distance). The summary
     /// prints the resolutions used.
     #[arg(long, value_name = "N|auto")]
     pub sampling_resolution: Option<String>,

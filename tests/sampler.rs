@@ -461,3 +461,23 @@ fn a_level_whose_probe_proves_nothing_is_split_unsampled() {
     assert!(probed_hidden[0] && !probed_hidden[1]);
     brute_force_hidden(&scene, &cell, 0);
 }
+
+/// `--max-memory`'s estimate holds one hemicube per worker thread at the largest resolution
+/// the sampler may render (the fixed one, or the automatic rule's greatest), and none without
+/// the sampler.
+#[test]
+fn the_memory_estimate_holds_a_hemicube_per_thread() {
+    let (scene, _) = scene(None);
+    let mut s = settings();
+    let fixed = bake::estimate_memory(&scene, &s, 4);
+    s.sampling_settings.resolution = None;
+    let auto = bake::estimate_memory(&scene, &s, 4);
+    let (_, hi) = SamplingSettings::AUTO_RESOLUTION;
+    assert_eq!(
+        auto - fixed,
+        4 * (SamplingSettings::hemicube_bytes(hi) - SamplingSettings::hemicube_bytes(64))
+    );
+    s.sampling = SweepChoice::Off;
+    let off = bake::estimate_memory(&scene, &s, 4);
+    assert!(off + 4 * SamplingSettings::hemicube_bytes(hi) < auto);
+}

@@ -364,7 +364,8 @@ pub const BAKE_BYTES_PER_THREAD: u64 = 96 << 20;
 /// a bake that cannot fit before it starts: the scene's arrays, [`BAKE_BYTES_PER_TRIANGLE`]
 /// (plus [`SAMPLER_BYTES_PER_TRIANGLE`] with the sampler on), [`CARD_POLYGON_BYTES`] for each
 /// polygon the alpha-tested cards may give (`alpha_card_polygons` per card triangle) and
-/// [`BAKE_BYTES_PER_THREAD`] per thread. It over-estimates the paper-size forest by about 10 %.
+/// [`BAKE_BYTES_PER_THREAD`] per thread, plus with the sampler one hemicube per thread at its
+/// largest resolution (`SamplingSettings::hemicube_bytes`). It over-estimates the paper-size forest by about 10 %.
 pub fn estimate_memory(scene: &Scene, settings: &BakeSettings, threads: usize) -> u64 {
     let tris = scene.triangles.len() as u64;
     let loaded = scene.vertices.len() as u64 * 12 + tris * 13 + scene.objects.len() as u64 * 96;
@@ -383,11 +384,19 @@ pub fn estimate_memory(scene: &Scene, settings: &BakeSettings, threads: usize) -
     } else {
         0
     };
+    // One hemicube per worker thread at the largest resolution the sampler may render.
+    let hemicube = if settings.sampling == SweepChoice::On {
+        crate::settings::SamplingSettings::hemicube_bytes(
+            settings.sampling_settings.max_resolution(),
+        )
+    } else {
+        0
+    };
     loaded
         + tris * (BAKE_BYTES_PER_TRIANGLE + sampler)
         + cards * 2 * CARD_BYTES
         + card_polygons
-        + threads as u64 * BAKE_BYTES_PER_THREAD
+        + threads as u64 * (BAKE_BYTES_PER_THREAD + hemicube)
 }
 
 /// Bytes per card polygon a bake may hold (points, part, its projections and sweep data):
