@@ -365,7 +365,8 @@ pub const BAKE_BYTES_PER_THREAD: u64 = 96 << 20;
 /// (plus [`SAMPLER_BYTES_PER_TRIANGLE`] with the sampler on), [`CARD_POLYGON_BYTES`] for each
 /// polygon the alpha-tested cards may give (`alpha_card_polygons` per card triangle) and
 /// [`BAKE_BYTES_PER_THREAD`] per thread, plus with the sampler one hemicube per thread at its
-/// largest resolution (`SamplingSettings::hemicube_bytes`). It over-estimates the paper-size forest by about 10 %.
+/// largest resolution (`SamplingSettings::hemicube_bytes`). It over-estimates the paper-size
+/// forest by about 10 %.
 pub fn estimate_memory(scene: &Scene, settings: &BakeSettings, threads: usize) -> u64 {
     let tris = scene.triangles.len() as u64;
     let loaded = scene.vertices.len() as u64 * 12 + tris * 13 + scene.objects.len() as u64 * 96;
