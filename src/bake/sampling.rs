@@ -53,7 +53,7 @@ use crate::pvs::SamplingLevel;
 use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
 use crate::settings::SamplingSettings;
 use crate::validate::SceneRays;
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -252,7 +252,7 @@ impl Culler for SamplingCuller {
             median_hit_distance(
                 &data.rays,
                 cell,
-                cell_seed(cell) ^ 0x5eed,
+                cell_seed(cell),
                 prepared.settings.alpha_occluders,
             )
         } else {
@@ -368,14 +368,9 @@ impl Culler for SamplingCuller {
                 let rest: Vec<usize> = (0..level.len()).filter(|i| i % stride != 0).collect();
                 if (hid as f64) < s.probe * tested as f64 && !shared.spent() {
                     probe_only = true;
+                    // Their quadrants drop what was decided meanwhile (`patch` filters).
                     for i in rest {
-                        let list = &level[i].1;
-                        let list: Vec<u32> = list
-                            .iter()
-                            .copied()
-                            .filter(|&o| !shared.done[o as usize].load(Ordering::Relaxed))
-                            .collect();
-                        open[i] = (!list.is_empty()).then(|| Arc::new(list));
+                        open[i] = Some(level[i].1.clone());
                     }
                 } else {
                     for (i, o) in rest.iter().zip(sample(&rest)) {
@@ -463,29 +458,20 @@ fn distance_bands(eye: DVec3, boxes: &[DAabb], ratio: f64) -> Vec<Vec<usize>> {
 
 /// Rays [`median_hit_distance`] casts per cell.
 const HIT_RAYS: usize = 4096;
+/// The phase of [`median_hit_distance`]'s ray stream.
+const HIT_PHASE: u64 = 0x5eed;
 
 /// The median distance at which rays from random points of `cell` in random directions first
 /// hit a blocking triangle (rays that hit nothing left out), or NaN when none hits: the scale
 /// of the automatic sampling resolution ([`SamplingSettings::auto_resolution`]). Deterministic
 /// per cell (`seed`).
 fn median_hit_distance(rays: &SceneRays, cell: &Aabb, seed: u64, alpha_blocks: bool) -> f64 {
-    let mut state = seed | 1;
-    let mut uniform = move || {
-        // xorshift64*: plenty for choosing ray origins and directions.
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f32 / (1u64 << 53) as f32
-    };
+    // The validator's ray streams (its phases are small numbers; this one is its own).
+    let mut rng = crate::validate::chunk_rng(seed, 0, HIT_PHASE, 0);
     let mut hits: Vec<f32> = Vec::with_capacity(HIT_RAYS);
     for _ in 0..HIT_RAYS {
-        let origin = cell.min + (cell.max - cell.min) * Vec3::new(uniform(), uniform(), uniform());
-        let direction = loop {
-            let d = Vec3::new(uniform(), uniform(), uniform()) * 2.0 - Vec3::ONE;
-            if (0.01..=1.0).contains(&d.length_squared()) {
-                break d;
-            }
-        };
+        let origin = crate::validate::uniform_origin(&mut rng, cell);
+        let direction = crate::validate::sphere_direction(&mut rng).as_vec3();
         if let Some(h) = rays.trace(origin, direction, alpha_blocks).last() {
             hits.push(h.t * direction.length());
         }

@@ -45,4 +45,5 @@ pub use check::{
 };
 pub use hunt::{HUNT_PHASE, rays_per_culled_object};
 pub use sample::{CHUNK, CellSample, Witness, sample_cell};
+pub(crate) use sample::{chunk_rng, sphere_direction, uniform_origin};
 pub use trace::{SceneRays, TraceHit};

@@ -127,7 +127,7 @@ fn mix64(mut z: u64) -> u64 {
 }
 
 /// The random stream of one chunk.
-pub(super) fn chunk_rng(seed: u64, cell: u64, phase: u64, chunk: u64) -> Pcg64Mcg {
+pub(crate) fn chunk_rng(seed: u64, cell: u64, phase: u64, chunk: u64) -> Pcg64Mcg {
     let mut h = mix64(seed);
     h = mix64(h ^ cell);
     h = mix64(h ^ phase.wrapping_mul(0x5851_f42d_4c95_7f2d));
@@ -163,7 +163,8 @@ pub(super) fn clamp_inside(p: DVec3, cell: &Aabb) -> Vec3 {
     q
 }
 
-fn uniform_origin(rng: &mut Pcg64Mcg, cell: &Aabb) -> Vec3 {
+/// A point uniform in `cell`, strictly inside it where it has room.
+pub(crate) fn uniform_origin(rng: &mut Pcg64Mcg, cell: &Aabb) -> Vec3 {
     let (lo, size) = (cell.min.as_dvec3(), cell.size().as_dvec3());
     let u = DVec3::new(unit(rng), unit(rng), unit(rng));
     clamp_inside(lo + size * u, cell)
@@ -205,7 +206,8 @@ fn targeted_origin(rng: &mut Pcg64Mcg, cell: &Aabb) -> Vec3 {
     clamp_inside(p, cell)
 }
 
-pub(super) fn sphere_direction(rng: &mut Pcg64Mcg) -> DVec3 {
+/// A direction uniform on the unit sphere.
+pub(crate) fn sphere_direction(rng: &mut Pcg64Mcg) -> DVec3 {
     let z = 1.0 - 2.0 * unit(rng);
     let phi = std::f64::consts::TAU * unit(rng);
     let r = (1.0 - z * z).max(0.0).sqrt();
