@@ -7,6 +7,7 @@ use glam::DVec3;
 use std::path::PathBuf;
 use umbrasweep::backend::RasterBackend;
 use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::backend::gpu::GpuProjection;
 use umbrasweep::bake::{self, BakeSettings, SweepChoice};
 use umbrasweep::geom::Aabb;
 use umbrasweep::project::planes::{Spacing, SweepSettings};
@@ -102,6 +103,13 @@ pub struct BakeArgs {
     /// Raster backend.
     #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
     pub backend: BackendChoice,
+    /// How the GPU backend makes occluders' Projections: `clipped` (each occluder's 8 views
+    /// intersected on the CPU, the GPU tests the few edges left; the default) or `counting`
+    /// (the points go up as they are; a compute pass projects the views from the cell's
+    /// corners and one instanced draw per plane counts them per pixel; needs SHADER_F64). Same
+    /// PVS either way; ignored on the CPU backend.
+    #[arg(long, value_name = "clipped|counting", default_value_t = GpuProjection::Clipped)]
+    pub gpu_projection: GpuProjection,
     /// Depth Map resolution per side (a power of two).
     #[arg(long, default_value_t = BakeSettings::default_settings().resolution)]
     pub resolution: u32,
@@ -424,13 +432,22 @@ fn read_cells(a: &BakeArgs, scene: &scene::Scene) -> anyhow::Result<Vec<Aabb>> {
 
 /// Picks the backend: `auto` takes the GPU only when a hardware adapter exists (a software
 /// adapter such as lavapipe is slower than the CPU backend on the same cores).
-pub fn make_backend(choice: BackendChoice) -> anyhow::Result<Box<dyn RasterBackend>> {
+pub fn make_backend(
+    choice: BackendChoice,
+    projection: GpuProjection,
+) -> anyhow::Result<Box<dyn RasterBackend>> {
     use umbrasweep::backend::gpu::{GpuBackend, hardware_adapter_available};
     match choice {
         BackendChoice::Cpu => Ok(Box::new(CpuBackend::new())),
         BackendChoice::Auto if !hardware_adapter_available() => Ok(Box::new(CpuBackend::new())),
         BackendChoice::Auto | BackendChoice::Gpu => match GpuBackend::new() {
-            Ok(b) => Ok(Box::new(b)),
+            Ok(mut b) => match b.set_projection(projection) {
+                Ok(()) => Ok(Box::new(b)),
+                Err(e) => bail!(
+                    "--gpu-projection {projection}: {e} (use --gpu-projection clipped, or \
+                     --backend cpu)"
+                ),
+            },
             Err(e) => bail!("--backend gpu: {e} (use --backend cpu)"),
         },
     }
@@ -590,7 +607,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             );
         }
     }
-    let backend = make_backend(a.backend)?;
+    let backend = make_backend(a.backend, a.gpu_projection)?;
     let backend = backend.as_ref();
     let which: Vec<usize> = match a.shard {
         Some(s) => s.cells(cells.len()),
@@ -774,12 +791,17 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             eprintln!("warning     {w}");
         }
         eprintln!(
-            "backend     {}{}",
+            "backend     {}{}{}",
             s.backend,
             s.adapter
                 .as_ref()
                 .map(|x| format!(" ({x})"))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            if s.backend == "gpu" {
+                format!(", {} projections", a.gpu_projection)
+            } else {
+                String::new()
+            }
         );
         match a.shard {
             Some(spec) => eprintln!(

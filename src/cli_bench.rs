@@ -4,6 +4,7 @@
 
 use serde::Serialize;
 use std::path::{Path, PathBuf};
+use umbrasweep::backend::gpu::GpuProjection;
 use umbrasweep::bench::{self, BenchOptions, foliage};
 
 /// Which backends `umbrasweep bench` runs.
@@ -56,6 +57,11 @@ pub struct BenchArgs {
     /// Backends to run.
     #[arg(long, value_enum, default_value_t = BenchBackend::All)]
     pub backend: BenchBackend,
+    /// How the GPU backend makes occluders' Projections: `clipped` (views intersected on the
+    /// CPU, the default) or `counting` (views projected, hulled and counted per fragment on
+    /// the GPU; needs SHADER_F64).
+    #[arg(long, value_name = "clipped|counting", default_value_t = GpuProjection::Clipped)]
+    pub gpu_projection: GpuProjection,
     /// The shared scene folder (default: ../shared/scenes when it exists).
     #[arg(long, value_name = "DIR")]
     pub shared: Option<PathBuf>,
@@ -131,6 +137,7 @@ impl From<&BenchArgs> for BenchOptions {
             rays: a.rays,
             seed: a.seed,
             backend: a.backend.into(),
+            gpu_projection: a.gpu_projection,
             shared: a.shared.clone(),
             scenes: a.scenes.clone(),
             pvs_out: a.pvs_out.clone(),

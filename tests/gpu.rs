@@ -18,7 +18,7 @@ use std::path::Path;
 use std::sync::{Arc, OnceLock};
 use umbrasweep::backend::coverage;
 use umbrasweep::backend::cpu::{self, CpuBackend};
-use umbrasweep::backend::gpu::{self, GpuBackend};
+use umbrasweep::backend::gpu::{self, GpuBackend, GpuProjection};
 use umbrasweep::backend::{BackendError, RasterBackend};
 use umbrasweep::bake::{BakeSettings, bake};
 use umbrasweep::generate::{self, CityOptions};
@@ -35,9 +35,10 @@ fn shaders_validate_with_naga() {
     for &(path, source) in gpu::SHADERS {
         let module = naga::front::wgsl::parse_str(source)
             .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(source, path)));
-        // Ray space factorization's charts compute in f64 (`SHADER_F64`); the other passes
+        // Ray space factorization's charts and the occluders' views compute in f64
+        // (`SHADER_F64`); the other passes
         // need nothing beyond the defaults.
-        let caps = if path == "shaders/rsf.wgsl" {
+        let caps = if path == "shaders/rsf.wgsl" || path == "shaders/views.wgsl" {
             naga::valid::Capabilities::FLOAT64
         } else {
             naga::valid::Capabilities::default()
@@ -753,6 +754,10 @@ fn random_boxes_match_the_cpu() {
 #[test]
 fn halves_do_not_add_up_and_minimum_depth_wins() {
     let Some(b) = backend() else { return };
+    check_halves_and_minimum_depth(b);
+}
+
+fn check_halves_and_minimum_depth(b: &GpuBackend) {
     let f = frame(64, 2, true, 0.5);
     let q = |u: f64, v: f64, d: f64| point(&f, u, v, d);
     let mut two = OccluderSet::default();
@@ -1946,5 +1951,288 @@ fn the_bake_command_says_where_the_charts_run() {
         );
     }
     assert_eq!(pvs[0], pvs[1]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Views counted on the GPU (`GpuProjection::Counting`)
+
+/// A backend of the test's own (its counters are the test's) with
+/// [`GpuProjection::Counting`], or `None` (after printing why) without an adapter outside CI.
+/// Its adapter must have `SHADER_F64` in CI (lavapipe has it).
+fn counting_backend() -> Option<GpuBackend> {
+    backend()?;
+    let mut b = GpuBackend::new().expect("a second device");
+    match b.set_projection(GpuProjection::Counting) {
+        Ok(()) => Some(b),
+        Err(e) => no_adapter(&format!("no counting projection: {e}")),
+    }
+}
+
+/// [`assert_close_to_the_cpu`] on the counting backend, and the views of every occluder of at
+/// most 8 points went to the GPU (none was set up on the CPU).
+fn assert_counted_close_to_the_cpu(b: &GpuBackend, jobs: &[PlaneJob], what: &str) {
+    let before = b.total_stats();
+    assert_close_to_the_cpu(b, jobs, what);
+    let after = b.total_stats();
+    let small = jobs
+        .iter()
+        .flat_map(|j| (0..j.occluders.len()).map(|k| j.occluders.get(k).len()))
+        .filter(|&n| (3..=8).contains(&n))
+        .count();
+    assert_eq!(
+        after.counted - before.counted,
+        small,
+        "{what}: counted on the GPU"
+    );
+    assert!(small > 0, "{what}: the jobs have small occluders");
+}
+
+#[test]
+fn counted_views_match_the_cpu_for_every_shape() {
+    let Some(b) = &counting_backend() else { return };
+    assert_eq!(b.projection(), GpuProjection::Counting);
+    for (seed, shape) in [(1, Shape::Triangle), (2, Shape::Quad), (3, Shape::Box)] {
+        let jobs = random_jobs(seed, shape, 60, &[16, 32, 64, 128, 256]);
+        assert_counted_close_to_the_cpu(b, &jobs, &format!("counted {shape:?}"));
+    }
+}
+
+/// The counted draw keeps views of different occluders apart and the least Depth, as the
+/// clipped one does (the same analytic checks).
+#[test]
+fn counted_halves_do_not_add_up_and_minimum_depth_wins() {
+    let Some(b) = &counting_backend() else { return };
+    check_halves_and_minimum_depth(b);
+}
+
+/// Stretched maps, a cell 10⁵ from the origin, and occluders of 12 points (set up on the CPU)
+/// in the same planes as counted ones: all keep the CPU's coverage.
+#[test]
+fn counted_views_hold_on_stretched_far_and_mixed_planes() {
+    let Some(b) = &counting_backend() else { return };
+    let mut jobs = random_jobs(5, Shape::Quad, 60, &[64, 128]);
+    for (k, j) in jobs.iter_mut().enumerate() {
+        let res = j.frame.width;
+        (j.frame.width, j.frame.height) = if k % 2 == 0 {
+            (res * 8, res / 8)
+        } else {
+            (res / 8, res * 8)
+        };
+    }
+    assert_counted_close_to_the_cpu(b, &jobs, "counted, stretched");
+
+    let shift = DVec3::new(1e5, -2e5, 3e5);
+    let mut far = random_jobs(6, Shape::Triangle, 60, &[64, 256]);
+    for j in &mut far {
+        let (ua, va) = j.frame.uv_axes();
+        let a = j.frame.axis;
+        j.frame.cell.min += shift;
+        j.frame.cell.max += shift;
+        j.frame.position += shift[a];
+        j.frame.rect_min += DVec2::new(shift[ua], shift[va]);
+        j.frame.rect_max += DVec2::new(shift[ua], shift[va]);
+        let moved: Vec<Vec<DVec3>> = (0..j.occluders.len())
+            .map(|k| j.occluders.get(k).iter().map(|&p| p + shift).collect())
+            .collect();
+        j.occluders = OccluderSet::default();
+        for m in moved {
+            j.occluders.push(m);
+        }
+    }
+    assert_counted_close_to_the_cpu(b, &far, "counted, 1e5 away");
+
+    let mut rng = Pcg64::seed_from_u64(8);
+    let mut mixed = random_jobs(7, Shape::Triangle, 30, &[64, 128]);
+    for j in &mut mixed {
+        for _ in 0..20 {
+            // A planar convex 12-gon beyond the face: more points than the views pass takes.
+            let (cu, cv) = (rng.random_range(-8.0..8.0), rng.random_range(-8.0..8.0));
+            let (r, d) = (rng.random_range(0.5..5.0), rng.random_range(1.0..20.0));
+            let poly: Vec<DVec3> = (0..12)
+                .map(|k| {
+                    let t = k as f64 * std::f64::consts::TAU / 12.0;
+                    point(&j.frame, cu + r * t.cos(), cv + r * t.sin(), d)
+                })
+                .collect();
+            j.occluders.push(poly);
+        }
+    }
+    let before = b.total_stats();
+    assert_counted_close_to_the_cpu(b, &mixed, "counted with 12-gons");
+    let after = b.total_stats();
+    assert!(
+        after.occluders > before.occluders,
+        "the 12-gons were set up on the CPU and drawn: {after:?}"
+    );
+}
+
+/// Occluders the views pass must reject — a point behind a corner, a sliver thinner than a
+/// pixel, one entirely off the plane — cover nothing; reprojections and large planes split
+/// into several submissions keep the CPU's maps.
+#[test]
+fn counted_views_reject_what_the_cpu_rejects_and_keep_sweeps_and_waves() {
+    let Some(b) = &counting_backend() else { return };
+    let f = frame(64, 0, true, 0.5);
+    let mut occ = OccluderSet::default();
+    occ.push([
+        point(&f, 0.0, 0.0, -2.0),
+        point(&f, 5.0, 0.0, 5.0),
+        point(&f, 0.0, 5.0, 5.0),
+    ]);
+    occ.push([
+        point(&f, -5.0, 0.0, 5.0),
+        point(&f, 5.0, 0.001, 5.0),
+        point(&f, 5.0, 0.0, 5.0),
+    ]);
+    occ.push([
+        point(&f, 30.0, 30.0, 5.0),
+        point(&f, 40.0, 30.0, 5.0),
+        point(&f, 30.0, 40.0, 5.0),
+    ]);
+    let job = PlaneJob {
+        frame: f,
+        occluders: occ,
+        slices: vec![],
+        reproject: Vec::new(),
+    };
+    let maps = b.render(std::slice::from_ref(&job)).unwrap();
+    assert_eq!(maps[0], DepthMap::new(64), "nothing covered");
+    assert_eq!(
+        b.last_stats().counted,
+        3,
+        "all three went to the views pass"
+    );
+
+    let jobs = reprojection_jobs(44, &[32, 128]);
+    let gpu_maps = b.render(&jobs).unwrap();
+    for (job, g) in jobs.iter().zip(&gpu_maps) {
+        compare(job, g, &cpu::render_job(job));
+    }
+    let big = random_jobs(5, Shape::Quad, 10, &[2048, 2048]);
+    let d = run_and_compare(b, &big);
+    assert!(b.last_stats().submissions > 1, "{:?}", b.last_stats());
+    assert!(d.cpu_only * 100 <= d.covered.max(1), "{d:?}");
+}
+
+/// A whole bake of a small forest with the sweep gives the same PVS with counted views as on
+/// the CPU.
+#[test]
+fn counted_views_bake_the_same_pvs() {
+    let Some(b) = &counting_backend() else { return };
+    let forest = generate::forest(&generate::ForestOptions::default()).unwrap();
+    let scene = forest.to_scene("forest");
+    let cells = &forest.cells[..forest.cells.len().min(2)];
+    let settings = BakeSettings {
+        resolution: 128,
+        sweep: umbrasweep::bake::SweepChoice::On,
+        ..BakeSettings::default()
+    };
+    let c = bake(&scene, cells, &settings, &CpuBackend::new(), None).unwrap();
+    let before = b.total_stats().counted;
+    let g = bake(&scene, cells, &settings, b, None).unwrap();
+    assert!(
+        b.total_stats().counted > before,
+        "the bake counted views on the GPU"
+    );
+    for (k, (cc, gc)) in c.cells.iter().zip(&g.cells).enumerate() {
+        assert!(
+            cc.visible.len() < scene.objects.len(),
+            "cell {k} culls something"
+        );
+        assert_eq!(cc.visible, gc.visible, "cell {k}");
+        assert_eq!(cc.planes, gc.planes, "cell {k}");
+    }
+}
+
+/// Without `SHADER_F64` the counting projection is refused, naming the feature, and the
+/// backend keeps the clipped one.
+#[test]
+fn counting_needs_shader_f64() {
+    let Some((device, queue)) =
+        engine_device(GpuBackend::REQUIRED_FEATURES, wgpu::Limits::default())
+    else {
+        return;
+    };
+    let mut engine = GpuBackend::with_device(device, queue).expect("a backend on it");
+    match engine.set_projection(GpuProjection::Counting) {
+        Err(e @ BackendError::MissingFeatures { missing }) => {
+            assert_eq!(missing, wgpu::Features::SHADER_F64);
+            assert!(e.to_string().contains("SHADER_F64"), "{e}");
+        }
+        other => panic!("expected a missing feature, got {other:?}"),
+    }
+    assert_eq!(engine.projection(), GpuProjection::Clipped);
+    assert!(engine.set_projection(GpuProjection::Clipped).is_ok());
+}
+
+/// `bake --gpu-projection counting` says so and bakes the CPU's PVS; an unknown projection is
+/// refused naming both choices.
+#[test]
+fn the_bake_command_counts_views_on_request() {
+    if counting_backend().is_none() {
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::temp_dir().join(format!("umbrasweep-gpu-count-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cells: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("data/demo_forest_cells.json")).unwrap(),
+    )
+    .unwrap();
+    let two = serde_json::json!({ "cells": cells["cells"].as_array().unwrap()[..2] });
+    let cells_path = dir.join("cells.json");
+    std::fs::write(&cells_path, two.to_string()).unwrap();
+    let bake = |args: &[&str], out_path: &Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
+            .arg("bake")
+            .arg(root.join("data/demo_forest.obj"))
+            .arg("--cells")
+            .arg(&cells_path)
+            .args(args)
+            .arg("-o")
+            .arg(out_path)
+            .output()
+            .unwrap()
+    };
+    let mut pvs = Vec::new();
+    for (name, args) in [
+        (
+            "counting",
+            &["--backend", "gpu", "--gpu-projection", "counting"][..],
+        ),
+        ("cpu", &["--backend", "cpu"][..]),
+    ] {
+        let out_path = dir.join(format!("{name}.json"));
+        let out = bake(args, &out_path);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{err}");
+        let line = err
+            .lines()
+            .find(|l| l.starts_with("backend "))
+            .expect("the backend line");
+        assert_eq!(
+            line.contains("counting projections"),
+            name == "counting",
+            "{line}"
+        );
+        let doc: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out_path).unwrap()).unwrap();
+        pvs.push(
+            doc["cells"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c["visible"].clone())
+                .collect::<Vec<_>>(),
+        );
+    }
+    assert_eq!(pvs[0], pvs[1]);
+    let bad = dir.join("bad.json");
+    let out = bake(&["--backend", "gpu", "--gpu-projection", "stencil"], &bad);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("clipped") && err.contains("counting"), "{err}");
+    assert!(!bad.exists(), "nothing written");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -75,7 +75,9 @@ pub enum BackendError {
     /// The device lacks a feature the backend needs.
     ///
     /// **When this occurs:** [`gpu::GpuBackend::with_device`] on a device created without
-    /// [`gpu::GpuBackend::REQUIRED_FEATURES`].
+    /// [`gpu::GpuBackend::REQUIRED_FEATURES`]; [`gpu::GpuBackend::set_projection`] with
+    /// [`gpu::GpuProjection::Counting`] on a device without `SHADER_F64` (the backend keeps
+    /// its projection).
     ///
     /// **How to handle:** request `missing` in the `DeviceDescriptor`'s `required_features`
     /// (`adapter.features()` says whether the adapter has them).

@@ -51,7 +51,6 @@ use super::{
 };
 use crate::backend::RasterBackend;
 use crate::backend::cpu::CpuBackend;
-use crate::backend::gpu::GpuBackend;
 use crate::bake::{BakeSettings, SweepChoice, bake};
 use crate::generate::{CrownShape, ForestOptions, TreeModel, forest, forest_of_models};
 use crate::geom::Aabb;
@@ -661,7 +660,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
     let cpu;
     let gpu;
     let backend: &dyn RasterBackend = if args.backend == BenchBackend::Gpu {
-        gpu = GpuBackend::new().map_err(BenchError::Gpu)?;
+        gpu = super::gpu_backend(args)?;
         &gpu
     } else {
         cpu = CpuBackend::new();
@@ -761,7 +760,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                 let result = bake(&f.scene, &cells, &v.settings, backend, None);
                 let peak = peak_mib();
                 result.map(|r| {
-                    let row = score(
+                    let mut row = score(
                         which.name(),
                         &f.scene,
                         &cells,
@@ -771,6 +770,9 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                         plan.rays,
                         args.progress,
                     );
+                    if row.backend == "gpu" {
+                        row.gpu_projection = Some(args.gpu_projection.to_string());
+                    }
                     (row, peak)
                 })
             }));

@@ -98,6 +98,9 @@ pub struct BenchOptions {
     /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
     /// `bake`), forced on or off, to measure what it adds.
     pub rsf: crate::settings::SweepChoice,
+    /// How the GPU backend makes occluders' Projections
+    /// ([`GpuProjection`](crate::backend::gpu::GpuProjection)).
+    pub gpu_projection: crate::backend::gpu::GpuProjection,
 }
 
 impl Default for BenchOptions {
@@ -117,6 +120,7 @@ impl Default for BenchOptions {
             foliage_paper_cells: foliage::DEFAULT_PAPER_CELLS,
             foliage_model_trees: foliage::DEFAULT_MODEL_TREES,
             foliage_trees: None,
+            gpu_projection: crate::backend::gpu::GpuProjection::default(),
             progress: None,
             rsf: crate::settings::SweepChoice::Auto,
         }
@@ -205,6 +209,9 @@ pub struct BenchRow {
     pub backend: String,
     /// The GPU adapter, if any.
     pub adapter: Option<String>,
+    /// On the GPU backend, how it made occluders' Projections (`clipped` or `counting`).
+    #[serde(default)]
+    pub gpu_projection: Option<String>,
     /// Median bake time per cell (the bake's per-cell `ms`).
     pub median_ms_per_cell: f64,
     /// Median time to sample one cell's visible set with `rays_per_cell` rays.
@@ -499,6 +506,17 @@ fn build(
     }))
 }
 
+/// The GPU backend with `args`' projection.
+///
+/// # Errors
+/// [`BenchError::Gpu`] without an adapter, or for a projection the device cannot run.
+pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError> {
+    let mut g = GpuBackend::new().map_err(BenchError::Gpu)?;
+    g.set_projection(args.gpu_projection)
+        .map_err(BenchError::Gpu)?;
+    Ok(g)
+}
+
 /// Runs the benchmark and returns its rows (progress lines to [`BenchOptions::progress`]).
 ///
 /// # Errors
@@ -517,8 +535,8 @@ pub fn collect(args: &BenchOptions) -> Result<Bench, BenchError> {
     let cpu = CpuBackend::new();
     let gpu = match args.backend {
         BenchBackend::Cpu => None,
-        BenchBackend::Gpu => Some(GpuBackend::new().map_err(BenchError::Gpu)?),
-        BenchBackend::All => match GpuBackend::new() {
+        BenchBackend::Gpu => Some(gpu_backend(args)?),
+        BenchBackend::All => match gpu_backend(args) {
             Ok(g) => Some(g),
             Err(e) => {
                 skipped.push(format!("gpu: skipped, {e}"));
@@ -675,6 +693,9 @@ fn bench_scene(
         );
         row.peak_mib = peak;
         row.device = device;
+        if row.backend == "gpu" {
+            row.gpu_projection = Some(args.gpu_projection.to_string());
+        }
         out.push(row);
     }
     Ok(out)
@@ -778,6 +799,7 @@ pub(crate) fn score(
         cells: cells.len(),
         backend: result.backend.clone(),
         adapter: result.adapter.clone(),
+        gpu_projection: None,
         median_ms_per_cell: median(&ms),
         validate_ms_per_cell: median(&vms),
         peak_mib: None,

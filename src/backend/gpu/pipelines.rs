@@ -1,10 +1,11 @@
-//! The backend's device resources that do not depend on the work: the two render pipelines
+//! The backend's device resources that do not depend on the work: the render pipelines
 //! (occluder Projections, reprojections) and their bind group layouts, created once per device
-//! by [`Pipelines::new`].
+//! by [`Pipelines::new`], and, on devices with `SHADER_F64`, the views pass and the counted
+//! draw of [`GpuProjection::Counting`](super::GpuProjection::Counting) ([`ViewPipelines`]).
 
 use super::device::ErrorScopes;
 use super::setup::Vertex;
-use super::{PROJECTION_WGSL, REPROJECT_WGSL};
+use super::{COUNTED_WGSL, PROJECTION_WGSL, REPROJECT_WGSL, VIEWS_WGSL};
 use crate::backend::BackendError;
 use std::num::NonZeroU64;
 
@@ -44,6 +45,133 @@ impl Pipelines {
             projection_layout,
             reproject,
             reproject_layout,
+        })
+    }
+}
+
+/// The pipelines of [`GpuProjection::Counting`](super::GpuProjection::Counting): the compute
+/// pass that projects every occluder's views and writes its record (`shaders/views.wgsl`), and
+/// the instanced draw that counts them per fragment (`shaders/counted.wgsl`).
+#[derive(Debug)]
+pub(super) struct ViewPipelines {
+    /// The views pass.
+    pub views: wgpu::ComputePipeline,
+    /// Its bind group: points, occluders, plane frames (f64 and u32), records (written).
+    pub views_layout: wgpu::BindGroupLayout,
+    /// The counted draw.
+    pub counted: wgpu::RenderPipeline,
+    /// Its bind group: the plane's uniforms, the occluders and the records.
+    pub counted_layout: wgpu::BindGroupLayout,
+}
+
+impl ViewPipelines {
+    /// Compiles both shaders and creates both pipelines on `device` (which must have
+    /// `SHADER_F64`), every object labelled.
+    ///
+    /// # Errors
+    /// [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports one.
+    pub fn new(device: &wgpu::Device) -> Result<Self, BackendError> {
+        let scope = ErrorScopes::push(device);
+        let storage = |binding: u32, read_only: bool, visibility: wgpu::ShaderStages| {
+            wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only },
+                    has_dynamic_offset: false,
+                    min_binding_size: NonZeroU64::new(16),
+                },
+                count: None,
+            }
+        };
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let views_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("views bind group layout"),
+            entries: &[
+                storage(0, true, cs),
+                storage(1, true, cs),
+                storage(2, true, cs),
+                storage(3, true, cs),
+                storage(4, false, cs),
+            ],
+        });
+        let views_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shaders/views.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(VIEWS_WGSL.into()),
+        });
+        let views = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("views pipeline"),
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("views pipeline layout"),
+                    bind_group_layouts: &[Some(&views_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            module: &views_module,
+            entry_point: Some("views"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let counted_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("counted bind group layout"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: NonZeroU64::new(16),
+                    },
+                    count: None,
+                },
+                storage(1, true, wgpu::ShaderStages::VERTEX),
+                storage(2, true, vf),
+            ],
+        });
+        let counted_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shaders/counted.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(COUNTED_WGSL.into()),
+        });
+        let counted = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("counted pipeline"),
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("counted pipeline layout"),
+                    bind_group_layouts: &[Some(&counted_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            vertex: wgpu::VertexState {
+                module: &counted_module,
+                entry_point: Some("vs_counted"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &counted_module,
+                entry_point: Some("fs_counted"),
+                compilation_options: Default::default(),
+                targets: &[Some(depth_min_target())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        scope.check()?;
+        Ok(ViewPipelines {
+            views,
+            views_layout,
+            counted,
+            counted_layout,
         })
     }
 }

@@ -1,10 +1,12 @@
 //! The CPU side of a `render` call, per job and outside the backend's lock: every occluder's
-//! record, edges and geometry ([`setup`]) in draw chunks that fit one storage binding, the
-//! slices as a mask, and each reprojection's windows and summed-area table.
+//! record, edges and geometry ([`setup`]) in draw chunks that fit one storage binding — or,
+//! with [`GpuProjection::Counting`](super::GpuProjection::Counting), only the points and
+//! Depth of the occluders whose views the GPU computes ([`Counted`]) — the slices as a mask,
+//! and each reprojection's windows and summed-area table.
 
 use super::setup::{self, Output, PlaneSetup, Scratch, Vertex};
 use crate::backend::{BackendError, coverage};
-use crate::plane::{DepthMap, PlaneJob, Reprojection, Window};
+use crate::plane::{DepthMap, PlaneJob, Reprojection, Window, depth_up};
 use rayon::prelude::*;
 
 /// Occluders per rayon task of the setup.
@@ -22,7 +24,40 @@ pub(super) struct Prepared {
     pub mask: Option<DepthMap>,
     /// The job's reprojections that can set a pixel, in the job's order.
     pub sweeps: Vec<SweepSetup>,
+    /// With [`GpuProjection::Counting`](super::GpuProjection::Counting): the occluders whose
+    /// views the GPU computes (`shaders/views.wgsl`); empty otherwise.
+    pub counted: Counted,
 }
+
+/// Occluders of a job handed to the GPU as they are (`shaders/views.wgsl`): points and Depth
+/// only, no CPU work beyond the Depth.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Counted {
+    /// Their points, 3 `f64` each.
+    pub points: Vec<f64>,
+    /// Per occluder `[first point, point count, Depth bits, first record word]`, relative to
+    /// this job; the wave rebases the point and the record word and adds the plane's index
+    /// (`count | plane << 8`).
+    pub occ: Vec<[u32; 4]>,
+    /// Record words reserved: `1 + 8·n` per occluder of `n` points (a view's hull has at most
+    /// `n` edges).
+    pub record_words: usize,
+}
+
+impl Counted {
+    /// Number of occluders.
+    pub fn len(&self) -> usize {
+        self.occ.len()
+    }
+
+    /// True when there are none.
+    pub fn is_empty(&self) -> bool {
+        self.occ.is_empty()
+    }
+}
+
+/// Most points of an occluder whose views the GPU computes (`MAXP` in `shaders/views.wgsl`).
+pub(super) const COUNTED_MAX_POINTS: usize = 8;
 
 /// One reprojection of a job, prepared for the GPU (see [`sweep_setup`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -55,8 +90,20 @@ pub(super) struct Chunk {
 ///
 /// # Errors
 /// [`BackendError::OccluderTooLarge`] when one occluder's data exceed `max_chunk_words`.
-pub(super) fn prepare(job: &PlaneJob, max_chunk_words: usize) -> Result<Prepared, BackendError> {
-    let (mut out, occluders) = setup_occluders(job);
+pub(super) fn prepare(
+    job: &PlaneJob,
+    max_chunk_words: usize,
+    counting: bool,
+) -> Result<Prepared, BackendError> {
+    let counted = if counting {
+        count_occluders(job, max_chunk_words)
+    } else {
+        None
+    };
+    let (mut out, occluders) = match &counted {
+        Some((_, rest)) => setup_occluders(job, rest),
+        None => setup_occluders(job, &(0..job.occluders.len()).collect::<Vec<_>>()),
+    };
     let chunks = split_chunks(&mut out, max_chunk_words)?;
     Ok(Prepared {
         out,
@@ -64,22 +111,52 @@ pub(super) fn prepare(job: &PlaneJob, max_chunk_words: usize) -> Result<Prepared
         chunks,
         mask: slice_mask(job),
         sweeps: job.reproject.par_iter().filter_map(sweep_setup).collect(),
+        counted: counted.map(|c| c.0).unwrap_or_default(),
     })
 }
 
-/// Every occluder of the job set up ([`setup::occluder`]) in parallel tasks of [`SETUP_TASK`],
-/// concatenated in the job's order (record indices rebased); with the number set up.
-fn setup_occluders(job: &PlaneJob) -> (Output, usize) {
+/// The job's occluders of at most [`COUNTED_MAX_POINTS`] points, handed to the GPU as they
+/// are, and the indexes of the others (set up on the CPU). `None` (all on the CPU) when their
+/// records would not fit one storage binding of `max_chunk_words`.
+fn count_occluders(job: &PlaneJob, max_chunk_words: usize) -> Option<(Counted, Vec<usize>)> {
+    let frame = &job.frame;
+    let mut c = Counted::default();
+    let mut rest = Vec::new();
+    for k in 0..job.occluders.len() {
+        let pts = job.occluders.get(k);
+        if pts.len() > COUNTED_MAX_POINTS || pts.len() < 3 {
+            rest.push(k);
+            continue;
+        }
+        let depth = pts
+            .iter()
+            .map(|&p| frame.depth(p))
+            .fold(f64::NEG_INFINITY, f64::max);
+        c.occ.push([
+            (c.points.len() / 3) as u32,
+            pts.len() as u32,
+            depth_up(depth).to_bits(),
+            c.record_words as u32,
+        ]);
+        c.points.extend(pts.iter().flat_map(|p| p.to_array()));
+        c.record_words += 1 + 8 * pts.len();
+    }
+    (c.record_words + c.occ.len() <= max_chunk_words).then_some((c, rest))
+}
+
+/// The job's occluders `which` set up ([`setup::occluder`]) in parallel tasks of
+/// [`SETUP_TASK`], concatenated in order (record indices rebased); with the number set up.
+fn setup_occluders(job: &PlaneJob, which: &[usize]) -> (Output, usize) {
     let frame = &job.frame;
     let ps = PlaneSetup::new(frame);
-    let n = job.occluders.len();
+    let n = which.len();
     let parts: Vec<(Output, usize)> = (0..n.div_ceil(SETUP_TASK))
         .into_par_iter()
         .map(|t| {
             let mut scratch = Scratch::default();
             let mut out = Output::default();
             let mut count = 0;
-            for k in t * SETUP_TASK..((t + 1) * SETUP_TASK).min(n) {
+            for &k in &which[t * SETUP_TASK..((t + 1) * SETUP_TASK).min(n)] {
                 let pts = job.occluders.get(k);
                 let depth = pts
                     .iter()

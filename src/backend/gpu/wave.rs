@@ -7,12 +7,15 @@
 //! 2. allocate ([`GpuBackend::allocate`]): grow the shared buffers, add pooled targets and
 //!    tables;
 //! 3. upload ([`GpuBackend::upload`]): geometry, records and edges, windows, uniforms, tables;
-//! 4. encode ([`GpuBackend::encode`]): per plane one render pass and one copy into its
-//!    read-back buffer, in one command buffer;
+//! 4. encode ([`GpuBackend::encode`]): with [`GpuProjection::Counting`], one compute pass
+//!    for the views of every counted occluder of the wave; then per plane one render pass and
+//!    one copy into its read-back buffer, in one command buffer;
 //! 5. submit ([`GpuBackend::submit`]) and map every read-back buffer;
 //! 6. wait ([`GpuBackend::wait`]), polling with a timeout;
 //! 7. read back ([`read_back`]): the Depth Maps, with the slice masks merged.
 
+#[cfg(doc)]
+use super::GpuProjection;
 use super::device::{DeviceLimits, ErrorScopes};
 use super::prepare::{Prepared, merge_mask};
 use super::setup::Vertex;
@@ -43,6 +46,9 @@ pub(super) struct Pool {
     uniforms: Option<wgpu::Buffer>,
     /// Reprojection windows of every reprojection of a submission.
     windows: Option<wgpu::Buffer>,
+    /// The counted occluders' buffers ([`GpuProjection::Counting`]), absent until a wave has
+    /// some.
+    views: Option<ViewBuffers>,
     /// Per map size `(width, height)`.
     targets: HashMap<(u32, u32), Vec<Target>>,
     /// Reprojections' summed-area tables, one per reprojection of a submission, per source
@@ -52,6 +58,21 @@ pub(super) struct Pool {
     /// submission (with timestamps only).
     timestamps: Vec<TimestampSet>,
 }
+
+/// The buffers of the views pass and the counted draws (`shaders/views.wgsl`).
+#[derive(Default)]
+struct ViewBuffers {
+    points: Option<wgpu::Buffer>,
+    occ: Option<wgpu::Buffer>,
+    planes_f: Option<wgpu::Buffer>,
+    planes_u: Option<wgpu::Buffer>,
+    records: Option<wgpu::Buffer>,
+}
+
+/// `f64`s per plane in the views pass's frame buffer (`planes_f` in `shaders/views.wgsl`).
+const PLANE_F64S: usize = 32;
+/// Invocations per workgroup of the views pass.
+const VIEWS_WORKGROUP: u32 = 64;
 
 /// One plane's render target and its read-back buffer.
 struct Target {
@@ -73,6 +94,58 @@ struct SweepTable {
 /// size.
 type Slot = ((u32, u32), usize);
 
+/// Uploads the views pass's inputs: every plane's counted points, its occluders rebased onto
+/// the wave's buffers (first point, `count | plane << 8`, Depth, first record word), and every
+/// plane's frame (corners, rectangle, pixel scale, position and side in `f64`; axis and size in
+/// `u32`).
+fn upload_views(
+    queue: &wgpu::Queue,
+    v: &ViewBuffers,
+    layout: &WaveLayout,
+    jobs: &[PlaneJob],
+    prepared: &[Prepared],
+) {
+    let (Some(points), Some(occ), Some(planes_f), Some(planes_u)) =
+        (&v.points, &v.occ, &v.planes_f, &v.planes_u)
+    else {
+        unreachable!("the views buffers were just ensured");
+    };
+    let mut pts: Vec<f64> = Vec::with_capacity(layout.counted_f64s);
+    let mut recs: Vec<[u32; 4]> = Vec::with_capacity(layout.counted);
+    let mut pf: Vec<f64> = Vec::with_capacity(layout.planes.len() * PLANE_F64S);
+    let mut pu: Vec<[u32; 4]> = Vec::with_capacity(layout.planes.len());
+    let mut words = 0u32;
+    for (w, plane) in layout.planes.iter().enumerate() {
+        let c = &prepared[plane.job].counted;
+        let base = (pts.len() / 3) as u32;
+        recs.extend(c.occ.iter().map(|&[first, n, depth, rec]| {
+            [first + base, n | (w as u32) << 8, depth, rec + words]
+        }));
+        pts.extend_from_slice(&c.points);
+        words += c.record_words as u32;
+        let f = &jobs[plane.job].frame;
+        let start = pf.len();
+        for corner in f.cell.corners() {
+            pf.extend(corner.to_array());
+        }
+        let inv = glam::DVec2::ONE / f.pixel_size();
+        pf.extend([
+            f.rect_min.x,
+            f.rect_min.y,
+            inv.x,
+            inv.y,
+            f.position,
+            f.sign(),
+        ]);
+        pf.resize(start + PLANE_F64S, 0.0);
+        pu.push([f.axis as u32, f.width, f.height, 0]);
+    }
+    queue.write_buffer(points, 0, bytemuck::cast_slice(&pts));
+    queue.write_buffer(occ, 0, bytemuck::cast_slice(&recs));
+    queue.write_buffer(planes_f, 0, bytemuck::cast_slice(&pf));
+    queue.write_buffer(planes_u, 0, bytemuck::cast_slice(&pu));
+}
+
 /// Splits the planes that need the GPU (`gpu_jobs`, indexes of `jobs` and `prepared`) into
 /// waves, in order, each within [`TARGET_BUDGET`] of targets, read-back buffers and tables and
 /// within [`DATA_BUDGET`] (or the device's largest buffer) of uploaded data; a plane larger
@@ -85,7 +158,7 @@ pub(super) fn plan_waves(
 ) -> Vec<Vec<usize>> {
     let data_budget = DATA_BUDGET.min(limits.max_buffer);
     let mut waves: Vec<Vec<usize>> = Vec::new();
-    let (mut tgt, mut data) = (0u64, 0u64);
+    let (mut tgt, mut data, mut words) = (0u64, 0u64, 0usize);
     for &j in gpu_jobs {
         let (w, h) = (jobs[j].frame.width as u64, jobs[j].frame.height as u64);
         let p = &prepared[j];
@@ -101,20 +174,30 @@ pub(super) fn plan_waves(
             .iter()
             .map(|sw| (sw.words.len() as u64 * 8).next_multiple_of(limits.storage_align))
             .sum();
+        let c = &p.counted;
         let d = p.out.vertices.len() as u64 * VERTEX_SIZE
             + p.out.data.len() as u64 * 16
             + p.chunks.len() as u64 * limits.storage_align
-            + windows;
+            + windows
+            + (c.points.len() * 8 + c.occ.len() * 16 + c.record_words * 16) as u64;
+        // The wave's counted records are one storage binding.
+        let w_words = c.record_words;
         match waves.last_mut() {
-            Some(w) if tgt + t <= TARGET_BUDGET && data + d <= data_budget => {
+            Some(w)
+                if tgt + t <= TARGET_BUDGET
+                    && data + d <= data_budget
+                    && words + w_words <= limits.max_chunk_words =>
+            {
                 w.push(j);
                 tgt += t;
                 data += d;
+                words += w_words;
             }
             _ => {
                 waves.push(vec![j]);
                 tgt = t;
                 data = d;
+                words = w_words;
             }
         }
     }
@@ -137,6 +220,8 @@ struct PlaneLayout {
     target: Slot,
     /// Each reprojection's summed-area table.
     tables: Vec<Slot>,
+    /// Its counted occluders: the first in the wave's occluder buffer and how many.
+    counted: (u32, u32),
 }
 
 /// A wave's layout: its planes, in order, and the bytes each shared buffer must hold.
@@ -146,6 +231,10 @@ struct WaveLayout {
     data_bytes: u64,
     window_bytes: u64,
     uniform_bytes: u64,
+    /// Counted occluders of the wave, their points' `f64`s and their record words.
+    counted: usize,
+    counted_f64s: usize,
+    counted_words: usize,
 }
 
 impl WaveLayout {
@@ -164,8 +253,13 @@ impl WaveLayout {
             (size, *k - 1)
         };
         let mut planes = Vec::with_capacity(todo.len());
+        let (mut counted, mut counted_f64s, mut counted_words) = (0usize, 0usize, 0usize);
         for (w, &j) in todo.iter().enumerate() {
             let p = &prepared[j];
+            let c = (counted as u32, p.counted.len() as u32);
+            counted += p.counted.len();
+            counted_f64s += p.counted.points.len();
+            counted_words += p.counted.record_words;
             let first_vertex = (vertex_bytes / VERTEX_SIZE) as u32;
             vertex_bytes += p.out.vertices.len() as u64 * VERTEX_SIZE;
             let mut chunk_offsets = Vec::with_capacity(p.chunks.len());
@@ -191,6 +285,7 @@ impl WaveLayout {
                     .iter()
                     .map(|sw| take(&mut tables_taken, sw.source_size))
                     .collect(),
+                counted: c,
             });
         }
         WaveLayout {
@@ -199,7 +294,19 @@ impl WaveLayout {
             data_bytes,
             window_bytes,
             uniform_bytes: todo.len() as u64 * UNIFORM_STRIDE,
+            counted,
+            counted_f64s,
+            counted_words,
         }
+    }
+
+    /// Bytes the views pass uploads: points, occluders, and every plane's frame.
+    fn view_bytes(&self) -> u64 {
+        if self.counted == 0 {
+            return 0;
+        }
+        (self.counted_f64s * 8 + self.counted * 16 + self.planes.len() * (PLANE_F64S * 8 + 16))
+            as u64
     }
 
     /// Adds the wave's counters to `stats`: one submission, per plane one pass, its draws,
@@ -207,7 +314,7 @@ impl WaveLayout {
     fn count(&self, jobs: &[PlaneJob], prepared: &[Prepared], stats: &mut RenderStats) {
         stats.submissions += 1;
         stats.passes += self.planes.len();
-        stats.bytes_uploaded += self.vertex_bytes + self.uniform_bytes;
+        stats.bytes_uploaded += self.vertex_bytes + self.uniform_bytes + self.view_bytes();
         for plane in &self.planes {
             let p = &prepared[plane.job];
             for sw in &p.sweeps {
@@ -215,7 +322,8 @@ impl WaveLayout {
                 stats.draws += 1;
                 stats.bytes_uploaded += (sw.words.len() * 8 + sw.table.len() * 4) as u64;
             }
-            stats.draws += p.chunks.len();
+            stats.draws += p.chunks.len() + usize::from(!p.counted.is_empty());
+            stats.counted += p.counted.len();
             stats.occluders += p.occluders;
             stats.triangles += p.out.vertices.len() / 3;
             stats.edges += p.out.data.len() - p.occluders;
@@ -233,6 +341,8 @@ struct WaveBuffers<'a> {
     uniforms: &'a wgpu::Buffer,
     /// Absent until some wave reprojects.
     windows: Option<&'a wgpu::Buffer>,
+    /// Absent until some wave has counted occluders.
+    views: Option<&'a ViewBuffers>,
 }
 
 impl<'a> WaveBuffers<'a> {
@@ -248,6 +358,7 @@ impl<'a> WaveBuffers<'a> {
             data,
             uniforms,
             windows: pool.windows.as_ref(),
+            views: pool.views.as_ref(),
         }
     }
 }
@@ -304,6 +415,40 @@ impl GpuBackend {
             while pool.timestamps.len() < timestamp_sets(layout.planes.len()) {
                 pool.timestamps.push(TimestampSet::new(&self.device));
             }
+        }
+        if layout.counted > 0 {
+            let v = pool.views.get_or_insert_with(ViewBuffers::default);
+            let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+            self.ensure_buffer(
+                &mut v.points,
+                layout.counted_f64s as u64 * 8,
+                storage,
+                "counted occluder points",
+            )?;
+            self.ensure_buffer(
+                &mut v.occ,
+                layout.counted as u64 * 16,
+                storage,
+                "counted occluders",
+            )?;
+            self.ensure_buffer(
+                &mut v.planes_f,
+                (layout.planes.len() * PLANE_F64S * 8) as u64,
+                storage,
+                "counted plane frames (f64)",
+            )?;
+            self.ensure_buffer(
+                &mut v.planes_u,
+                layout.planes.len() as u64 * 16,
+                storage,
+                "counted plane frames (u32)",
+            )?;
+            self.ensure_buffer(
+                &mut v.records,
+                layout.counted_words as u64 * 16,
+                wgpu::BufferUsages::STORAGE,
+                "counted occluder records and view edges",
+            )?;
         }
         if layout.window_bytes > 0 {
             self.ensure_buffer(
@@ -389,6 +534,9 @@ impl GpuBackend {
             uniforms[o + 4..o + 8].copy_from_slice(&(2.0f32 / f.height as f32).to_le_bytes());
         }
         self.queue.write_buffer(buffers.uniforms, 0, &uniforms);
+        if let (Some(v), true) = (buffers.views, layout.counted > 0) {
+            upload_views(&self.queue, v, layout, jobs, prepared);
+        }
         for plane in &layout.planes {
             for (sw, &(size, k)) in prepared[plane.job].sweeps.iter().zip(&plane.tables) {
                 let (width, height) = size;
@@ -429,6 +577,9 @@ impl GpuBackend {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("umbrasweep planes"),
             });
+        if let (Some(v), true) = (buffers.views, layout.counted > 0) {
+            self.encode_views(&mut encoder, v, layout);
+        }
         for (w, plane) in layout.planes.iter().enumerate() {
             let writes = timestamps.map(|t| t.writes(w));
             self.encode_plane(
@@ -462,6 +613,7 @@ impl GpuBackend {
         let target = &pool.targets[&size][k];
         let chunk_groups = self.chunk_bind_groups(buffers, plane, p);
         let reproject_groups = self.reprojection_bind_groups(pool, buffers, plane, p);
+        let counted_group = self.counted_bind_group(buffers, plane);
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("occluder projections"),
@@ -492,6 +644,12 @@ impl GpuBackend {
                     pass.set_bind_group(0, bg, &[]);
                     pass.draw(base + c.vertices.start..base + c.vertices.end, 0..1);
                 }
+            }
+            if let (Some(bg), Some(vp)) = (&counted_group, &self.view_pipelines) {
+                let (first, count) = plane.counted;
+                pass.set_pipeline(&vp.counted);
+                pass.set_bind_group(0, bg, &[]);
+                pass.draw(0..6, first..first + count);
             }
             if !p.sweeps.is_empty() {
                 pass.set_pipeline(&self.pipelines.reproject);
@@ -563,6 +721,102 @@ impl GpuBackend {
                 })
             })
             .collect()
+    }
+
+    /// The views pass of a wave (`shaders/views.wgsl`): one invocation per counted occluder,
+    /// in workgroups of [`VIEWS_WORKGROUP`] laid out in rows of at most 65,535.
+    fn encode_views(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        v: &ViewBuffers,
+        layout: &WaveLayout,
+    ) {
+        let Some(vp) = &self.view_pipelines else {
+            unreachable!("counted occluders are only prepared with the views pipelines");
+        };
+        fn whole(b: &Option<wgpu::Buffer>, size: u64) -> wgpu::BindingResource<'_> {
+            let Some(b) = b else {
+                unreachable!("the views buffers were just ensured");
+            };
+            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: b,
+                offset: 0,
+                size: NonZeroU64::new(size),
+            })
+        }
+        let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("views bind group"),
+            layout: &vp.views_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: whole(&v.points, layout.counted_f64s as u64 * 8),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: whole(&v.occ, layout.counted as u64 * 16),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: whole(&v.planes_f, (layout.planes.len() * PLANE_F64S * 8) as u64),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: whole(&v.planes_u, layout.planes.len() as u64 * 16),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: whole(&v.records, layout.counted_words as u64 * 16),
+                },
+            ],
+        });
+        let groups = (layout.counted as u32).div_ceil(VIEWS_WORKGROUP);
+        let gx = groups.min(65_535);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("occluder views"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&vp.views);
+        pass.set_bind_group(0, &bg, &[]);
+        pass.dispatch_workgroups(gx, groups.div_ceil(gx), 1);
+    }
+
+    /// The bind group of a plane's counted draw (`None` without counted occluders): its
+    /// uniforms, the wave's occluders and records.
+    fn counted_bind_group(
+        &self,
+        buffers: &WaveBuffers,
+        plane: &PlaneLayout,
+    ) -> Option<wgpu::BindGroup> {
+        let (v, vp) = (buffers.views?, self.view_pipelines.as_ref()?);
+        if plane.counted.1 == 0 {
+            return None;
+        }
+        let (Some(occ), Some(records)) = (&v.occ, &v.records) else {
+            unreachable!("the views buffers were just ensured");
+        };
+        Some(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("counted bind group"),
+            layout: &vp.counted_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: buffers.uniforms,
+                        offset: plane.uniform_offset,
+                        size: NonZeroU64::new(16),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: occ.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: records.as_entire_binding(),
+                },
+            ],
+        }))
     }
 
     /// The bind groups of a plane's reprojection draws, one per reprojection: its windows and

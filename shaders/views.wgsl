@@ -1,0 +1,239 @@
+// umbrasweep — occluder views on the GPU (`GpuProjection::Counting`): the views of each occluder
+// from the cell's 8 corners are computed in a compute pass, in f64 with the CPU's expressions
+// (`backend::coverage`), and counted per fragment in one instanced draw per plane.
+//
+// `views` (compute, one invocation per occluder of the wave): project the occluder's points
+// from the 8 corners onto its plane, in pixel units; reject it as the CPU's quick rejects do
+// (a point not strictly beyond a corner, or views' bounding boxes whose intersection cannot
+// hold a whole pixel, or outside the plane); take each view's convex hull (gift wrapping: each
+// hull edge joins two of the points and leaves every point on its left, so the polygon is the
+// hull of some of the points and never larger than the view); erode each hull edge by the
+// pixel's half-extent along its normal plus the CPU's margin, its f64 error and a bound on the
+// fragment shader's f32 error; and write a record with the pixel box to draw (the
+// intersection of the views' boxes, clipped to the plane, rounded outward to whole pixels) and
+// the edges no pixel centre of the box passes for sure. Eroding the intersection of the views
+// equals intersecting the eroded views, so a pixel centre passing every edge means the whole
+// pixel lies inside all 8 views of this occluder: the backend contract's coverage, counted per
+// occluder, so views of different occluders never add up.
+//
+// `counted.wgsl` then draws the records, one instanced draw per plane.
+//
+// Record (at word `occ[i].w` of `records`):
+//   records[r]         = (x0 | y0 << 16, depth bits, edge count or REJECT, x1 | y1 << 16)
+//   records[r + 1 + k] = (bitcast nx, bitcast ny, bitcast c, 0)       for k < edge count
+// The CPU reserves 1 + 8·n words per occluder of n points (at most n hull edges per view).
+
+// Points per occluder this pass takes (the CPU sets up larger ones itself).
+const MAXP: u32 = 8u;
+// An occluder that covers no pixel.
+const REJECT: u32 = 0xffffffffu;
+// `coverage::MARGIN`: extra erosion (pixels) for float error.
+const MARGIN: f64 = 1e-4lf;
+// `setup::F64_REL_ERR`: 8 ulps of f64 relative to the offset's terms.
+const F64_REL_ERR: f64 = 1.7763568394002505e-15lf;
+// `setup::F32_ERR_PER_PX`: 2^-21 per pixel of the box's extent.
+const F32_ERR_PER_PX: f64 = 4.76837158203125e-7lf;
+
+// Occluder points, 3 f64 each (scene coordinates).
+@group(0) @binding(0) var<storage, read> points: array<f64>;
+// Per occluder: (first point, point count | plane << 8, Depth bits, record word in `records`).
+@group(0) @binding(1) var<storage, read> occ: array<vec4<u32>>;
+// Per plane, 32 f64: the 8 corners (x, y, z), rect_min (u, v), 1 / pixel size (u, v), the
+// plane's position, its side (±1), then padding.
+@group(0) @binding(2) var<storage, read> planes_f: array<f64>;
+// Per plane: (axis, width, height, 0).
+@group(0) @binding(3) var<storage, read> planes_u: array<vec4<u32>>;
+@group(0) @binding(4) var<storage, read_write> records: array<vec4<u32>>;
+
+fn next_up(f: f32) -> f32 {
+    let b = bitcast<u32>(f);
+    if (b & 0x7fffffffu) == 0u {
+        return bitcast<f32>(1u);
+    }
+    if (b & 0x80000000u) == 0u {
+        return bitcast<f32>(b + 1u);
+    }
+    return bitcast<f32>(b - 1u);
+}
+
+// `geom::f32_up`: the nearest f32 at or above (|x| well inside the f32 range).
+fn f32_up(x: f64) -> f32 {
+    let f = f32(x);
+    if f64(f) < x {
+        return next_up(f);
+    }
+    return f;
+}
+
+// `setup::flush_tiny`: GPUs may flush denormals.
+fn flush_tiny(x: f32) -> f32 {
+    if abs(x) < 1e-30 {
+        return 0.0;
+    }
+    return x;
+}
+
+fn cross2(a: vec2<f64>, b: vec2<f64>) -> f64 {
+    return a.x * b.y - a.y * b.x;
+}
+
+fn reject(r: u32) {
+    records[r] = vec4<u32>(0u, 0u, REJECT, 0u);
+}
+
+@compute @workgroup_size(64)
+fn views(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let i = gid.y * groups.x * 64u + gid.x;
+    if i >= arrayLength(&occ) {
+        return;
+    }
+    let o = occ[i];
+    let n = min(o.y & 0xffu, MAXP);
+    let plane = o.y >> 8u;
+    let r = o.w;
+    let pf = plane * 32u;
+    let pu = planes_u[plane];
+    let a = pu.x;
+    let ua = (a + 1u) % 3u;
+    let va = (a + 2u) % 3u;
+    let rect_min = vec2<f64>(planes_f[pf + 24u], planes_f[pf + 25u]);
+    let inv_px = vec2<f64>(planes_f[pf + 26u], planes_f[pf + 27u]);
+    let position = planes_f[pf + 28u];
+    let s = planes_f[pf + 29u];
+    let size = vec2<f64>(f64(pu.y), f64(pu.z));
+
+    // Every view, projected in pixel units (`coverage::projection_polygon`).
+    var q: array<vec2<f64>, 64>;
+    var lo = vec2<f64>(-1e300lf, -1e300lf);
+    var hi = vec2<f64>(1e300lf, 1e300lf);
+    for (var c = 0u; c < 8u; c++) {
+        let v = vec3<f64>(planes_f[pf + 3u * c], planes_f[pf + 3u * c + 1u], planes_f[pf + 3u * c + 2u]);
+        var vlo = vec2<f64>(1e300lf, 1e300lf);
+        var vhi = vec2<f64>(-1e300lf, -1e300lf);
+        for (var k = 0u; k < n; k++) {
+            let b = 3u * (o.x + k);
+            let p = vec3<f64>(points[b], points[b + 1u], points[b + 2u]);
+            let dz = s * (p[a] - v[a]);
+            // Not strictly beyond the corner, or not finite (NaN fails both tests).
+            if !(dz > 0.0lf && dz < 1e300lf) {
+                reject(r);
+                return;
+            }
+            let t = s * (position - v[a]) / dz;
+            let pr = vec2<f64>(v[ua] + (p[ua] - v[ua]) * t, v[va] + (p[va] - v[va]) * t);
+            let px = (pr - rect_min) * inv_px;
+            q[c * MAXP + k] = px;
+            vlo = min(vlo, px);
+            vhi = max(vhi, px);
+        }
+        lo = max(lo, vlo);
+        hi = min(hi, vhi);
+        // A whole pixel needs an integer-aligned unit square inside the box.
+        if floor(hi.x) - ceil(lo.x) < 1.0lf || floor(hi.y) - ceil(lo.y) < 1.0lf {
+            reject(r);
+            return;
+        }
+    }
+    if hi.x <= 0.0lf || hi.y <= 0.0lf || lo.x >= size.x || lo.y >= size.y {
+        reject(r);
+        return;
+    }
+    // The pixels whose centres can pass: the box clipped to the plane, to whole pixels.
+    let b0 = floor(max(lo, vec2<f64>(0.0lf, 0.0lf)));
+    let b1 = ceil(min(hi, size));
+    let ext = max(b1.x - b0.x, b1.y - b0.y) + 1.0lf;
+    let f32_err = F32_ERR_PER_PX * (ext + 1.0lf);
+    // Pixel centres relative to the origin b0 range over [0.5, b1 - b0 - 0.5].
+    let dlo = vec2<f64>(0.5lf, 0.5lf);
+    let dhi = b1 - b0 - vec2<f64>(0.5lf, 0.5lf);
+
+    var m = 0u;
+    for (var c = 0u; c < 8u; c++) {
+        let base = c * MAXP;
+        // Gift wrapping from the lowest (x, then y) point, counter-clockwise: the next vertex
+        // leaves every point on its left (the farthest of collinear ones).
+        var start = 0u;
+        for (var k = 1u; k < n; k++) {
+            let pk = q[base + k];
+            let ps = q[base + start];
+            if pk.x < ps.x || (pk.x == ps.x && pk.y < ps.y) {
+                start = k;
+            }
+        }
+        var cur = start;
+        var hull_len = 0u;
+        var closed = false;
+        for (var step = 0u; step <= n; step++) {
+            var next = cur;
+            for (var k = 0u; k < n; k++) {
+                if k == cur {
+                    continue;
+                }
+                let dk = q[base + k] - q[base + cur];
+                if next == cur {
+                    if dot(dk, dk) > 0.0lf {
+                        next = k;
+                    }
+                    continue;
+                }
+                let dn = q[base + next] - q[base + cur];
+                let cr = cross2(dn, dk);
+                if cr < 0.0lf || (cr == 0.0lf && dot(dk, dk) > dot(dn, dn)) {
+                    next = k;
+                }
+            }
+            if next == cur {
+                break;
+            }
+            // The edge cur → next, eroded (`setup::occluder`).
+            let p0 = q[base + cur];
+            let p1 = q[base + next];
+            let nrm = vec2<f64>(-(p1.y - p0.y), p1.x - p0.x);
+            let l1 = abs(nrm.x) + abs(nrm.y);
+            if !(l1 > 0.0lf && l1 < 1e300lf) {
+                reject(r);
+                return;
+            }
+            let nh = nrm / l1;
+            let rel = p0 - b0;
+            let off = nh.x * rel.x + nh.y * rel.y;
+            let f64_err = F64_REL_ERR * (abs(nh.x) * abs(rel.x) + abs(nh.y) * abs(rel.y));
+            let cc = off + 0.5lf + MARGIN + f64_err + f32_err;
+            // Range of nh·d over the box's pixel centres (linear: extremes at its corners).
+            let dmin = min(nh.x * dlo.x, nh.x * dhi.x) + min(nh.y * dlo.y, nh.y * dhi.y);
+            let dmax = max(nh.x * dlo.x, nh.x * dhi.x) + max(nh.y * dlo.y, nh.y * dhi.y);
+            if dmax < cc - f32_err {
+                // No pixel centre of the box passes, neither exactly nor in f32.
+                reject(r);
+                return;
+            }
+            if dmin < cc + f32_err {
+                records[r + 1u + m] = vec4<u32>(
+                    bitcast<u32>(flush_tiny(f32(nh.x))),
+                    bitcast<u32>(flush_tiny(f32(nh.y))),
+                    bitcast<u32>(f32_up(cc)),
+                    0u,
+                );
+                m++;
+            }
+            hull_len++;
+            cur = next;
+            if cur == start {
+                closed = true;
+                break;
+            }
+        }
+        if !closed || hull_len < 3u {
+            reject(r);
+            return;
+        }
+    }
+    let x0 = u32(b0.x);
+    let y0 = u32(b0.y);
+    let x1 = u32(b1.x);
+    let y1 = u32(b1.y);
+    records[r] = vec4<u32>(x0 | (y0 << 16u), o.z, m, x1 | (y1 << 16u));
+}
