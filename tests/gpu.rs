@@ -1553,6 +1553,10 @@ fn bake_pvs_is_identical_with_the_sweep() {
         2 * stats.reprojections > 3 * stats.gpu_planes,
         "several reprojections per plane: {stats:?}"
     );
+    assert!(
+        stats.tables_reused > stats.tables_uploaded,
+        "most reprojections take their source's table from the device: {stats:?}"
+    );
     let hidden: usize = c
         .cells
         .iter()
@@ -2235,4 +2239,100 @@ fn the_bake_command_counts_views_on_request() {
     assert!(err.contains("clipped") && err.contains("counting"), "{err}");
     assert!(!bad.exists(), "nothing written");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reprojection tables kept on the device
+
+/// Only the reprojections of `job`, no occluders or slices (the map is exactly the CPU's).
+fn sweeps_only(job: &PlaneJob) -> PlaneJob {
+    PlaneJob {
+        frame: job.frame.clone(),
+        occluders: OccluderSet::default(),
+        slices: vec![],
+        reproject: job.reproject.clone(),
+    }
+}
+
+/// A source reprojected again in a later call is taken from the device, not uploaded again,
+/// and the maps stay the CPU's bit for bit.
+#[test]
+fn a_source_reprojected_again_is_not_uploaded_again() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a backend of the test's own");
+    let jobs: Vec<PlaneJob> = reprojection_jobs(46, &[64])
+        .iter()
+        .map(sweeps_only)
+        .collect();
+    let check = |what: &str| {
+        let maps = b.render(&jobs).unwrap();
+        for (k, (job, m)) in jobs.iter().zip(&maps).enumerate() {
+            assert_bits_equal(m, &cpu::render_job(job), &format!("{what}, job {k}"));
+        }
+        b.last_stats()
+    };
+    let first = check("first call");
+    assert!(first.tables_uploaded > 0, "{first:?}");
+    assert_eq!(first.tables_reused, 0, "{first:?}");
+    let second = check("second call");
+    assert_eq!(second.tables_uploaded, 0, "{second:?}");
+    assert_eq!(second.tables_reused, first.tables_uploaded, "{second:?}");
+    assert!(
+        second.bytes_uploaded < first.bytes_uploaded / 4,
+        "{first:?} {second:?}"
+    );
+}
+
+/// New sources of the same size with other umbras, some made where a dropped one was (the
+/// allocator may reuse the address), others beside ones still alive: each new one's table is
+/// built, never another's reused; a source still alive is reused.
+#[test]
+fn a_new_source_never_takes_an_old_sources_table() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a backend of the test's own");
+    let mut rng = Pcg64::seed_from_u64(47);
+    let planes = sweep_planes(&mut rng, 32, 2, true, &[0.5, 1.0]);
+    let (src, dst) = (&planes[0], &planes[1]);
+    let mut kept = Vec::new();
+    for round in 0..40 {
+        let mut map = DepthMap::for_frame(src);
+        // A different umbra each round: one quarter of the source, in turn.
+        let (w, h) = (src.width as usize, src.height as usize);
+        for j in 0..h {
+            for i in 0..w {
+                let quarter = (2 * j / h) * 2 + 2 * i / w;
+                if quarter == round % 4 {
+                    map.depth[j * w + i] = -1.0;
+                }
+            }
+        }
+        let job = PlaneJob {
+            frame: dst.clone(),
+            occluders: OccluderSet::default(),
+            slices: vec![],
+            reproject: vec![Reprojection::new(src, dst, Arc::new(map))],
+        };
+        let gpu_map = &b.render(std::slice::from_ref(&job)).unwrap()[0];
+        let cpu_map = cpu::render_job(&job);
+        assert!(
+            cpu_map.covered() > 0,
+            "round {round}: the quarter reprojects"
+        );
+        assert_bits_equal(gpu_map, &cpu_map, &format!("round {round}"));
+        assert_eq!(b.last_stats().tables_uploaded, 1, "round {round}");
+        if round % 3 == 0 {
+            kept.push((job, cpu_map));
+        }
+    }
+    // The sources kept alive are still on the device, each with its own table.
+    for (k, (job, cpu_map)) in kept.iter().enumerate() {
+        let gpu_map = &b.render(std::slice::from_ref(job)).unwrap()[0];
+        assert_bits_equal(gpu_map, cpu_map, &format!("kept {k}"));
+        let st = b.last_stats();
+        assert_eq!((st.tables_uploaded, st.tables_reused), (0, 1), "kept {k}");
+    }
 }

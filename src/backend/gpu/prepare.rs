@@ -5,9 +5,11 @@
 //! and each reprojection's windows and summed-area table.
 
 use super::setup::{self, Output, PlaneSetup, Scratch, Vertex};
+use super::tables::{Cached, SweepTable, TableCache, UmbraBox};
 use crate::backend::{BackendError, coverage};
 use crate::plane::{DepthMap, PlaneJob, Reprojection, Window, depth_up};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Occluders per rayon task of the setup.
 const SETUP_TASK: usize = 1024;
@@ -59,8 +61,24 @@ impl Counted {
 /// Most points of an occluder whose views the GPU computes (`MAXP` in `shaders/views.wgsl`).
 pub(super) const COUNTED_MAX_POINTS: usize = 8;
 
+/// Where a reprojection's summed-area table comes from.
+#[derive(Clone, Debug)]
+pub(super) enum TableSource {
+    /// Built by this call: the source's summed-area table of pixels outside the umbra,
+    /// row-major (entry `(x, y)` counts the source pixels in `[0, x] × [0, y]` whose Depth is
+    /// not `≤ 0`), to upload into a texture and cache for `source` with its `umbra` box.
+    Upload {
+        table: Vec<u32>,
+        source: Arc<DepthMap>,
+        umbra: [u32; 4],
+    },
+    /// On the device already, from an earlier reprojection of the same source
+    /// ([`TableCache`]).
+    Cached(Arc<SweepTable>),
+}
+
 /// One reprojection of a job, prepared for the GPU (see [`sweep_setup`]).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub(super) struct SweepSetup {
     /// The storage data: `[depth bits, target width]`, `[+inf bits, source width]`,
     /// `[source height, 0]`, then the column windows, then the row windows
@@ -68,9 +86,8 @@ pub(super) struct SweepSetup {
     pub words: Vec<[u32; 2]>,
     /// The source's (and the table's) `(width, height)`.
     pub source_size: (u32, u32),
-    /// The source's summed-area table of pixels outside the umbra, row-major: entry `(x, y)`
-    /// counts the source pixels in `[0, x] × [0, y]` whose Depth is not `≤ 0`.
-    pub table: Vec<u32>,
+    /// Its summed-area table: built now, or cached on the device.
+    pub table: TableSource,
     /// The draw's scissor rectangle `[x, y, width, height]`: the bounding box of the target
     /// pixels the reprojection may set.
     pub scissor: [u32; 4],
@@ -94,6 +111,7 @@ pub(super) fn prepare(
     job: &PlaneJob,
     max_chunk_words: usize,
     counting: bool,
+    tables: &TableCache,
 ) -> Result<Prepared, BackendError> {
     let counted = if counting {
         count_occluders(job, max_chunk_words)
@@ -110,7 +128,11 @@ pub(super) fn prepare(
         occluders,
         chunks,
         mask: slice_mask(job),
-        sweeps: job.reproject.par_iter().filter_map(sweep_setup).collect(),
+        sweeps: job
+            .reproject
+            .par_iter()
+            .filter_map(|r| sweep_setup(r, tables))
+            .collect(),
         counted: counted.map(|c| c.0).unwrap_or_default(),
     })
 }
@@ -226,51 +248,45 @@ fn split_chunks(out: &mut Output, max_chunk_words: usize) -> Result<Vec<Chunk>, 
 
 /// A reprojection prepared for the GPU, or `None` when it cannot set a pixel.
 ///
-/// The summed-area table of the source's pixels outside the umbra is built in one pass over
-/// the source (the same `d <= 0` test as [`Reprojection::mask`]). A target pixel `(i, j)` can
+/// The summed-area table of the source's pixels outside the umbra ([`umbra_table`], the same
+/// `d <= 0` test as [`Reprojection::mask`]) and its umbra's bounding box are built once per
+/// source and kept on the device ([`TableCache`]); later reprojections of the same source
+/// take them from there. A target pixel `(i, j)` can
 /// only be set when its windows are valid and `cols[i] × rows[j]` lies inside the bounding box
 /// of the umbra (every column and row of the box then holds an umbra pixel); the draw is
 /// scissored to the bounding box of those pixels, and outside it a draw would write `+inf`
 /// anyway. No umbra, or no such pixel: `None`.
-fn sweep_setup(r: &Reprojection) -> Option<SweepSetup> {
+fn sweep_setup(r: &Reprojection, cache: &TableCache) -> Option<SweepSetup> {
     let (sw, sh) = (r.source.width, r.source.height);
-    let (n, m) = (sw as usize, sh as usize);
     // Windows first: O(width + height), and a reprojection without any skips the table.
     let any_valid = |w: &[Window], len: u32| w.iter().any(|&[a, b]| a <= b && b < len);
     if !any_valid(&r.cols, sw) || !any_valid(&r.rows, sh) {
         return None;
     }
-    let mut table = vec![0u32; n * m];
-    for (y, src) in r.source.depth.chunks_exact(n).enumerate() {
-        let (done, rest) = table.split_at_mut(y * n);
-        let row = &mut rest[..n];
-        // The row's prefix count of pixels outside the umbra (not `d <= 0`: NaNs are outside)…
-        let mut run = 0u32;
-        for (t, &d) in row.iter_mut().zip(src) {
-            run += u32::from(d <= 0.0) ^ 1;
-            *t = run;
+    let (table, [x0, x1, y0, y1]) = match cache.get(&r.source) {
+        Some(c) => (TableSource::Cached(c.table?), c.umbra?),
+        None => {
+            let (table, umbra) = umbra_table(&r.source);
+            let Some(b) = umbra else {
+                cache.insert(
+                    &r.source,
+                    Cached {
+                        table: None,
+                        umbra: None,
+                    },
+                );
+                return None;
+            };
+            (
+                TableSource::Upload {
+                    table,
+                    source: r.source.clone(),
+                    umbra: b,
+                },
+                b,
+            )
         }
-        // …plus the rows above.
-        if y > 0 {
-            for (t, &a) in row.iter_mut().zip(&done[(y - 1) * n..]) {
-                *t += a;
-            }
-        }
-    }
-    let last = &table[(m - 1) * n..];
-    if last[n - 1] as usize == n * m {
-        return None;
-    }
-    // The umbra's bounding box [x0, x1] × [y0, y1]: the columns and rows not entirely outside.
-    let column = |x: usize| last[x] - if x > 0 { last[x - 1] } else { 0 };
-    let row = |y: usize| table[y * n + n - 1] - if y > 0 { table[y * n - 1] } else { 0 };
-    let bounds = |full: &dyn Fn(usize) -> u32, count: usize, len: u32| {
-        let lo = (0..count).position(|k| full(k) < len)?;
-        let hi = (0..count).rposition(|k| full(k) < len)?;
-        Some((lo as u32, hi as u32))
     };
-    // A column holds `sh` pixels, a row `sw`.
-    let ((x0, x1), (y0, y1)) = (bounds(&column, n, sh)?, bounds(&row, m, sw)?);
     // The range of indices whose window lies inside [lo, hi].
     let inside = |windows: &[Window], lo: u32, hi: u32| {
         let ok = |&[a, b]: &Window| a <= b && a >= lo && b <= hi;
@@ -292,6 +308,48 @@ fn sweep_setup(r: &Reprojection) -> Option<SweepSetup> {
         table,
         scissor: [i0, j0, i1 - i0 + 1, j1 - j0 + 1],
     })
+}
+
+/// The summed-area table of `source`'s pixels outside the umbra, row-major (entry `(x, y)`
+/// counts the pixels in `[0, x] × [0, y]` whose Depth is not `≤ 0`), built in one pass, and
+/// the umbra's bounding box `[x0, x1, y0, y1]` (inclusive; `None` without umbra).
+fn umbra_table(source: &DepthMap) -> (Vec<u32>, UmbraBox) {
+    let (sw, sh) = (source.width, source.height);
+    let (n, m) = (sw as usize, sh as usize);
+    let mut table = vec![0u32; n * m];
+    for (y, src) in source.depth.chunks_exact(n).enumerate() {
+        let (done, rest) = table.split_at_mut(y * n);
+        let row = &mut rest[..n];
+        // The row's prefix count of pixels outside the umbra (not `d <= 0`: NaNs are outside)…
+        let mut run = 0u32;
+        for (t, &d) in row.iter_mut().zip(src) {
+            run += u32::from(d <= 0.0) ^ 1;
+            *t = run;
+        }
+        // …plus the rows above.
+        if y > 0 {
+            for (t, &a) in row.iter_mut().zip(&done[(y - 1) * n..]) {
+                *t += a;
+            }
+        }
+    }
+    let last = &table[(m - 1) * n..];
+    if last[n - 1] as usize == n * m {
+        return (table, None);
+    }
+    // The umbra's bounding box [x0, x1] × [y0, y1]: the columns and rows not entirely outside.
+    let column = |x: usize| last[x] - if x > 0 { last[x - 1] } else { 0 };
+    let row = |y: usize| table[y * n + n - 1] - if y > 0 { table[y * n - 1] } else { 0 };
+    let bounds = |full: &dyn Fn(usize) -> u32, count: usize, len: u32| {
+        let lo = (0..count).position(|k| full(k) < len)?;
+        let hi = (0..count).rposition(|k| full(k) < len)?;
+        Some((lo as u32, hi as u32))
+    };
+    // A column holds `sh` pixels, a row `sw`.
+    let umbra = bounds(&column, n, sh)
+        .zip(bounds(&row, m, sw))
+        .map(|((x0, x1), (y0, y1))| [x0, x1, y0, y1]);
+    (table, umbra)
 }
 
 /// The job's slices as a map: `0` inside, `+inf` elsewhere (`None` without slices).

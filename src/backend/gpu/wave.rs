@@ -17,13 +17,15 @@
 #[cfg(doc)]
 use super::GpuProjection;
 use super::device::{DeviceLimits, ErrorScopes};
-use super::prepare::{Prepared, merge_mask};
+use super::prepare::{Prepared, TableSource, merge_mask};
 use super::setup::Vertex;
+use super::tables::{Cached, SweepTable};
 use super::{GpuBackend, RenderStats, UNIFORM_STRIDE};
 use crate::backend::BackendError;
 use crate::plane::{DepthMap, PlaneJob};
 use std::collections::HashMap;
 use std::num::NonZeroU64;
+use std::sync::Arc;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -51,9 +53,6 @@ pub(super) struct Pool {
     views: Option<ViewBuffers>,
     /// Per map size `(width, height)`.
     targets: HashMap<(u32, u32), Vec<Target>>,
-    /// Reprojections' summed-area tables, one per reprojection of a submission, per source
-    /// size.
-    tables: HashMap<(u32, u32), Vec<SweepTable>>,
     /// Timestamp query sets, each for [`TIMESTAMPS_PER_SET`] / 2 render passes of a
     /// submission (with timestamps only).
     timestamps: Vec<TimestampSet>,
@@ -80,14 +79,6 @@ struct Target {
     texture: wgpu::Texture,
     staging: wgpu::Buffer,
     padded_row: u32,
-}
-
-/// One reprojection's summed-area table (see [`SweepSetup::table`]).
-///
-/// [`SweepSetup::table`]: super::prepare::SweepSetup::table
-struct SweepTable {
-    texture: wgpu::Texture,
-    view: wgpu::TextureView,
 }
 
 /// A pooled resource: its size `(width, height)` and its index in the pool's list for that
@@ -166,6 +157,7 @@ pub(super) fn plan_waves(
         let tables: u64 = p
             .sweeps
             .iter()
+            .filter(|sw| matches!(sw.table, TableSource::Upload { .. }))
             .map(|sw| sw.source_size.0 as u64 * sw.source_size.1 as u64 * 4)
             .sum();
         let t = w * h * 4 + (w * 4).next_multiple_of(256) * h + tables;
@@ -218,8 +210,6 @@ struct PlaneLayout {
     uniform_offset: u64,
     /// Its render target and read-back buffer.
     target: Slot,
-    /// Each reprojection's summed-area table.
-    tables: Vec<Slot>,
     /// Its counted occluders: the first in the wave's occluder buffer and how many.
     counted: (u32, u32),
 }
@@ -246,7 +236,6 @@ impl WaveLayout {
     fn new(todo: &[usize], jobs: &[PlaneJob], prepared: &[Prepared], storage_align: u64) -> Self {
         let (mut vertex_bytes, mut data_bytes, mut window_bytes) = (0u64, 0u64, 0u64);
         let mut targets_taken: HashMap<(u32, u32), usize> = HashMap::new();
-        let mut tables_taken: HashMap<(u32, u32), usize> = HashMap::new();
         let take = |taken: &mut HashMap<(u32, u32), usize>, size: (u32, u32)| {
             let k = taken.entry(size).or_default();
             *k += 1;
@@ -280,11 +269,6 @@ impl WaveLayout {
                 window_offsets,
                 uniform_offset: w as u64 * UNIFORM_STRIDE,
                 target: take(&mut targets_taken, (f.width, f.height)),
-                tables: p
-                    .sweeps
-                    .iter()
-                    .map(|sw| take(&mut tables_taken, sw.source_size))
-                    .collect(),
                 counted: c,
             });
         }
@@ -320,7 +304,14 @@ impl WaveLayout {
             for sw in &p.sweeps {
                 stats.reprojections += 1;
                 stats.draws += 1;
-                stats.bytes_uploaded += (sw.words.len() * 8 + sw.table.len() * 4) as u64;
+                stats.bytes_uploaded += sw.words.len() as u64 * 8;
+                match &sw.table {
+                    TableSource::Upload { table, .. } => {
+                        stats.tables_uploaded += 1;
+                        stats.bytes_uploaded += table.len() as u64 * 4;
+                    }
+                    TableSource::Cached(_) => stats.tables_reused += 1,
+                }
             }
             stats.draws += p.chunks.len() + usize::from(!p.counted.is_empty());
             stats.counted += p.counted.len();
@@ -343,11 +334,13 @@ struct WaveBuffers<'a> {
     windows: Option<&'a wgpu::Buffer>,
     /// Absent until some wave has counted occluders.
     views: Option<&'a ViewBuffers>,
+    /// Per plane of the wave, each reprojection's summed-area table.
+    tables: Vec<Vec<Arc<SweepTable>>>,
 }
 
 impl<'a> WaveBuffers<'a> {
-    /// The pool's buffers, after [`GpuBackend::allocate`].
-    fn of(pool: &'a Pool) -> Self {
+    /// The pool's buffers and the wave's tables, after [`GpuBackend::allocate`].
+    fn of(pool: &'a Pool, tables: Vec<Vec<Arc<SweepTable>>>) -> Self {
         let (Some(vertices), Some(data), Some(uniforms)) =
             (&pool.vertices, &pool.data, &pool.uniforms)
         else {
@@ -359,6 +352,7 @@ impl<'a> WaveBuffers<'a> {
             uniforms,
             windows: pool.windows.as_ref(),
             views: pool.views.as_ref(),
+            tables,
         }
     }
 }
@@ -382,10 +376,10 @@ impl GpuBackend {
     ) -> Result<(), BackendError> {
         let scope = ErrorScopes::push(&self.device);
         let layout = WaveLayout::new(todo, jobs, prepared, self.limits.storage_align);
-        self.allocate(pool, &layout)?;
+        let tables = self.allocate(pool, &layout, prepared)?;
         let pool = &*pool;
-        let buffers = WaveBuffers::of(pool);
-        self.upload(pool, &buffers, &layout, jobs, prepared);
+        let buffers = WaveBuffers::of(pool, tables);
+        self.upload(&buffers, &layout, jobs, prepared);
         layout.count(jobs, prepared, stats);
         let timestamps = self.timestamp_period.map(|period| Timestamps {
             sets: &pool.timestamps[..timestamp_sets(layout.planes.len())],
@@ -410,7 +404,12 @@ impl GpuBackend {
     ///
     /// # Errors
     /// [`BackendError::BufferTooLarge`] when a buffer would exceed the device's largest.
-    fn allocate(&self, pool: &mut Pool, layout: &WaveLayout) -> Result<(), BackendError> {
+    fn allocate(
+        &self,
+        pool: &mut Pool,
+        layout: &WaveLayout,
+        prepared: &[Prepared],
+    ) -> Result<Vec<Vec<Arc<SweepTable>>>, BackendError> {
         if self.timestamp_period.is_some() {
             while pool.timestamps.len() < timestamp_sets(layout.planes.len()) {
                 pool.timestamps.push(TimestampSet::new(&self.device));
@@ -476,20 +475,29 @@ impl GpuBackend {
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             "plane uniforms",
         )?;
+        let mut tables = Vec::with_capacity(layout.planes.len());
         for plane in &layout.planes {
             let (size, k) = plane.target;
             let list = pool.targets.entry(size).or_default();
             if list.len() <= k {
                 list.push(self.new_target(size));
             }
-            for &(size, k) in &plane.tables {
-                let list = pool.tables.entry(size).or_default();
-                if list.len() <= k {
-                    list.push(self.new_sweep_table(size));
-                }
-            }
+            tables.push(
+                prepared[plane.job]
+                    .sweeps
+                    .iter()
+                    .map(|sw| match &sw.table {
+                        TableSource::Cached(t) => t.clone(),
+                        TableSource::Upload { .. } => Arc::new(
+                            self.tables
+                                .take_free(sw.source_size)
+                                .unwrap_or_else(|| self.new_sweep_table(sw.source_size)),
+                        ),
+                    })
+                    .collect(),
+            );
         }
-        Ok(())
+        Ok(tables)
     }
 
     /// Upload step: every plane's vertices, chunks of records and edges and reprojection
@@ -497,7 +505,6 @@ impl GpuBackend {
     /// NDC scale), then the reprojections' summed-area tables.
     fn upload(
         &self,
-        pool: &Pool,
         buffers: &WaveBuffers,
         layout: &WaveLayout,
         jobs: &[PlaneJob],
@@ -537,17 +544,25 @@ impl GpuBackend {
         if let (Some(v), true) = (buffers.views, layout.counted > 0) {
             upload_views(&self.queue, v, layout, jobs, prepared);
         }
-        for plane in &layout.planes {
-            for (sw, &(size, k)) in prepared[plane.job].sweeps.iter().zip(&plane.tables) {
-                let (width, height) = size;
+        for (plane, tables) in layout.planes.iter().zip(&buffers.tables) {
+            for (sw, t) in prepared[plane.job].sweeps.iter().zip(tables) {
+                let TableSource::Upload {
+                    table,
+                    source,
+                    umbra,
+                } = &sw.table
+                else {
+                    continue;
+                };
+                let (width, height) = sw.source_size;
                 self.queue.write_texture(
                     wgpu::TexelCopyTextureInfo {
-                        texture: &pool.tables[&size][k].texture,
+                        texture: &t.texture,
                         mip_level: 0,
                         origin: wgpu::Origin3d::ZERO,
                         aspect: wgpu::TextureAspect::All,
                     },
-                    bytemuck::cast_slice(&sw.table),
+                    bytemuck::cast_slice(table),
                     wgpu::TexelCopyBufferLayout {
                         offset: 0,
                         bytes_per_row: Some(width * 4),
@@ -557,6 +572,14 @@ impl GpuBackend {
                         width,
                         height,
                         depth_or_array_layers: 1,
+                    },
+                );
+                // Later reprojections of this source (this call's or later ones') use it.
+                self.tables.insert(
+                    source,
+                    Cached {
+                        table: Some(t.clone()),
+                        umbra: Some(*umbra),
                     },
                 );
             }
@@ -586,7 +609,7 @@ impl GpuBackend {
                 &mut encoder,
                 pool,
                 buffers,
-                plane,
+                (plane, &buffers.tables[w]),
                 &prepared[plane.job],
                 writes,
             );
@@ -605,14 +628,14 @@ impl GpuBackend {
         encoder: &mut wgpu::CommandEncoder,
         pool: &Pool,
         buffers: &WaveBuffers,
-        plane: &PlaneLayout,
+        (plane, tables): (&PlaneLayout, &[Arc<SweepTable>]),
         p: &Prepared,
         timestamp_writes: Option<wgpu::RenderPassTimestampWrites>,
     ) {
         let (size, k) = plane.target;
         let target = &pool.targets[&size][k];
         let chunk_groups = self.chunk_bind_groups(buffers, plane, p);
-        let reproject_groups = self.reprojection_bind_groups(pool, buffers, plane, p);
+        let reproject_groups = self.reprojection_bind_groups(buffers, plane, tables, p);
         let counted_group = self.counted_bind_group(buffers, plane);
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -823,16 +846,16 @@ impl GpuBackend {
     /// its summed-area table.
     fn reprojection_bind_groups(
         &self,
-        pool: &Pool,
         buffers: &WaveBuffers,
         plane: &PlaneLayout,
+        tables: &[Arc<SweepTable>],
         p: &Prepared,
     ) -> Vec<wgpu::BindGroup> {
         p.sweeps
             .iter()
-            .zip(&plane.tables)
+            .zip(tables)
             .zip(&plane.window_offsets)
-            .map(|((sw, &(size, k)), &off)| {
+            .map(|((sw, t), &off)| {
                 let Some(buf) = buffers.windows else {
                     unreachable!("the windows buffer exists when a plane reprojects");
                 };
@@ -850,9 +873,7 @@ impl GpuBackend {
                         },
                         wgpu::BindGroupEntry {
                             binding: 1,
-                            resource: wgpu::BindingResource::TextureView(
-                                &pool.tables[&size][k].view,
-                            ),
+                            resource: wgpu::BindingResource::TextureView(&t.view),
                         },
                     ],
                 })
@@ -1064,7 +1085,11 @@ impl GpuBackend {
             wgpu::TextureFormat::R32Uint,
             wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         );
-        SweepTable { texture, view }
+        SweepTable {
+            texture,
+            view,
+            size,
+        }
     }
 }
 
