@@ -2336,3 +2336,57 @@ fn a_new_source_never_takes_an_old_sources_table() {
         assert_eq!((st.tables_uploaded, st.tables_reused), (0, 1), "kept {k}");
     }
 }
+
+/// A strip of ground from a cell's face to its plane (Depth −0): projected from the corners
+/// level with it, its views reach ~5,000 px off the map, and clipping once left two vertices
+/// 1.2·10⁻⁷ px apart with the edge between them pointing backwards, whose erosion cut the whole
+/// Projection away (found by `--gpu-projection counting`, whose per-view hulls covered it).
+/// Both backends and both projections cover the pixel, 21 px inside every view.
+#[test]
+fn far_vertices_of_a_ground_strip_do_not_uncover_it() {
+    let f = PlaneFrame {
+        cell: DAabb {
+            min: DVec3::new(18.5, 1.2000000476837158, 3.296069383621216),
+            max: DVec3::new(19.5, 2.200000047683716, 4.296069145202637),
+        },
+        axis: 2,
+        positive: false,
+        position: 2.296069622039795,
+        rect_min: DVec2::new(16.75000035762787, -0.5499995946884155),
+        rect_max: DVec2::new(21.24999964237213, 3.949999690055847),
+        width: 256,
+        height: 256,
+    };
+    let strip = [
+        DVec3::new(40.160701751708984, 0.0, 3.296069280281692),
+        DVec3::new(40.160701751708984, 0.0, 2.296069622039795),
+        DVec3::new(-40.160701751708984, 0.0, 2.296069622039795),
+        DVec3::new(-40.160701751708984, 0.0, 3.296069280281692),
+    ];
+    let slack = coverage::contract_slack(&f, &strip, 99, 9);
+    assert!(
+        slack > 20.0,
+        "pixel (99, 9) is deep inside all 8 views: {slack}"
+    );
+    let mut occ = OccluderSet::default();
+    occ.push(strip);
+    let job = PlaneJob {
+        frame: f,
+        occluders: occ,
+        slices: vec![],
+        reproject: Vec::new(),
+    };
+    let k = 9 * 256 + 99;
+    let map = cpu::render_job(&job);
+    assert!(map.depth[k] <= 0.0, "CPU covers {} pixels", map.covered());
+    let Some(b) = backend() else { return };
+    let clipped = &b.render(std::slice::from_ref(&job)).unwrap()[0];
+    assert!(clipped.depth[k] <= 0.0);
+    assert_eq!(compare(&job, clipped, &map).gpu_only, 0);
+    let Some(counting) = &counting_backend() else {
+        return;
+    };
+    let counted = &counting.render(std::slice::from_ref(&job)).unwrap()[0];
+    assert!(counted.depth[k] <= 0.0);
+    compare(&job, counted, &map);
+}

@@ -130,15 +130,25 @@ pub fn contract_slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> f64 {
     slack
 }
 
-/// Removes vertices within 1e-7 pixel of their predecessor (clipping leaves such pairs): an
-/// edge that short has a normal made of rounding noise, and its erosion could cut the polygon
-/// anywhere. Dropping a vertex of a convex polygon only shrinks it, so this stays conservative.
+/// Removes vertices within `1e-7 + 1e-9·|v|` pixel of their predecessor (clipping leaves such
+/// pairs): an edge that short has a normal made of rounding noise, and its erosion could cut
+/// the polygon anywhere. The tolerance grows with the coordinates' magnitude `|v|` because the
+/// noise does: an occluder reaching almost to a corner's plane projects thousands of pixels
+/// away, and its clipped vertices carry errors far above an absolute 1e-7 px (a ground strip
+/// between a cell's face and its plane once projected to vertices ~1,300 px off the map with
+/// a 1.2e-7 px edge between two of them, pointing backwards, and covered nothing:
+/// `tests/gpu.rs`, `far_vertices_of_a_ground_strip_do_not_uncover_it`). Dropping a vertex of a
+/// convex polygon only shrinks it, so this stays conservative.
 fn drop_near_duplicates(poly: &mut Vec<DVec2>) {
-    const EPS2: f64 = 1e-14;
     let mut k = 0;
     while k < poly.len() && poly.len() > 1 {
         let next = (k + 1) % poly.len();
-        if poly[k].distance_squared(poly[next]) < EPS2 {
+        let m = poly[k]
+            .abs()
+            .max_element()
+            .max(poly[next].abs().max_element());
+        let tol = 1e-7 + 1e-9 * m;
+        if poly[k].distance_squared(poly[next]) < tol * tol {
             poly.remove(next);
         } else {
             k += 1;
