@@ -137,8 +137,13 @@ pub fn contract_slack(f: &PlaneFrame, pts: &[DVec3], i: u32, j: u32) -> f64 {
 /// away, and its clipped vertices carry errors far above an absolute 1e-7 px (a ground strip
 /// between a cell's face and its plane once projected to vertices ~1,300 px off the map with
 /// a 1.2e-7 px edge between two of them, pointing backwards, and covered nothing:
-/// `tests/gpu.rs`, `far_vertices_of_a_ground_strip_do_not_uncover_it`). Dropping a vertex of a
-/// convex polygon only shrinks it, so this stays conservative.
+/// `tests/gpu.rs`, `far_vertices_of_a_ground_strip_do_not_uncover_it`).
+///
+/// Conservative: the exact Projection is convex, and every computed vertex lies within the
+/// rounding noise of an exact one (the noise that [`MARGIN`] absorbs on every eroded edge).
+/// Dropping a vertex leaves the hull of the other exact vertices, up to that same noise: a
+/// convex polygon inside the exact one. Where the noise made the dropped vertex reflex (as in
+/// the strip above), dropping it is what removes the spurious backward edge.
 fn drop_near_duplicates(poly: &mut Vec<DVec2>) {
     let mut k = 0;
     while k < poly.len() && poly.len() > 1 {
