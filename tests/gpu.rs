@@ -2390,3 +2390,40 @@ fn far_vertices_of_a_ground_strip_do_not_uncover_it() {
     assert!(counted.depth[k] <= 0.0);
     compare(&job, counted, &map);
 }
+
+/// Degenerate occluders on the counted path: collinear points, all points equal, a quad with a
+/// repeated vertex (its hull a triangle), a sliver at a grazing angle to the plane, and a
+/// triangle touching a corner's plane: each covers exactly what the CPU's contract allows.
+#[test]
+fn counted_views_of_degenerate_occluders_keep_the_contract() {
+    let Some(b) = &counting_backend() else { return };
+    let f = frame(128, 1, false, 0.5);
+    let p = |u: f64, v: f64, d: f64| point(&f, u, v, d);
+    let mut occ = OccluderSet::default();
+    occ.push([p(-4.0, 0.0, 5.0), p(0.0, 0.0, 5.0), p(4.0, 0.0, 5.0)]);
+    occ.push([p(1.0, 1.0, 5.0), p(1.0, 1.0, 5.0), p(1.0, 1.0, 5.0)]);
+    occ.push([
+        p(-3.0, -3.0, 4.0),
+        p(3.0, -3.0, 4.0),
+        p(3.0, -3.0, 4.0),
+        p(-3.0, 3.0, 4.0),
+    ]);
+    occ.push([p(2.0, 2.0, 1.0), p(8.0, 2.0, 21.0), p(8.0, 2.3, 21.0)]);
+    // Its first point a hair beyond the face: views from the corners reach far off the map.
+    occ.push([p(-9.0, 3.0, 1e-9), p(9.0, 3.0, 1e-9), p(0.0, 8.0, 6.0)]);
+    let job = PlaneJob {
+        frame: f,
+        occluders: occ,
+        slices: vec![],
+        reproject: Vec::new(),
+    };
+    let cpu_map = cpu::render_job(&job);
+    let gpu_map = &b.render(std::slice::from_ref(&job)).unwrap()[0];
+    assert_eq!(b.last_stats().counted, 5);
+    let d = compare(&job, gpu_map, &cpu_map);
+    assert!(
+        cpu_map.covered() > 100,
+        "the repeated-vertex quad covers: {d:?}"
+    );
+    assert!(d.cpu_only * 50 <= d.covered, "{d:?}");
+}

@@ -71,14 +71,15 @@
 //! Same coverage as the clipped path up to near-tie pixels (`tests/gpu.rs`: random triangles,
 //! quads and boxes at 16²–256², stretched maps, a cell 10⁵ from the origin, 12-gons mixed in,
 //! rejects, sweeps, several submissions, and whole bakes with the same PVS). Measured on
-//! lavapipe (2 shared cores, `bake --backend gpu`, shipped scenes, one run each):
+//! lavapipe (2 shared cores, `bake --backend gpu`, shipped scenes, medians of 3 runs, the two
+//! projections alternating; the same PVS every time):
 //!
-//! | scene | projection | CPU setup ms/cell | GPU section ms/cell | ms/cell |
-//! | --- | --- | ---: | ---: | ---: |
-//! | `data/demo_forest` (10 cells, 126 planes and 22,763 occluder Projections per cell) | clipped | 224 | 1,101 | 1,477 |
-//! | | counting | 155 | 2,446 | 2,845 |
-//! | `data/demo_city` (24 cells) | clipped | 10.5 | 753 | 797 |
-//! | | counting | 7.8 | 783 | 840 |
+//! | scene | projection | CPU setup ms/cell | GPU section ms/cell | GPU passes (timestamps) | ms/cell |
+//! | --- | --- | ---: | ---: | ---: | ---: |
+//! | `data/demo_forest` (10 cells, 126 planes and 22,763 occluder Projections per cell) | clipped | 201 | 1,103 | 670 | 1,485 |
+//! | | counting | 141 | 2,535 | 1,286 | 2,834 |
+//! | `data/demo_city` (24 cells) | clipped | 9.6 | 614 | 79 | 665 |
+//! | | counting | 7.4 | 717 | 124 | 783 |
 //!
 //! On a software rasteriser the fragment work dominates and counting tests ~8× the edges per
 //! fragment (every view's, not the ~3 the clipping leaves), so it is slower here; on a real
