@@ -1,4 +1,6 @@
-// umbrasweep — occluder Projection pass: one draw per plane over all of its occluders.
+// umbrasweep — occluder Projection pass: one draw per plane over all of its occluders
+// (`vs_main`, records the CPU set up), or one instanced draw per plane over the records the
+// views pass computed (`vs_counted`, `GpuProjection::Counting`); both end in `fs_main`.
 //
 // Each occluder is drawn as its view from cell corner 0, clipped to the pixel rectangle that
 // can hold covered pixels (a superset of its Projection), and has a record in `data`:
@@ -19,6 +21,11 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> data: array<vec4<u32>>;
+// `vs_counted` only: per occluder (first point, count | plane << 8, Depth bits, record word).
+@group(0) @binding(2) var<storage, read> occ: array<vec4<u32>>;
+
+// A record `views.wgsl` rejected.
+const REJECT: u32 = 0xffffffffu;
 
 struct Vertex {
     @location(0) pos: vec2<f32>,
@@ -44,6 +51,41 @@ fn vs_main(v: Vertex) -> Varyings {
     out.depth = bitcast<f32>(rec.y);
     out.edges = vec2<u32>(v.record + 1u, v.record + 1u + rec.z);
     return out;
+}
+
+// `GpuProjection::Counting`: one instanced draw per plane over the records `views.wgsl`
+// wrote (same layout as above, plus the box's far corner `x1 | y1 << 16` in the fourth word),
+// an instance per occluder. The quad over the record's pixel box has integer corners, exact on
+// every rasteriser, so every pixel centre of the box gets a fragment; `fs_main` then tests it
+// against the occluder's eroded view edges — all 8 views of that one occluder — and a rejected
+// record draws a zero-area quad.
+@vertex
+fn vs_counted(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> Varyings {
+    let r = occ[ii].w;
+    let rec = data[r];
+    var out_v: Varyings;
+    out_v.depth = bitcast<f32>(rec.y);
+    if rec.z == REJECT {
+        // A zero-area quad: no fragment.
+        out_v.position = vec4<f32>(-2.0, -2.0, 0.0, 1.0);
+        out_v.origin = vec2<f32>(0.0, 0.0);
+        out_v.edges = vec2<u32>(0u, 0u);
+        return out_v;
+    }
+    let x0 = f32(rec.x & 0xffffu);
+    let y0 = f32(rec.x >> 16u);
+    let x1 = f32(rec.w & 0xffffu);
+    let y1 = f32(rec.w >> 16u);
+    // Two triangles: (0,0) (1,0) (1,1), (0,0) (1,1) (0,1).
+    let cx = array<u32, 6>(0u, 1u, 1u, 0u, 1u, 0u);
+    let cy = array<u32, 6>(0u, 0u, 1u, 0u, 1u, 1u);
+    let pos = vec2<f32>(select(x0, x1, cx[vi] == 1u), select(y0, y1, cy[vi] == 1u));
+    // Framebuffer y grows downwards, NDC y upwards: row j of the target is pixel row j.
+    let ndc = pos * params.ndc_scale - vec2<f32>(1.0, 1.0);
+    out_v.position = vec4<f32>(ndc.x, -ndc.y, 0.0, 1.0);
+    out_v.origin = vec2<f32>(x0, y0);
+    out_v.edges = vec2<u32>(r + 1u, r + 1u + rec.z);
+    return out_v;
 }
 
 @fragment

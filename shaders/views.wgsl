@@ -16,7 +16,7 @@
 // pixel lies inside all 8 views of this occluder: the backend contract's coverage, counted per
 // occluder, so views of different occluders never add up.
 //
-// `counted.wgsl` then draws the records, one instanced draw per plane.
+// `vs_counted` in `projection.wgsl` then draws the records, one instanced draw per plane.
 //
 // Record (at word `occ[i].w` of `records`):
 //   records[r]         = (x0 | y0 << 16, depth bits, edge count or REJECT, x1 | y1 << 16)

@@ -20,7 +20,7 @@ use umbrasweep::backend::coverage;
 use umbrasweep::backend::cpu::{self, CpuBackend};
 use umbrasweep::backend::gpu::{self, GpuBackend, GpuProjection};
 use umbrasweep::backend::{BackendError, RasterBackend};
-use umbrasweep::bake::{BakeSettings, bake};
+use umbrasweep::bake::{BakeResult, BakeSettings, bake};
 use umbrasweep::generate::{self, CityOptions};
 use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::plane::{DepthMap, OccluderSet, PlaneFrame, PlaneJob, Reprojection, depth_up};
@@ -717,11 +717,8 @@ fn assert_close_to_the_cpu(b: &GpuBackend, jobs: &[PlaneJob], what: &str) {
     );
 }
 
-/// Maps stretched to 8× wider than tall and 8× taller than wide (a bake's planes beside a cell
-/// in a forest): the GPU's projection still matches the CPU's.
-#[test]
-fn stretched_maps_match_the_cpu() {
-    let Some(b) = backend() else { return };
+/// Random quads on maps stretched to 8× wider than tall and 8× taller than wide, in turn.
+fn stretched_jobs() -> Vec<PlaneJob> {
     let mut jobs = random_jobs(5, Shape::Quad, 60, &[64, 128]);
     for (k, j) in jobs.iter_mut().enumerate() {
         let res = j.frame.width;
@@ -731,6 +728,15 @@ fn stretched_maps_match_the_cpu() {
             (res / 8, res * 8)
         };
     }
+    jobs
+}
+
+/// Maps stretched to 8× wider than tall and 8× taller than wide (a bake's planes beside a cell
+/// in a forest): the GPU's projection still matches the CPU's.
+#[test]
+fn stretched_maps_match_the_cpu() {
+    let Some(b) = backend() else { return };
+    let jobs = stretched_jobs();
     assert_close_to_the_cpu(b, &jobs, "stretched");
 }
 
@@ -1405,6 +1411,18 @@ fn reprojection_cost_at_256() {
 // ---------------------------------------------------------------------------------------------
 // Regression: degenerate clipped edges
 
+/// A job of one occluder on `frame`.
+fn one_occluder_job(frame: PlaneFrame, pts: &[DVec3]) -> PlaneJob {
+    let mut occ = OccluderSet::default();
+    occ.push(pts.iter().copied());
+    PlaneJob {
+        frame,
+        occluders: occ,
+        slices: vec![],
+        reproject: Vec::new(),
+    }
+}
+
 /// Clipping can leave near-duplicate vertices (edges ~10⁻¹⁴ px long) whose normals are
 /// rounding noise; eroding such an edge once cut off whole Projections in the CPU backend
 /// (found by these comparisons, fixed there). Both backends now cover this pixel.
@@ -1433,14 +1451,7 @@ fn degenerate_clipped_edges_do_not_uncover_a_triangle() {
         slack > 0.3,
         "pixel (62, 4) is well inside all 8 views: {slack}"
     );
-    let mut occ = OccluderSet::default();
-    occ.push(tri);
-    let job = PlaneJob {
-        frame: f,
-        occluders: occ,
-        slices: vec![],
-        reproject: Vec::new(),
-    };
+    let job = one_occluder_job(f, &tri);
     let map = cpu::render_job(&job);
     assert!(
         map.depth[4 * 64 + 62].is_finite(),
@@ -1529,14 +1540,9 @@ fn bake_pvs_is_identical_on_a_small_city() {
     assert!(same_pvs(&scene, &city.cells, &coarse).is_some_and(|h| h > 0));
 }
 
-/// A whole bake with the occlusion sweep on a small forest, on a backend of its own: planes
-/// carry several reprojections (the skip list), and the PVS is the same as the CPU's.
-#[test]
-fn bake_pvs_is_identical_with_the_sweep() {
-    if backend().is_none() {
-        return;
-    }
-    let b = GpuBackend::new().expect("a second device");
+/// The default forest's first two cells baked with the sweep at 128² on the CPU and on `b`:
+/// the scene and both results.
+fn sweep_forest_bakes(b: &GpuBackend) -> (Scene, BakeResult, BakeResult) {
     let forest = generate::forest(&generate::ForestOptions::default()).unwrap();
     let scene = forest.to_scene("forest");
     let cells = &forest.cells[..forest.cells.len().min(2)];
@@ -1546,7 +1552,19 @@ fn bake_pvs_is_identical_with_the_sweep() {
         ..BakeSettings::default()
     };
     let c = bake(&scene, cells, &settings, &CpuBackend::new(), None).unwrap();
-    let g = bake(&scene, cells, &settings, &b, None).unwrap();
+    let g = bake(&scene, cells, &settings, b, None).unwrap();
+    (scene, c, g)
+}
+
+/// A whole bake with the occlusion sweep on a small forest, on a backend of its own: planes
+/// carry several reprojections (the skip list), and the PVS is the same as the CPU's.
+#[test]
+fn bake_pvs_is_identical_with_the_sweep() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a second device");
+    let (scene, c, g) = sweep_forest_bakes(&b);
     let stats = b.total_stats();
     eprintln!("sweep bake of a forest: {stats:?}");
     assert!(
@@ -1903,6 +1921,32 @@ fn an_engine_device_without_f64_keeps_the_charts_on_the_cpu() {
     }
 }
 
+/// The first two cells of `data/NAME_cells.json`, written to `dir` (created); their path.
+fn two_demo_cells(dir: &Path, name: &str) -> std::path::PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::fs::create_dir_all(dir).unwrap();
+    let cells: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join(format!("data/{name}_cells.json"))).unwrap(),
+    )
+    .unwrap();
+    let two = serde_json::json!({ "cells": cells["cells"].as_array().unwrap()[..2] });
+    let path = dir.join("cells.json");
+    std::fs::write(&path, two.to_string()).unwrap();
+    path
+}
+
+/// Each cell's visible set in the PVS document at `path`.
+fn visible_sets(path: &Path) -> Vec<serde_json::Value> {
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    doc["cells"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["visible"].clone())
+        .collect()
+}
+
 /// `bake --backend gpu` says where ray space factorization's charts ran, and writes the same
 /// PVS as `--backend cpu`.
 #[test]
@@ -1912,14 +1956,7 @@ fn the_bake_command_says_where_the_charts_run() {
     };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = std::env::temp_dir().join(format!("umbrasweep-gpu-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cells: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(root.join("data/demo_city_cells.json")).unwrap(),
-    )
-    .unwrap();
-    let two = serde_json::json!({ "cells": cells["cells"].as_array().unwrap()[..2] });
-    let cells_path = dir.join("cells.json");
-    std::fs::write(&cells_path, two.to_string()).unwrap();
+    let cells_path = two_demo_cells(&dir, "demo_city");
     let mut pvs = Vec::new();
     for backend in ["gpu", "cpu"] {
         let out_path = dir.join(format!("{backend}.json"));
@@ -1943,16 +1980,7 @@ fn the_bake_command_says_where_the_charts_run() {
             ("gpu", false) => assert!(line.contains("no SHADER_F64"), "{line}"),
             _ => assert!(!line.contains("GPU"), "{line}"),
         }
-        let doc: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&out_path).unwrap()).unwrap();
-        pvs.push(
-            doc["cells"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|c| c["visible"].clone())
-                .collect::<Vec<_>>(),
-        );
+        pvs.push(visible_sets(&out_path));
     }
     assert_eq!(pvs[0], pvs[1]);
     std::fs::remove_dir_all(&dir).ok();
@@ -2015,15 +2043,7 @@ fn counted_halves_do_not_add_up_and_minimum_depth_wins() {
 #[test]
 fn counted_views_hold_on_stretched_far_and_mixed_planes() {
     let Some(b) = &counting_backend() else { return };
-    let mut jobs = random_jobs(5, Shape::Quad, 60, &[64, 128]);
-    for (k, j) in jobs.iter_mut().enumerate() {
-        let res = j.frame.width;
-        (j.frame.width, j.frame.height) = if k % 2 == 0 {
-            (res * 8, res / 8)
-        } else {
-            (res / 8, res * 8)
-        };
-    }
+    let jobs = stretched_jobs();
     assert_counted_close_to_the_cpu(b, &jobs, "counted, stretched");
 
     let shift = DVec3::new(1e5, -2e5, 3e5);
@@ -2124,19 +2144,9 @@ fn counted_views_reject_what_the_cpu_rejects_and_keep_sweeps_and_waves() {
 #[test]
 fn counted_views_bake_the_same_pvs() {
     let Some(b) = &counting_backend() else { return };
-    let forest = generate::forest(&generate::ForestOptions::default()).unwrap();
-    let scene = forest.to_scene("forest");
-    let cells = &forest.cells[..forest.cells.len().min(2)];
-    let settings = BakeSettings {
-        resolution: 128,
-        sweep: umbrasweep::bake::SweepChoice::On,
-        ..BakeSettings::default()
-    };
-    let c = bake(&scene, cells, &settings, &CpuBackend::new(), None).unwrap();
-    let before = b.total_stats().counted;
-    let g = bake(&scene, cells, &settings, b, None).unwrap();
+    let (scene, c, g) = sweep_forest_bakes(b);
     assert!(
-        b.total_stats().counted > before,
+        b.total_stats().counted > 0,
         "the bake counted views on the GPU"
     );
     for (k, (cc, gc)) in c.cells.iter().zip(&g.cells).enumerate() {
@@ -2179,14 +2189,7 @@ fn the_bake_command_counts_views_on_request() {
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = std::env::temp_dir().join(format!("umbrasweep-gpu-count-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let cells: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(root.join("data/demo_forest_cells.json")).unwrap(),
-    )
-    .unwrap();
-    let two = serde_json::json!({ "cells": cells["cells"].as_array().unwrap()[..2] });
-    let cells_path = dir.join("cells.json");
-    std::fs::write(&cells_path, two.to_string()).unwrap();
+    let cells_path = two_demo_cells(&dir, "demo_forest");
     let bake = |args: &[&str], out_path: &Path| {
         std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
             .arg("bake")
@@ -2220,16 +2223,7 @@ fn the_bake_command_counts_views_on_request() {
             name == "counting",
             "{line}"
         );
-        let doc: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&out_path).unwrap()).unwrap();
-        pvs.push(
-            doc["cells"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|c| c["visible"].clone())
-                .collect::<Vec<_>>(),
-        );
+        pvs.push(visible_sets(&out_path));
     }
     assert_eq!(pvs[0], pvs[1]);
     let bad = dir.join("bad.json");
@@ -2368,14 +2362,7 @@ fn far_vertices_of_a_ground_strip_do_not_uncover_it() {
         slack > 20.0,
         "pixel (99, 9) is deep inside all 8 views: {slack}"
     );
-    let mut occ = OccluderSet::default();
-    occ.push(strip);
-    let job = PlaneJob {
-        frame: f,
-        occluders: occ,
-        slices: vec![],
-        reproject: Vec::new(),
-    };
+    let job = one_occluder_job(f, &strip);
     let k = 9 * 256 + 99;
     let map = cpu::render_job(&job);
     assert!(map.depth[k] <= 0.0, "CPU covers {} pixels", map.covered());

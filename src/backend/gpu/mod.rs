@@ -59,7 +59,7 @@
 //! the shared margin, the `f64` error term, the bound on the fragment shader's `f32` error,
 //! offset rounded up), keeps only the edges some pixel centre of the box can fail, and writes
 //! a record with the box to draw: the intersection of the views' boxes, clipped to the plane,
-//! rounded outward to whole pixels. Then one instanced draw per plane (`shaders/counted.wgsl`)
+//! rounded outward to whole pixels. Then one instanced draw per plane (`vs_counted` in `shaders/projection.wgsl`)
 //! draws each record's box as a quad with integer corners — every pixel centre inside gets a
 //! fragment on any rasteriser — and the fragment shader counts the pixel in only when its
 //! centre passes every edge of all 8 views of that one occluder. Eroding the intersection of
@@ -231,17 +231,12 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shaders/views.wgsl",
         include_str!("../../../shaders/views.wgsl"),
     ),
-    (
-        "shaders/counted.wgsl",
-        include_str!("../../../shaders/counted.wgsl"),
-    ),
 ];
 
 const PROJECTION_WGSL: &str = SHADERS[0].1;
 const REPROJECT_WGSL: &str = SHADERS[1].1;
 const RSF_WGSL: &str = SHADERS[2].1;
 const VIEWS_WGSL: &str = SHADERS[3].1;
-const COUNTED_WGSL: &str = SHADERS[4].1;
 
 /// How the GPU backend gets each occluder's Projection (its 8 views intersected), the pixels
 /// it covers. Both keep the contract of [`crate::plane`] with the same coverage up to
@@ -264,7 +259,7 @@ pub enum GpuProjection {
     /// from the 8 corners in `f64`, takes their hulls and erodes their edges
     /// (`shaders/views.wgsl`), and one instanced draw per plane counts them per fragment: a
     /// pixel is covered when its centre passes every eroded edge of all 8 views of one
-    /// occluder (`shaders/counted.wgsl`). Occluders of more than 8 points are set up on the
+    /// occluder (`vs_counted` in `shaders/projection.wgsl`). Occluders of more than 8 points are set up on the
     /// CPU as with [`Clipped`](Self::Clipped). Needs [`wgpu::Features::SHADER_F64`].
     Counting,
 }

@@ -5,7 +5,7 @@
 
 use super::device::ErrorScopes;
 use super::setup::Vertex;
-use super::{COUNTED_WGSL, PROJECTION_WGSL, REPROJECT_WGSL, VIEWS_WGSL};
+use super::{PROJECTION_WGSL, REPROJECT_WGSL, VIEWS_WGSL};
 use crate::backend::BackendError;
 use std::num::NonZeroU64;
 
@@ -51,7 +51,8 @@ impl Pipelines {
 
 /// The pipelines of [`GpuProjection::Counting`](super::GpuProjection::Counting): the compute
 /// pass that projects every occluder's views and writes its record (`shaders/views.wgsl`), and
-/// the instanced draw that counts them per fragment (`shaders/counted.wgsl`).
+/// the instanced draw that counts them per fragment (`vs_counted` and `fs_main` in
+/// `shaders/projection.wgsl`).
 #[derive(Debug)]
 pub(super) struct ViewPipelines {
     /// The views pass.
@@ -60,7 +61,7 @@ pub(super) struct ViewPipelines {
     pub views_layout: wgpu::BindGroupLayout,
     /// The counted draw.
     pub counted: wgpu::RenderPipeline,
-    /// Its bind group: the plane's uniforms, the occluders and the records.
+    /// Its bind group: the plane's uniforms, the records and the occluders.
     pub counted_layout: wgpu::BindGroupLayout,
 }
 
@@ -117,55 +118,23 @@ impl ViewPipelines {
         let counted_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("counted bind group layout"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: NonZeroU64::new(16),
-                    },
-                    count: None,
-                },
-                storage(1, true, wgpu::ShaderStages::VERTEX),
-                storage(2, true, vf),
+                plane_uniforms_entry(),
+                storage(1, true, vf),
+                storage(2, true, wgpu::ShaderStages::VERTEX),
             ],
         });
         let counted_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("shaders/counted.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(COUNTED_WGSL.into()),
+            label: Some("shaders/projection.wgsl (counted)"),
+            source: wgpu::ShaderSource::Wgsl(PROJECTION_WGSL.into()),
         });
-        let counted = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("counted pipeline"),
-            layout: Some(
-                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("counted pipeline layout"),
-                    bind_group_layouts: &[Some(&counted_layout)],
-                    immediate_size: 0,
-                }),
-            ),
-            vertex: wgpu::VertexState {
-                module: &counted_module,
-                entry_point: Some("vs_counted"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &counted_module,
-                entry_point: Some("fs_counted"),
-                compilation_options: Default::default(),
-                targets: &[Some(depth_min_target())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let counted = depth_map_pipeline(
+            device,
+            "counted",
+            &counted_layout,
+            &counted_module,
+            ("vs_counted", "fs_main"),
+            &[],
+        );
         scope.check()?;
         Ok(ViewPipelines {
             views,
@@ -200,16 +169,7 @@ fn projection_pipeline(device: &wgpu::Device) -> (wgpu::RenderPipeline, wgpu::Bi
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("projection bind group layout"),
         entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: NonZeroU64::new(16),
-                },
-                count: None,
-            },
+            plane_uniforms_entry(),
             wgpu::BindGroupLayoutEntry {
                 binding: 1,
                 visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
@@ -222,41 +182,19 @@ fn projection_pipeline(device: &wgpu::Device) -> (wgpu::RenderPipeline, wgpu::Bi
             },
         ],
     });
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("projection pipeline layout"),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
     let attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Uint32];
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("projection pipeline"),
-        layout: Some(&pipeline_layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<Vertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &attributes,
-            })],
-        },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: None,
-        multisample: wgpu::MultisampleState::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_main"),
-            compilation_options: Default::default(),
-            targets: &[Some(depth_min_target())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    });
+    let pipeline = depth_map_pipeline(
+        device,
+        "projection",
+        &layout,
+        &module,
+        ("vs_main", "fs_main"),
+        &[Some(wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Vertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &attributes,
+        })],
+    );
     (pipeline, layout)
 }
 
@@ -293,19 +231,55 @@ fn reproject_pipeline(device: &wgpu::Device) -> (wgpu::RenderPipeline, wgpu::Bin
             },
         ],
     });
+    let pipeline = depth_map_pipeline(
+        device,
+        "reprojection",
+        &layout,
+        &module,
+        ("vs_fullscreen", "fs_reproject"),
+        &[],
+    );
+    (pipeline, layout)
+}
+
+/// Binding 0 of the occluder draws: the plane's uniforms (pixel to NDC scale), vertex stage.
+fn plane_uniforms_entry() -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding: 0,
+        visibility: wgpu::ShaderStages::VERTEX,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: NonZeroU64::new(16),
+        },
+        count: None,
+    }
+}
+
+/// A render pipeline into an `R32Float` Depth Map ([`depth_min_target`]): a triangle list from
+/// `entries` (vertex and fragment entry points) of `module`, with one bind group of `layout`,
+/// labelled `name pipeline` (and its layout `name pipeline layout`).
+fn depth_map_pipeline(
+    device: &wgpu::Device,
+    name: &str,
+    layout: &wgpu::BindGroupLayout,
+    module: &wgpu::ShaderModule,
+    (vs, fs): (&str, &str),
+    buffers: &[Option<wgpu::VertexBufferLayout>],
+) -> wgpu::RenderPipeline {
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("reprojection pipeline layout"),
-        bind_group_layouts: &[Some(&layout)],
+        label: Some(&format!("{name} pipeline layout")),
+        bind_group_layouts: &[Some(layout)],
         immediate_size: 0,
     });
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("reprojection pipeline"),
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(&format!("{name} pipeline")),
         layout: Some(&pipeline_layout),
         vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_fullscreen"),
+            module,
+            entry_point: Some(vs),
             compilation_options: Default::default(),
-            buffers: &[],
+            buffers,
         },
         primitive: wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,
@@ -315,13 +289,12 @@ fn reproject_pipeline(device: &wgpu::Device) -> (wgpu::RenderPipeline, wgpu::Bin
         depth_stencil: None,
         multisample: wgpu::MultisampleState::default(),
         fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_reproject"),
+            module,
+            entry_point: Some(fs),
             compilation_options: Default::default(),
             targets: &[Some(depth_min_target())],
         }),
         multiview_mask: None,
         cache: None,
-    });
-    (pipeline, layout)
+    })
 }

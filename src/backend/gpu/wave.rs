@@ -85,6 +85,18 @@ struct Target {
 /// size.
 type Slot = ((u32, u32), usize);
 
+/// Binding 0 of the occluder draws' bind groups: the plane's uniforms.
+fn uniforms_entry<'a>(buffers: &WaveBuffers<'a>, plane: &PlaneLayout) -> wgpu::BindGroupEntry<'a> {
+    wgpu::BindGroupEntry {
+        binding: 0,
+        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: buffers.uniforms,
+            offset: plane.uniform_offset,
+            size: NonZeroU64::new(16),
+        }),
+    }
+}
+
 /// Uploads the views pass's inputs: every plane's counted points, its occluders rebased onto
 /// the wave's buffers (first point, `count | plane << 8`, Depth, first record word), and every
 /// plane's frame (corners, rectangle, pixel scale, position and side in `f64`; axis and size in
@@ -724,14 +736,7 @@ impl GpuBackend {
                     label: Some("projection chunk bind group"),
                     layout: &self.pipelines.projection_layout,
                     entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                                buffer: buffers.uniforms,
-                                offset: plane.uniform_offset,
-                                size: NonZeroU64::new(16),
-                            }),
-                        },
+                        uniforms_entry(buffers, plane),
                         wgpu::BindGroupEntry {
                             binding: 1,
                             resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -822,21 +827,14 @@ impl GpuBackend {
             label: Some("counted bind group"),
             layout: &vp.counted_layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: buffers.uniforms,
-                        offset: plane.uniform_offset,
-                        size: NonZeroU64::new(16),
-                    }),
-                },
+                uniforms_entry(buffers, plane),
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: occ.as_entire_binding(),
+                    resource: records.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 2,
-                    resource: records.as_entire_binding(),
+                    resource: occ.as_entire_binding(),
                 },
             ],
         }))
