@@ -308,6 +308,17 @@ fn render_passes_are_timed_when_the_device_has_timestamps() {
     engine.render(&jobs).unwrap();
     assert_eq!(engine.last_stats().timed_passes, 0);
     assert_eq!(engine.counters().unwrap().pass_time, None);
+    // Counted views: the views pass is timed too (one per submission).
+    let Some(counting) = &counting_backend() else {
+        return;
+    };
+    counting.render(&jobs).unwrap();
+    let st = counting.last_stats();
+    if counting.timestamps() {
+        assert!(st.counted > 0, "{st:?}");
+        assert_eq!(st.timed_passes, st.passes + st.submissions, "{st:?}");
+        assert!(st.pass_time > std::time::Duration::ZERO, "{st:?}");
+    }
 }
 
 /// The bench's rows of the GPU backend say what the device did per cell (passes, bytes up and

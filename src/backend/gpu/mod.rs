@@ -374,8 +374,9 @@ pub struct RenderStats {
     pub gpu: Duration,
     /// Wall time of the whole render, setup included.
     pub total: Duration,
-    /// GPU time of the timed render passes, from the GPU's own timestamps at the start and end
-    /// of each pass (zero without [`wgpu::Features::TIMESTAMP_QUERY`]).
+    /// GPU time of the timed passes — every render pass, and the views pass of
+    /// [`GpuProjection::Counting`] — from the GPU's own timestamps at the start and end of each
+    /// pass (zero without [`wgpu::Features::TIMESTAMP_QUERY`]).
     pub pass_time: Duration,
     /// Render passes timed with timestamps (0 when the device has none).
     pub timed_passes: usize,

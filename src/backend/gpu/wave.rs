@@ -296,6 +296,12 @@ impl WaveLayout {
         }
     }
 
+    /// Passes timed with timestamps: every plane's render pass, then the views pass when the
+    /// wave has counted occluders.
+    fn timed_passes(&self) -> usize {
+        self.planes.len() + usize::from(self.counted > 0)
+    }
+
     /// Bytes the views pass uploads: points, occluders, and every plane's frame.
     fn view_bytes(&self) -> u64 {
         if self.counted == 0 {
@@ -394,8 +400,8 @@ impl GpuBackend {
         self.upload(&buffers, &layout, jobs, prepared);
         layout.count(jobs, prepared, stats);
         let timestamps = self.timestamp_period.map(|period| Timestamps {
-            sets: &pool.timestamps[..timestamp_sets(layout.planes.len())],
-            passes: layout.planes.len(),
+            sets: &pool.timestamps[..timestamp_sets(layout.timed_passes())],
+            passes: layout.timed_passes(),
             period,
         });
         let commands = self.encode(pool, &buffers, &layout, prepared, timestamps.as_ref());
@@ -406,7 +412,7 @@ impl GpuBackend {
         self.check_failure()?;
         if let Some(t) = &timestamps {
             stats.pass_time += t.read()?;
-            stats.timed_passes += layout.planes.len();
+            stats.timed_passes += layout.timed_passes();
         }
         read_back(pool, &layout, prepared, out)
     }
@@ -423,7 +429,7 @@ impl GpuBackend {
         prepared: &[Prepared],
     ) -> Result<Vec<Vec<Arc<SweepTable>>>, BackendError> {
         if self.timestamp_period.is_some() {
-            while pool.timestamps.len() < timestamp_sets(layout.planes.len()) {
+            while pool.timestamps.len() < timestamp_sets(layout.timed_passes()) {
                 pool.timestamps.push(TimestampSet::new(&self.device));
             }
         }
@@ -613,7 +619,8 @@ impl GpuBackend {
                 label: Some("umbrasweep planes"),
             });
         if let (Some(v), true) = (buffers.views, layout.counted > 0) {
-            self.encode_views(&mut encoder, v, layout);
+            let writes = timestamps.map(|t| t.compute_writes(layout.planes.len()));
+            self.encode_views(&mut encoder, v, layout, writes);
         }
         for (w, plane) in layout.planes.iter().enumerate() {
             let writes = timestamps.map(|t| t.writes(w));
@@ -758,6 +765,7 @@ impl GpuBackend {
         encoder: &mut wgpu::CommandEncoder,
         v: &ViewBuffers,
         layout: &WaveLayout,
+        timestamp_writes: Option<wgpu::ComputePassTimestampWrites>,
     ) {
         let Some(vp) = &self.view_pipelines else {
             unreachable!("counted occluders are only prepared with the views pipelines");
@@ -802,7 +810,7 @@ impl GpuBackend {
         let gx = groups.min(65_535);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("occluder views"),
-            timestamp_writes: None,
+            timestamp_writes,
         });
         pass.set_pipeline(&vp.views);
         pass.set_bind_group(0, &bg, &[]);
@@ -1124,7 +1132,7 @@ impl TimestampSet {
         };
         TimestampSet {
             set: device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("render pass timestamps"),
+                label: Some("pass timestamps"),
                 ty: wgpu::QueryType::Timestamp,
                 count: TIMESTAMPS_PER_SET as u32,
             }),
@@ -1159,13 +1167,23 @@ impl Timestamps<'_> {
         u64::from(self.queries(k)) * 8
     }
 
-    /// The start and end timestamps of pass `w`.
+    /// The start and end timestamps of render pass `w`.
     fn writes(&self, w: usize) -> wgpu::RenderPassTimestampWrites<'_> {
         let (k, i) = ((2 * w) / TIMESTAMPS_PER_SET, (2 * w) % TIMESTAMPS_PER_SET);
         wgpu::RenderPassTimestampWrites {
             query_set: &self.sets[k].set,
             beginning_of_pass_write_index: Some(i as u32),
             end_of_pass_write_index: Some(i as u32 + 1),
+        }
+    }
+
+    /// The start and end timestamps of pass `w` when it is a compute pass (the views pass).
+    fn compute_writes(&self, w: usize) -> wgpu::ComputePassTimestampWrites<'_> {
+        let r = self.writes(w);
+        wgpu::ComputePassTimestampWrites {
+            query_set: r.query_set,
+            beginning_of_pass_write_index: r.beginning_of_pass_write_index,
+            end_of_pass_write_index: r.end_of_pass_write_index,
         }
     }
 
