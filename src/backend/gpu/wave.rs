@@ -411,8 +411,12 @@ impl GpuBackend {
         self.wait(submission, mapped, waited)?;
         self.check_failure()?;
         if let Some(t) = &timestamps {
-            stats.pass_time += t.read()?;
+            let (all, last) = t.read()?;
+            stats.pass_time += all;
             stats.timed_passes += layout.timed_passes();
+            if layout.counted > 0 {
+                stats.views_time += last;
+            }
         }
         read_back(pool, &layout, prepared, out)
     }
@@ -1195,11 +1199,12 @@ impl Timestamps<'_> {
         }
     }
 
-    /// The summed GPU time of the wave's passes (mapped buffers), unmapping them.
+    /// The summed GPU time of the wave's passes and the time of its last pass (mapped
+    /// buffers), unmapping them.
     ///
     /// # Errors
     /// [`BackendError::ReadBack`] when a mapped range cannot be read.
-    fn read(&self) -> Result<Duration, BackendError> {
+    fn read(&self) -> Result<(Duration, Duration), BackendError> {
         let mut ticks: Vec<u64> = Vec::with_capacity(2 * self.passes);
         for (k, s) in self.sets.iter().enumerate() {
             let bytes = s
@@ -1218,12 +1223,14 @@ impl Timestamps<'_> {
             drop(bytes);
             s.read_back.unmap();
         }
-        let sum: u64 = ticks
+        let per_pass: Vec<u64> = ticks
             .chunks_exact(2)
             .map(|p| p[1].saturating_sub(p[0]))
-            .sum();
-        Ok(Duration::from_nanos(
-            (sum as f64 * self.period).round() as u64
+            .collect();
+        let time = |t: u64| Duration::from_nanos((t as f64 * self.period).round() as u64);
+        Ok((
+            time(per_pass.iter().sum()),
+            time(per_pass.last().copied().unwrap_or(0)),
         ))
     }
 }
