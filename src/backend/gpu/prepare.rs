@@ -102,8 +102,10 @@ pub(super) struct Chunk {
 }
 
 /// CPU setup of one job: records, edges and geometry of every occluder ([`setup_occluders`]),
-/// split into draw chunks whose data fits `max_chunk_words` ([`split_chunks`]), the slice mask
-/// and the reprojections that can set a pixel.
+/// split into draw chunks whose data fits `max_chunk_words` ([`split_chunks`]) — with
+/// `counting`, only of those the views pass does not take ([`count_occluders`]) — the slice
+/// mask, and the reprojections that can set a pixel, their tables taken from `tables` where
+/// an earlier reprojection of the same source left them.
 ///
 /// # Errors
 /// [`BackendError::OccluderTooLarge`] when one occluder's data exceed `max_chunk_words`.
