@@ -1,7 +1,8 @@
 // Ray space factorization's charts on the GPU, the twin of `src/rsf/mod.rs` (see its docs for
 // the geometry and the proof, and `src/backend/gpu/rsf.rs` for the passes). Everything is
 // computed in f64 (the device has `SHADER_F64`) with the CPU's expressions, margins and
-// rounding to f32, so both give the same charts.
+// rounding to f32, so both give the same charts. `rounding.wgsl` (INF_BITS, next_up,
+// f32_up, …) is prepended to this file.
 //
 // Charts: per chart `c`, row `j`, column `i`, the pixel `(c·res + j)·res + i` holds six f32:
 // the near umbra (slope, guard, base) then the far one. `NONE` is (−inf, +inf, +inf).
@@ -32,8 +33,6 @@ struct Params {
 // insert: per occluder, 1 when it wrote a pixel; test: per box, 1 when it is visible.
 @group(0) @binding(5) var<storage, read_write> flags: array<atomic<u32>>;
 
-const INF_BITS: u32 = 0x7f800000u;
-
 struct Umbra {
     slope: f32,
     guard: f32,
@@ -50,42 +49,6 @@ fn none() -> Umbra {
 
 fn is_none(u: Umbra) -> bool {
     return u.guard == inf32();
-}
-
-// Rust's `f32::next_up` for finite values and −inf.
-fn next_up(f: f32) -> f32 {
-    let b = bitcast<u32>(f);
-    if b == INF_BITS || (b & 0x7fffffffu) > INF_BITS {
-        return f;
-    }
-    if (b & 0x7fffffffu) == 0u {
-        return bitcast<f32>(1u);
-    }
-    if (b & 0x80000000u) == 0u {
-        return bitcast<f32>(b + 1u);
-    }
-    return bitcast<f32>(b - 1u);
-}
-
-fn next_down(f: f32) -> f32 {
-    return -next_up(-f);
-}
-
-// `geom::f32_down` / `f32_up`: the nearest f32 at or below / above.
-fn f32_down(x: f64) -> f32 {
-    let f = f32(x);
-    if f64(f) > x {
-        return next_down(f);
-    }
-    return f;
-}
-
-fn f32_up(x: f64) -> f32 {
-    let f = f32(x);
-    if f64(f) < x {
-        return next_up(f);
-    }
-    return f;
 }
 
 struct Frame {

@@ -18,6 +18,8 @@
 //
 // `vs_counted` in `projection.wgsl` then draws the records, one instanced draw per plane.
 //
+// `rounding.wgsl` (f32_up, …) is prepended to this file.
+//
 // Record (at word `occ[i].w` of `records`):
 //   records[r]         = (x0 | y0 << 16, depth bits, edge count or REJECT, x1 | y1 << 16)
 //   records[r + 1 + k] = (bitcast nx, bitcast ny, bitcast c, 0)       for k < edge count
@@ -44,26 +46,6 @@ const F32_ERR_PER_PX: f64 = 4.76837158203125e-7lf;
 // Per plane: (axis, width, height, 0).
 @group(0) @binding(3) var<storage, read> planes_u: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read_write> records: array<vec4<u32>>;
-
-fn next_up(f: f32) -> f32 {
-    let b = bitcast<u32>(f);
-    if (b & 0x7fffffffu) == 0u {
-        return bitcast<f32>(1u);
-    }
-    if (b & 0x80000000u) == 0u {
-        return bitcast<f32>(b + 1u);
-    }
-    return bitcast<f32>(b - 1u);
-}
-
-// `geom::f32_up`: the nearest f32 at or above (|x| well inside the f32 range).
-fn f32_up(x: f64) -> f32 {
-    let f = f32(x);
-    if f64(f) < x {
-        return next_up(f);
-    }
-    return f;
-}
 
 // `setup::flush_tiny`: GPUs may flush denormals.
 fn flush_tiny(x: f32) -> f32 {

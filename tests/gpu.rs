@@ -35,10 +35,13 @@ fn shaders_validate_with_naga() {
     for &(path, source) in gpu::SHADERS {
         let module = naga::front::wgsl::parse_str(source)
             .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(source, path)));
-        // Ray space factorization's charts and the occluders' views compute in f64
-        // (`SHADER_F64`); the other passes
+        // Ray space factorization's charts, the occluders' views and their shared rounding
+        // compute in f64 (`SHADER_F64`); the other passes
         // need nothing beyond the defaults.
-        let caps = if path == "shaders/rsf.wgsl" || path == "shaders/views.wgsl" {
+        let caps = if ["rsf", "views", "rounding"]
+            .map(|n| format!("shaders/{n}.wgsl"))
+            .contains(&path.to_string())
+        {
             naga::valid::Capabilities::FLOAT64
         } else {
             naga::valid::Capabilities::default()

@@ -44,10 +44,7 @@ pub fn render_job(job: &PlaneJob) -> DepthMap {
     for k in 0..job.occluders.len() {
         let pts = job.occluders.get(k);
         if projection_polygon(frame, &corners, pts, &mut scratch) {
-            let depth = pts
-                .iter()
-                .map(|&p| frame.depth(p))
-                .fold(f64::NEG_INFINITY, f64::max);
+            let depth = frame.far_depth(pts);
             fill_convex(&mut map, &scratch.poly, depth_up(depth));
         }
     }

@@ -109,6 +109,14 @@ impl PlaneFrame {
         self.sign() * (p[self.axis] - self.position)
     }
 
+    /// An occluder's Depth before rounding: the largest [`Self::depth`] of its points
+    /// (`-inf` for none).
+    pub fn far_depth(&self, pts: &[DVec3]) -> f64 {
+        pts.iter()
+            .map(|&p| self.depth(p))
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
     /// Coordinate of the cell's face the plane looks out of.
     pub fn face(&self) -> f64 {
         if self.positive {

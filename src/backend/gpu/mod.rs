@@ -215,7 +215,8 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 use wave::{Pool, plan_waves};
 
-/// The WGSL source of every pass, `(file name, source)`, for validation in tests.
+/// The WGSL source of every pass, `(file name, source)`, for validation in tests: the `f64`
+/// passes (`rsf.wgsl`, `views.wgsl`) with `shaders/rounding.wgsl` prepended, and that file alone.
 pub const SHADERS: &[(&str, &str)] = &[
     (
         "shaders/projection.wgsl",
@@ -227,11 +228,21 @@ pub const SHADERS: &[(&str, &str)] = &[
     ),
     (
         "shaders/rsf.wgsl",
-        include_str!("../../../shaders/rsf.wgsl"),
+        concat!(
+            include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/rsf.wgsl")
+        ),
     ),
     (
         "shaders/views.wgsl",
-        include_str!("../../../shaders/views.wgsl"),
+        concat!(
+            include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/views.wgsl")
+        ),
+    ),
+    (
+        "shaders/rounding.wgsl",
+        include_str!("../../../shaders/rounding.wgsl"),
     ),
 ];
 

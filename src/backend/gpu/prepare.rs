@@ -120,10 +120,7 @@ pub(super) fn prepare(
     } else {
         None
     };
-    let (mut out, occluders) = match &counted {
-        Some((_, rest)) => setup_occluders(job, rest),
-        None => setup_occluders(job, &(0..job.occluders.len()).collect::<Vec<_>>()),
-    };
+    let (mut out, occluders) = setup_occluders(job, counted.as_ref().map(|c| c.1.as_slice()));
     let chunks = split_chunks(&mut out, max_chunk_words)?;
     Ok(Prepared {
         out,
@@ -152,10 +149,7 @@ fn count_occluders(job: &PlaneJob, max_chunk_words: usize) -> Option<(Counted, V
             rest.push(k);
             continue;
         }
-        let depth = pts
-            .iter()
-            .map(|&p| frame.depth(p))
-            .fold(f64::NEG_INFINITY, f64::max);
+        let depth = frame.far_depth(pts);
         c.occ.push([
             (c.points.len() / 3) as u32,
             pts.len() as u32,
@@ -168,24 +162,22 @@ fn count_occluders(job: &PlaneJob, max_chunk_words: usize) -> Option<(Counted, V
     (c.record_words + c.occ.len() <= max_chunk_words).then_some((c, rest))
 }
 
-/// The job's occluders `which` set up ([`setup::occluder`]) in parallel tasks of
-/// [`SETUP_TASK`], concatenated in order (record indices rebased); with the number set up.
-fn setup_occluders(job: &PlaneJob, which: &[usize]) -> (Output, usize) {
+/// The job's occluders `which` (all when `None`) set up ([`setup::occluder`]) in parallel
+/// tasks of [`SETUP_TASK`], concatenated in order (record indices rebased); with the number
+/// set up.
+fn setup_occluders(job: &PlaneJob, which: Option<&[usize]>) -> (Output, usize) {
     let frame = &job.frame;
     let ps = PlaneSetup::new(frame);
-    let n = which.len();
+    let n = which.map_or(job.occluders.len(), <[usize]>::len);
     let parts: Vec<(Output, usize)> = (0..n.div_ceil(SETUP_TASK))
         .into_par_iter()
         .map(|t| {
             let mut scratch = Scratch::default();
             let mut out = Output::default();
             let mut count = 0;
-            for &k in &which[t * SETUP_TASK..((t + 1) * SETUP_TASK).min(n)] {
-                let pts = job.occluders.get(k);
-                let depth = pts
-                    .iter()
-                    .map(|&p| frame.depth(p))
-                    .fold(f64::NEG_INFINITY, f64::max);
+            for i in t * SETUP_TASK..((t + 1) * SETUP_TASK).min(n) {
+                let pts = job.occluders.get(which.map_or(i, |w| w[i]));
+                let depth = frame.far_depth(pts);
                 if setup::occluder(&ps, pts, depth, &mut scratch, &mut out) {
                     count += 1;
                 }

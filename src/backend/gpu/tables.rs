@@ -67,10 +67,8 @@ impl TableCache {
 
     /// What is cached for `source`, if anything.
     pub fn get(&self, source: &Arc<DepthMap>) -> Option<Cached> {
-        let inner = self.lock();
-        let e = inner.live.get(&key(source))?;
-        // The Weak keeps the address taken (module docs); the check is belt and braces.
-        (e.source.as_ptr() == Arc::as_ptr(source)).then(|| e.cached.clone())
+        // The key is the address, which the entry's Weak keeps taken (module docs).
+        self.lock().live.get(&key(source)).map(|e| e.cached.clone())
     }
 
     /// Records `cached` for `source` (a later call finds it with [`Self::get`]).
@@ -90,8 +88,8 @@ impl TableCache {
     }
 
     /// Evicts the entries whose source is gone; their textures go to the free lists (at most
-    /// [`FREE_PER_SIZE`] per size). Returns how many entries are left.
-    pub fn evict(&self) -> usize {
+    /// [`FREE_PER_SIZE`] per size).
+    pub fn evict(&self) {
         let mut inner = self.lock();
         let dead: Vec<usize> = inner
             .live
@@ -112,7 +110,6 @@ impl TableCache {
                 }
             }
         }
-        inner.live.len()
     }
 }
 
