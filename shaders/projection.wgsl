@@ -54,8 +54,9 @@ fn vs_main(v: Vertex) -> Varyings {
 }
 
 // `GpuProjection::Counting`: one instanced draw per plane over the records `views.wgsl`
-// wrote (same layout as above, plus the box's far corner `x1 | y1 << 16` in the fourth word),
-// an instance per occluder. The quad over the record's pixel box has integer corners, exact on
+// wrote (as above, plus the box's far corner `x1 | y1 << 16` in the fourth word and a second
+// header word whose first holds the box's near corner; the edges follow it), an instance per
+// occluder. The quad over the record's pixel box has integer corners, exact on
 // every rasteriser, so every pixel centre of the box gets a fragment; `fs_main` then tests it
 // against the occluder's eroded view edges — all 8 views of that one occluder — and a rejected
 // record draws a zero-area quad.
@@ -72,8 +73,10 @@ fn vs_counted(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
         out_v.edges = vec2<u32>(0u, 0u);
         return out_v;
     }
-    let x0 = f32(rec.x & 0xffffu);
-    let y0 = f32(rec.x >> 16u);
+    // The edges' origin, and the box: from the second header word to the fourth word.
+    let box0 = data[r + 1u].x;
+    let x0 = f32(box0 & 0xffffu);
+    let y0 = f32(box0 >> 16u);
     let x1 = f32(rec.w & 0xffffu);
     let y1 = f32(rec.w >> 16u);
     // Two triangles: (0,0) (1,0) (1,1), (0,0) (1,1) (0,1).
@@ -83,8 +86,8 @@ fn vs_counted(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
     // Framebuffer y grows downwards, NDC y upwards: row j of the target is pixel row j.
     let ndc = pos * params.ndc_scale - vec2<f32>(1.0, 1.0);
     out_v.position = vec4<f32>(ndc.x, -ndc.y, 0.0, 1.0);
-    out_v.origin = vec2<f32>(x0, y0);
-    out_v.edges = vec2<u32>(r + 1u, r + 1u + rec.z);
+    out_v.origin = vec2<f32>(f32(rec.x & 0xffffu), f32(rec.x >> 16u));
+    out_v.edges = vec2<u32>(r + 2u, r + 2u + rec.z);
     return out_v;
 }
 

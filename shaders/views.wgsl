@@ -9,9 +9,12 @@
 // hull edge joins two of the points and leaves every point on its left, so the polygon is the
 // hull of some of the points and never larger than the view); erode each hull edge by the
 // pixel's half-extent along its normal plus the CPU's margin, its f64 error and a bound on the
-// fragment shader's f32 error; and write a record with the pixel box to draw (the
-// intersection of the views' boxes, clipped to the plane, rounded outward to whole pixels) and
-// the edges no pixel centre of the box passes for sure. Eroding the intersection of the views
+// fragment shader's f32 error; keep the edges some pixel centre of the box (the intersection
+// of the views' boxes, clipped to the plane, rounded outward to whole pixels) may fail; clip
+// the box by them to the polygon P that holds every centre the fragment shader can pass, drop
+// the edges all of P passes with room for the f32 error and shrink the box to P's pixels (the
+// coverage is unchanged: the argument is at the clipping below and in `gpu/mod.rs`); and
+// write a record with the box and the remaining edges. Eroding the intersection of the views
 // equals intersecting the eroded views, so a pixel centre passing every edge means the whole
 // pixel lies inside all 8 views of this occluder: the backend contract's coverage, counted per
 // occluder, so views of different occluders never add up.
@@ -21,9 +24,11 @@
 // `rounding.wgsl` (f32_up, …) is prepended to this file.
 //
 // Record (at word `occ[i].w` of `records`):
-//   records[r]         = (x0 | y0 << 16, depth bits, edge count or REJECT, x1 | y1 << 16)
-//   records[r + 1 + k] = (bitcast nx, bitcast ny, bitcast c, 0)       for k < edge count
-// The CPU reserves 1 + 8·n words per occluder of n points (at most n hull edges per view).
+//   records[r]         = (ox | oy << 16, depth bits, edge count or REJECT, x1 | y1 << 16)
+//   records[r + 1]     = (x0 | y0 << 16, 0, 0, 0)
+//   records[r + 2 + k] = (bitcast nx, bitcast ny, bitcast c, 0)       for k < edge count
+// (ox, oy) is the origin of the edges' offsets, [x0, x1) × [y0, y1) the pixel box to draw.
+// The CPU reserves 2 + 8·n words per occluder of n points (at most n hull edges per view).
 
 // Points per occluder this pass takes (the CPU sets up larger ones itself).
 const MAXP: u32 = 8u;
@@ -61,6 +66,34 @@ fn cross2(a: vec2<f64>, b: vec2<f64>) -> f64 {
 
 fn reject(r: u32) {
     records[r] = vec4<u32>(0u, 0u, REJECT, 0u);
+}
+
+// Clips the convex polygon `src[0..n]` to the half-plane e.x·x + e.y·y ≥ e.z into `dst`
+// (Sutherland–Hodgman); returns the new vertex count.
+fn clip(
+    src: ptr<function, array<vec2<f64>, 72>>,
+    dst: ptr<function, array<vec2<f64>, 72>>,
+    n: u32,
+    e: vec3<f64>,
+) -> u32 {
+    var nq = 0u;
+    var va = (*src)[n - 1u];
+    var fa = e.x * va.x + e.y * va.y - e.z;
+    for (var i = 0u; i < n; i++) {
+        let vb = (*src)[i];
+        let fb = e.x * vb.x + e.y * vb.y - e.z;
+        if (fa >= 0.0lf) != (fb >= 0.0lf) && nq < 72u {
+            (*dst)[nq] = va + (vb - va) * (fa / (fa - fb));
+            nq++;
+        }
+        if fb >= 0.0lf && nq < 72u {
+            (*dst)[nq] = vb;
+            nq++;
+        }
+        va = vb;
+        fa = fb;
+    }
+    return nq;
 }
 
 @compute @workgroup_size(64)
@@ -132,6 +165,10 @@ fn views(
     let dlo = vec2<f64>(0.5lf, 0.5lf);
     let dhi = b1 - b0 - vec2<f64>(0.5lf, 0.5lf);
 
+    // The eroded edges some pixel centre of the box may fail: (nx, ny, offset, 0), the
+    // offset relative to b0 and eroded by half a pixel, the margin, the f64 error and the
+    // bound on the fragment shader's f32 error.
+    var ed: array<vec4<f64>, 64>;
     var m = 0u;
     for (var c = 0u; c < 8u; c++) {
         let base = c * MAXP;
@@ -193,12 +230,7 @@ fn views(
                 return;
             }
             if dmin < cc + f32_err {
-                records[r + 1u + m] = vec4<u32>(
-                    bitcast<u32>(flush_tiny(f32(nh.x))),
-                    bitcast<u32>(flush_tiny(f32(nh.y))),
-                    bitcast<u32>(f32_up(cc)),
-                    0u,
-                );
+                ed[m] = vec4<f64>(nh.x, nh.y, cc, 0.0lf);
                 m++;
             }
             hull_len++;
@@ -213,9 +245,89 @@ fn views(
             return;
         }
     }
+
+    // The region whose pixel centres can pass in the fragment shader: a centre d passing an
+    // edge (offset c) in f32 has nh·d ≥ c − f32_err (the f32 bound), so it lies in
+    // P = box of centres ∩ {nh·d ≥ c − f32_err} over the kept edges. Clip the box by them
+    // (f64).
+    var keep = array<bool, 64>();
+    for (var k = 0u; k < m; k++) {
+        keep[k] = true;
+    }
+    var d0 = vec2<f64>(0.0lf, 0.0lf);
+    var d1 = dhi + vec2<f64>(0.5lf, 0.5lf);
+    if m > 0u {
+        var pa: array<vec2<f64>, 72>;
+        var pb: array<vec2<f64>, 72>;
+        pa[0] = dlo;
+        pa[1] = vec2<f64>(dhi.x, dlo.y);
+        pa[2] = dhi;
+        pa[3] = vec2<f64>(dlo.x, dhi.y);
+        var np = 4u;
+        // Two edges per step, from pa to pb and back (no copy).
+        for (var k = 0u; k < m && np > 0u; k += 2u) {
+            np = clip(&pa, &pb, np, ed[k].xyz - vec3<f64>(0.0lf, 0.0lf, f32_err));
+            if k + 1u < m && np > 0u {
+                np = clip(&pb, &pa, np, ed[k + 1u].xyz - vec3<f64>(0.0lf, 0.0lf, f32_err));
+            } else {
+                for (var i = 0u; i < np; i++) {
+                    pa[i] = pb[i];
+                }
+            }
+        }
+        // An empty P (up to rounding) keeps the record as it is: same coverage.
+        if np > 0u {
+            // An edge every vertex of P passes with room for both f32 errors (and far more
+            // than the f64 rounding of the vertices) holds all of P: P is the intersection
+            // of the box, the other edges and this one, and if some point of the others'
+            // region failed it, the segment from there to P would cross its line inside P,
+            // between vertices that all pass it by that room. So no centre passing the others
+            // in f32 fails it in f32: it is dropped, and the coverage is unchanged.
+            let room = 2.0lf * f32_err + 1e-6lf;
+            var plo = pa[0];
+            var phi = pa[0];
+            for (var i = 1u; i < np; i++) {
+                plo = min(plo, pa[i]);
+                phi = max(phi, pa[i]);
+            }
+            for (var k = 0u; k < m; k++) {
+                let e = ed[k];
+                var least = 1e300lf;
+                for (var i = 0u; i < np; i++) {
+                    least = min(least, e.x * pa[i].x + e.y * pa[i].y - (e.z - f32_err));
+                }
+                keep[k] = least < room;
+            }
+            // The pixels whose centres (i + 0.5) can lie in P, with room for its rounding.
+            d0 = max(d0, ceil(plo - vec2<f64>(0.5lf + 1e-4lf, 0.5lf + 1e-4lf)));
+            d1 = min(d1, floor(phi - vec2<f64>(0.5lf - 1e-4lf, 0.5lf - 1e-4lf)) + vec2<f64>(1.0lf, 1.0lf));
+        }
+    }
+    var w = 0u;
+    for (var k = 0u; k < m; k++) {
+        if keep[k] {
+            let e = ed[k];
+            records[r + 2u + w] = vec4<u32>(
+                bitcast<u32>(flush_tiny(f32(e.x))),
+                bitcast<u32>(flush_tiny(f32(e.y))),
+                bitcast<u32>(f32_up(e.z)),
+                0u,
+            );
+            w++;
+        }
+    }
+    if d1.x <= d0.x || d1.y <= d0.y {
+        reject(r);
+        return;
+    }
+    // The origin of the edges' offsets stays b0 (the f32 bound holds over the whole box); the
+    // box drawn shrinks to P's pixels.
     let x0 = u32(b0.x);
     let y0 = u32(b0.y);
-    let x1 = u32(b1.x);
-    let y1 = u32(b1.y);
-    records[r] = vec4<u32>(x0 | (y0 << 16u), o.z, m, x1 | (y1 << 16u));
+    let bx0 = u32(b0.x + d0.x);
+    let by0 = u32(b0.y + d0.y);
+    let bx1 = u32(b0.x + d1.x);
+    let by1 = u32(b0.y + d1.y);
+    records[r] = vec4<u32>(x0 | (y0 << 16u), o.z, w, bx1 | (by1 << 16u));
+    records[r + 1u] = vec4<u32>(bx0 | (by0 << 16u), 0u, 0u, 0u);
 }

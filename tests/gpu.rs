@@ -2045,6 +2045,23 @@ fn counted_views_match_the_cpu_for_every_shape() {
     }
 }
 
+/// A cell a thousandth of a unit wide: its 8 views of each occluder nearly coincide, so the
+/// views pass clips the box by bundles of almost parallel, almost coincident edges and must
+/// drop none that some pixel centre can still fail (and shrink the drawn box to no fewer
+/// pixels than pass): the CPU's coverage, and the coverage of the plain cell is there too.
+#[test]
+fn counted_views_of_a_tiny_cell_keep_the_contract() {
+    let Some(b) = &counting_backend() else { return };
+    let mut jobs = random_jobs(11, Shape::Triangle, 60, &[64, 256]);
+    jobs.extend(random_jobs(12, Shape::Quad, 60, &[128]));
+    for j in &mut jobs {
+        let c = 0.5 * (j.frame.cell.min + j.frame.cell.max);
+        j.frame.cell.min = c - DVec3::splat(5e-4);
+        j.frame.cell.max = c + DVec3::splat(5e-4);
+    }
+    assert_counted_close_to_the_cpu(b, &jobs, "counted, tiny cell");
+}
+
 /// The counted draw keeps views of different occluders apart and the least Depth, as the
 /// clipped one does (the same analytic checks).
 #[test]

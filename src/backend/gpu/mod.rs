@@ -57,9 +57,19 @@
 //! polygon is the hull of some of the points: never larger than the view), erodes every hull
 //! edge exactly as `setup.rs` erodes the clipped polygon's (half a pixel along the normal,
 //! the shared margin, the `f64` error term, the bound on the fragment shader's `f32` error,
-//! offset rounded up), keeps only the edges some pixel centre of the box can fail, and writes
-//! a record with the box to draw: the intersection of the views' boxes, clipped to the plane,
-//! rounded outward to whole pixels. Then one instanced draw per plane (`vs_counted` in `shaders/projection.wgsl`)
+//! offset rounded up), keeps only the edges some pixel centre of the box can fail, and takes
+//! the box: the intersection of the views' boxes, clipped to the plane, rounded outward to
+//! whole pixels. Then it clips that box of pixel centres by every kept edge in `f64`
+//! (Sutherland–Hodgman), loosened by the `f32` bound: the polygon `P` holds every centre the
+//! fragment shader can pass. An edge every vertex of `P` passes by twice the `f32` bound (and
+//! 10⁻⁶ px for the vertices' rounding) is dropped — `P` is the intersection of the others and
+//! that edge, so if a point passing the others failed it, the segment from that point to `P`
+//! would cross its line inside `P`, between vertices that all pass it by that room; no centre
+//! the others pass can fail it in `f32`, and the coverage is unchanged. The box drawn shrinks
+//! to the pixels whose centres can lie in `P` (10⁻⁴ px of room); the edges keep the first box's
+//! corner as their origin, over which the `f32` bound was proven. An empty `P` (up to rounding)
+//! keeps the record whole. The record goes out with the box and the kept edges.
+//! Then one instanced draw per plane (`vs_counted` in `shaders/projection.wgsl`)
 //! draws each record's box as a quad with integer corners — every pixel centre inside gets a
 //! fragment on any rasteriser — and the fragment shader counts the pixel in only when its
 //! centre passes every edge of all 8 views of that one occluder. Eroding the intersection of
@@ -76,17 +86,23 @@
 //!
 //! | scene | projection | CPU setup ms/cell | GPU section ms/cell | GPU passes (timestamps) | ms/cell |
 //! | --- | --- | ---: | ---: | ---: | ---: |
-//! | `data/demo_forest` (10 cells, 126 planes and 22,763 occluder Projections per cell) | clipped | 201 | 1,103 | 670 | 1,485 |
-//! | | counting | 141 | 2,535 | 1,286 | 2,834 |
-//! | `data/demo_city` (24 cells) | clipped | 9.6 | 614 | 79 | 665 |
-//! | | counting | 7.4 | 717 | 124 | 783 |
+//! | `data/demo_forest` (10 cells, 126 planes and 22,763 occluder Projections per cell) | clipped | 155 | 1,036 | 560 | 1,312 |
+//! | | counting | 84 | 1,510 | 620 | 1,695 |
+//! | | counting, before the views pass clipped the box (all kept edges tested per fragment) | 141 | 2,535 | 1,286 | 2,834 |
+//! | `data/demo_city` (24 cells) | clipped | 6.7 | 480 | 81 | 497 |
+//! | | counting | 4.8 | 470 | 78 | 517 |
+//! | | counting, before the clipping | 7.4 | 717 | 124 | 783 |
 //!
-//! On a software rasteriser the fragment work dominates and counting tests ~8× the edges per
-//! fragment (every view's, not the ~3 the clipping leaves), so it is slower here: the views
-//! pass itself takes 3.5–4.7 ms of the demo forest's ~1,250 ms of GPU passes per cell (22,663
-//! counted occluders; timestamps, [`RenderStats::views_time`]), the rest is the draws; on a real
-//! GPU, where fragment and compute work cost little and the CPU setup bounds a cell, it
-//! takes the per-occluder clipping off the CPU. [`GpuProjection::Clipped`] stays the default
+//! On a software rasteriser the fragment work dominates. Without the clipping in the views
+//! pass, counting tested every view's edges some centre of the box can fail (~8× what the
+//! CPU's clipping leaves) over the views' box, and took twice the clipped path's GPU time; with
+//! it, the fragments test about as many edges over about as many pixels as the clipped path,
+//! and the views pass takes 5–11 ms of the demo forest's ~620 ms of GPU passes per cell
+//! (22,663 counted occluders; timestamps, [`RenderStats::views_time`]; 4–5 ms before the
+//! clipping). The first bake after a shader change is slower on lavapipe (its JIT: 320 ms of
+//! views), so the table gives medians of 3 later runs. On a real GPU, where fragment and
+//! compute work cost little and the CPU setup bounds a cell, counting takes the per-occluder
+//! clipping off the CPU. [`GpuProjection::Clipped`] stays the default
 //! until it is measured on a real GPU (`umbrasweep bench --backend gpu --gpu-projection
 //! counting`).
 //!

@@ -41,7 +41,7 @@ pub(super) struct Counted {
     /// this job; the wave rebases the point and the record word and adds the plane's index
     /// (`count | plane << 8`).
     pub occ: Vec<[u32; 4]>,
-    /// Record words reserved: `1 + 8·n` per occluder of `n` points (a view's hull has at most
+    /// Record words reserved: `2 + 8·n` per occluder of `n` points (a view's hull has at most
     /// `n` edges).
     pub record_words: usize,
 }
@@ -157,7 +157,7 @@ fn count_occluders(job: &PlaneJob, max_chunk_words: usize) -> Option<(Counted, V
             c.record_words as u32,
         ]);
         c.points.extend(pts.iter().flat_map(|p| p.to_array()));
-        c.record_words += 1 + 8 * pts.len();
+        c.record_words += 2 + 8 * pts.len();
     }
     (c.record_words + c.occ.len() <= max_chunk_words).then_some((c, rest))
 }
