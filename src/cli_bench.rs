@@ -121,6 +121,20 @@ pub struct BenchArgs {
     /// Tests only: trees of every procedural foliage forest (instead of 1,500 and 7,750).
     #[arg(long, value_name = "N", hide = true, requires = "foliage")]
     pub foliage_trees: Option<u32>,
+    /// Sample points per cell of the sampler rows (their `--sampling-budget`). The fine
+    /// forest's finest level needs tens of thousands: raise it with
+    /// --foliage-sampling-max-eps for a row that can cull (hours per cell on two cores).
+    #[arg(
+        long,
+        value_name = "POINTS",
+        default_value_t = foliage::SAMPLING_BENCH_POINTS,
+        requires = "foliage"
+    )]
+    pub foliage_sampling_budget: u64,
+    /// The sampler rows' --sampling-max-eps E: levels coarser than E are split without being
+    /// sampled (e.g. 0.05 on the fine forest, whose coarser levels hide nothing).
+    #[arg(long, value_name = "E", requires = "foliage")]
+    pub foliage_sampling_max_eps: Option<f64>,
 }
 
 /// Prints a progress line on stderr.
@@ -153,6 +167,8 @@ impl From<&BenchArgs> for BenchOptions {
             foliage_paper_cells: a.foliage_paper_cells,
             foliage_model_trees: a.foliage_model_trees,
             foliage_trees: a.foliage_trees,
+            foliage_sampling_budget: a.foliage_sampling_budget,
+            foliage_sampling_max_eps: a.foliage_sampling_max_eps,
             progress: Some(progress),
         }
     }

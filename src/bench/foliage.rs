@@ -204,7 +204,8 @@ fn swept(sweep: SweepChoice) -> BakeSettings {
 pub const SAMPLING_BENCH_POINTS: u64 = 2000;
 
 /// The sampler row of a study: the sweep, then the shrunk-occluder sampler with at most
-/// [`SAMPLING_BENCH_POINTS`] points per cell, on `cells` cells.
+/// [`SAMPLING_BENCH_POINTS`] points per cell, on `cells` cells ([`with_sampler`] sets the
+/// budget and `--sampling-max-eps` the run asks for).
 fn sampled(cells: usize) -> Variant {
     let mut s = swept(SweepChoice::On);
     s.sampling = SweepChoice::On;
@@ -214,6 +215,24 @@ fn sampled(cells: usize) -> Variant {
         settings: s,
         max_cells: Some(cells),
     }
+}
+
+/// `list` with its sampler rows ([`variants`]) given `budget` points per cell and, if any,
+/// `max_eps` (`--sampling-max-eps`), their labels saying so.
+pub fn with_sampler(mut list: Vec<Variant>, budget: u64, max_eps: Option<f64>) -> Vec<Variant> {
+    for v in &mut list {
+        if v.settings.sampling != SweepChoice::On {
+            continue;
+        }
+        let sa = &mut v.settings.sampling_settings;
+        sa.budget_points = budget;
+        sa.max_eps = max_eps;
+        v.label = format!("--sweep --sampling --sampling-budget {budget}");
+        if let Some(e) = max_eps {
+            v.label += &format!(" --sampling-max-eps {e}");
+        }
+    }
+    list
 }
 
 /// The rows of `study` (one of [`STUDIES`]); the sub-cell and sampler variants bake
@@ -363,6 +382,9 @@ pub fn describe(s: &BakeSettings) -> String {
             sa.eps.map_or("auto".to_string(), |e| e.to_string()),
             sa.budget_points
         );
+        if let Some(e) = sa.max_eps {
+            let _ = write!(out, ", levels ε ≤{e}");
+        }
     }
     out
 }
@@ -415,6 +437,10 @@ pub struct FoliageBench {
     pub paper_cells: usize,
     /// Trees of the jacaranda forest.
     pub model_trees: u32,
+    /// Sample points per cell of the sampler rows (`--foliage-sampling-budget`).
+    pub sampling_budget_points: u64,
+    /// The sampler rows' `--sampling-max-eps`, if given (`--foliage-sampling-max-eps`).
+    pub sampling_max_eps: Option<f64>,
     /// The test-only tree count of the procedural forests, if given.
     pub trees_override: Option<u32>,
     /// Seed of forests and rays.
@@ -439,6 +465,8 @@ struct Plan {
     subcell_cells: usize,
     paper_cells: usize,
     model_trees: u32,
+    sampling_budget: u64,
+    sampling_max_eps: Option<f64>,
 }
 
 impl Plan {
@@ -462,6 +490,8 @@ impl Plan {
             subcell_cells: args.foliage_subcell_cells,
             paper_cells: args.foliage_paper_cells,
             model_trees: args.foliage_model_trees,
+            sampling_budget: args.foliage_sampling_budget,
+            sampling_max_eps: args.foliage_sampling_max_eps,
         };
         let counts = [
             ("--cells", plan.cells as u64),
@@ -470,9 +500,19 @@ impl Plan {
             ("--foliage-paper-cells", plan.paper_cells as u64),
             ("--foliage-model-trees", plan.model_trees as u64),
             ("--foliage-trees", args.foliage_trees.unwrap_or(1) as u64),
+            ("--foliage-sampling-budget", plan.sampling_budget),
         ];
         if let Some((flag, _)) = counts.iter().find(|c| c.1 == 0) {
             return Err(BenchError::Zero(flag));
+        }
+        if let Some(e) = plan.sampling_max_eps
+            && !(e.is_finite() && e > 0.0)
+        {
+            return Err(BenchError::BadValue {
+                flag: "--foliage-sampling-max-eps",
+                value: e.to_string(),
+                why: "must be a positive distance in scene units (e.g. 0.05 on the fine forest)",
+            });
         }
         Ok(plan)
     }
@@ -717,7 +757,11 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
             skipped.push(why);
             continue;
         }
-        let list = variants(study, plan.subcell_cells);
+        let list = with_sampler(
+            variants(study, plan.subcell_cells),
+            plan.sampling_budget,
+            plan.sampling_max_eps,
+        );
         // Sample every cell a row bakes before the first bake, so that the ray index is not
         // held during the bakes (their peak memory).
         let mut ids: Vec<usize> = list
@@ -835,6 +879,8 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
         subcell_cells: plan.subcell_cells,
         paper_cells: plan.paper_cells,
         model_trees: plan.model_trees,
+        sampling_budget_points: plan.sampling_budget,
+        sampling_max_eps: plan.sampling_max_eps,
         trees_override: args.foliage_trees,
         seed: args.seed,
         threads: rayon::current_num_threads(),
@@ -1072,5 +1118,47 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(err.contains("--foliage-paper-cells"), "{err}");
+        for (budget, max_eps, flag) in [
+            (0, None, "--foliage-sampling-budget"),
+            (10, Some(0.0), "--foliage-sampling-max-eps"),
+            (10, Some(f64::NAN), "--foliage-sampling-max-eps"),
+        ] {
+            let err = collect(&BenchOptions {
+                foliage_sampling_budget: budget,
+                foliage_sampling_max_eps: max_eps,
+                ..BenchOptions::default()
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(err.contains(flag), "{err}");
+        }
+    }
+
+    /// The sampler rows take the run's budget and `--sampling-max-eps`, and only they do.
+    #[test]
+    fn the_sampler_rows_take_the_runs_budget_and_max_eps() {
+        for study in ["coarse", "fine"] {
+            let plain = variants(study, 3);
+            let set = with_sampler(variants(study, 3), 40_000, Some(0.05));
+            assert_eq!(plain.len(), set.len());
+            let mut sampled = 0;
+            for (p, v) in plain.iter().zip(&set) {
+                if p.settings.sampling != SweepChoice::On {
+                    assert_eq!(p.label, v.label);
+                    assert_eq!(p.settings, v.settings);
+                    continue;
+                }
+                sampled += 1;
+                let sa = &v.settings.sampling_settings;
+                assert_eq!((sa.budget_points, sa.max_eps), (40_000, Some(0.05)));
+                assert_eq!(
+                    v.label,
+                    "--sweep --sampling --sampling-budget 40000 --sampling-max-eps 0.05"
+                );
+                assert!(describe(&v.settings).ends_with("≤40000 points, levels ε ≤0.05"));
+                assert!(v.settings.check().is_ok());
+            }
+            assert_eq!(sampled, 1, "{study}");
+        }
     }
 }

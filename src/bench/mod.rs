@@ -93,6 +93,11 @@ pub struct BenchOptions {
     pub foliage_model_trees: u32,
     /// Trees of every procedural foliage forest (instead of 1,500 and 7,750), for tests.
     pub foliage_trees: Option<u32>,
+    /// Sample points per cell of the foliage study's sampler rows (`--sampling-budget`).
+    pub foliage_sampling_budget: u64,
+    /// The sampler rows' `--sampling-max-eps` (levels coarser than this are split without
+    /// being sampled), if any.
+    pub foliage_sampling_max_eps: Option<f64>,
     /// Receives the progress lines; none are reported when `None`.
     pub progress: Option<ProgressLog>,
     /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
@@ -120,6 +125,8 @@ impl Default for BenchOptions {
             foliage_paper_cells: foliage::DEFAULT_PAPER_CELLS,
             foliage_model_trees: foliage::DEFAULT_MODEL_TREES,
             foliage_trees: None,
+            foliage_sampling_budget: foliage::SAMPLING_BENCH_POINTS,
+            foliage_sampling_max_eps: None,
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             progress: None,
             rsf: crate::settings::SweepChoice::Auto,
@@ -145,6 +152,16 @@ pub enum BenchError {
     /// give at least 1.
     #[error("{0} must be at least 1")]
     Zero(&'static str),
+    /// An option's value is out of range (`flag` names it; `why` says what it must be).
+    #[error("{flag} {value}: {why}")]
+    BadValue {
+        /// The option.
+        flag: &'static str,
+        /// The value given.
+        value: String,
+        /// What it must be.
+        why: &'static str,
+    },
     /// [`BenchOptions::scenes`] names a scene the benchmark does not have.
     #[error("--scenes {}: unknown scene (one of {})", .0, SCENES.join(", "))]
     UnknownScene(String),
