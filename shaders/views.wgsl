@@ -34,6 +34,8 @@
 const MAXP: u32 = 8u;
 // An occluder that covers no pixel.
 const REJECT: u32 = 0xffffffffu;
+// `clip`: more vertices than its arrays hold.
+const OVERFLOW: u32 = 0xffffffffu;
 // `coverage::MARGIN`: extra erosion (pixels) for float error.
 const MARGIN: f64 = 1e-4lf;
 // `setup::F64_REL_ERR`: 8 ulps of f64 relative to the offset's terms.
@@ -69,7 +71,9 @@ fn reject(r: u32) {
 }
 
 // Clips the convex polygon `src[0..n]` to the half-plane e.x·x + e.y·y ≥ e.z into `dst`
-// (Sutherland–Hodgman); returns the new vertex count.
+// (Sutherland–Hodgman); returns the new vertex count, or OVERFLOW when it would exceed 72
+// (a convex polygon gains at most one vertex per clip, 68 in all, but rounding could make a
+// sliver non-convex).
 fn clip(
     src: ptr<function, array<vec2<f64>, 72>>,
     dst: ptr<function, array<vec2<f64>, 72>>,
@@ -82,11 +86,17 @@ fn clip(
     for (var i = 0u; i < n; i++) {
         let vb = (*src)[i];
         let fb = e.x * vb.x + e.y * vb.y - e.z;
-        if (fa >= 0.0lf) != (fb >= 0.0lf) && nq < 72u {
+        if (fa >= 0.0lf) != (fb >= 0.0lf) {
+            if nq == 72u {
+                return OVERFLOW;
+            }
             (*dst)[nq] = va + (vb - va) * (fa / (fa - fb));
             nq++;
         }
-        if fb >= 0.0lf && nq < 72u {
+        if fb >= 0.0lf {
+            if nq == 72u {
+                return OVERFLOW;
+            }
             (*dst)[nq] = vb;
             nq++;
         }
@@ -265,8 +275,11 @@ fn views(
         pa[3] = vec2<f64>(dlo.x, dhi.y);
         var np = 4u;
         // Two edges per step, from pa to pb and back (no copy).
-        for (var k = 0u; k < m && np > 0u; k += 2u) {
+        for (var k = 0u; k < m && np > 0u && np != OVERFLOW; k += 2u) {
             np = clip(&pa, &pb, np, ed[k].xyz - vec3<f64>(0.0lf, 0.0lf, f32_err));
+            if np == OVERFLOW {
+                break;
+            }
             if k + 1u < m && np > 0u {
                 np = clip(&pb, &pa, np, ed[k + 1u].xyz - vec3<f64>(0.0lf, 0.0lf, f32_err));
             } else {
@@ -275,14 +288,16 @@ fn views(
                 }
             }
         }
-        // An empty P (up to rounding) keeps the record as it is: same coverage.
-        if np > 0u {
-            // An edge every vertex of P passes with room for both f32 errors (and far more
-            // than the f64 rounding of the vertices) holds all of P: P is the intersection
-            // of the box, the other edges and this one, and if some point of the others'
-            // region failed it, the segment from there to P would cross its line inside P,
-            // between vertices that all pass it by that room. So no centre passing the others
-            // in f32 fails it in f32: it is dropped, and the coverage is unchanged.
+        // An empty P (up to rounding), or an overflow, keeps the record as it is: the same
+        // coverage.
+        if np > 0u && np != OVERFLOW {
+            // The edges every vertex of P passes with room for both f32 errors (and far more
+            // than the f64 rounding of the vertices) are dropped together. Let Q be the box
+            // cut by the kept edges: if Q held a point outside P, the segment from it to a
+            // point of P would leave P across the line of a dropped edge, at a point of P,
+            // a convex combination of P's vertices, which all pass that edge by the room. So
+            // Q = P, and every centre passing the kept edges in f32 passes each dropped one
+            // by more than the f32 error: it passes it in f32 too. The coverage is unchanged.
             let room = 2.0lf * f32_err + 1e-6lf;
             var plo = pa[0];
             var phi = pa[0];

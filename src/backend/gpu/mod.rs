@@ -61,14 +61,16 @@
 //! the box: the intersection of the views' boxes, clipped to the plane, rounded outward to
 //! whole pixels. Then it clips that box of pixel centres by every kept edge in `f64`
 //! (Sutherland–Hodgman), loosened by the `f32` bound: the polygon `P` holds every centre the
-//! fragment shader can pass. An edge every vertex of `P` passes by twice the `f32` bound (and
-//! 10⁻⁶ px for the vertices' rounding) is dropped — `P` is the intersection of the others and
-//! that edge, so if a point passing the others failed it, the segment from that point to `P`
-//! would cross its line inside `P`, between vertices that all pass it by that room; no centre
-//! the others pass can fail it in `f32`, and the coverage is unchanged. The box drawn shrinks
-//! to the pixels whose centres can lie in `P` (10⁻⁴ px of room); the edges keep the first box's
-//! corner as their origin, over which the `f32` bound was proven. An empty `P` (up to rounding)
-//! keeps the record whole. The record goes out with the box and the kept edges.
+//! fragment shader can pass. The edges every vertex of `P` passes by twice the `f32` bound
+//! (and 10⁻⁶ px for the vertices' rounding) are dropped together: if the box cut by the kept
+//! edges held a point outside `P`, the segment from it to `P` would leave `P` across a dropped
+//! edge's line at a point of `P` — a convex combination of vertices that all pass that edge by
+//! the room — so that region is `P`, and every centre the kept edges pass in `f32` passes the
+//! dropped ones in `f32` too: the coverage is unchanged. The box drawn shrinks to the pixels
+//! whose centres can lie in `P` (10⁻⁴ px of room); the edges keep the first box's corner as
+//! their origin, over which the `f32` bound was proven. An empty `P` (up to rounding) or more
+//! vertices than the pass holds keeps the record whole. The record goes out with the box and
+//! the kept edges.
 //! Then one instanced draw per plane (`vs_counted` in `shaders/projection.wgsl`)
 //! draws each record's box as a quad with integer corners — every pixel centre inside gets a
 //! fragment on any rasteriser — and the fragment shader counts the pixel in only when its
