@@ -101,10 +101,14 @@
 //! it, the fragments test about as many edges over about as many pixels as the clipped path,
 //! and the views pass takes 5–11 ms of the demo forest's ~620 ms of GPU passes per cell
 //! (22,663 counted occluders; timestamps, [`RenderStats::views_time`]; 4–5 ms before the
-//! clipping). The first bake after a shader change is slower on lavapipe (its JIT: 320 ms of
-//! views), so the table gives medians of 3 later runs. On a real GPU, where fragment and
-//! compute work cost little and the CPU setup bounds a cell, counting takes the per-occluder
-//! clipping off the CPU. [`GpuProjection::Clipped`] stays the default
+//! clipping; one run, the first after a build, measured 320 ms of views per cell, and no run
+//! since). With counting the forest's GPU section still runs ~890 ms per cell beyond its timed
+//! passes, against ~480 ms with clipping, and `perf` counts 67 % more samples in lavapipe's
+//! rasteriser threads: not yet explained. Drawing an octagon hugging `P` instead of its box
+//! (18 vertices per instance) measured no gain (medians of 3 interleaved runs: 1,262 against
+//! 1,161 ms per cell), so the box stays. On a real GPU, where fragment and compute work cost
+//! little and the CPU setup bounds a cell, counting takes the per-occluder clipping off the
+//! CPU. [`GpuProjection::Clipped`] stays the default
 //! until it is measured on a real GPU (`umbrasweep bench --backend gpu --gpu-projection
 //! counting`).
 //!
