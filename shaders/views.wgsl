@@ -260,20 +260,19 @@ fn views(
     // edge (offset c) in f32 has nh·d ≥ c − f32_err (the f32 bound), so it lies in
     // P = box of centres ∩ {nh·d ≥ c − f32_err} over the kept edges. Clip the box by them
     // (f64).
-    var keep = array<bool, 64>();
-    for (var k = 0u; k < m; k++) {
-        keep[k] = true;
-    }
+    // Set when P is known (np of its vertices in pa): then edges may be dropped.
+    var known = false;
+    var pa: array<vec2<f64>, 72>;
+    var np = 0u;
     var d0 = vec2<f64>(0.0lf, 0.0lf);
     var d1 = dhi + vec2<f64>(0.5lf, 0.5lf);
     if m > 0u {
-        var pa: array<vec2<f64>, 72>;
         var pb: array<vec2<f64>, 72>;
         pa[0] = dlo;
         pa[1] = vec2<f64>(dhi.x, dlo.y);
         pa[2] = dhi;
         pa[3] = vec2<f64>(dlo.x, dhi.y);
-        var np = 4u;
+        np = 4u;
         // Two edges per step, from pa to pb and back (no copy).
         for (var k = 0u; k < m && np > 0u && np != OVERFLOW; k += 2u) {
             np = clip(&pa, &pb, np, ed[k].xyz - vec3<f64>(0.0lf, 0.0lf, f32_err));
@@ -290,7 +289,8 @@ fn views(
         }
         // An empty P (up to rounding), or an overflow, keeps the record as it is: the same
         // coverage.
-        if np > 0u && np != OVERFLOW {
+        known = np > 0u && np != OVERFLOW;
+        if known {
             // The edges every vertex of P passes with room for both f32 errors (and far more
             // than the f64 rounding of the vertices) are dropped together. Let Q be the box
             // cut by the kept edges: if Q held a point outside P, the segment from it to a
@@ -298,30 +298,35 @@ fn views(
             // a convex combination of P's vertices, which all pass that edge by the room. So
             // Q = P, and every centre passing the kept edges in f32 passes each dropped one
             // by more than the f32 error: it passes it in f32 too. The coverage is unchanged.
-            let room = 2.0lf * f32_err + 1e-6lf;
             var plo = pa[0];
             var phi = pa[0];
             for (var i = 1u; i < np; i++) {
                 plo = min(plo, pa[i]);
                 phi = max(phi, pa[i]);
             }
-            for (var k = 0u; k < m; k++) {
-                let e = ed[k];
-                var least = 1e300lf;
-                for (var i = 0u; i < np; i++) {
-                    least = min(least, e.x * pa[i].x + e.y * pa[i].y - (e.z - f32_err));
-                }
-                keep[k] = least < room;
-            }
             // The pixels whose centres (i + 0.5) can lie in P, with room for its rounding.
             d0 = max(d0, ceil(plo - vec2<f64>(0.5lf + 1e-4lf, 0.5lf + 1e-4lf)));
             d1 = min(d1, floor(phi - vec2<f64>(0.5lf - 1e-4lf, 0.5lf - 1e-4lf)) + vec2<f64>(1.0lf, 1.0lf));
         }
     }
+    // No pixel centre can lie in P: nothing passes.
+    if d1.x <= d0.x || d1.y <= d0.y {
+        reject(r);
+        return;
+    }
+    // The edges all of P passes with room for both f32 errors (see above) are dropped.
+    let room = 2.0lf * f32_err + 1e-6lf;
     var w = 0u;
     for (var k = 0u; k < m; k++) {
-        if keep[k] {
-            let e = ed[k];
+        let e = ed[k];
+        var least = -1e300lf;
+        if known {
+            least = 1e300lf;
+            for (var i = 0u; i < np; i++) {
+                least = min(least, e.x * pa[i].x + e.y * pa[i].y - (e.z - f32_err));
+            }
+        }
+        if least < room {
             records[r + 2u + w] = vec4<u32>(
                 bitcast<u32>(flush_tiny(f32(e.x))),
                 bitcast<u32>(flush_tiny(f32(e.y))),
@@ -330,10 +335,6 @@ fn views(
             );
             w++;
         }
-    }
-    if d1.x <= d0.x || d1.y <= d0.y {
-        reject(r);
-        return;
     }
     // The origin of the edges' offsets stays b0 (the f32 bound holds over the whole box); the
     // box drawn shrinks to P's pixels.

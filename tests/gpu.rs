@@ -2048,7 +2048,7 @@ fn counted_views_match_the_cpu_for_every_shape() {
 /// A cell a thousandth of a unit wide: its 8 views of each occluder nearly coincide, so the
 /// views pass clips the box by bundles of almost parallel, almost coincident edges and must
 /// drop none that some pixel centre can still fail (and shrink the drawn box to no fewer
-/// pixels than pass): the CPU's coverage, and the coverage of the plain cell is there too.
+/// pixels than pass): the CPU's coverage.
 #[test]
 fn counted_views_of_a_tiny_cell_keep_the_contract() {
     let Some(b) = &counting_backend() else { return };
