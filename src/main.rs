@@ -55,14 +55,17 @@ fn quiet_display_probe() -> Option<tempfile::TempDir> {
         .prefix("umbrasweep-runtime-")
         .tempdir()
         .ok()?;
-    // SAFETY: called first thing in `main`, before any other thread exists.
+    // SAFETY: called in `main` right after parsing the arguments, before any other thread
+    // exists.
     unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir.path()) };
     Some(dir)
 }
 
 fn main() -> ExitCode {
-    let _runtime_dir = quiet_display_probe();
+    // Parse first: `--help`, `--version` and usage errors end the process inside the parser,
+    // which would leave the probe's folder behind.
     let cli = Cli::parse();
+    let _runtime_dir = quiet_display_probe();
     let result = match &cli.command {
         Command::Bake(a) => cli_bake::run(a).map(|_| 0),
         Command::Cells(a) => cli_cells::run(a).map(|_| 0),

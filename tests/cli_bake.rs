@@ -349,6 +349,33 @@ fn backend_auto_prints_no_driver_noise() {
     assert!(stderr.starts_with("scene "), "{stderr}");
 }
 
+/// The private folder that quiets the adapter probe is removed however the process ends: after
+/// a bake, `--help` and a usage error (both end inside the argument parser) leave nothing in
+/// the temporary directory.
+#[test]
+fn the_probe_folder_is_removed_on_every_exit() {
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let (mut bake, out) = wall_bake(dir.path());
+    bake.args(["--backend", "cpu"]);
+    let mut help = bin();
+    help.arg("--help");
+    let mut usage = bin();
+    usage.args(["bake", "--no-such-flag"]);
+    for (k, mut cmd) in [bake, help, usage].into_iter().enumerate() {
+        let r = cmd
+            .env_remove("XDG_RUNTIME_DIR")
+            .env("TMPDIR", &tmp)
+            .output()
+            .unwrap();
+        assert_eq!(r.status.success(), k < 2, "run {k}: {r:?}");
+        let left: Vec<_> = std::fs::read_dir(&tmp).unwrap().collect();
+        assert!(left.is_empty(), "run {k} left {left:?}");
+    }
+    assert!(out.exists());
+}
+
 /// A bake estimated to need more memory than `--max-memory` is refused before it starts:
 /// the estimate and what to change in the message, no output and no journal.
 #[test]

@@ -79,15 +79,16 @@ fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
         nv += 3;
         n += 1;
     }
-    let dir = std::env::temp_dir().join(format!("umbrasweep-sampler-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    // One file per call: tests run in parallel threads of one process and would otherwise
-    // read each other's half-written files.
-    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let path = dir.join(format!("leaves-{}-{call}.obj", hole.is_some()));
-    std::fs::write(&path, obj).unwrap();
-    let scene = umbrasweep::scene::load(&path).unwrap();
+    // A file of its own per call (tests run in parallel threads of one process), removed
+    // when the handle drops.
+    let file = tempfile::Builder::new()
+        .prefix(&format!("umbrasweep-sampler-leaves-{}-", hole.is_some()))
+        .suffix(".obj")
+        .tempfile()
+        .unwrap();
+    std::fs::write(file.path(), obj).unwrap();
+    let path = file.path();
+    let scene = umbrasweep::scene::load(path).unwrap();
     (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
 }
 
