@@ -482,3 +482,53 @@ fn the_memory_estimate_holds_a_hemicube_per_thread() {
     let off = bake::estimate_memory(&scene, &s, 4);
     assert!(off + 4 * SamplingSettings::hemicube_bytes(hi) < auto);
 }
+
+/// The sampler's results do not depend on the threads: a small forest's middle cell, with
+/// certifying rays, several levels and distance bands, sampled on 1, 3 and 4 threads, hides
+/// the same objects with the same points and the same cost curve. (Rectangles running side by
+/// side once decided with what the others had just found visible, which changed their
+/// candidate lists, hence their bands and shrinks.)
+#[test]
+fn the_sampler_hides_the_same_on_any_thread_count() {
+    let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
+        trees: 120,
+        leaves: 150,
+        ..umbrasweep::generate::ForestOptions::coarse()
+    })
+    .unwrap();
+    let scene = generated.to_scene("forest.obj");
+    let cell = generated.cells[generated.cells.len() / 2];
+    let mut settings = settings();
+    settings.sampling_settings = SamplingSettings {
+        eps: Some(0.12),
+        levels: 2,
+        resolution: Some(96),
+        rays: 3_000,
+        probe: 0.0,
+        ..SamplingSettings::default()
+    };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let (hidden, work) = pool.install(|| run_sampler(&scene, &cell, &settings));
+        let curve: Vec<(u64, u32)> = work.levels.iter().map(|l| (l.points, l.hidden)).collect();
+        (hidden, work.points, curve)
+    };
+    let one = run(1);
+    assert!(
+        one.1 > 64 && one.2.len() >= 2 && one.0.contains(&true),
+        "the test needs several chunks of rectangles, two levels and something hidden: {:?}",
+        (one.1, &one.2)
+    );
+    for threads in [3, 4] {
+        let other = run(threads);
+        assert_eq!(one.2, other.2, "cost curve on {threads} threads");
+        assert_eq!(one.1, other.1, "points on {threads} threads");
+        assert!(
+            one.0 == other.0,
+            "hidden objects differ on {threads} threads"
+        );
+    }
+}
