@@ -25,7 +25,8 @@
 //!   settings: kernel spacing with K = 3, 5, 9 (at most 256 planes, so K decides), 12, 24, 48,
 //!   96 geometric sweep planes, resolution 128, 512, 1024, extend 1.0, 1.2, 2.0.
 //! * `paper`: [`ForestOptions::paper`] (7,750 trees, 7.8 M triangles), `--sweep`, on
-//!   `--foliage-paper-cells` cells.
+//!   `--foliage-paper-cells` cells, and the sampler row (as for `coarse`) on
+//!   `--foliage-subcell-cells` of them: its time per cell and peak memory.
 //! * `jacaranda`: `foliage/jacaranda_tree.glb` instanced by [`forest_of_models`] as
 //!   `gen forest --preset coarse --tree-model` does (the coarse options, the spacing from the
 //!   model's footprint, each tree split into 8 objects with `--model-split 8`) but with
@@ -346,7 +347,7 @@ pub fn variants(study: &str, subcell_cells: usize) -> Vec<Variant> {
             }
             v
         }
-        "paper" => vec![variant("--sweep", on())],
+        "paper" => vec![variant("--sweep", on()), sampled(subcell_cells)],
         _ => Vec::new(),
     }
 }
@@ -995,7 +996,10 @@ mod tests {
         assert_eq!(goal.sweep, SweepChoice::On);
         assert_eq!(labels("ellipsoid"), ["--sweep", "--no-sweep"]);
         assert_eq!(labels("jacaranda"), ["--sweep", "--no-sweep"]);
-        assert_eq!(labels("paper"), ["--sweep"]);
+        assert_eq!(
+            labels("paper"),
+            ["--sweep", "--sweep --sampling --sampling-budget 2000"]
+        );
         assert_eq!(
             labels("fine"),
             [
