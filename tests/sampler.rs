@@ -484,10 +484,10 @@ fn the_memory_estimate_holds_a_hemicube_per_thread() {
 }
 
 /// The sampler's results do not depend on the threads: a small forest's middle cell, with
-/// certifying rays, several levels and distance bands, sampled on 1, 3 and 4 threads, hides
-/// the same objects with the same points and the same cost curve. (Rectangles running side by
-/// side once decided with what the others had just found visible, which changed their
-/// candidate lists, hence their bands and shrinks.)
+/// certifying rays, levels with probes, a level sampled whole (scouts first) and distance
+/// bands, sampled on 1, 3 and 4 threads, hides the same objects with the same points and the
+/// same cost curve. (Rectangles running side by side once decided with what the others had
+/// just found visible, which changed their candidate lists, hence their bands and shrinks.)
 #[test]
 fn the_sampler_hides_the_same_on_any_thread_count() {
     let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
@@ -504,7 +504,6 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
         levels: 2,
         resolution: Some(96),
         rays: 3_000,
-        probe: 0.0,
         ..SamplingSettings::default()
     };
     let run = |threads: usize| {
@@ -519,7 +518,7 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
     let one = run(1);
     assert!(
         one.1 > 64 && one.2.len() >= 2 && one.0.contains(&true),
-        "the test needs several chunks of rectangles, two levels and something hidden: {:?}",
+        "the test needs many rectangles, two levels and something hidden: {:?}",
         (one.1, &one.2)
     );
     for threads in [3, 4] {
