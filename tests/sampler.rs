@@ -251,6 +251,13 @@ fn the_default_leaves_the_sampler_off_and_says_why() {
         "{}",
         p.sampling_reason
     );
+    // The unit cell refined to ε 0.1 everywhere: squares of side 1/8 (half diagonal 0.088),
+    // 64 per face.
+    assert!(
+        p.sampling_reason.contains("up to 384 points per cell"),
+        "{}",
+        p.sampling_reason
+    );
 }
 
 /// A wall quad at x = −2 hides a small target behind it from the coarsest balls already; a

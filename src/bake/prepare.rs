@@ -276,6 +276,31 @@ impl<'a> Prepared<'a> {
                      (--sampling-max-eps)"
                 );
             }
+            // What refining every face down to the finest ε would render, for the median cell.
+            let mut most: Vec<u64> = cells
+                .iter()
+                .map(|c| {
+                    super::sampling::finest_rectangles(
+                        &c.to_f64(),
+                        d.eps,
+                        settings.sampling_settings.levels,
+                    )
+                })
+                .collect();
+            if !most.is_empty() {
+                let mid = most.len() / 2;
+                let m = *most.select_nth_unstable(mid).1;
+                let budget = settings.sampling_settings.budget_points;
+                sampling_reason = format!(
+                    "{sampling_reason}; up to {m} points per cell (the median cell's faces all \
+                     refined to the finest ε){}",
+                    if m > budget {
+                        format!(", more than the budget of {budget} (--sampling-budget)")
+                    } else {
+                        String::new()
+                    }
+                );
+            }
             sampling_reason = match settings.sampling_settings.resolution {
                 Some(r) => format!("{sampling_reason}; {r} px per view (--sampling-resolution)"),
                 None => format!(

@@ -299,9 +299,7 @@ impl Culler for SamplingCuller {
             }
             let list = Arc::new(list);
             let (wb, wc) = (cb.max[b] - cb.min[b], cb.max[c] - cb.min[c]);
-            let side = eps0 * std::f64::consts::SQRT_2;
-            let nb = (wb / side).ceil().max(1.0) as usize;
-            let nc = (wc / side).ceil().max(1.0) as usize;
+            let (nb, nc) = face_grid(wb, wc, eps0);
             let at = |lo: f64, w: f64, i: usize, m: usize| {
                 if i == m {
                     lo + w
@@ -496,6 +494,38 @@ fn distance_bands(eye: DVec3, boxes: &[DAabb], ratio: f64) -> Vec<Vec<usize>> {
     }
     bands.retain(|b| !b.is_empty());
     bands
+}
+
+/// The top-level grid of a face `wb` × `wc` wide: rectangles whose half diagonals are at
+/// most `eps0`.
+fn face_grid(wb: f64, wc: f64, eps0: f64) -> (usize, usize) {
+    let side = eps0 * std::f64::consts::SQRT_2;
+    (
+        (wb / side).ceil().max(1.0) as usize,
+        (wc / side).ceil().max(1.0) as usize,
+    )
+}
+
+/// The rectangles of `cell`'s finest level if every one were refined down to it (finest ε
+/// `eps`, `levels` levels above it): the most points the sampler can render for the cell,
+/// about its boundary's area / (2ε²). Shown by `bake` so that a slow sampler is expected.
+pub fn finest_rectangles(cell: &DAabb, eps: f64, levels: u32) -> u64 {
+    let eps0 = eps * f64::from(1u32 << levels.min(20));
+    let mut total = 0u64;
+    for axis in 0..3 {
+        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+        let (wb, wc) = (cell.max[b] - cell.min[b], cell.max[c] - cell.min[c]);
+        let (nb, nc) = face_grid(wb, wc, eps0);
+        // Quadrants halve the half diagonal until it is the finest ε.
+        let mut half = 0.5 * (wb / nb as f64).hypot(wc / nc as f64);
+        let mut per_top = 1u64;
+        while half > eps * (1.0 + 1e-6) && per_top < 1 << 40 {
+            half *= 0.5;
+            per_top *= 4;
+        }
+        total = total.saturating_add(2 * (nb * nc) as u64 * per_top);
+    }
+    total
 }
 
 /// A level sampled whole starts with every this-many-th rectangle.
@@ -756,5 +786,40 @@ impl Shared<'_> {
             }
         }
         cast
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A unit cube at finest ε = 0.25/√2 (squares of side 0.25) has 16 finest rectangles per
+    /// face, whatever the levels above; a 4×2×4 cell at 0.042 about its boundary's area
+    /// (64) / (2ε²) ≈ 18,000.
+    #[test]
+    fn finest_rectangles_count_the_full_refinement() {
+        let cube = DAabb {
+            min: DVec3::ZERO,
+            max: DVec3::ONE,
+        };
+        let eps = 0.25 / std::f64::consts::SQRT_2;
+        for levels in 0..4 {
+            assert_eq!(
+                finest_rectangles(&cube, eps, levels),
+                6 * 16,
+                "levels {levels}"
+            );
+        }
+        let cell = DAabb {
+            min: DVec3::ZERO,
+            max: DVec3::new(4.0, 2.0, 4.0),
+        };
+        let n = finest_rectangles(&cell, 0.042, 2) as f64;
+        let area = 2.0 * (4.0 * 2.0 + 2.0 * 4.0 + 4.0 * 4.0);
+        let estimate = area / (2.0 * 0.042 * 0.042);
+        assert!(
+            n >= estimate && n < 2.0 * estimate,
+            "{n} rectangles, about {estimate} expected"
+        );
     }
 }
