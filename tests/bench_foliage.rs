@@ -46,7 +46,10 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
             "--sweep --sampling --sampling-budget 2000"
         ]
     );
-    assert_eq!(labels(&bench, "paper"), ["--sweep"]);
+    assert_eq!(
+        labels(&bench, "paper"),
+        ["--sweep", "--sweep --sampling --sampling-budget 2000"]
+    );
     let jacaranda = labels(&bench, "jacaranda");
     if jacaranda.is_empty() {
         assert!(
