@@ -440,9 +440,8 @@ impl Culler for SamplingCuller {
             });
             if shared.spent() {
                 // The next level would sample nothing: what it would test stays visible.
-                let mut known = shared.known_now();
                 for l in open.iter().flatten() {
-                    shared.give_up(l, &mut known);
+                    shared.mark_visible(l);
                 }
                 break;
             }
@@ -626,11 +625,17 @@ impl Shared<'_> {
             .collect()
     }
 
-    /// Marks `list` visible (undecided at the finest ε, or out of budget), live and in
-    /// `known`.
-    fn give_up(&self, list: &[u32], known: &mut [bool]) {
+    /// Marks `list` visible (undecided at the finest ε, or out of budget) in the live set.
+    fn mark_visible(&self, list: &[u32]) {
         for &o in list {
             self.done[o as usize].store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// [`Shared::mark_visible`], and in the lane's `known`.
+    fn give_up(&self, list: &[u32], known: &mut [bool]) {
+        self.mark_visible(list);
+        for &o in list {
             known[o as usize] = true;
         }
     }
