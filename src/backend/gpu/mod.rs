@@ -221,6 +221,7 @@ mod device;
 mod pipelines;
 mod prepare;
 mod rsf;
+pub mod sampler;
 pub mod setup;
 mod tables;
 mod wave;
@@ -266,12 +267,20 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shaders/rounding.wgsl",
         include_str!("../../../shaders/rounding.wgsl"),
     ),
+    (
+        "shaders/sampler.wgsl",
+        concat!(
+            include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/sampler.wgsl")
+        ),
+    ),
 ];
 
 const PROJECTION_WGSL: &str = SHADERS[0].1;
 const REPROJECT_WGSL: &str = SHADERS[1].1;
 const RSF_WGSL: &str = SHADERS[2].1;
 const VIEWS_WGSL: &str = SHADERS[3].1;
+const SAMPLER_WGSL: &str = SHADERS[5].1;
 
 /// How the GPU backend gets each occluder's Projection (its 8 views intersected), the pixels
 /// it covers. Both keep the contract of [`crate::plane`] with the same coverage up to

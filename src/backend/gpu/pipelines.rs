@@ -147,7 +147,7 @@ impl ViewPipelines {
 
 /// The colour target of every pass into a Depth Map: `R32Float`, red only, blended with
 /// [`MIN_BLEND`].
-fn depth_min_target() -> wgpu::ColorTargetState {
+pub(super) fn depth_min_target() -> wgpu::ColorTargetState {
     wgpu::ColorTargetState {
         format: wgpu::TextureFormat::R32Float,
         blend: Some(wgpu::BlendState {

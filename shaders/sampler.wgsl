@@ -1,0 +1,290 @@
+// umbrasweep — the shrunk-occluder sampler's hemicube on the GPU (`backend::gpu::sampler`), the
+// twin of the CPU's `sampler::Hemicube`: the CPU records each polygon's draws per view
+// (`Hemicube::record`: edges' tests, depth, pixels to scan, plane of a deep polygon) and each
+// occludee box's parts (`Hemicube::box_rects`); this file does the per-pixel work.
+//
+// `vs_fill` / `fs_fill` (one render pass per view, one instance per draw): the view is drawn at
+// 8× its resolution, one fragment per sub-pixel, so each of a pixel's 8 × 8 sub-pixels keeps
+// its own nearest depth (`Min` blend into an `R32Float` layer). A fragment repeats the CPU's
+// work for its pixel: the four corners' `f32` tests (the CPU's `√(u²+v²+1)` table, margin
+// `CORNER_MARGIN`); all four pass → the whole pixel is covered; else, with sub-pixel masks and
+// a passing corner (or a thin draw), the sub-pixel's bit of the CPU's `pixel_mask` in `f64`.
+// The depth is the draw's, or for a deep polygon the largest plane depth at the pixel's
+// corners, rounded up, when nearer. A pixel's sub-pixels all nearer than a depth is the CPU's
+// "covered at that depth"; a box's part over some sub-pixels nearer is the CPU's partial-layer
+// test. The CPU keeps at most eight partial layers per pixel and merges the two farthest
+// (which only loses), so this covers at least what the CPU covers.
+//
+// `reduce` (compute): each pixel's largest sub-pixel depth (the CPU's pixel depth).
+// `test` (compute, one workgroup per box part): every pixel of the part must hold a depth
+// strictly nearer than the part's, or every sub-pixel of it under the part must; a failing
+// pixel sets the box's flag (open). Only the flags are read back.
+//
+// `rounding.wgsl` (f32_up, …) is prepended to this file.
+//
+// Draw (two vec4<u32> per draw, `draws`):
+//   (first edge, edge count | thin << 16, depth bits, plane index or NO_PLANE)
+//   (i0 | i1 << 16, j0 | j1 << 16, 0, 0)
+// Box part (`parts_u`, `parts_f`): (box, view, i0 | i1 << 16, j0 | j1 << 16) and 8 f64:
+//   pu0, pu1, pv0, pv1, z, 0, 0, 0.
+
+// `hemicube::CORNER_MARGIN`.
+const CORNER_MARGIN: f32 = 4e-6;
+const NO_PLANE: u32 = 0xffffffffu;
+// Beyond this a depth is infinite for the CPU too (it rounds to f32 infinity).
+const F32_BIG: f64 = 3.0e38lf;
+
+struct Params {
+    // Pixels across a view.
+    res: u32,
+    // The view of a render pass.
+    view: u32,
+    // Sub-pixel masks on (1) or off (0).
+    subpixel: u32,
+    // Items of a compute pass.
+    n: u32,
+    // Pixel rows of the pass's view.
+    rows: u32,
+    // Workgroups along x of a 2D dispatch.
+    groups_x: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> P: Params;
+
+// ---------------------------------------------------------------------------------------------
+// Fill
+
+@group(0) @binding(1) var<storage, read> draws: array<vec4<u32>>;
+@group(0) @binding(2) var<storage, read> edges: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> planes: array<f64>;
+@group(0) @binding(4) var<storage, read> norms: array<f32>;
+
+struct FillOut {
+    @builtin(position) pos: vec4<f32>,
+    @location(0) @interpolate(flat) draw: u32,
+}
+
+@vertex
+fn vs_fill(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> FillOut {
+    let w1 = draws[2u * ii + 1u];
+    let x0 = 8u * (w1.x & 0xffffu);
+    let x1 = 8u * (w1.x >> 16u);
+    let y0 = 8u * (w1.y & 0xffffu);
+    let y1 = 8u * (w1.y >> 16u);
+    var xs = array<u32, 6>(x0, x1, x0, x1, x1, x0);
+    var ys = array<u32, 6>(y0, y0, y1, y0, y1, y1);
+    let w = f32(8u * P.res);
+    let h = f32(8u * P.rows);
+    var out: FillOut;
+    // Sub-pixel row y is texture row y (v grows with the row).
+    out.pos = vec4<f32>(f32(xs[vi]) / w * 2.0 - 1.0, 1.0 - f32(ys[vi]) / h * 2.0, 0.5, 1.0);
+    out.draw = ii;
+    return out;
+}
+
+// The CPU's corner test: every edge passes at (u, v) with √(u²+v²+1) = l.
+fn corner_passes(first: u32, count: u32, u: f32, v: f32, l: f32) -> bool {
+    for (var k = 0u; k < count; k++) {
+        let e = edges[first + k];
+        if !(e.x * u + e.y * v + e.z - e.w * l >= CORNER_MARGIN) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// Bit (sa, sb) of the CPU's `pixel_mask` for the pixel with corner (u0, v0).
+fn sub_bit(first: u32, count: u32, u0: f64, v0: f64, ps: f64, lmax: f64, sa: u32, sb: u32) -> bool {
+    let margin = f64(CORNER_MARGIN);
+    let h = ps / 8.0lf;
+    for (var k = 0u; k < count; k++) {
+        let e = edges[first + k];
+        let a = f64(e.x);
+        let b = f64(e.y);
+        let c = f64(e.z);
+        let s = f64(e.w);
+        let base = a * u0 + b * v0 + c - s * lmax;
+        let du = a * h;
+        let dv = b * h;
+        let c0 = base + min(du, 0.0lf) + min(dv, 0.0lf);
+        if c0 + 7.0lf * (min(du, 0.0lf) + min(dv, 0.0lf)) >= margin {
+            continue;
+        }
+        if c0 + 7.0lf * (max(du, 0.0lf) + max(dv, 0.0lf)) < margin {
+            return false;
+        }
+        let r = c0 + f64(sb) * dv;
+        if !(r + f64(sa) * du >= margin) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// The plane's depth in direction (u, v, 1), or a negative value where the CPU's is infinite.
+fn plane_depth(pl: u32, u: f64, v: f64) -> f64 {
+    let w = planes[4u * pl] * u + planes[4u * pl + 1u] * v + planes[4u * pl + 2u];
+    let d = planes[4u * pl + 3u];
+    if !(abs(w) * F32_BIG > abs(d)) {
+        return -1.0lf;
+    }
+    let z = d / w;
+    if z > 0.0lf {
+        return z;
+    }
+    return -1.0lf;
+}
+
+@fragment
+fn fs_fill(in: FillOut) -> @location(0) vec4<f32> {
+    let fx = u32(in.pos.x);
+    let fy = u32(in.pos.y);
+    let i = fx / 8u;
+    let j = fy / 8u;
+    let w0 = draws[2u * in.draw];
+    let first = w0.x;
+    let count = w0.y & 0xffffu;
+    let thin = (w0.y >> 16u) != 0u;
+    let res = P.res;
+    let ps = 2.0lf / f64(res);
+    var vmin = 0.0lf;
+    var nbase = (res + 1u) * (res + 1u);
+    if P.view == 0u {
+        vmin = -1.0lf;
+        nbase = 0u;
+    }
+    let stride = res + 1u;
+    let uc0 = f32(-1.0lf + f64(i) * ps);
+    let uc1 = f32(-1.0lf + f64(i + 1u) * ps);
+    let vc0 = f32(vmin + f64(j) * ps);
+    let vc1 = f32(vmin + f64(j + 1u) * ps);
+    let l00 = norms[nbase + j * stride + i];
+    let l10 = norms[nbase + j * stride + i + 1u];
+    let l01 = norms[nbase + (j + 1u) * stride + i];
+    let l11 = norms[nbase + (j + 1u) * stride + i + 1u];
+    var corners = 0u;
+    corners += u32(corner_passes(first, count, uc0, vc0, l00));
+    corners += u32(corner_passes(first, count, uc1, vc0, l10));
+    corners += u32(corner_passes(first, count, uc0, vc1, l01));
+    corners += u32(corner_passes(first, count, uc1, vc1, l11));
+    let u0 = -1.0lf + f64(i) * ps;
+    let v0 = vmin + f64(j) * ps;
+    var covered = corners == 4u;
+    if !covered && P.subpixel != 0u && (corners > 0u || thin) {
+        let lmax = f64(max(max(l00, l10), max(l01, l11)));
+        covered = sub_bit(first, count, u0, v0, ps, lmax, fx % 8u, fy % 8u);
+    }
+    if !covered {
+        discard;
+    }
+    var z = bitcast<f32>(w0.z);
+    if w0.w != NO_PLANE {
+        let u1 = u0 + ps;
+        let v1 = v0 + ps;
+        let d00 = plane_depth(w0.w, u0, v0);
+        let d10 = plane_depth(w0.w, u1, v0);
+        let d01 = plane_depth(w0.w, u0, v1);
+        let d11 = plane_depth(w0.w, u1, v1);
+        if min(min(d00, d10), min(d01, d11)) > 0.0lf {
+            let m = max(max(d00, d10), max(d01, d11)) * (1.0lf + 1e-6lf);
+            if m < F32_BIG {
+                z = min(f32_up(m), z);
+            }
+        }
+    }
+    return vec4<f32>(z, 0.0, 0.0, 0.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reduce and test
+
+// (Bindings apart from the fill's: each pipeline's layout holds only its own.)
+@group(0) @binding(5) var fine: texture_2d_array<f32>;
+@group(0) @binding(6) var<storage, read_write> pixmax: array<f32>;
+@group(0) @binding(7) var<storage, read> parts_u: array<vec4<u32>>;
+@group(0) @binding(8) var<storage, read> parts_f: array<f64>;
+@group(0) @binding(9) var<storage, read_write> flags: array<atomic<u32>>;
+
+fn sub_depth(i: u32, j: u32, k: u32) -> f32 {
+    return textureLoad(fine, vec2<i32>(i32(i), i32(j)), i32(k), 0).r;
+}
+
+@compute @workgroup_size(64)
+fn reduce(@builtin(global_invocation_id) g: vec3<u32>) {
+    let idx = g.x + g.y * P.groups_x * 64u;
+    let per = P.res * P.res;
+    if idx >= 5u * per {
+        return;
+    }
+    let k = idx / per;
+    let p = idx % per;
+    let j = p / P.res;
+    let i = p % P.res;
+    var rows = P.res / 2u;
+    if k == 0u {
+        rows = P.res;
+    }
+    if j >= rows {
+        return;
+    }
+    var m = sub_depth(8u * i, 8u * j, k);
+    for (var b = 0u; b < 8u; b++) {
+        for (var a = 0u; a < 8u; a++) {
+            m = max(m, sub_depth(8u * i + a, 8u * j + b, k));
+        }
+    }
+    pixmax[idx] = m;
+}
+
+// The sub-pixel index (0–7) of bound `t` (pixel units) in pixel `p`, widened by a millionth
+// of a sub-pixel as the CPU's `sub_covered` does.
+fn sub_index(t: f64, p: u32, widen: f64) -> u32 {
+    return u32(clamp(floor((t - f64(p)) * 8.0lf + widen), 0.0lf, 7.0lf));
+}
+
+@compute @workgroup_size(64)
+fn test(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let r = wg.x + wg.y * P.groups_x;
+    if r >= P.n {
+        return;
+    }
+    let pu = parts_u[r];
+    let bx = pu.x;
+    let k = pu.y;
+    let i0 = pu.z & 0xffffu;
+    let i1 = pu.z >> 16u;
+    let j0 = pu.w & 0xffffu;
+    let j1 = pu.w >> 16u;
+    let u_lo = parts_f[8u * r];
+    let u_hi = parts_f[8u * r + 1u];
+    let v_lo = parts_f[8u * r + 2u];
+    let v_hi = parts_f[8u * r + 3u];
+    let z = parts_f[8u * r + 4u];
+    let w = i1 - i0;
+    let n = w * (j1 - j0);
+    let per = P.res * P.res;
+    for (var t = li; t < n; t += 64u) {
+        if atomicLoad(&flags[bx]) != 0u {
+            return;
+        }
+        let i = i0 + t % w;
+        let j = j0 + t / w;
+        if f64(pixmax[k * per + j * P.res + i]) < z {
+            continue;
+        }
+        let a0 = sub_index(u_lo, i, -1e-6lf);
+        let a1 = sub_index(u_hi, i, 1e-6lf);
+        let b0 = sub_index(v_lo, j, -1e-6lf);
+        let b1 = sub_index(v_hi, j, 1e-6lf);
+        for (var b = b0; b <= b1; b++) {
+            for (var a = a0; a <= a1; a++) {
+                if !(f64(sub_depth(8u * i + a, 8u * j + b, k)) < z) {
+                    atomicStore(&flags[bx], 1u);
+                    return;
+                }
+            }
+        }
+    }
+}
