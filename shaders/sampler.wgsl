@@ -1,19 +1,20 @@
 // umbrasweep — the shrunk-occluder sampler's hemicube on the GPU (`backend::gpu::sampler`), the
-// twin of the CPU's `sampler::Hemicube`: the CPU records each polygon's draws per view
-// (`Hemicube::record`: edges' tests, depth, pixels to scan, plane of a deep polygon) and each
-// occludee box's parts (`Hemicube::box_rects`); this file does the per-pixel work.
+// twin of the CPU's `sampler::Hemicube`: `sampler_setup.wgsl` turns each occluder polygon into
+// draws per view (edges' tests, depth, pixels to scan, plane of a deep polygon), the CPU gives
+// each occludee box's parts (`Hemicube::box_rects`); this file does the per-pixel work.
 //
-// `vs_fill` / `fs_fill` (one render pass per view, one instance per draw): the view is drawn at
-// 8× its resolution, one fragment per sub-pixel, so each of a pixel's 8 × 8 sub-pixels keeps
-// its own nearest depth (`Min` blend into an `R32Float` layer). A fragment repeats the CPU's
-// work for its pixel: the four corners' `f32` tests (the CPU's `√(u²+v²+1)` table, margin
-// `CORNER_MARGIN`); all four pass → the whole pixel is covered; else, with sub-pixel masks and
-// a passing corner (or a thin draw), the sub-pixel's bit of the CPU's `pixel_mask` in `f64`.
-// The depth is the draw's, or for a deep polygon the largest plane depth at the pixel's
-// corners, rounded up, when nearer. A pixel's sub-pixels all nearer than a depth is the CPU's
-// "covered at that depth"; a box's part over some sub-pixels nearer is the CPU's partial-layer
-// test. The CPU keeps at most eight partial layers per pixel and merges the two farthest
-// (which only loses), so this covers at least what the CPU covers.
+// `vs_fill` / `fs_fill` (one render pass per view, one instance per draw, drawn indirectly with
+// the count the set-up pass made): the view is drawn at 8× its resolution, one fragment per
+// sub-pixel, so each of a pixel's 8 × 8 sub-pixels keeps its own nearest depth (`Min` blend
+// into an `R32Float` layer). A fragment repeats the CPU's work for its pixel: the four
+// corners' `f32` tests (the CPU's `√(u²+v²+1)` table, margin `CORNER_MARGIN`); all four pass →
+// the whole pixel is covered; else, with sub-pixel masks and a passing corner (or a thin
+// draw), the sub-pixel's bit of the CPU's `pixel_mask` in `f64`. The depth is the draw's, or
+// for a deep polygon the largest plane depth at the pixel's corners, rounded up, when nearer.
+// A pixel's sub-pixels all nearer than a depth is the CPU's "covered at that depth"; a box's
+// part over some sub-pixels nearer is the CPU's partial-layer test. The CPU keeps at most eight
+// partial layers per pixel and merges the two farthest (which only loses), so this covers at
+// least what the CPU covers.
 //
 // `reduce` (compute): each pixel's largest sub-pixel depth (the CPU's pixel depth).
 // `test` (compute, one workgroup per box part): every pixel of the part must hold a depth
@@ -22,15 +23,15 @@
 //
 // `rounding.wgsl` (f32_up, …) is prepended to this file.
 //
-// Draw (two vec4<u32> per draw, `draws`):
-//   (first edge, edge count | thin << 16, depth bits, plane index or NO_PLANE)
+// Draw (two vec4<u32> per draw, `draws`, view k's from 2 · k · capacity):
+//   (first edge (the polygon's first point), edge count | thin << 16, depth bits,
+//    1 + the polygon for a deep one (its plane in `pplanes`), else 0)
 //   (i0 | i1 << 16, j0 | j1 << 16, 0, 0)
 // Box part (`parts_u`, `parts_f`): (box, view, i0 | i1 << 16, j0 | j1 << 16) and 8 f64:
 //   pu0, pu1, pv0, pv1, z, 0, 0, 0.
 
 // `hemicube::CORNER_MARGIN`.
 const CORNER_MARGIN: f32 = 4e-6;
-const NO_PLANE: u32 = 0xffffffffu;
 // Beyond this a depth is infinite for the CPU too (it rounds to f32 infinity).
 const F32_BIG: f64 = 3.0e38lf;
 
@@ -47,8 +48,14 @@ struct Params {
     rows: u32,
     // Workgroups along x of a 2D dispatch.
     groups_x: u32,
+    // The face's axis and sign (1: +), for the views' coordinates.
+    axis: u32,
+    sign: u32,
+    // The first draw of the pass's view.
+    base: u32,
     pad0: u32,
     pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> P: Params;
@@ -57,9 +64,72 @@ struct Params {
 // Fill
 
 @group(0) @binding(1) var<storage, read> draws: array<vec4<u32>>;
-@group(0) @binding(2) var<storage, read> edges: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> planes: array<f64>;
+// Per polygon point, the edge from it to the next, world frame: (m, s) (`sampler_setup.wgsl`).
+@group(0) @binding(2) var<storage, read> pedges: array<vec4<f32>>;
+// Per polygon its unit normal and first vertex relative to the eye (6 f64).
+@group(0) @binding(3) var<storage, read> pplanes: array<f64>;
 @group(0) @binding(4) var<storage, read> norms: array<f32>;
+
+// The pass's view coordinates of a world vector (`View::map`; exact: a signed permutation).
+fn view_f32(p: vec3<f32>) -> vec3<f32> {
+    let a = P.axis;
+    let b = (a + 1u) % 3u;
+    let c = (a + 2u) % 3u;
+    var s = -1.0;
+    if P.sign == 1u {
+        s = 1.0;
+    }
+    switch P.view {
+        case 0u: {
+            return vec3<f32>(p[b], p[c], s * p[a]);
+        }
+        case 1u: {
+            return vec3<f32>(p[c], s * p[a], p[b]);
+        }
+        case 2u: {
+            return vec3<f32>(p[c], s * p[a], -p[b]);
+        }
+        case 3u: {
+            return vec3<f32>(p[b], s * p[a], p[c]);
+        }
+        default: {
+            return vec3<f32>(p[b], s * p[a], -p[c]);
+        }
+    }
+}
+
+fn view_f64(p: vec3<f64>) -> vec3<f64> {
+    let a = P.axis;
+    let b = (a + 1u) % 3u;
+    let c = (a + 2u) % 3u;
+    var s = -1.0lf;
+    if P.sign == 1u {
+        s = 1.0lf;
+    }
+    switch P.view {
+        case 0u: {
+            return vec3<f64>(p[b], p[c], s * p[a]);
+        }
+        case 1u: {
+            return vec3<f64>(p[c], s * p[a], p[b]);
+        }
+        case 2u: {
+            return vec3<f64>(p[c], s * p[a], -p[b]);
+        }
+        case 3u: {
+            return vec3<f64>(p[b], s * p[a], p[c]);
+        }
+        default: {
+            return vec3<f64>(p[b], s * p[a], -p[c]);
+        }
+    }
+}
+
+// Edge k of the polygon whose edges start at `first`, in the pass's view: (a, b, c, s).
+fn edge(first: u32, k: u32) -> vec4<f32> {
+    let e = pedges[first + k];
+    return vec4<f32>(view_f32(e.xyz), e.w);
+}
 
 struct FillOut {
     @builtin(position) pos: vec4<f32>,
@@ -68,7 +138,7 @@ struct FillOut {
 
 @vertex
 fn vs_fill(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> FillOut {
-    let w1 = draws[2u * ii + 1u];
+    let w1 = draws[2u * (P.base + ii) + 1u];
     let x0 = 8u * (w1.x & 0xffffu);
     let x1 = 8u * (w1.x >> 16u);
     let y0 = 8u * (w1.y & 0xffffu);
@@ -80,14 +150,14 @@ fn vs_fill(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> 
     var out: FillOut;
     // Sub-pixel row y is texture row y (v grows with the row).
     out.pos = vec4<f32>(f32(xs[vi]) / w * 2.0 - 1.0, 1.0 - f32(ys[vi]) / h * 2.0, 0.5, 1.0);
-    out.draw = ii;
+    out.draw = P.base + ii;
     return out;
 }
 
 // The CPU's corner test: every edge passes at (u, v) with √(u²+v²+1) = l.
 fn corner_passes(first: u32, count: u32, u: f32, v: f32, l: f32) -> bool {
     for (var k = 0u; k < count; k++) {
-        let e = edges[first + k];
+        let e = edge(first, k);
         if !(e.x * u + e.y * v + e.z - e.w * l >= CORNER_MARGIN) {
             return false;
         }
@@ -100,7 +170,7 @@ fn sub_bit(first: u32, count: u32, u0: f64, v0: f64, ps: f64, lmax: f64, sa: u32
     let margin = f64(CORNER_MARGIN);
     let h = ps / 8.0lf;
     for (var k = 0u; k < count; k++) {
-        let e = edges[first + k];
+        let e = edge(first, k);
         let a = f64(e.x);
         let b = f64(e.y);
         let c = f64(e.z);
@@ -123,14 +193,14 @@ fn sub_bit(first: u32, count: u32, u0: f64, v0: f64, ps: f64, lmax: f64, sa: u32
     return true;
 }
 
-// The plane's depth in direction (u, v, 1), or a negative value where the CPU's is infinite.
-fn plane_depth(pl: u32, u: f64, v: f64) -> f64 {
-    let w = planes[4u * pl] * u + planes[4u * pl + 1u] * v + planes[4u * pl + 2u];
-    let d = planes[4u * pl + 3u];
-    if !(abs(w) * F32_BIG > abs(d)) {
+// The plane's depth in direction (u, v, 1) (`nd`: its normal in view coordinates and offset),
+// or a negative value where the CPU's is infinite.
+fn plane_depth(nd: vec4<f64>, u: f64, v: f64) -> f64 {
+    let w = nd.x * u + nd.y * v + nd.z;
+    if !(abs(w) * F32_BIG > abs(nd.w)) {
         return -1.0lf;
     }
-    let z = d / w;
+    let z = nd.w / w;
     if z > 0.0lf {
         return z;
     }
@@ -180,13 +250,17 @@ fn fs_fill(in: FillOut) -> @location(0) vec4<f32> {
         discard;
     }
     var z = bitcast<f32>(w0.z);
-    if w0.w != NO_PLANE {
+    if w0.w != 0u {
+        let pp = 6u * (w0.w - 1u);
+        let nv = view_f64(vec3<f64>(pplanes[pp], pplanes[pp + 1u], pplanes[pp + 2u]));
+        let qv = view_f64(vec3<f64>(pplanes[pp + 3u], pplanes[pp + 4u], pplanes[pp + 5u]));
+        let nd = vec4<f64>(nv, nv.x * qv.x + nv.y * qv.y + nv.z * qv.z);
         let u1 = u0 + ps;
         let v1 = v0 + ps;
-        let d00 = plane_depth(w0.w, u0, v0);
-        let d10 = plane_depth(w0.w, u1, v0);
-        let d01 = plane_depth(w0.w, u0, v1);
-        let d11 = plane_depth(w0.w, u1, v1);
+        let d00 = plane_depth(nd, u0, v0);
+        let d10 = plane_depth(nd, u1, v0);
+        let d01 = plane_depth(nd, u0, v1);
+        let d11 = plane_depth(nd, u1, v1);
         if min(min(d00, d10), min(d01, d11)) > 0.0lf {
             let m = max(max(d00, d10), max(d01, d11)) * (1.0lf + 1e-6lf);
             if m < F32_BIG {

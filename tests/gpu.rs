@@ -38,7 +38,7 @@ fn shaders_validate_with_naga() {
         // Ray space factorization's charts, the occluders' views and their shared rounding
         // compute in f64 (`SHADER_F64`); the other passes
         // need nothing beyond the defaults.
-        let caps = if ["rsf", "views", "rounding", "sampler"]
+        let caps = if ["rsf", "views", "rounding", "sampler", "sampler_setup"]
             .map(|n| format!("shaders/{n}.wgsl"))
             .contains(&path.to_string())
         {

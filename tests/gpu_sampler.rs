@@ -229,7 +229,7 @@ fn unblocked(rng: &mut Rng, cfg: &Config, bx: &DAabb) -> Option<(DVec3, DVec3)> 
 }
 
 /// Renders `cfg` on the CPU and on the GPU: per box, (CPU hidden, GPU hidden).
-fn both(gs: &mut GpuSampler, cfg: &Config) -> Vec<(bool, bool)> {
+fn both(gpu: &GpuBackend, cfg: &Config) -> Vec<(bool, bool)> {
     let tagged: Vec<(Vec<DVec3>, u32)> = cfg
         .polys
         .iter()
@@ -237,6 +237,7 @@ fn both(gs: &mut GpuSampler, cfg: &Config) -> Vec<(bool, bool)> {
         .map(|(k, p)| (p.clone(), k as u32))
         .collect();
     let occ = SampleOccluders::from_polygons(&tagged);
+    let mut gs = GpuSampler::new(gpu, &occ, cfg.res).expect("GPU sampler");
     let mut hc = Hemicube::new(cfg.res);
     hc.set_subpixel(cfg.subpixel);
     gs.hemicube().set_subpixel(cfg.subpixel);
@@ -251,7 +252,6 @@ fn both(gs: &mut GpuSampler, cfg: &Config) -> Vec<(bool, bool)> {
         }
     }
     hc.draw(&occ);
-    gs.draw(&occ);
     let gpu = gs.test_boxes(&cfg.boxes).expect("GPU sampler render");
     cfg.boxes
         .iter()
@@ -269,10 +269,9 @@ fn the_gpu_hides_what_the_cpu_hides_and_only_blocked_boxes() {
     let (mut cpu_hidden, mut gpu_hidden, mut total) = (0usize, 0usize, 0usize);
     let mut missed = Vec::new();
     for res in [32u32, 64] {
-        let mut gs = GpuSampler::new(gpu, res).expect("GPU sampler");
         for c in 0..12 {
             let cfg = config(&mut rng, res);
-            for (b, (cpu, g)) in both(&mut gs, &cfg).into_iter().enumerate() {
+            for (b, (cpu, g)) in both(gpu, &cfg).into_iter().enumerate() {
                 total += 1;
                 cpu_hidden += usize::from(cpu);
                 gpu_hidden += usize::from(g);
@@ -313,7 +312,6 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
     let Some(gpu) = backend() else {
         return;
     };
-    let mut gs = GpuSampler::new(gpu, 32).expect("GPU sampler");
     let behind = DAabb {
         min: DVec3::new(-0.5, -0.5, 8.0),
         max: DVec3::new(0.5, 0.5, 9.0),
@@ -323,19 +321,24 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
         max: DVec3::new(7.0, 0.5, 9.0),
     };
     let boxes = [behind, beside];
+    let empty = SampleOccluders::from_polygons(&[]);
+    let mut gs = GpuSampler::new(gpu, &empty, 32).expect("GPU sampler");
     gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &boxes);
-    gs.draw(&SampleOccluders::from_polygons(&[]));
     assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![false, false]);
+    assert_eq!(gs.last_draws(), 0);
     let wall = vec![
         DVec3::new(-2.0, -2.0, 4.0),
         DVec3::new(2.0, -2.0, 4.0),
         DVec3::new(2.0, 2.0, 4.0),
         DVec3::new(-2.0, 2.0, 4.0),
     ];
+    let occ = SampleOccluders::from_polygons(&[(wall, 0)]);
+    let mut gs = GpuSampler::new(gpu, &occ, 32).expect("GPU sampler");
     gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &boxes);
-    gs.draw(&SampleOccluders::from_polygons(&[(wall, 0)]));
     assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![true, false]);
-    // The same box tested twice in one call gets the same answer.
+    assert!(gs.last_draws() >= 1);
+    // The same box tested twice in one call gets the same answer, and a render can be tested
+    // again.
     assert_eq!(
         gs.test_boxes(&[behind, beside, behind]).unwrap(),
         vec![true, false, true]

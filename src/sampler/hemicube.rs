@@ -289,38 +289,6 @@ pub struct RenderStats {
     pub reached: u64,
 }
 
-/// One polygon's draw in one view, as [`Hemicube::record`] gives it to a GPU twin
-/// (`backend::gpu::sampler`): the pixels the CPU would scan, the edges' tests, the depth and,
-/// for a polygon deep in the view, its plane. The twin repeats the CPU's per-pixel work on them
-/// (corner tests, sub-pixel masks, per-pixel plane depths).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ViewDraw {
-    /// The view: 0 the front, 1–4 the sides' outer halves.
-    pub view: u8,
-    /// The pixels to scan, `[i0, i1) × [j0, j1)`.
-    pub px: [u32; 4],
-    /// The polygon's largest view depth, rounded up.
-    pub z: f32,
-    /// Every scanned pixel gets a sub-pixel mask (a narrow silhouette), not only those with a
-    /// passing corner.
-    pub thin: bool,
-    /// Its edges' tests, `[start, end)` in [`DrawList::edges`].
-    pub edges: [u32; 2],
-    /// For a polygon deep in this view: its plane's normal in view coordinates and offset
-    /// (`n·(u, v, 1)·Z = d`), whose depth per pixel is the largest at the pixel's corners.
-    pub plane: Option<[f64; 4]>,
-}
-
-/// What [`Hemicube::record`] recorded: every polygon's draws, and their edges' tests
-/// `[a, b, c, s]` (a direction `(u, v, 1)` passes when `a·u + b·v + c ≥ s·√(u²+v²+1)`).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct DrawList {
-    /// The draws, in the traversal's order.
-    pub draws: Vec<ViewDraw>,
-    /// The edges' tests the draws index.
-    pub edges: Vec<[f32; 4]>,
-}
-
 /// An occludee box's part in one view, as [`Hemicube::box_rects`] gives it to a GPU twin: the
 /// pixels `[i[0], i[1]) × [j[0], j[1])`, the unrounded bounds in pixel units (`pu` along `u`,
 /// `pv` along `v`) and the depth every pixel must hold strictly nearer (the part's nearest,
@@ -428,8 +396,6 @@ pub struct Hemicube {
     /// Whether edges are shrunk only as much as occludees no farther than `max_dist` need
     /// ([`Hemicube::set_depth_bounded`]).
     depth_bounded: bool,
-    /// With [`Hemicube::record`]: the draws, recorded instead of rasterised.
-    recording: Option<DrawList>,
 }
 
 impl Hemicube {
@@ -469,7 +435,6 @@ impl Hemicube {
             scratch_ev: Vec::new(),
             subpixel: true,
             depth_bounded: true,
-            recording: None,
         }
     }
 
@@ -733,20 +698,6 @@ impl Hemicube {
         st
     }
 
-    /// [`Hemicube::draw`] for a GPU twin: the same traversal and per-polygon work (edges,
-    /// shrinks, depths, the pixels to scan), recorded per view instead of rasterised. Nothing
-    /// is drawn, so no polygon is skipped for being behind pixels already covered (such a
-    /// polygon changes no test), and the twin covers at least the pixels the CPU would: every
-    /// sub-pixel keeps its own nearest depth there, where the CPU merges a pixel's two farthest
-    /// partial layers once it has eight. Textured card triangles are left out (the twin does
-    /// not read textures; leaving a polygon out only uncovers pixels). The CPU's depths are
-    /// left untouched: [`Hemicube::test_box`] after this answers for an empty render.
-    pub fn record(&mut self, occ: &SampleOccluders) -> (DrawList, RenderStats) {
-        self.recording = Some(DrawList::default());
-        let st = self.draw(occ);
-        (self.recording.take().unwrap_or_default(), st)
-    }
-
     /// The parts of a box in the views (appended to `out`) that a GPU twin tests as
     /// [`Hemicube::test_box`] does: hidden when every pixel of every part holds a depth
     /// strictly nearer than the part's `z`, or its sub-pixels under the part do. False, with
@@ -788,6 +739,41 @@ impl Hemicube {
     /// front view's `(R+1)²` (row by row, `R+1` per row), then the side views' `(R+1)·(R/2+1)`.
     pub fn corner_norms(&self) -> (&[f32], &[f32]) {
         (&self.norm_front, &self.norm_side)
+    }
+
+    /// The render's set-up as the GPU twin's per-polygon pass takes it
+    /// (`shaders/sampler_setup.wgsl`): `f64`s (the eye, ε, the rectangle's half sides, the
+    /// farthest box corner's distance) and `u32`s (axis, sign, rectangle, depth-bounded,
+    /// sub-pixel masks, resolution, `polys`, `capacity`, each view's needed pixels, then each
+    /// view's tiles' need depths as `f32` bits).
+    pub fn setup_frame(&self, polys: u32, capacity: u32) -> (Vec<f64>, Vec<u32>) {
+        let [hb, hc] = self.patch.unwrap_or([0.0; 2]);
+        let f = vec![
+            self.eye.x,
+            self.eye.y,
+            self.eye.z,
+            self.eps,
+            hb,
+            hc,
+            self.max_dist,
+        ];
+        let mut u = vec![
+            self.axis as u32,
+            u32::from(self.sign > 0.0),
+            u32::from(self.patch.is_some()),
+            u32::from(self.depth_bounded),
+            u32::from(self.subpixel),
+            self.res as u32,
+            polys,
+            capacity,
+        ];
+        for v in &self.views {
+            u.extend(v.need.map(|x| x as u32));
+        }
+        for v in &self.views {
+            u.extend(v.need_z.iter().map(|z| z.to_bits()));
+        }
+        (f, u)
     }
 
     /// Whether anything in `bx` could still lower a needed pixel.
@@ -940,9 +926,6 @@ impl Hemicube {
         normal: DVec3,
         card: Option<(&SampleCard, &Coverage)>,
     ) -> bool {
-        if self.recording.is_some() && card.is_some() {
-            return false;
-        }
         let res = self.res;
         let ps = 2.0 / res as f64;
         let view = &self.views[k];
@@ -1072,20 +1055,6 @@ impl Hemicube {
         } else {
             None
         };
-        if let Some(list) = self.recording.as_mut() {
-            let start = list.edges.len() as u32;
-            list.edges.extend_from_slice(ev);
-            list.draws.push(ViewDraw {
-                view: k as u8,
-                px: [pi0, pi1, pj0, pj1].map(|x| x as u32),
-                z,
-                thin,
-                edges: [start, list.edges.len() as u32],
-                plane: plane.map(|(nv, d)| [nv.x, nv.y, nv.z, d]),
-            });
-            self.scratch_ev = ev_buf;
-            return true;
-        }
         let plane_depth = |u: f64, v: f64| -> f64 {
             let (nv, d) = plane.expect("plane");
             let w = nv.x * u + nv.y * v + nv.z;

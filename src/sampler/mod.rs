@@ -134,7 +134,7 @@
 
 mod hemicube;
 
-pub use hemicube::{BoxRect, BoxTest, DrawList, Hemicube, RenderStats, ViewDraw};
+pub use hemicube::{BoxRect, BoxTest, Hemicube, RenderStats};
 
 use crate::geom::{Aabb, DAabb};
 use crate::project::occluders::{Occluders, PartKind, polygon_inradius};

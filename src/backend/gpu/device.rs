@@ -247,9 +247,13 @@ impl DeviceLimits {
 }
 
 /// A Validation and an OutOfMemory error scope, popped together.
+///
+/// Fields drop in declaration order, and scopes must be popped in reverse order of their
+/// pushes: `validation` (pushed last) comes first, so that a guard dropped on an early return
+/// (`?`) pops cleanly instead of panicking.
 pub(super) struct ErrorScopes {
-    oom: wgpu::ErrorScopeGuard,
     validation: wgpu::ErrorScopeGuard,
+    oom: wgpu::ErrorScopeGuard,
 }
 
 impl ErrorScopes {

@@ -274,6 +274,13 @@ pub const SHADERS: &[(&str, &str)] = &[
             include_str!("../../../shaders/sampler.wgsl")
         ),
     ),
+    (
+        "shaders/sampler_setup.wgsl",
+        concat!(
+            include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/sampler_setup.wgsl")
+        ),
+    ),
 ];
 
 const PROJECTION_WGSL: &str = SHADERS[0].1;
@@ -281,6 +288,7 @@ const REPROJECT_WGSL: &str = SHADERS[1].1;
 const RSF_WGSL: &str = SHADERS[2].1;
 const VIEWS_WGSL: &str = SHADERS[3].1;
 const SAMPLER_WGSL: &str = SHADERS[5].1;
+const SAMPLER_SETUP_WGSL: &str = SHADERS[6].1;
 
 /// How the GPU backend gets each occluder's Projection (its 8 views intersected), the pixels
 /// it covers. Both keep the contract of [`crate::plane`] with the same coverage up to

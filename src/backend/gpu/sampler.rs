@@ -1,41 +1,39 @@
-//! The shrunk-occluder sampler's hemicube on the GPU (`shaders/sampler.wgsl`), the twin of the
-//! CPU's [`Hemicube`]: [`GpuSampler`].
+//! The shrunk-occluder sampler's hemicube on the GPU (`shaders/sampler_setup.wgsl`,
+//! `shaders/sampler.wgsl`), the twin of the CPU's [`Hemicube`]: [`GpuSampler`].
 //!
 //! # Design
-//! The CPU keeps the traversal and the per-polygon work ([`Hemicube::record`]: the same code
-//! as its own draws, so edges, shrinks, depths and pixel bounds are the CPU's to the bit) and
-//! the occludees' per-view parts ([`Hemicube::box_rects`]); the GPU does the per-pixel work,
-//! which is where the CPU spends its time (a render of the fine forest reaches ~281 k
-//! polygons and spends most of its time in the pixels of the ~23 k it draws). One submission
-//! per sample point: five render passes (one per view, one instance per draw) into an
-//! `R32Float` array at 8× the view's resolution, one fragment per sub-pixel, `Min` blended;
-//! a compute pass taking each pixel's largest sub-pixel depth; a compute pass testing the
-//! boxes' parts, one workgroup each; only a flag per box is read back.
+//! The occluder polygons are uploaded once ([`GpuSampler::new`]). Per sample point the CPU
+//! only sets up the render ([`Hemicube::begin`]: which pixels and tiles the boxes need) and
+//! cuts the boxes into per-view parts ([`Hemicube::box_rects`]); one submission then does the
+//! rest: a compute pass repeats the CPU's per-polygon work for every polygon (edges, shrinks,
+//! depth, the pixels of its shrunk silhouette per view) and appends draws per view; five render
+//! passes (one per view, drawn indirectly) fill an `R32Float` array at 8× the view's
+//! resolution, one fragment per sub-pixel, `Min` blended; a compute pass takes each pixel's
+//! largest sub-pixel depth; a compute pass tests the boxes' parts, one workgroup each. Only a
+//! flag per box and the draw counts are read back.
 //!
 //! # Why it is conservative, and what it answers
-//! A fragment repeats the CPU's per-pixel decision for its pixel (corner tests in `f32` with
-//! the CPU's table of `√(u²+v²+1)` and margin, the sub-pixel's bit of the CPU's mask in `f64`,
-//! per-pixel plane depths in `f64` rounded up as the CPU rounds them), so it covers a
-//! sub-pixel only where the CPU's argument ([`crate::sampler`]) covers it. Each sub-pixel keeps
-//! its own nearest depth, where the CPU keeps at most eight partial layers per pixel and
-//! merges the two farthest (which only loses): the GPU hides every box the CPU hides, and a
-//! few more where pixels gather more than eight depths (about 1 % more objects hidden from a
-//! point of the fine forest: 32 layers on the CPU hide 3,702 objects against 3,659 with 8,
-//! `examples/sampler_points`, 12 points, ε 0.05, 1,024 px). A driver rounding an `f64`
-//! operation differently (a fused multiply-add) moves a decision only where a test is within
-//! a rounding error of a margin 10⁷ times larger. Textured card triangles are left out
-//! ([`Hemicube::record`]), which only uncovers pixels.
+//! The passes repeat the CPU's expressions (`f64` where the CPU uses `f64`, its `f32` corner
+//! tests with its table of `√(u²+v²+1)` and margin, its roundings up), so a sub-pixel is
+//! covered only where the CPU's argument ([`crate::sampler`]) covers it. Each sub-pixel keeps
+//! its own nearest depth, where the CPU keeps at most eight partial layers per pixel and merges
+//! the two farthest (which only loses): the GPU hides every box the CPU hides, and more where
+//! pixels gather more than eight depths (from two points of the fine forest's cell at ε 0.05
+//! and 512 px, 3,889 objects against the CPU's 3,789; `examples/sampler_gpu.rs`). A driver
+//! rounding an `f64` operation differently (a fused multiply-add) moves a decision only where
+//! a test is within a rounding error of a margin 10⁷ times larger. The GPU leaves out polygons
+//! of more than eight vertices and textured card triangles, which only uncovers pixels.
 //!
 //! # Not yet
 //! This is the twin of one render; the sampler's driver (`bake::sampling`) still renders on
-//! the CPU. Still to come: the per-polygon work in a compute pass (the CPU's share), several
-//! sample points per submission, and the pieces' and triangles' tests.
+//! the CPU. Still to come: several sample points per submission, hierarchical culling of the
+//! polygons (the set-up pass takes every one), and the pieces' and triangles' tests.
 
 use super::GpuBackend;
 use super::device::ErrorScopes;
 use crate::backend::BackendError;
 use crate::geom::DAabb;
-use crate::sampler::{BoxRect, DrawList, Hemicube, RenderStats, SampleOccluders};
+use crate::sampler::{BoxRect, Hemicube, SampleOccluders};
 use glam::DVec3;
 use std::num::NonZeroU64;
 
@@ -43,14 +41,14 @@ use std::num::NonZeroU64;
 const PARAM_SLOT: u64 = 256;
 /// Parameter slots: the five views' fills, the reduction, the test.
 const SLOTS: u64 = 7;
+/// Bytes of one draw (two `vec4<u32>`).
+const DRAW_BYTES: u64 = 32;
 /// Workgroup size of the compute entry points.
 const WORKGROUP: u32 = 64;
 /// The most workgroups along one dimension of a dispatch.
 const MAX_GROUPS: u32 = 65535;
 /// Sub-pixels per pixel side.
 const SUB: u32 = 8;
-/// `NO_PLANE` of the shader.
-const NO_PLANE: u32 = u32::MAX;
 
 /// The uniforms of one pass (`Params` of the shader).
 #[repr(C)]
@@ -62,7 +60,10 @@ struct Params {
     n: u32,
     rows: u32,
     groups_x: u32,
-    pad: [u32; 2],
+    axis: u32,
+    sign: u32,
+    base: u32,
+    pad: [u32; 3],
 }
 
 /// The dispatch size for `groups` workgroups: `(x, y)` with `x ≤ 65535`.
@@ -71,8 +72,8 @@ fn dispatch(groups: u32) -> (u32, u32) {
     (x, groups.div_ceil(MAX_GROUPS).max(1))
 }
 
-/// The sampler's hemicube on a [`GpuBackend`]'s device: the CPU's [`Hemicube`] records, the
-/// device draws and tests (module docs).
+/// The sampler's hemicube on a [`GpuBackend`]'s device, with one scene's occluder polygons
+/// resident there (module docs).
 ///
 /// ```no_run
 /// use glam::DVec3;
@@ -84,18 +85,21 @@ fn dispatch(groups: u32) -> (u32, u32) {
 /// let leaf = vec![DVec3::new(-1.0, -1.0, 5.0), DVec3::new(1.0, -1.0, 5.0), DVec3::new(0.0, 1.0, 5.0)];
 /// let occ = SampleOccluders::from_polygons(&[(leaf, 0)]);
 /// let boxes = [DAabb { min: DVec3::new(-0.1, -0.1, 9.0), max: DVec3::new(0.1, 0.1, 9.2) }];
-/// let mut hc = GpuSampler::new(&gpu, 64)?;
+/// let mut hc = GpuSampler::new(&gpu, &occ, 64)?;
 /// hc.begin(DVec3::ZERO, 2, 1.0, 0.01, &boxes);
-/// hc.draw(&occ);
 /// assert_eq!(hc.test_boxes(&boxes)?, vec![true]);
 /// # Ok::<(), umbrasweep::backend::BackendError>(())
 /// ```
 pub struct GpuSampler<'a> {
     gpu: &'a GpuBackend,
     hc: Hemicube,
-    list: DrawList,
+    polys: u32,
+    /// Draws each view's region of `draws` holds.
+    cap: u32,
+    setup_layout: wgpu::BindGroupLayout,
     fill_layout: wgpu::BindGroupLayout,
     test_layout: wgpu::BindGroupLayout,
+    setup: wgpu::ComputePipeline,
     fill: wgpu::RenderPipeline,
     reduce: wgpu::ComputePipeline,
     test: wgpu::ComputePipeline,
@@ -107,34 +111,76 @@ pub struct GpuSampler<'a> {
     params: wgpu::Buffer,
     norms: wgpu::Buffer,
     pixmax: wgpu::Buffer,
-    draws: Option<wgpu::Buffer>,
-    edges: Option<wgpu::Buffer>,
-    planes: Option<wgpu::Buffer>,
+    /// The polygons (first point, end, card) and their points (`f64`), uploaded once.
+    poly_buf: wgpu::Buffer,
+    points: wgpu::Buffer,
+    /// Per point: the set-up pass's output.
+    draws: wgpu::Buffer,
+    pedges: wgpu::Buffer,
+    pplanes: wgpu::Buffer,
+    indirect: wgpu::Buffer,
+    frame: Option<wgpu::Buffer>,
+    frame_u: Option<wgpu::Buffer>,
     parts_u: Option<wgpu::Buffer>,
     parts_f: Option<wgpu::Buffer>,
     flags: Option<wgpu::Buffer>,
     staging: Option<wgpu::Buffer>,
+    last_draws: u64,
 }
 
 impl std::fmt::Debug for GpuSampler<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GpuSampler")
             .field("resolution", &self.hc.resolution())
+            .field("polygons", &self.polys)
             .finish_non_exhaustive()
     }
 }
 
+/// A bind group entry for the whole of `buffer`.
+fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// A storage buffer of `size` bytes (at least 16), labelled.
+fn storage_buffer(
+    gpu: &GpuBackend,
+    size: u64,
+    extra: wgpu::BufferUsages,
+    label: &'static str,
+) -> Result<wgpu::Buffer, BackendError> {
+    let size = size.max(16).next_multiple_of(16);
+    let max = gpu
+        .limits
+        .max_buffer
+        .min(gpu.device.limits().max_storage_buffer_binding_size);
+    if size > max {
+        return Err(BackendError::BufferTooLarge { label, size, max });
+    }
+    Ok(gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+        mapped_at_creation: false,
+    }))
+}
+
 impl<'a> GpuSampler<'a> {
     /// A hemicube of `res` pixels across each view (rounded up to a multiple of 16, as
-    /// [`Hemicube::new`]) on `gpu`'s device.
+    /// [`Hemicube::new`]) on `gpu`'s device, with the polygons of `occ` uploaded.
     ///
     /// # Errors
-    /// * [`BackendError::MissingFeatures`] when the device lacks `SHADER_F64` (the sub-pixel
-    ///   masks and plane depths are the CPU's `f64` expressions);
+    /// * [`BackendError::MissingFeatures`] when the device lacks `SHADER_F64` (the set-up,
+    ///   sub-pixel masks and plane depths are the CPU's `f64` expressions);
     /// * [`BackendError::PlaneSize`] when `8 × res` exceeds the device's largest texture side;
+    /// * [`BackendError::BufferTooLarge`] when the polygons' buffers exceed the device's
+    ///   largest storage binding (about 340 bytes per polygon);
     /// * [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports
-    ///   one while the pipelines and textures are created.
-    pub fn new(gpu: &'a GpuBackend, res: u32) -> Result<Self, BackendError> {
+    ///   one while the pipelines and buffers are created.
+    pub fn new(gpu: &'a GpuBackend, occ: &SampleOccluders, res: u32) -> Result<Self, BackendError> {
         gpu.check_failure()?;
         let device = &gpu.device;
         if !device.features().contains(wgpu::Features::SHADER_F64) {
@@ -153,7 +199,65 @@ impl<'a> GpuSampler<'a> {
                 adapter: gpu.adapter_name.clone(),
             });
         }
+        let n = occ.polys.len();
+        let mut poly_words: Vec<[u32; 4]> = Vec::with_capacity(n);
+        for (k, p) in occ.polys.iter().enumerate() {
+            poly_words.push([p.start, p.end, u32::from(occ.card(k).is_some()), 0]);
+        }
+        let point_data: Vec<f64> = occ.points.iter().flat_map(|p| p.to_array()).collect();
+        let np = n as u64;
         let scope = ErrorScopes::push(device);
+        let poly_buf = storage_buffer(
+            gpu,
+            16 * np,
+            wgpu::BufferUsages::empty(),
+            "sampler polygons",
+        )?;
+        let points = storage_buffer(
+            gpu,
+            8 * point_data.len() as u64,
+            wgpu::BufferUsages::empty(),
+            "sampler polygon points",
+        )?;
+        gpu.queue
+            .write_buffer(&poly_buf, 0, bytemuck::cast_slice(&poly_words));
+        gpu.queue
+            .write_buffer(&points, 0, bytemuck::cast_slice(&point_data));
+        // Each polygon draws at most once per view; a view's share of the largest binding caps
+        // its draws (overflowing it is an error, see `test_boxes`).
+        let max_binding = gpu
+            .limits
+            .max_buffer
+            .min(device.limits().max_storage_buffer_binding_size);
+        let cap = np.clamp(1, max_binding / (5 * DRAW_BYTES)) as u32;
+        let draws = storage_buffer(
+            gpu,
+            5 * DRAW_BYTES * u64::from(cap),
+            wgpu::BufferUsages::empty(),
+            "sampler draws",
+        )?;
+        let pedges = storage_buffer(
+            gpu,
+            16 * occ.points.len() as u64,
+            wgpu::BufferUsages::empty(),
+            "sampler edges",
+        )?;
+        let pplanes = storage_buffer(
+            gpu,
+            6 * 8 * np,
+            wgpu::BufferUsages::empty(),
+            "sampler planes",
+        )?;
+        let indirect = storage_buffer(
+            gpu,
+            5 * 16,
+            wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
+            "sampler indirect draws",
+        )?;
+        let setup_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shaders/sampler_setup.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(super::SAMPLER_SETUP_WGSL.into()),
+        });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("shaders/sampler.wgsl"),
             source: wgpu::ShaderSource::Wgsl(super::SAMPLER_WGSL.into()),
@@ -178,6 +282,20 @@ impl<'a> GpuSampler<'a> {
             },
             count: None,
         };
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let setup_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("sampler set-up bind group layout"),
+            entries: &[
+                storage(0, cs, true),
+                storage(1, cs, true),
+                storage(2, cs, true),
+                storage(3, cs, true),
+                storage(4, cs, false),
+                storage(5, cs, false),
+                storage(6, cs, false),
+                storage(7, cs, false),
+            ],
+        });
         let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let fill_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sampler fill bind group layout"),
@@ -189,7 +307,6 @@ impl<'a> GpuSampler<'a> {
                 storage(4, vf, true),
             ],
         });
-        let cs = wgpu::ShaderStages::COMPUTE;
         let test_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sampler test bind group layout"),
             entries: &[
@@ -210,15 +327,23 @@ impl<'a> GpuSampler<'a> {
                 storage(9, cs, false),
             ],
         });
-        let fill_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("sampler fill pipeline layout"),
-            bind_group_layouts: &[Some(&fill_layout)],
-            immediate_size: 0,
-        });
-        let test_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("sampler test pipeline layout"),
-            bind_group_layouts: &[Some(&test_layout)],
-            immediate_size: 0,
+        let layout = |label: &'static str, bgl: &wgpu::BindGroupLayout| {
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &[Some(bgl)],
+                immediate_size: 0,
+            })
+        };
+        let setup_pl = layout("sampler set-up pipeline layout", &setup_layout);
+        let fill_pl = layout("sampler fill pipeline layout", &fill_layout);
+        let test_pl = layout("sampler test pipeline layout", &test_layout);
+        let setup = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("sampler set-up pipeline"),
+            layout: Some(&setup_pl),
+            module: &setup_module,
+            entry_point: Some("setup"),
+            compilation_options: Default::default(),
+            cache: None,
         });
         let fill = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("sampler fill pipeline"),
@@ -289,12 +414,12 @@ impl<'a> GpuSampler<'a> {
         });
         let (front, sides) = hc.corner_norms();
         let norm_data: Vec<f32> = front.iter().chain(sides).copied().collect();
-        let norms = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("sampler corner norms"),
-            size: 4 * norm_data.len() as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let norms = storage_buffer(
+            gpu,
+            4 * norm_data.len() as u64,
+            wgpu::BufferUsages::empty(),
+            "sampler corner norms",
+        )?;
         gpu.queue
             .write_buffer(&norms, 0, bytemuck::cast_slice(&norm_data));
         let params = device.create_buffer(&wgpu::BufferDescriptor {
@@ -303,19 +428,22 @@ impl<'a> GpuSampler<'a> {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let pixmax = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("sampler pixel depths"),
-            size: 4 * 5 * u64::from(r) * u64::from(r),
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
+        let pixmax = storage_buffer(
+            gpu,
+            4 * 5 * u64::from(r) * u64::from(r),
+            wgpu::BufferUsages::empty(),
+            "sampler pixel depths",
+        )?;
         scope.check()?;
         Ok(GpuSampler {
             gpu,
             hc,
-            list: DrawList::default(),
+            polys: n as u32,
+            cap,
+            setup_layout,
             fill_layout,
             test_layout,
+            setup,
             fill,
             reduce,
             test,
@@ -325,29 +453,35 @@ impl<'a> GpuSampler<'a> {
             params,
             norms,
             pixmax,
-            draws: None,
-            edges: None,
-            planes: None,
+            poly_buf,
+            points,
+            draws,
+            pedges,
+            pplanes,
+            indirect,
+            frame: None,
+            frame_u: None,
             parts_u: None,
             parts_f: None,
             flags: None,
             staging: None,
+            last_draws: 0,
         })
     }
 
-    /// The CPU hemicube that records (for its settings: [`Hemicube::set_subpixel`],
-    /// [`Hemicube::set_depth_bounded`]).
+    /// The CPU hemicube that sets up each render (for its settings:
+    /// [`Hemicube::set_subpixel`], [`Hemicube::set_depth_bounded`]).
     pub fn hemicube(&mut self) -> &mut Hemicube {
         &mut self.hc
     }
 
-    /// [`Hemicube::begin`].
+    /// [`Hemicube::begin`]: the next [`GpuSampler::test_boxes`] renders from `eye`.
     pub fn begin(&mut self, eye: DVec3, axis: usize, sign: f64, eps: f64, boxes: &[DAabb]) {
-        self.list = DrawList::default();
         self.hc.begin(eye, axis, sign, eps, boxes);
     }
 
-    /// [`Hemicube::begin_patch`].
+    /// [`Hemicube::begin_patch`]: the next [`GpuSampler::test_boxes`] renders for the
+    /// rectangle.
     pub fn begin_patch(
         &mut self,
         eye: DVec3,
@@ -356,25 +490,21 @@ impl<'a> GpuSampler<'a> {
         half: [f64; 2],
         boxes: &[DAabb],
     ) {
-        self.list = DrawList::default();
         self.hc.begin_patch(eye, axis, sign, half, boxes);
     }
 
-    /// Records the polygons of `occ` for the device ([`Hemicube::record`]); they are drawn by
-    /// the next [`GpuSampler::test_boxes`].
-    pub fn draw(&mut self, occ: &SampleOccluders) -> RenderStats {
-        let (list, st) = self.hc.record(occ);
-        self.list = list;
-        st
+    /// The draws (one polygon in one view) of the last [`GpuSampler::test_boxes`].
+    pub fn last_draws(&self) -> u64 {
+        self.last_draws
     }
 
-    /// Draws what [`GpuSampler::draw`] recorded and tests `boxes` (each given to the last
+    /// Renders the polygons from the last `begin` and tests `boxes` (each given to that
     /// `begin`, or inside their pixels) as [`Hemicube::test_box`] does: true for a box hidden
     /// from every point of the ball (or rectangle), looking out through the face.
     ///
     /// # Errors
     /// The device's failures ([`BackendError::device_failed`]), and
-    /// [`BackendError::BufferTooLarge`] for more draws or boxes than a buffer holds.
+    /// [`BackendError::BufferTooLarge`] for more boxes than a buffer holds.
     pub fn test_boxes(&mut self, boxes: &[DAabb]) -> Result<Vec<bool>, BackendError> {
         let gpu = self.gpu;
         gpu.check_failure()?;
@@ -401,59 +531,25 @@ impl<'a> GpuSampler<'a> {
                     .extend_from_slice(&[r.pu[0], r.pu[1], r.pv[0], r.pv[1], r.z, 0.0, 0.0, 0.0]);
             }
         }
-        // The draws, view by view.
-        let mut order: Vec<usize> = (0..self.list.draws.len()).collect();
-        order.sort_by_key(|&d| self.list.draws[d].view);
-        let mut draws: Vec<[u32; 4]> = Vec::with_capacity(2 * order.len() + 2);
-        let mut planes: Vec<f64> = Vec::new();
-        let mut ranges = [(0u32, 0u32); 5];
-        for &d in &order {
-            let dr = &self.list.draws[d];
-            let k = usize::from(dr.view);
-            let idx = (draws.len() / 2) as u32;
-            if ranges[k].1 == 0 {
-                ranges[k].0 = idx;
-            }
-            ranges[k].1 += 1;
-            let plane = match dr.plane {
-                Some(p) => {
-                    planes.extend_from_slice(&p);
-                    (planes.len() / 4 - 1) as u32
-                }
-                None => NO_PLANE,
-            };
-            draws.push([
-                dr.edges[0],
-                (dr.edges[1] - dr.edges[0]) | u32::from(dr.thin) << 16,
-                dr.z.to_bits(),
-                plane,
-            ]);
-            draws.push([dr.px[0] | dr.px[1] << 16, dr.px[2] | dr.px[3] << 16, 0, 0]);
-        }
         let n_parts = parts_u.len() as u32;
         // Never an empty buffer.
-        draws.push([0; 4]);
-        planes.push(0.0);
         parts_u.push([0; 4]);
         parts_f.push(0.0);
-        let mut edges = self.list.edges.clone();
-        edges.push([0.0; 4]);
+        let cap = self.cap;
+        let (frame, frame_u) = self.hc.setup_frame(self.polys, cap);
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
-        let upload = [
+        let scope = ErrorScopes::push(&gpu.device);
+        let mut uploaded = 0u64;
+        for (slot, bytes, label) in [
             (
-                &mut self.draws,
-                bytemuck::cast_slice::<_, u8>(&draws),
-                "sampler draws",
+                &mut self.frame,
+                bytemuck::cast_slice::<_, u8>(&frame),
+                "sampler frame",
             ),
             (
-                &mut self.edges,
-                bytemuck::cast_slice(&edges),
-                "sampler edges",
-            ),
-            (
-                &mut self.planes,
-                bytemuck::cast_slice(&planes),
-                "sampler planes",
+                &mut self.frame_u,
+                bytemuck::cast_slice(&frame_u),
+                "sampler frame words",
             ),
             (
                 &mut self.parts_u,
@@ -465,10 +561,7 @@ impl<'a> GpuSampler<'a> {
                 bytemuck::cast_slice(&parts_f),
                 "sampler box part bounds",
             ),
-        ];
-        let scope = ErrorScopes::push(&gpu.device);
-        let mut uploaded = 0u64;
-        for (slot, bytes, label) in upload {
+        ] {
             gpu.ensure_buffer(slot, bytes.len() as u64, storage, label)?;
             if let Some(b) = slot {
                 gpu.queue.write_buffer(b, 0, bytes);
@@ -482,24 +575,24 @@ impl<'a> GpuSampler<'a> {
             storage | wgpu::BufferUsages::COPY_SRC,
             "sampler flags",
         )?;
+        // The flags, then the five indirect draws (their instance counts).
+        let read_bytes = flag_bytes + 5 * 16;
         gpu.ensure_buffer(
             &mut self.staging,
-            flag_bytes,
+            read_bytes,
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            "sampler flags read-back",
+            "sampler read-back",
         )?;
         let (
-            Some(draws_b),
-            Some(edges_b),
-            Some(planes_b),
+            Some(frame_b),
+            Some(frame_u_b),
             Some(parts_u_b),
             Some(parts_f_b),
             Some(flags_b),
             Some(staging),
         ) = (
-            &self.draws,
-            &self.edges,
-            &self.planes,
+            &self.frame,
+            &self.frame_u,
             &self.parts_u,
             &self.parts_f,
             &self.flags,
@@ -510,13 +603,20 @@ impl<'a> GpuSampler<'a> {
         };
         gpu.queue
             .write_buffer(flags_b, 0, bytemuck::cast_slice(&open));
+        let indirect_init: Vec<u32> = (0..5).flat_map(|_| [6u32, 0, 0, 0]).collect();
+        gpu.queue
+            .write_buffer(&self.indirect, 0, bytemuck::cast_slice(&indirect_init));
         let subpixel = u32::from(self.hc.subpixel());
+        let (axis, sign) = (frame_u[0], frame_u[1]);
         for k in 0..5u32 {
             let p = Params {
                 res,
                 view: k,
                 subpixel,
                 rows: if k == 0 { res } else { res / 2 },
+                axis,
+                sign,
+                base: k * cap,
                 ..Params::default()
             };
             gpu.queue.write_buffer(
@@ -528,6 +628,7 @@ impl<'a> GpuSampler<'a> {
         let pixels = 5 * res * res;
         let reduce_groups = dispatch(pixels.div_ceil(WORKGROUP));
         let test_groups = dispatch(n_parts);
+        let setup_groups = dispatch(self.polys.div_ceil(WORKGROUP));
         let reduce_p = Params {
             res,
             n: pixels,
@@ -544,66 +645,53 @@ impl<'a> GpuSampler<'a> {
             .write_buffer(&self.params, 5 * PARAM_SLOT, bytemuck::bytes_of(&reduce_p));
         gpu.queue
             .write_buffer(&self.params, 6 * PARAM_SLOT, bytemuck::bytes_of(&test_p));
-        uploaded += SLOTS * std::mem::size_of::<Params>() as u64 + flag_bytes;
-        let param_binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer: &self.params,
-            offset: 0,
-            size: NonZeroU64::new(std::mem::size_of::<Params>() as u64),
+        uploaded += SLOTS * std::mem::size_of::<Params>() as u64 + flag_bytes + 80;
+        let param_entry = wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &self.params,
+                offset: 0,
+                size: NonZeroU64::new(std::mem::size_of::<Params>() as u64),
+            }),
+        };
+        let setup_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sampler set-up bind group"),
+            layout: &self.setup_layout,
+            entries: &[
+                entry(0, frame_b),
+                entry(1, frame_u_b),
+                entry(2, &self.poly_buf),
+                entry(3, &self.points),
+                entry(4, &self.draws),
+                entry(5, &self.pedges),
+                entry(6, &self.pplanes),
+                entry(7, &self.indirect),
+            ],
         });
         let fill_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("sampler fill bind group"),
             layout: &self.fill_layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: param_binding.clone(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: draws_b.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: edges_b.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: planes_b.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: self.norms.as_entire_binding(),
-                },
+                param_entry.clone(),
+                entry(1, &self.draws),
+                entry(2, &self.pedges),
+                entry(3, &self.pplanes),
+                entry(4, &self.norms),
             ],
         });
         let test_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("sampler test bind group"),
             layout: &self.test_layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: param_binding,
-                },
+                param_entry,
                 wgpu::BindGroupEntry {
                     binding: 5,
                     resource: wgpu::BindingResource::TextureView(&self.fine_all),
                 },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: self.pixmax.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: parts_u_b.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 8,
-                    resource: parts_f_b.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 9,
-                    resource: flags_b.as_entire_binding(),
-                },
+                entry(6, &self.pixmax),
+                entry(7, parts_u_b),
+                entry(8, parts_f_b),
+                entry(9, flags_b),
             ],
         });
         let mut encoder = gpu
@@ -611,7 +699,16 @@ impl<'a> GpuSampler<'a> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("sampler encoder"),
             });
-        for (k, &(first, count)) in ranges.iter().enumerate() {
+        if self.polys > 0 {
+            let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("sampler set-up pass"),
+                timestamp_writes: None,
+            });
+            cp.set_pipeline(&self.setup);
+            cp.set_bind_group(0, &setup_group, &[]);
+            cp.dispatch_workgroups(setup_groups.0, setup_groups.1, 1);
+        }
+        for k in 0..5usize {
             let rows = if k == 0 { res } else { res / 2 };
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("sampler fill pass"),
@@ -634,12 +731,10 @@ impl<'a> GpuSampler<'a> {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            if count > 0 {
-                pass.set_viewport(0.0, 0.0, (SUB * res) as f32, (SUB * rows) as f32, 0.0, 1.0);
-                pass.set_pipeline(&self.fill);
-                pass.set_bind_group(0, &fill_group, &[(k as u64 * PARAM_SLOT) as u32]);
-                pass.draw(0..6, first..first + count);
-            }
+            pass.set_viewport(0.0, 0.0, (SUB * res) as f32, (SUB * rows) as f32, 0.0, 1.0);
+            pass.set_pipeline(&self.fill);
+            pass.set_bind_group(0, &fill_group, &[(k as u64 * PARAM_SLOT) as u32]);
+            pass.draw_indirect(&self.indirect, 16 * k as u64);
         }
         {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -660,11 +755,12 @@ impl<'a> GpuSampler<'a> {
             cp.dispatch_workgroups(test_groups.0, test_groups.1, 1);
         }
         encoder.copy_buffer_to_buffer(flags_b, 0, staging, 0, flag_bytes);
+        encoder.copy_buffer_to_buffer(&self.indirect, 0, staging, flag_bytes, 80);
         let submission = gpu.queue.submit([encoder.finish()]);
         scope.check()?;
         let (tx, rx) = std::sync::mpsc::channel();
         staging
-            .slice(..flag_bytes)
+            .slice(..read_bytes)
             .map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
             });
@@ -675,25 +771,39 @@ impl<'a> GpuSampler<'a> {
             }),
             Err(_) => Ok(false),
         })?;
-        let hidden: Vec<bool> = {
+        let (hidden, draws) = {
             let view = staging
-                .slice(..flag_bytes)
+                .slice(..read_bytes)
                 .get_mapped_range()
                 .map_err(|e| BackendError::ReadBack {
                     step: "sampler flags mapping",
                     message: e.to_string(),
                 })?;
-            view.chunks_exact(4)
-                .take(boxes.len())
-                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]) == 0)
-                .collect()
+            let words: Vec<u32> = view
+                .chunks_exact(4)
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            let hidden: Vec<bool> = words[..boxes.len()].iter().map(|&w| w == 0).collect();
+            let base = open.len();
+            let draws: Vec<u64> = (0..5).map(|k| u64::from(words[base + 4 * k + 1])).collect();
+            (hidden, draws)
         };
         staging.unmap();
+        self.last_draws = draws.iter().sum();
+        if let Some(&most) = draws.iter().max()
+            && most > u64::from(cap)
+        {
+            return Err(BackendError::BufferTooLarge {
+                label: "sampler draws",
+                size: 5 * DRAW_BYTES * most,
+                max: 5 * DRAW_BYTES * u64::from(cap),
+            });
+        }
         gpu.add_totals(&super::RenderStats {
             submissions: 1,
-            passes: 7,
+            passes: 8,
             bytes_uploaded: uploaded,
-            bytes_read_back: flag_bytes,
+            bytes_read_back: read_bytes,
             ..super::RenderStats::default()
         });
         Ok(hidden)
