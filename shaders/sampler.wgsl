@@ -19,7 +19,9 @@
 // `reduce` (compute): each pixel's largest sub-pixel depth (the CPU's pixel depth).
 // `test` (compute, one workgroup per box part): every pixel of the part must hold a depth
 // strictly nearer than the part's, or every sub-pixel of it under the part must; a failing
-// pixel sets the box's flag (open). Only the flags are read back.
+// pixel sets the box's flag (open). `test_tri` (compute, one invocation per triangle and view):
+// the CPU's `test_triangle`, the triangle clipped in f64 to the view, each pixel row's and each
+// pixel's pyramid (planes widened), each part tested as a box's. Only the flags are read back.
 //
 // `rounding.wgsl` (f32_up, …) is prepended to this file.
 //
@@ -99,6 +101,10 @@ fn view_f32(p: vec3<f32>) -> vec3<f32> {
 }
 
 fn view_f64(p: vec3<f64>) -> vec3<f64> {
+    return view_f64_k(P.view, p);
+}
+
+fn view_f64_k(k: u32, p: vec3<f64>) -> vec3<f64> {
     let a = P.axis;
     let b = (a + 1u) % 3u;
     let c = (a + 2u) % 3u;
@@ -106,7 +112,7 @@ fn view_f64(p: vec3<f64>) -> vec3<f64> {
     if P.sign == 1u {
         s = 1.0lf;
     }
-    switch P.view {
+    switch k {
         case 0u: {
             return vec3<f64>(p[b], p[c], s * p[a]);
         }
@@ -348,16 +354,170 @@ fn test(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         if f64(pixmax[k * per + j * P.res + i]) < z {
             continue;
         }
-        let a0 = sub_index(u_lo, i, -1e-6lf);
-        let a1 = sub_index(u_hi, i, 1e-6lf);
-        let b0 = sub_index(v_lo, j, -1e-6lf);
-        let b1 = sub_index(v_hi, j, 1e-6lf);
-        for (var b = b0; b <= b1; b++) {
-            for (var a = a0; a <= a1; a++) {
-                if !(f64(sub_depth(8u * i + a, 8u * j + b, k)) < z) {
-                    atomicStore(&flags[bx], 1u);
-                    return;
-                }
+        if !subs_nearer(k, i, j, u_lo, u_hi, v_lo, v_hi, z) {
+            atomicStore(&flags[bx], 1u);
+            return;
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Triangles (`Hemicube::test_triangle`)
+
+// The eye (3 f64, then one unused), then 9 f64 per triangle (scene coordinates).
+@group(0) @binding(10) var<storage, read> tris: array<f64>;
+// Per triangle: 0 hidden, 1 open, 2 reaches the eye (its box decides).
+@group(0) @binding(11) var<storage, read_write> tflags: array<atomic<u32>>;
+// `sampler_setup.wgsl`'s u32 frame: the views' needed pixels at NEED.
+@group(0) @binding(12) var<storage, read> frame_u: array<u32>;
+
+const NEED: u32 = 8u;
+// `test_triangle`'s widening of every clipping plane's slope.
+const W: f64 = 1e-9lf;
+
+// The CPU's `clip`: the convex polygon `poly[0..n]` cut to n·p ≥ 0, in place; the new count.
+fn clip_tri(poly: ptr<function, array<vec3<f64>, 16>>, n: u32, h: vec3<f64>) -> u32 {
+    var out: array<vec3<f64>, 16>;
+    var m = 0u;
+    for (var i = 0u; i < n; i++) {
+        let a = (*poly)[i];
+        let b = (*poly)[(i + 1u) % n];
+        let fa = h.x * a.x + h.y * a.y + h.z * a.z;
+        let fb = h.x * b.x + h.y * b.y + h.z * b.z;
+        if fa >= 0.0lf && m < 16u {
+            out[m] = a;
+            m++;
+        }
+        if (fa >= 0.0lf) != (fb >= 0.0lf) && m < 16u {
+            out[m] = a + (b - a) * (fa / (fa - fb));
+            m++;
+        }
+    }
+    *poly = out;
+    return m;
+}
+
+// Whether the sub-pixels of pixel (i, j) of view k under the bounds (pixel units) are all
+// nearer than z (`sub_covered`).
+fn subs_nearer(k: u32, i: u32, j: u32, u_lo: f64, u_hi: f64, v_lo: f64, v_hi: f64, z: f64) -> bool {
+    let a0 = sub_index(u_lo, i, -1e-6lf);
+    let a1 = sub_index(u_hi, i, 1e-6lf);
+    let b0 = sub_index(v_lo, j, -1e-6lf);
+    let b1 = sub_index(v_hi, j, 1e-6lf);
+    for (var b = b0; b <= b1; b++) {
+        for (var a = a0; a <= a1; a++) {
+            if !(f64(sub_depth(8u * i + a, 8u * j + b, k)) < z) {
+                return false;
+            }
+        }
+    }
+    return true;
+}
+
+// One invocation per (triangle, view): the CPU's per-view loop of `test_triangle`.
+@compute @workgroup_size(64)
+fn test_tri(@builtin(global_invocation_id) g: vec3<u32>) {
+    let idx = g.x + g.y * P.groups_x * 64u;
+    if idx >= 5u * P.n {
+        return;
+    }
+    let t = idx / 5u;
+    let k = idx % 5u;
+    if atomicLoad(&tflags[t]) != 0u {
+        return;
+    }
+    let res = P.res;
+    let ps = 2.0lf / f64(res);
+    let half = f64(res) / 2.0lf;
+    var vmin = 0.0lf;
+    var rows = res / 2u;
+    if k == 0u {
+        vmin = -1.0lf;
+        rows = res;
+    }
+    let eye = vec3<f64>(tris[0], tris[1], tris[2]);
+    var poly: array<vec3<f64>, 16>;
+    for (var c = 0u; c < 3u; c++) {
+        let b = 4u + 9u * t + 3u * c;
+        poly[c] = view_f64_k(k, vec3<f64>(tris[b], tris[b + 1u], tris[b + 2u]) - eye);
+    }
+    var n = 3u;
+    let vmax = vmin + f64(rows) * ps;
+    n = clip_tri(&poly, n, vec3<f64>(1.0lf, 0.0lf, 1.0lf + W));
+    n = clip_tri(&poly, n, vec3<f64>(-1.0lf, 0.0lf, 1.0lf + W));
+    n = clip_tri(&poly, n, vec3<f64>(0.0lf, 1.0lf, -vmin + W));
+    n = clip_tri(&poly, n, vec3<f64>(0.0lf, -1.0lf, vmax + W));
+    if n == 0u {
+        return;
+    }
+    var vr = vec2<f64>(1e308lf, -1e308lf);
+    for (var c = 0u; c < n; c++) {
+        if !(poly[c].z > 0.0lf) {
+            atomicMax(&tflags[t], 2u);
+            return;
+        }
+        let w = poly[c].y / poly[c].z;
+        vr = vec2<f64>(min(vr.x, w), max(vr.y, w));
+    }
+    let need = vec4<u32>(frame_u[NEED + 4u * k], frame_u[NEED + 4u * k + 1u], frame_u[NEED + 4u * k + 2u], frame_u[NEED + 4u * k + 3u]);
+    let j0 = u32(floor(clamp((vr.x - W - vmin) * half, 0.0lf, f64(rows))));
+    let j1 = min(u32(floor(clamp((vr.y + W - vmin) * half, 0.0lf, f64(rows)))) + 1u, rows);
+    let per = res * res;
+    for (var j = j0; j < j1; j++) {
+        let s0 = vmin + f64(j) * ps;
+        let s1 = vmin + f64(j + 1u) * ps;
+        var row = poly;
+        var rn = clip_tri(&row, n, vec3<f64>(0.0lf, 1.0lf, -s0 + W));
+        rn = clip_tri(&row, rn, vec3<f64>(0.0lf, -1.0lf, s1 + W));
+        if rn == 0u {
+            continue;
+        }
+        var ur = vec2<f64>(1e308lf, -1e308lf);
+        for (var c = 0u; c < rn; c++) {
+            let u = row[c].x / row[c].z;
+            ur = vec2<f64>(min(ur.x, u), max(ur.y, u));
+        }
+        let i0 = u32(floor(clamp((ur.x - W + 1.0lf) * half, 0.0lf, f64(res))));
+        let i1 = min(u32(floor(clamp((ur.y + W + 1.0lf) * half, 0.0lf, f64(res)))) + 1u, res);
+        if i0 < need.x || i1 > need.y || j < need.z || j >= need.w {
+            atomicMax(&tflags[t], 1u);
+            return;
+        }
+        for (var i = i0; i < i1; i++) {
+            let t0 = -1.0lf + f64(i) * ps;
+            let t1 = -1.0lf + f64(i + 1u) * ps;
+            var px = row;
+            var pn = clip_tri(&px, rn, vec3<f64>(1.0lf, 0.0lf, -t0 + W));
+            pn = clip_tri(&px, pn, vec3<f64>(-1.0lf, 0.0lf, t1 + W));
+            if pn == 0u {
+                continue;
+            }
+            var zmin = 1e308lf;
+            var pu = vec2<f64>(1e308lf, -1e308lf);
+            var pv = vec2<f64>(1e308lf, -1e308lf);
+            for (var c = 0u; c < pn; c++) {
+                zmin = min(zmin, px[c].z);
+                let u = px[c].x / px[c].z;
+                let v = px[c].y / px[c].z;
+                pu = vec2<f64>(min(pu.x, u), max(pu.y, u));
+                pv = vec2<f64>(min(pv.x, v), max(pv.y, v));
+            }
+            let z = zmin * (1.0lf - 1e-9lf);
+            if f64(pixmax[k * per + j * res + i]) < z {
+                continue;
+            }
+            if !subs_nearer(
+                k,
+                i,
+                j,
+                (pu.x - W + 1.0lf) * half,
+                (pu.y + W + 1.0lf) * half,
+                (pv.x - W - vmin) * half,
+                (pv.y + W - vmin) * half,
+                z,
+            ) {
+                atomicMax(&tflags[t], 1u);
+                return;
             }
         }
     }

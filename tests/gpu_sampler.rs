@@ -73,6 +73,8 @@ struct Config {
     subpixel: bool,
     polys: Vec<Vec<DVec3>>,
     boxes: Vec<DAabb>,
+    /// Occludee triangles, each inside a box.
+    tris: Vec<[DVec3; 3]>,
 }
 
 /// A direction on the outer side of the face, at least `zmin` along its normal.
@@ -128,7 +130,7 @@ fn config(rng: &mut Rng, res: u32) -> Config {
             c + (-e1 + e2) * s,
         ]);
     }
-    let boxes = (0..60)
+    let boxes: Vec<DAabb> = (0..60)
         .map(|_| {
             let d = outward(rng, axis, sign, 0.05);
             let c = eye + d * rng.u(5.5, 12.0);
@@ -137,6 +139,18 @@ fn config(rng: &mut Rng, res: u32) -> Config {
                 min: c - h,
                 max: c + h,
             }
+        })
+        .collect();
+    let tris = boxes
+        .iter()
+        .map(|b: &DAabb| {
+            std::array::from_fn(|_| {
+                DVec3::new(
+                    rng.u(b.min.x, b.max.x),
+                    rng.u(b.min.y, b.max.y),
+                    rng.u(b.min.z, b.max.z),
+                )
+            })
         })
         .collect();
     Config {
@@ -149,6 +163,7 @@ fn config(rng: &mut Rng, res: u32) -> Config {
         subpixel: rng.f() < 0.8,
         polys,
         boxes,
+        tris,
     }
 }
 
@@ -190,10 +205,44 @@ fn unblocked(rng: &mut Rng, cfg: &Config, bx: &DAabb) -> Option<(DVec3, DVec3)> 
     if lo[a] > hi[a] {
         return None;
     }
+    unblocked_to(rng, cfg, |rng| {
+        DVec3::new(rng.u(lo.x, hi.x), rng.u(lo.y, hi.y), rng.u(lo.z, hi.z))
+    })
+}
+
+/// [`unblocked`] for the outer part of a triangle.
+fn unblocked_tri(rng: &mut Rng, cfg: &Config, tri: &[DVec3; 3]) -> Option<(DVec3, DVec3)> {
+    let (a, s) = (cfg.axis, cfg.sign);
+    let outer = |p: DVec3| s * (p[a] - cfg.eye[a]) >= 0.0;
+    if !tri.iter().any(|&p| outer(p)) {
+        return None;
+    }
+    unblocked_to(rng, cfg, |rng| {
+        loop {
+            let (mut x, mut y) = (rng.f(), rng.f());
+            if x + y > 1.0 {
+                (x, y) = (1.0 - x, 1.0 - y);
+            }
+            let p = tri[0] + (tri[1] - tri[0]) * x + (tri[2] - tri[0]) * y;
+            if outer(p) {
+                return p;
+            }
+        }
+    })
+}
+
+/// Segments from the ball's rim and inside (or the rectangle's corners, edge midpoints and
+/// inside) to 100 points `target` picks: the first one no polygon blocks.
+fn unblocked_to(
+    rng: &mut Rng,
+    cfg: &Config,
+    mut target: impl FnMut(&mut Rng) -> DVec3,
+) -> Option<(DVec3, DVec3)> {
+    let a = cfg.axis;
     let (b_ax, c_ax) = ((a + 1) % 3, (a + 2) % 3);
     let mut from = Vec::new();
     for _ in 0..100 {
-        let to = DVec3::new(rng.u(lo.x, hi.x), rng.u(lo.y, hi.y), rng.u(lo.z, hi.z));
+        let to = target(rng);
         from.clear();
         match cfg.patch {
             Some([hb, hc]) => {
@@ -228,8 +277,11 @@ fn unblocked(rng: &mut Rng, cfg: &Config, bx: &DAabb) -> Option<(DVec3, DVec3)> 
     None
 }
 
-/// Renders `cfg` on the CPU and on the GPU: per box, (CPU hidden, GPU hidden).
-fn both(gpu: &GpuBackend, cfg: &Config) -> Vec<(bool, bool)> {
+/// Per item, (CPU hidden, GPU hidden).
+type Pairs = Vec<(bool, bool)>;
+
+/// Renders `cfg` on the CPU and on the GPU: the boxes' and the triangles' answers.
+fn both(gpu: &GpuBackend, cfg: &Config) -> (Pairs, Pairs) {
     let tagged: Vec<(Vec<DVec3>, u32)> = cfg
         .polys
         .iter()
@@ -252,12 +304,20 @@ fn both(gpu: &GpuBackend, cfg: &Config) -> Vec<(bool, bool)> {
         }
     }
     hc.draw(&occ);
-    let gpu = gs.test_boxes(&cfg.boxes).expect("GPU sampler render");
-    cfg.boxes
-        .iter()
-        .zip(gpu)
-        .map(|(b, g)| (hc.test_box(b) == BoxTest::Hidden, g))
-        .collect()
+    let g_boxes = gs.test_boxes(&cfg.boxes).expect("GPU sampler render");
+    let g_tris = gs.test_triangles(&cfg.tris).expect("GPU triangle test");
+    (
+        cfg.boxes
+            .iter()
+            .zip(g_boxes)
+            .map(|(b, g)| (hc.test_box(b) == BoxTest::Hidden, g))
+            .collect(),
+        cfg.tris
+            .iter()
+            .zip(g_tris)
+            .map(|(t, g)| (hc.test_triangle(*t) == BoxTest::Hidden, g))
+            .collect(),
+    )
 }
 
 #[test]
@@ -266,44 +326,58 @@ fn the_gpu_hides_what_the_cpu_hides_and_only_blocked_boxes() {
         return;
     };
     let mut rng = Rng(0x5eed);
-    let (mut cpu_hidden, mut gpu_hidden, mut total) = (0usize, 0usize, 0usize);
+    // Per kind (boxes, triangles): CPU hidden, GPU hidden, tested.
+    let mut counts = [[0usize; 3]; 2];
     let mut missed = Vec::new();
     for res in [32u32, 64] {
         for c in 0..12 {
             let cfg = config(&mut rng, res);
-            for (b, (cpu, g)) in both(gpu, &cfg).into_iter().enumerate() {
-                total += 1;
-                cpu_hidden += usize::from(cpu);
-                gpu_hidden += usize::from(g);
-                if cpu && !g {
-                    missed.push(format!("res {res} config {c} box {b}"));
-                }
-                if g && !cpu
-                    && let Some((from, to)) = unblocked(&mut rng, &cfg, &cfg.boxes[b])
-                {
-                    panic!(
-                        "res {res} config {c}: the GPU hid box {b} but the segment \
-                         {from} → {to} crosses no leaf"
-                    );
+            let (boxes, tris) = both(gpu, &cfg);
+            for (kind, results) in [boxes, tris].into_iter().enumerate() {
+                for (b, (cpu, g)) in results.into_iter().enumerate() {
+                    let n = &mut counts[kind];
+                    n[0] += usize::from(cpu);
+                    n[1] += usize::from(g);
+                    n[2] += 1;
+                    let what = ["box", "triangle"][kind];
+                    if cpu && !g {
+                        missed.push(format!("res {res} config {c} {what} {b}"));
+                    }
+                    if g && !cpu {
+                        let seg = if kind == 0 {
+                            unblocked(&mut rng, &cfg, &cfg.boxes[b])
+                        } else {
+                            unblocked_tri(&mut rng, &cfg, &cfg.tris[b])
+                        };
+                        if let Some((from, to)) = seg {
+                            panic!(
+                                "res {res} config {c}: the GPU hid {what} {b} but the \
+                                 segment {from} → {to} crosses no leaf"
+                            );
+                        }
+                    }
                 }
             }
         }
     }
-    eprintln!("{total} boxes: the CPU hid {cpu_hidden}, the GPU {gpu_hidden}");
+    eprintln!("boxes and triangles: [CPU hid, GPU hid, tested] {counts:?}");
     assert!(
         missed.is_empty(),
-        "the GPU left open {} boxes the CPU hid: {missed:?}",
+        "the GPU left open {} the CPU hid: {missed:?}",
         missed.len()
     );
-    // Not vacuous: the leaves hide a good share. The GPU's extra boxes come only from pixels
-    // with more than eight partial layers on the CPU: a few at most.
+    for (kind, [cpu, g, total]) in counts.into_iter().enumerate() {
+        // Not vacuous: the leaves hide a good share (triangles more than their boxes). The
+        // GPU's extra come only from pixels with more than eight partial layers on the CPU.
+        assert!(cpu * 8 > total, "kind {kind}: only {cpu} of {total} hidden");
+        assert!(
+            g <= cpu + total / 200,
+            "kind {kind}: the GPU hid {g} against the CPU's {cpu}"
+        );
+    }
     assert!(
-        cpu_hidden * 5 > total,
-        "only {cpu_hidden} of {total} hidden"
-    );
-    assert!(
-        gpu_hidden <= cpu_hidden + total / 200,
-        "the GPU hid {gpu_hidden} boxes against the CPU's {cpu_hidden}"
+        counts[1][0] > counts[0][0],
+        "triangles hide more than boxes"
     );
 }
 

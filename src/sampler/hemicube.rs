@@ -1289,7 +1289,7 @@ impl Hemicube {
 
     /// Whether the box spanned by `pts` reaches farther from the eye than the farthest corner
     /// of the boxes given to [`Hemicube::begin`], for which the edges were shrunk.
-    fn beyond_bound(&self, pts: &[DVec3]) -> bool {
+    pub fn beyond_bound(&self, pts: &[DVec3]) -> bool {
         if !self.depth_bounded {
             return false;
         }

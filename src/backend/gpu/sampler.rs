@@ -39,8 +39,8 @@ use std::num::NonZeroU64;
 
 /// Bytes of one parameter slot (WebGPU's largest uniform offset alignment).
 const PARAM_SLOT: u64 = 256;
-/// Parameter slots: the five views' fills, the reduction, the test.
-const SLOTS: u64 = 7;
+/// Parameter slots: the five views' fills, the reduction, the boxes' test, the triangles'.
+const SLOTS: u64 = 8;
 /// Bytes of one draw (two `vec4<u32>`).
 const DRAW_BYTES: u64 = 32;
 /// Workgroup size of the compute entry points.
@@ -125,7 +125,12 @@ pub struct GpuSampler<'a> {
     parts_f: Option<wgpu::Buffer>,
     flags: Option<wgpu::Buffer>,
     staging: Option<wgpu::Buffer>,
+    tris: Option<wgpu::Buffer>,
+    tflags: Option<wgpu::Buffer>,
+    test_tri: wgpu::ComputePipeline,
     last_draws: u64,
+    /// The polygons are drawn for the last `begin` (tests after the first reuse the maps).
+    rendered: bool,
 }
 
 impl std::fmt::Debug for GpuSampler<'_> {
@@ -325,6 +330,9 @@ impl<'a> GpuSampler<'a> {
                 storage(7, cs, true),
                 storage(8, cs, true),
                 storage(9, cs, false),
+                storage(10, cs, true),
+                storage(11, cs, false),
+                storage(12, cs, true),
             ],
         });
         let layout = |label: &'static str, bgl: &wgpu::BindGroupLayout| {
@@ -382,6 +390,7 @@ impl<'a> GpuSampler<'a> {
         };
         let reduce = compute("reduce", "sampler reduce pipeline");
         let test = compute("test", "sampler test pipeline");
+        let test_tri = compute("test_tri", "sampler triangle test pipeline");
         let fine = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("sampler sub-pixel depths"),
             size: wgpu::Extent3d {
@@ -465,7 +474,11 @@ impl<'a> GpuSampler<'a> {
             parts_f: None,
             flags: None,
             staging: None,
+            tris: None,
+            tflags: None,
+            test_tri,
             last_draws: 0,
+            rendered: false,
         })
     }
 
@@ -475,13 +488,13 @@ impl<'a> GpuSampler<'a> {
         &mut self.hc
     }
 
-    /// [`Hemicube::begin`]: the next [`GpuSampler::test_boxes`] renders from `eye`.
+    /// [`Hemicube::begin`]: the next test renders from `eye`.
     pub fn begin(&mut self, eye: DVec3, axis: usize, sign: f64, eps: f64, boxes: &[DAabb]) {
+        self.rendered = false;
         self.hc.begin(eye, axis, sign, eps, boxes);
     }
 
-    /// [`Hemicube::begin_patch`]: the next [`GpuSampler::test_boxes`] renders for the
-    /// rectangle.
+    /// [`Hemicube::begin_patch`]: the next test renders for the rectangle.
     pub fn begin_patch(
         &mut self,
         eye: DVec3,
@@ -490,6 +503,7 @@ impl<'a> GpuSampler<'a> {
         half: [f64; 2],
         boxes: &[DAabb],
     ) {
+        self.rendered = false;
         self.hc.begin_patch(eye, axis, sign, half, boxes);
     }
 
@@ -498,14 +512,57 @@ impl<'a> GpuSampler<'a> {
         self.last_draws
     }
 
-    /// Renders the polygons from the last `begin` and tests `boxes` (each given to that
-    /// `begin`, or inside their pixels) as [`Hemicube::test_box`] does: true for a box hidden
-    /// from every point of the ball (or rectangle), looking out through the face.
+    /// Tests `boxes` (each given to the last `begin`, or inside their pixels) as
+    /// [`Hemicube::test_box`] does: true for a box hidden from every point of the ball (or
+    /// rectangle), looking out through the face. The first test after a `begin` also renders
+    /// (in the same submission); later ones reuse the maps.
     ///
     /// # Errors
     /// The device's failures ([`BackendError::device_failed`]), and
-    /// [`BackendError::BufferTooLarge`] for more boxes than a buffer holds.
+    /// [`BackendError::BufferTooLarge`] for more boxes than a buffer holds or more draws than
+    /// a view's share of the draws' buffer.
     pub fn test_boxes(&mut self, boxes: &[DAabb]) -> Result<Vec<bool>, BackendError> {
+        Ok(self.submit(boxes, &[])?.0)
+    }
+
+    /// Tests triangles (each inside the boxes given to the last `begin`) as
+    /// [`Hemicube::test_triangle`] does, pixel by pixel with the triangle's own part in each
+    /// pixel: true for a hidden one. A triangle reaching the eye is decided by its box, as on
+    /// the CPU.
+    ///
+    /// # Errors
+    /// As [`GpuSampler::test_boxes`].
+    pub fn test_triangles(&mut self, tris: &[[DVec3; 3]]) -> Result<Vec<bool>, BackendError> {
+        let (_, codes) = self.submit(&[], tris)?;
+        let mut hidden: Vec<bool> = codes.iter().map(|&c| c == 0).collect();
+        // Those reaching the eye: their boxes decide.
+        let reach: Vec<usize> = (0..tris.len()).filter(|&t| codes[t] == 2).collect();
+        if !reach.is_empty() {
+            let boxes: Vec<DAabb> = reach
+                .iter()
+                .map(|&t| {
+                    let [a, b, c] = tris[t];
+                    DAabb {
+                        min: a.min(b).min(c),
+                        max: a.max(b).max(c),
+                    }
+                })
+                .collect();
+            for (&t, h) in reach.iter().zip(self.test_boxes(&boxes)?) {
+                hidden[t] = h;
+            }
+        }
+        Ok(hidden)
+    }
+
+    /// One submission: the render (unless done since the last `begin`), the boxes' parts and
+    /// the triangles tested. Returns the boxes' hidden flags and the triangles' codes (0 hidden,
+    /// 1 open, 2 reaching the eye).
+    fn submit(
+        &mut self,
+        boxes: &[DAabb],
+        tris: &[[DVec3; 3]],
+    ) -> Result<(Vec<bool>, Vec<u32>), BackendError> {
         let gpu = self.gpu;
         gpu.check_failure()?;
         let res = self.hc.resolution() as u32;
@@ -537,6 +594,16 @@ impl<'a> GpuSampler<'a> {
         parts_f.push(0.0);
         let cap = self.cap;
         let (frame, frame_u) = self.hc.setup_frame(self.polys, cap);
+        // The triangles after the eye; one reaching beyond the farthest box is open at once.
+        let mut tri_f: Vec<f64> = vec![frame[0], frame[1], frame[2], 0.0];
+        let mut tri_codes = vec![0u32; tris.len().max(1)];
+        for (t, tri) in tris.iter().enumerate() {
+            if self.hc.beyond_bound(tri) {
+                tri_codes[t] = 1;
+            }
+            tri_f.extend(tri.iter().flat_map(|p| p.to_array()));
+        }
+        let n_tris = tris.len() as u32;
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let scope = ErrorScopes::push(&gpu.device);
         let mut uploaded = 0u64;
@@ -561,6 +628,11 @@ impl<'a> GpuSampler<'a> {
                 bytemuck::cast_slice(&parts_f),
                 "sampler box part bounds",
             ),
+            (
+                &mut self.tris,
+                bytemuck::cast_slice(&tri_f),
+                "sampler triangles",
+            ),
         ] {
             gpu.ensure_buffer(slot, bytes.len() as u64, storage, label)?;
             if let Some(b) = slot {
@@ -575,8 +647,15 @@ impl<'a> GpuSampler<'a> {
             storage | wgpu::BufferUsages::COPY_SRC,
             "sampler flags",
         )?;
-        // The flags, then the five indirect draws (their instance counts).
-        let read_bytes = flag_bytes + 5 * 16;
+        let tflag_bytes = 4 * tri_codes.len() as u64;
+        gpu.ensure_buffer(
+            &mut self.tflags,
+            tflag_bytes,
+            storage | wgpu::BufferUsages::COPY_SRC,
+            "sampler triangle flags",
+        )?;
+        // The flags, the triangles' codes, then the five indirect draws (instance counts).
+        let read_bytes = flag_bytes + tflag_bytes + 5 * 16;
         gpu.ensure_buffer(
             &mut self.staging,
             read_bytes,
@@ -590,6 +669,8 @@ impl<'a> GpuSampler<'a> {
             Some(parts_f_b),
             Some(flags_b),
             Some(staging),
+            Some(tris_b),
+            Some(tflags_b),
         ) = (
             &self.frame,
             &self.frame_u,
@@ -597,15 +678,22 @@ impl<'a> GpuSampler<'a> {
             &self.parts_f,
             &self.flags,
             &self.staging,
+            &self.tris,
+            &self.tflags,
         )
         else {
             unreachable!("every buffer was just ensured");
         };
         gpu.queue
             .write_buffer(flags_b, 0, bytemuck::cast_slice(&open));
-        let indirect_init: Vec<u32> = (0..5).flat_map(|_| [6u32, 0, 0, 0]).collect();
         gpu.queue
-            .write_buffer(&self.indirect, 0, bytemuck::cast_slice(&indirect_init));
+            .write_buffer(tflags_b, 0, bytemuck::cast_slice(&tri_codes));
+        let render = !self.rendered;
+        if render {
+            let indirect_init: Vec<u32> = (0..5).flat_map(|_| [6u32, 0, 0, 0]).collect();
+            gpu.queue
+                .write_buffer(&self.indirect, 0, bytemuck::cast_slice(&indirect_init));
+        }
         let subpixel = u32::from(self.hc.subpixel());
         let (axis, sign) = (frame_u[0], frame_u[1]);
         for k in 0..5u32 {
@@ -645,7 +733,18 @@ impl<'a> GpuSampler<'a> {
             .write_buffer(&self.params, 5 * PARAM_SLOT, bytemuck::bytes_of(&reduce_p));
         gpu.queue
             .write_buffer(&self.params, 6 * PARAM_SLOT, bytemuck::bytes_of(&test_p));
-        uploaded += SLOTS * std::mem::size_of::<Params>() as u64 + flag_bytes + 80;
+        let tri_groups = dispatch((5 * n_tris).div_ceil(WORKGROUP));
+        let tri_p = Params {
+            res,
+            n: n_tris,
+            groups_x: tri_groups.0,
+            axis,
+            sign,
+            ..Params::default()
+        };
+        gpu.queue
+            .write_buffer(&self.params, 7 * PARAM_SLOT, bytemuck::bytes_of(&tri_p));
+        uploaded += SLOTS * std::mem::size_of::<Params>() as u64 + flag_bytes + tflag_bytes + 80;
         let param_entry = wgpu::BindGroupEntry {
             binding: 0,
             resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -692,6 +791,9 @@ impl<'a> GpuSampler<'a> {
                 entry(7, parts_u_b),
                 entry(8, parts_f_b),
                 entry(9, flags_b),
+                entry(10, tris_b),
+                entry(11, tflags_b),
+                entry(12, frame_u_b),
             ],
         });
         let mut encoder = gpu
@@ -699,7 +801,7 @@ impl<'a> GpuSampler<'a> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("sampler encoder"),
             });
-        if self.polys > 0 {
+        if render && self.polys > 0 {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("sampler set-up pass"),
                 timestamp_writes: None,
@@ -708,7 +810,7 @@ impl<'a> GpuSampler<'a> {
             cp.set_bind_group(0, &setup_group, &[]);
             cp.dispatch_workgroups(setup_groups.0, setup_groups.1, 1);
         }
-        for k in 0..5usize {
+        for k in (0..5usize).filter(|_| render) {
             let rows = if k == 0 { res } else { res / 2 };
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("sampler fill pass"),
@@ -736,7 +838,7 @@ impl<'a> GpuSampler<'a> {
             pass.set_bind_group(0, &fill_group, &[(k as u64 * PARAM_SLOT) as u32]);
             pass.draw_indirect(&self.indirect, 16 * k as u64);
         }
-        {
+        if render {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("sampler reduce pass"),
                 timestamp_writes: None,
@@ -754,8 +856,18 @@ impl<'a> GpuSampler<'a> {
             cp.set_bind_group(0, &test_group, &[(6 * PARAM_SLOT) as u32]);
             cp.dispatch_workgroups(test_groups.0, test_groups.1, 1);
         }
+        if n_tris > 0 {
+            let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("sampler triangle test pass"),
+                timestamp_writes: None,
+            });
+            cp.set_pipeline(&self.test_tri);
+            cp.set_bind_group(0, &test_group, &[(7 * PARAM_SLOT) as u32]);
+            cp.dispatch_workgroups(tri_groups.0, tri_groups.1, 1);
+        }
         encoder.copy_buffer_to_buffer(flags_b, 0, staging, 0, flag_bytes);
-        encoder.copy_buffer_to_buffer(&self.indirect, 0, staging, flag_bytes, 80);
+        encoder.copy_buffer_to_buffer(tflags_b, 0, staging, flag_bytes, tflag_bytes);
+        encoder.copy_buffer_to_buffer(&self.indirect, 0, staging, flag_bytes + tflag_bytes, 80);
         let submission = gpu.queue.submit([encoder.finish()]);
         scope.check()?;
         let (tx, rx) = std::sync::mpsc::channel();
@@ -771,7 +883,7 @@ impl<'a> GpuSampler<'a> {
             }),
             Err(_) => Ok(false),
         })?;
-        let (hidden, draws) = {
+        let (hidden, codes, draws) = {
             let view = staging
                 .slice(..read_bytes)
                 .get_mapped_range()
@@ -784,11 +896,23 @@ impl<'a> GpuSampler<'a> {
                 .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
                 .collect();
             let hidden: Vec<bool> = words[..boxes.len()].iter().map(|&w| w == 0).collect();
-            let base = open.len();
+            let codes: Vec<u32> = words[open.len()..open.len() + tris.len()].to_vec();
+            let base = open.len() + tri_codes.len();
             let draws: Vec<u64> = (0..5).map(|k| u64::from(words[base + 4 * k + 1])).collect();
-            (hidden, draws)
+            (hidden, codes, draws)
         };
         staging.unmap();
+        if !render {
+            gpu.add_totals(&super::RenderStats {
+                submissions: 1,
+                passes: usize::from(n_parts > 0) + usize::from(n_tris > 0),
+                bytes_uploaded: uploaded,
+                bytes_read_back: read_bytes,
+                ..super::RenderStats::default()
+            });
+            return Ok((hidden, codes));
+        }
+        self.rendered = true;
         self.last_draws = draws.iter().sum();
         if let Some(&most) = draws.iter().max()
             && most > u64::from(cap)
@@ -801,11 +925,11 @@ impl<'a> GpuSampler<'a> {
         }
         gpu.add_totals(&super::RenderStats {
             submissions: 1,
-            passes: 8,
+            passes: 7 + usize::from(n_parts > 0) + usize::from(n_tris > 0),
             bytes_uploaded: uploaded,
             bytes_read_back: read_bytes,
             ..super::RenderStats::default()
         });
-        Ok(hidden)
+        Ok((hidden, codes))
     }
 }
