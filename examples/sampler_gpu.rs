@@ -8,7 +8,7 @@ mod common;
 use glam::DVec3;
 use std::time::{Duration, Instant};
 use umbrasweep::backend::gpu::GpuBackend;
-use umbrasweep::backend::gpu::sampler::GpuSampler;
+use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
 use umbrasweep::sampler::{BoxTest, Hemicube};
 
 fn main() {
@@ -28,7 +28,8 @@ fn main() {
     let gpu = GpuBackend::new().expect("GPU backend");
     println!("GPU: {}", gpu.adapter_info().name);
     let t = Instant::now();
-    let mut gs = GpuSampler::new(&gpu, &data.occluders, res).expect("GPU sampler");
+    let on_gpu = GpuSamplerScene::new(&gpu, &data.occluders).expect("GPU sampler scene");
+    let mut gs = GpuSampler::new(&gpu, &on_gpu, res).expect("GPU sampler");
     println!(
         "{} polygons uploaded and pipelines made in {:.2} s",
         data.occluders.polys.len(),

@@ -14,10 +14,15 @@
 use glam::DVec3;
 use std::sync::OnceLock;
 use umbrasweep::backend::BackendError;
+use umbrasweep::backend::RasterBackend;
+use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::backend::gpu::GpuBackend;
-use umbrasweep::backend::gpu::sampler::GpuSampler;
+use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
+use umbrasweep::bake::{BakeSettings, CullState, Culler, Prepared, SamplingCuller, SweepChoice};
 use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube, SampleOccluders};
+use umbrasweep::settings::SamplingSettings;
+use umbrasweep::validate::SceneRays;
 
 /// The shared backend, or `None` (after printing why) when there is no adapter outside CI.
 fn backend() -> Option<&'static GpuBackend> {
@@ -289,7 +294,8 @@ fn both(gpu: &GpuBackend, cfg: &Config) -> (Pairs, Pairs) {
         .map(|(k, p)| (p.clone(), k as u32))
         .collect();
     let occ = SampleOccluders::from_polygons(&tagged);
-    let mut gs = GpuSampler::new(gpu, &occ, cfg.res).expect("GPU sampler");
+    let scene = GpuSamplerScene::new(gpu, &occ).expect("GPU sampler scene");
+    let mut gs = GpuSampler::new(gpu, &scene, cfg.res).expect("GPU sampler");
     let mut hc = Hemicube::new(cfg.res);
     hc.set_subpixel(cfg.subpixel);
     gs.hemicube().set_subpixel(cfg.subpixel);
@@ -396,7 +402,8 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
     };
     let boxes = [behind, beside];
     let empty = SampleOccluders::from_polygons(&[]);
-    let mut gs = GpuSampler::new(gpu, &empty, 32).expect("GPU sampler");
+    let scene = GpuSamplerScene::new(gpu, &empty).expect("GPU sampler scene");
+    let mut gs = GpuSampler::new(gpu, &scene, 32).expect("GPU sampler");
     gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &boxes);
     assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![false, false]);
     assert_eq!(gs.last_draws(), 0);
@@ -407,7 +414,8 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
         DVec3::new(-2.0, 2.0, 4.0),
     ];
     let occ = SampleOccluders::from_polygons(&[(wall, 0)]);
-    let mut gs = GpuSampler::new(gpu, &occ, 32).expect("GPU sampler");
+    let scene = GpuSamplerScene::new(gpu, &occ).expect("GPU sampler scene");
+    let mut gs = GpuSampler::new(gpu, &scene, 32).expect("GPU sampler");
     gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &boxes);
     assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![true, false]);
     assert!(gs.last_draws() >= 1);
@@ -417,4 +425,101 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
         gs.test_boxes(&[behind, beside, behind]).unwrap(),
         vec![true, false, true]
     );
+}
+
+/// A small forest and its middle cell.
+fn small_forest() -> (umbrasweep::Scene, umbrasweep::geom::Aabb) {
+    let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
+        trees: 120,
+        leaves: 150,
+        ..umbrasweep::generate::ForestOptions::coarse()
+    })
+    .unwrap();
+    (
+        generated.to_scene("forest.obj"),
+        generated.cells[generated.cells.len() / 2],
+    )
+}
+
+/// The sampler alone on [`small_forest`]'s cell with `backend`: what it hid, and the points
+/// it rendered.
+fn sample_forest(backend: &dyn RasterBackend) -> (Vec<bool>, u64) {
+    let (scene, cell) = small_forest();
+    let settings = BakeSettings {
+        sampling: SweepChoice::On,
+        sampling_settings: SamplingSettings {
+            eps: Some(0.12),
+            levels: 1,
+            resolution: Some(48),
+            rays: 0,
+            ..SamplingSettings::default()
+        },
+        ..BakeSettings::default()
+    };
+    let prepared = Prepared::new(&scene, &settings, &[cell]).unwrap();
+    let mut state = CullState {
+        hidden: vec![false; scene.objects.len()],
+        known_visible: None,
+    };
+    let work = SamplingCuller::default()
+        .cull(&prepared, &cell, backend, &mut state, &mut |_, _, _| {})
+        .unwrap();
+    (state.hidden, work.points)
+}
+
+/// `bake --sampling --backend gpu` samples on the device: the same objects hidden as on the
+/// CPU (or more, where pixels gather more than eight depths), from the same points.
+#[test]
+fn the_sampler_culls_the_same_on_the_gpu_backend() {
+    let Some(gpu) = backend() else {
+        return;
+    };
+    assert!(
+        gpu.sampler_on_gpu(),
+        "lavapipe and the target GPUs have f64"
+    );
+    let before = gpu.total_stats().submissions;
+    let (cpu, cpu_points) = sample_forest(&CpuBackend::new());
+    let (on_gpu, gpu_points) = sample_forest(gpu);
+    assert!(
+        gpu.total_stats().submissions > before,
+        "the GPU backend's sampler submitted nothing to the device"
+    );
+    let n_cpu = cpu.iter().filter(|&&h| h).count();
+    let n_gpu = on_gpu.iter().filter(|&&h| h).count();
+    eprintln!("hidden: CPU {n_cpu}, GPU {n_gpu}; points {cpu_points}, {gpu_points}");
+    assert!(n_cpu > 10, "the test needs something hidden: {n_cpu}");
+    let missed: Vec<usize> = (0..cpu.len()).filter(|&o| cpu[o] && !on_gpu[o]).collect();
+    assert!(
+        missed.is_empty(),
+        "the GPU kept objects the CPU hid: {missed:?}"
+    );
+    // What only the GPU hid (pixels with more than eight partial layers on the CPU, many at
+    // this low resolution): each must be blocked from random points of the cell.
+    let (scene, cell) = small_forest();
+    let rays = SceneRays::new(&scene);
+    let mut rng = Rng(23);
+    let extra: Vec<usize> = (0..cpu.len()).filter(|&o| on_gpu[o] && !cpu[o]).collect();
+    assert!(extra.len() <= n_cpu, "GPU {n_gpu} against CPU {n_cpu}");
+    for &o in &extra {
+        let ob = &scene.objects[o];
+        for _ in 0..20_000 {
+            let from = cell.min.as_dvec3()
+                + (cell.max - cell.min).as_dvec3() * DVec3::new(rng.f(), rng.f(), rng.f());
+            let t = ob.triangles.start as usize
+                + (rng.f() * ob.triangles.len() as f64) as usize % ob.triangles.len();
+            let [a, b, c] = scene.triangle(t).map(|p| p.as_dvec3());
+            let (mut u, mut v) = (rng.f(), rng.f());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let to = a + (b - a) * u + (c - a) * v;
+            let hits = rays.trace(from.as_vec3(), (to - from).as_vec3(), false);
+            let first = hits.first().expect("the ray reaches the object at least");
+            assert_ne!(
+                first.object as usize, o,
+                "the segment {from:?} → {to:?} sees object {o}, which only the GPU hid"
+            );
+        }
+    }
 }

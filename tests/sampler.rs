@@ -117,7 +117,7 @@ fn run_sampler(
         hidden: vec![false; scene.objects.len()],
         known_visible: None,
     };
-    let work = SamplingCuller
+    let work = SamplingCuller::default()
         .cull(
             &prepared,
             cell,

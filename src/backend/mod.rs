@@ -381,6 +381,11 @@ pub trait RasterBackend: Send + Sync {
     ) -> Result<Box<dyn RsfCharts + '_>, BackendError> {
         Ok(Box::new(RayCharts::new(cell, up, resolution)))
     }
+    /// The GPU backend itself, for a culler whose GPU twin lives outside this trait (the
+    /// shrunk-occluder sampler's hemicube, [`gpu::sampler`]); None on the CPU backend.
+    fn as_gpu(&self) -> Option<&gpu::GpuBackend> {
+        None
+    }
 }
 
 /// One occluder for ray space factorization's charts: a convex polygon (points in order,

@@ -143,7 +143,7 @@ pub fn cullers(
     }
     out.push(Box::new(super::planes::PlaneCuller { sweep }));
     if sampling {
-        out.push(Box::new(super::sampling::SamplingCuller));
+        out.push(Box::new(super::sampling::SamplingCuller::default()));
     }
     out
 }

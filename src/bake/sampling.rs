@@ -53,7 +53,9 @@
 use super::BakeError;
 use super::pipeline::{CullState, Culler, CullerWork};
 use super::prepare::Prepared;
-use crate::backend::RasterBackend;
+use crate::backend::gpu::GpuBackend;
+use crate::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
+use crate::backend::{BackendError, RasterBackend};
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::Hdm;
 use crate::plane::{DepthMap, PlaneJob};
@@ -125,8 +127,37 @@ impl SamplerData {
 }
 
 /// The culler: see the module docs.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct SamplingCuller;
+#[derive(Debug, Default)]
+pub struct SamplingCuller {
+    /// With the GPU backend: the occluder polygons on its device, uploaded by the first cell
+    /// and kept for the bake.
+    gpu_scene: Mutex<Option<Arc<GpuSamplerScene>>>,
+}
+
+impl SamplingCuller {
+    /// The occluder polygons on `gpu`'s device (uploaded once per bake).
+    fn gpu_scene(
+        &self,
+        gpu: &GpuBackend,
+        occ: &SampleOccluders,
+    ) -> Result<Arc<GpuSamplerScene>, BakeError> {
+        let mut slot = self.gpu_scene.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(s) = slot.as_ref() {
+            return Ok(s.clone());
+        }
+        let s = Arc::new(GpuSamplerScene::new(gpu, occ)?);
+        *slot = Some(s.clone());
+        Ok(s)
+    }
+}
+
+/// What renders a rectangle: the CPU's hemicube, or its GPU twin (with the GPU backend on a
+/// device with `SHADER_F64`), which gives the same answers or hides more (module docs of
+/// `backend::gpu::sampler`).
+enum Renderer<'a> {
+    Cpu(Box<Hemicube>),
+    Gpu(Box<GpuSampler<'a>>),
+}
 
 /// Certifying rays per undecided object and sample point at most.
 const CERTIFY_PER_OBJECT: usize = 2;
@@ -189,6 +220,8 @@ struct Shared<'a> {
     tested: AtomicU64,
     hid: AtomicU64,
     start: Instant,
+    /// The first device failure (the rectangles it hit gave their objects up as visible).
+    failed: Mutex<Option<BackendError>>,
 }
 
 impl Culler for SamplingCuller {
@@ -200,7 +233,7 @@ impl Culler for SamplingCuller {
         &self,
         prepared: &Prepared,
         cell: &Aabb,
-        _backend: &dyn RasterBackend,
+        backend: &dyn RasterBackend,
         state: &mut CullState,
         _observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
     ) -> Result<CullerWork, BakeError> {
@@ -254,6 +287,11 @@ impl Culler for SamplingCuller {
             }
         });
         let s = data.settings;
+        // The GPU twin of the hemicube, with the GPU backend where the device has `f64`.
+        let gpu_scene = match backend.as_gpu() {
+            Some(g) if g.sampler_on_gpu() => Some((g, self.gpu_scene(g, &data.occluders)?)),
+            _ => None,
+        };
         let eps0 = data.eps * f64::from(1u32 << s.levels.min(20));
         // The automatic resolution's scale: where the cell's rays first hit (NaN: never).
         let hit_distance = if s.resolution.is_none() {
@@ -277,6 +315,7 @@ impl Culler for SamplingCuller {
             tested: AtomicU64::new(0),
             hid: AtomicU64::new(0),
             start: Instant::now(),
+            failed: Mutex::new(None),
         };
         // Top-level patches: a grid per face whose rectangles' half diagonals are at most eps0.
         let mut top: Vec<(Patch, Arc<Vec<u32>>)> = Vec::new();
@@ -348,7 +387,19 @@ impl Culler for SamplingCuller {
             // meanwhile, so the results do not depend on the threads.
             // Hemicubes are large (about 100 bytes per pixel): lanes take one from the pool
             // and give it back, so a level allocates one per thread, not one per lane.
-            let pool: Mutex<Vec<Hemicube>> = Mutex::new(Vec::new());
+            let pool: Mutex<Vec<Renderer>> = Mutex::new(Vec::new());
+            let new_renderer = || -> Option<Renderer> {
+                match &gpu_scene {
+                    None => Some(Renderer::Cpu(Box::new(Hemicube::new(resolution)))),
+                    Some((g, scene)) => match GpuSampler::new(g, scene, resolution) {
+                        Ok(gs) => Some(Renderer::Gpu(Box::new(gs))),
+                        Err(e) => {
+                            shared.fail(e);
+                            None
+                        }
+                    },
+                }
+            };
             let sample = |indices: &[usize]| -> Vec<Option<Arc<Vec<u32>>>> {
                 let mut out = Vec::with_capacity(indices.len());
                 let (chunk_len, lane_len) = lanes(indices.len());
@@ -358,16 +409,21 @@ impl Culler for SamplingCuller {
                         .par_chunks(lane_len)
                         .map(|lane| {
                             let taken = pool.lock().map(|mut p| p.pop()).ok().flatten();
-                            let mut hc = taken.unwrap_or_else(|| Hemicube::new(resolution));
                             let mut known = known.clone();
+                            let Some(mut r) = taken.or_else(new_renderer) else {
+                                // No renderer (the device failed): what the lane would test
+                                // stays visible.
+                                for &i in lane {
+                                    shared.give_up(&level[i].1, &mut known);
+                                }
+                                return vec![None; lane.len()];
+                            };
                             let open = lane
                                 .iter()
-                                .map(|&i| {
-                                    shared.patch(&mut hc, level[i].0, &level[i].1, &mut known)
-                                })
+                                .map(|&i| shared.patch(&mut r, level[i].0, &level[i].1, &mut known))
                                 .collect();
                             if let Ok(mut p) = pool.lock() {
-                                p.push(hc);
+                                p.push(r);
                             }
                             open
                         })
@@ -451,6 +507,14 @@ impl Culler for SamplingCuller {
                 .filter_map(|((patch, _), open)| open.map(|o| (patch, o)))
                 .flat_map(|(patch, o)| patch.quadrants().map(move |q| (q, o.clone())))
                 .collect();
+        }
+        if let Some(e) = shared
+            .failed
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+        {
+            return Err(e.into());
         }
         for &o in &candidates {
             if !shared.done[o as usize].load(Ordering::Relaxed) {
@@ -632,6 +696,14 @@ impl Shared<'_> {
         }
     }
 
+    /// Records the first device failure.
+    fn fail(&self, e: BackendError) {
+        let mut f = self.failed.lock().unwrap_or_else(|e| e.into_inner());
+        if f.is_none() {
+            *f = Some(e);
+        }
+    }
+
     /// [`Shared::mark_visible`], and in the lane's `known`.
     fn give_up(&self, list: &[u32], known: &mut [bool]) {
         self.mark_visible(list);
@@ -649,7 +721,7 @@ impl Shared<'_> {
     /// it, and adds to it what it finds visible.
     fn patch(
         &self,
-        hc: &mut Hemicube,
+        renderer: &mut Renderer,
         patch: Patch,
         list: &[u32],
         known: &mut [bool],
@@ -686,36 +758,53 @@ impl Shared<'_> {
         let mut rays = 0usize;
         for band in distance_bands(eye, &boxes, self.data.settings.band_ratio) {
             let band_boxes: Vec<DAabb> = band.iter().map(|&i| boxes[i]).collect();
-            hc.begin_patch(eye, f.axis, f.sign, half, &band_boxes);
-            let st = hc.draw(&self.data.occluders);
-            self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
+            // On the GPU the band's objects are tested together (boxes, then the open ones'
+            // pieces, then the open pieces' triangles); on the CPU one by one as they come.
+            let batch = match renderer {
+                Renderer::Cpu(hc) => {
+                    hc.begin_patch(eye, f.axis, f.sign, half, &band_boxes);
+                    let st = hc.draw(&self.data.occluders);
+                    self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
+                    None
+                }
+                Renderer::Gpu(gs) => {
+                    gs.begin_patch(eye, f.axis, f.sign, half, &band_boxes);
+                    let objects: Vec<(u32, DAabb)> = band
+                        .iter()
+                        .filter(|&&i| !known[list[i] as usize])
+                        .map(|&i| (list[i], boxes[i]))
+                        .collect();
+                    match self.test_on_gpu(gs, eye, &objects) {
+                        Ok(r) => {
+                            self.polygons.fetch_add(gs.last_draws(), Ordering::Relaxed);
+                            Some(objects.iter().map(|p| p.0).zip(r).collect::<Vec<_>>())
+                        }
+                        Err(e) => {
+                            // The device failed: this rectangle decides nothing.
+                            self.fail(e);
+                            self.give_up(&list, known);
+                            return None;
+                        }
+                    }
+                }
+            };
+            let mut batch = batch.map(|b| b.into_iter().peekable());
             for &i in &band {
                 let (o, bx) = (list[i], &boxes[i]);
+                // The GPU's answer for `o` (its batch holds the band's objects not known
+                // visible when it ran, in the band's order).
+                let from_gpu = batch
+                    .as_mut()
+                    .and_then(|b| b.next_if(|&(p, _)| p == o).map(|(_, r)| r));
                 if known[o as usize] {
                     // Certified visible by a ray of this rectangle's.
                     continue;
                 }
                 self.tested.fetch_add(1, Ordering::Relaxed);
-                let test = match hc.test_box(bx) {
-                    BoxTest::Hidden => {
-                        self.hid.fetch_add(1, Ordering::Relaxed);
-                        continue;
-                    }
-                    BoxTest::Open { direction } => {
-                        let pieces = self.prepared.pieces[o as usize].clone();
-                        let mut first = None;
-                        for k in pieces.clone() {
-                            if let BoxTest::Open { direction } = self.test_piece(hc, k as usize) {
-                                first = Some(direction);
-                                break;
-                            }
-                        }
-                        if pieces.is_empty() {
-                            Some(direction)
-                        } else {
-                            first
-                        }
-                    }
+                let test = match (renderer as &Renderer, from_gpu) {
+                    (_, Some(r)) => r,
+                    (Renderer::Cpu(hc), None) => self.test_object(hc, o, bx),
+                    (Renderer::Gpu(_), None) => unreachable!("the batch holds every object"),
                 };
                 let Some(direction) = test else {
                     self.hid.fetch_add(1, Ordering::Relaxed);
@@ -740,6 +829,95 @@ impl Shared<'_> {
             return None;
         }
         Some(Arc::new(open))
+    }
+
+    /// Tests object `o` (box `bx`) on the CPU: its box, and when that is open, its pieces
+    /// ([`Shared::test_piece`]). None when hidden; else a direction in which it shows.
+    fn test_object(&self, hc: &Hemicube, o: u32, bx: &DAabb) -> Option<DVec3> {
+        match hc.test_box(bx) {
+            BoxTest::Hidden => None,
+            BoxTest::Open { direction } => {
+                let pieces = self.prepared.pieces[o as usize].clone();
+                if pieces.is_empty() {
+                    return Some(direction);
+                }
+                for k in pieces {
+                    if let BoxTest::Open { direction } = self.test_piece(hc, k as usize) {
+                        return Some(direction);
+                    }
+                }
+                None
+            }
+        }
+    }
+
+    /// Tests objects on the GPU as [`Shared::test_object`] does on the CPU, in three
+    /// submissions: the boxes (with the render), the pieces of the open ones, the triangles
+    /// of the open pieces. An object is hidden when its box is, or when it has pieces and each
+    /// piece's box or every one of its triangles is: the CPU's answer, found by testing
+    /// everything rather than stopping at the first open piece. An open object's direction
+    /// is towards its box's centre (the GPU reads back no pixels).
+    ///
+    /// # Errors
+    /// The device's failures.
+    fn test_on_gpu(
+        &self,
+        gs: &mut GpuSampler,
+        eye: DVec3,
+        objects: &[(u32, DAabb)],
+    ) -> Result<Vec<Option<DVec3>>, BackendError> {
+        let p = self.prepared;
+        let boxes: Vec<DAabb> = objects.iter().map(|&(_, b)| b).collect();
+        let box_hidden = gs.test_boxes(&boxes)?;
+        // The open objects' pieces.
+        let mut pieces: Vec<(usize, usize)> = Vec::new();
+        for (n, &(o, _)) in objects.iter().enumerate() {
+            if !box_hidden[n] {
+                pieces.extend(p.pieces[o as usize].clone().map(|k| (n, k as usize)));
+            }
+        }
+        let piece_boxes: Vec<DAabb> = pieces.iter().map(|&(_, k)| p.piece_boxes[k]).collect();
+        let mut piece_hidden = if piece_boxes.is_empty() {
+            Vec::new()
+        } else {
+            gs.test_boxes(&piece_boxes)?
+        };
+        // The open pieces' triangles.
+        let mut tris: Vec<[DVec3; 3]> = Vec::new();
+        let mut tri_piece: Vec<usize> = Vec::new();
+        for (m, &(_, k)) in pieces.iter().enumerate() {
+            if piece_hidden[m] {
+                continue;
+            }
+            let r = &p.piece_triangle_ranges[k];
+            for &t in &p.piece_triangles[r.start as usize..r.end as usize] {
+                tris.push(p.scene.triangle(t as usize).map(|v| v.as_dvec3()));
+                tri_piece.push(m);
+            }
+        }
+        // A piece whose box is open is hidden when all its triangles are (as on the CPU, a
+        // piece without any is).
+        let mut all = vec![true; pieces.len()];
+        if !tris.is_empty() {
+            for (&m, h) in tri_piece.iter().zip(gs.test_triangles(&tris)?) {
+                all[m] &= h;
+            }
+        }
+        for (h, a) in piece_hidden.iter_mut().zip(all) {
+            *h |= a;
+        }
+        let mut open_piece = vec![false; objects.len()];
+        for (m, &(n, _)) in pieces.iter().enumerate() {
+            open_piece[n] |= !piece_hidden[m];
+        }
+        Ok(objects
+            .iter()
+            .enumerate()
+            .map(|(n, &(o, bx))| {
+                let hidden = box_hidden[n] || (!p.pieces[o as usize].is_empty() && !open_piece[n]);
+                (!hidden).then(|| bx.center() - eye)
+            })
+            .collect())
     }
 
     /// Tests piece `k` of an object: its box, and when that is open, each of its triangles

@@ -640,6 +640,13 @@ impl GpuBackend {
         self.stats.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
+    /// True when the shrunk-occluder sampler renders on this device
+    /// ([`sampler::GpuSampler`]): the device has `SHADER_F64`. Otherwise a bake with the GPU
+    /// backend samples on the CPU.
+    pub fn sampler_on_gpu(&self) -> bool {
+        self.device.features().contains(wgpu::Features::SHADER_F64)
+    }
+
     /// True when ray space factorization's charts run on this device
     /// ([`RasterBackend::rsf_charts`]): it has [`wgpu::Features::SHADER_F64`] (the backend's
     /// own device takes it whenever the adapter has it). Otherwise the CPU's charts are used.
@@ -724,6 +731,10 @@ fn skip_the_gpu(
 }
 
 impl RasterBackend for GpuBackend {
+    fn as_gpu(&self) -> Option<&GpuBackend> {
+        Some(self)
+    }
+
     fn stats_summary(&self, cells: usize) -> Option<String> {
         let t = self.total_stats();
         let n = cells.max(1) as f64;

@@ -2,7 +2,8 @@
 //! `shaders/sampler.wgsl`), the twin of the CPU's [`Hemicube`]: [`GpuSampler`].
 //!
 //! # Design
-//! The occluder polygons are uploaded once ([`GpuSampler::new`]). Per sample point the CPU
+//! The occluder polygons are uploaded once ([`GpuSamplerScene::new`]), with the pipelines;
+//! each thread renders with its own [`GpuSampler`] (its maps and per-render buffers). Per sample point the CPU
 //! only sets up the render ([`Hemicube::begin`]: which pixels and tiles the boxes need) and
 //! cuts the boxes into per-view parts ([`Hemicube::box_rects`]); one submission then does the
 //! rest: a compute pass repeats the CPU's per-polygon work for every polygon (edges, shrinks,
@@ -72,12 +73,13 @@ fn dispatch(groups: u32) -> (u32, u32) {
     (x, groups.div_ceil(MAX_GROUPS).max(1))
 }
 
-/// The sampler's hemicube on a [`GpuBackend`]'s device, with one scene's occluder polygons
-/// resident there (module docs).
+/// The sampler's hemicube on a [`GpuBackend`]'s device, rendering a [`GpuSamplerScene`]'s
+/// polygons (module docs).
 ///
 /// ```no_run
 /// use glam::DVec3;
-/// use umbrasweep::backend::gpu::{GpuBackend, sampler::GpuSampler};
+/// use umbrasweep::backend::gpu::GpuBackend;
+/// use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
 /// use umbrasweep::geom::DAabb;
 /// use umbrasweep::sampler::SampleOccluders;
 ///
@@ -85,24 +87,16 @@ fn dispatch(groups: u32) -> (u32, u32) {
 /// let leaf = vec![DVec3::new(-1.0, -1.0, 5.0), DVec3::new(1.0, -1.0, 5.0), DVec3::new(0.0, 1.0, 5.0)];
 /// let occ = SampleOccluders::from_polygons(&[(leaf, 0)]);
 /// let boxes = [DAabb { min: DVec3::new(-0.1, -0.1, 9.0), max: DVec3::new(0.1, 0.1, 9.2) }];
-/// let mut hc = GpuSampler::new(&gpu, &occ, 64)?;
+/// let scene = GpuSamplerScene::new(&gpu, &occ)?;
+/// let mut hc = GpuSampler::new(&gpu, &scene, 64)?;
 /// hc.begin(DVec3::ZERO, 2, 1.0, 0.01, &boxes);
 /// assert_eq!(hc.test_boxes(&boxes)?, vec![true]);
 /// # Ok::<(), umbrasweep::backend::BackendError>(())
 /// ```
 pub struct GpuSampler<'a> {
     gpu: &'a GpuBackend,
+    scene: &'a GpuSamplerScene,
     hc: Hemicube,
-    polys: u32,
-    /// Draws each view's region of `draws` holds.
-    cap: u32,
-    setup_layout: wgpu::BindGroupLayout,
-    fill_layout: wgpu::BindGroupLayout,
-    test_layout: wgpu::BindGroupLayout,
-    setup: wgpu::ComputePipeline,
-    fill: wgpu::RenderPipeline,
-    reduce: wgpu::ComputePipeline,
-    test: wgpu::ComputePipeline,
     /// The sub-pixel depths: five layers of `8R × 8R` (the sides use the lower half); kept
     /// for its views.
     _fine: wgpu::Texture,
@@ -111,9 +105,6 @@ pub struct GpuSampler<'a> {
     params: wgpu::Buffer,
     norms: wgpu::Buffer,
     pixmax: wgpu::Buffer,
-    /// The polygons (first point, end, card) and their points (`f64`), uploaded once.
-    poly_buf: wgpu::Buffer,
-    points: wgpu::Buffer,
     /// Per point: the set-up pass's output.
     draws: wgpu::Buffer,
     pedges: wgpu::Buffer,
@@ -127,17 +118,43 @@ pub struct GpuSampler<'a> {
     staging: Option<wgpu::Buffer>,
     tris: Option<wgpu::Buffer>,
     tflags: Option<wgpu::Buffer>,
-    test_tri: wgpu::ComputePipeline,
     last_draws: u64,
     /// The polygons are drawn for the last `begin` (tests after the first reuse the maps).
     rendered: bool,
+}
+
+/// One scene's occluder polygons on the device, with the sampler's pipelines: made once and
+/// shared by the [`GpuSampler`]s that render from it (one per thread, each with its own maps).
+pub struct GpuSamplerScene {
+    polys: u32,
+    /// Draws each view's region of a sampler's draws holds.
+    cap: u32,
+    points_len: u64,
+    setup_layout: wgpu::BindGroupLayout,
+    fill_layout: wgpu::BindGroupLayout,
+    test_layout: wgpu::BindGroupLayout,
+    setup: wgpu::ComputePipeline,
+    fill: wgpu::RenderPipeline,
+    reduce: wgpu::ComputePipeline,
+    test: wgpu::ComputePipeline,
+    test_tri: wgpu::ComputePipeline,
+    /// The polygons (first point, end, card) and their points (`f64`), uploaded once.
+    poly_buf: wgpu::Buffer,
+    points: wgpu::Buffer,
+}
+
+impl std::fmt::Debug for GpuSamplerScene {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuSamplerScene")
+            .field("polygons", &self.polys)
+            .finish_non_exhaustive()
+    }
 }
 
 impl std::fmt::Debug for GpuSampler<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GpuSampler")
             .field("resolution", &self.hc.resolution())
-            .field("polygons", &self.polys)
             .finish_non_exhaustive()
     }
 }
@@ -150,6 +167,13 @@ fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     }
 }
 
+/// The largest storage binding of `gpu`'s device.
+fn max_binding(gpu: &GpuBackend) -> u64 {
+    gpu.limits
+        .max_buffer
+        .min(gpu.device.limits().max_storage_buffer_binding_size)
+}
+
 /// A storage buffer of `size` bytes (at least 16), labelled.
 fn storage_buffer(
     gpu: &GpuBackend,
@@ -158,10 +182,7 @@ fn storage_buffer(
     label: &'static str,
 ) -> Result<wgpu::Buffer, BackendError> {
     let size = size.max(16).next_multiple_of(16);
-    let max = gpu
-        .limits
-        .max_buffer
-        .min(gpu.device.limits().max_storage_buffer_binding_size);
+    let max = max_binding(gpu);
     if size > max {
         return Err(BackendError::BufferTooLarge { label, size, max });
     }
@@ -173,35 +194,22 @@ fn storage_buffer(
     }))
 }
 
-impl<'a> GpuSampler<'a> {
-    /// A hemicube of `res` pixels across each view (rounded up to a multiple of 16, as
-    /// [`Hemicube::new`]) on `gpu`'s device, with the polygons of `occ` uploaded.
+impl GpuSamplerScene {
+    /// The polygons of `occ` uploaded to `gpu`'s device, and the sampler's pipelines.
     ///
     /// # Errors
     /// * [`BackendError::MissingFeatures`] when the device lacks `SHADER_F64` (the set-up,
     ///   sub-pixel masks and plane depths are the CPU's `f64` expressions);
-    /// * [`BackendError::PlaneSize`] when `8 × res` exceeds the device's largest texture side;
-    /// * [`BackendError::BufferTooLarge`] when the polygons' buffers exceed the device's
-    ///   largest storage binding (about 340 bytes per polygon);
+    /// * [`BackendError::BufferTooLarge`] when the polygons' points exceed the device's largest
+    ///   storage binding (24 bytes per point);
     /// * [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports
     ///   one while the pipelines and buffers are created.
-    pub fn new(gpu: &'a GpuBackend, occ: &SampleOccluders, res: u32) -> Result<Self, BackendError> {
+    pub fn new(gpu: &GpuBackend, occ: &SampleOccluders) -> Result<Self, BackendError> {
         gpu.check_failure()?;
         let device = &gpu.device;
         if !device.features().contains(wgpu::Features::SHADER_F64) {
             return Err(BackendError::MissingFeatures {
                 missing: wgpu::Features::SHADER_F64,
-            });
-        }
-        let hc = Hemicube::new(res);
-        let r = hc.resolution() as u32;
-        let side = SUB * r;
-        if side > gpu.limits.max_texture {
-            return Err(BackendError::PlaneSize {
-                width: side,
-                height: side,
-                max: gpu.limits.max_texture,
-                adapter: gpu.adapter_name.clone(),
             });
         }
         let n = occ.polys.len();
@@ -211,6 +219,9 @@ impl<'a> GpuSampler<'a> {
         }
         let point_data: Vec<f64> = occ.points.iter().flat_map(|p| p.to_array()).collect();
         let np = n as u64;
+        // Each polygon draws at most once per view; a view's share of the largest binding caps
+        // its draws (overflowing it is an error, see `GpuSampler::test_boxes`).
+        let cap = np.clamp(1, max_binding(gpu) / (5 * DRAW_BYTES)) as u32;
         let scope = ErrorScopes::push(device);
         let poly_buf = storage_buffer(
             gpu,
@@ -228,37 +239,6 @@ impl<'a> GpuSampler<'a> {
             .write_buffer(&poly_buf, 0, bytemuck::cast_slice(&poly_words));
         gpu.queue
             .write_buffer(&points, 0, bytemuck::cast_slice(&point_data));
-        // Each polygon draws at most once per view; a view's share of the largest binding caps
-        // its draws (overflowing it is an error, see `test_boxes`).
-        let max_binding = gpu
-            .limits
-            .max_buffer
-            .min(device.limits().max_storage_buffer_binding_size);
-        let cap = np.clamp(1, max_binding / (5 * DRAW_BYTES)) as u32;
-        let draws = storage_buffer(
-            gpu,
-            5 * DRAW_BYTES * u64::from(cap),
-            wgpu::BufferUsages::empty(),
-            "sampler draws",
-        )?;
-        let pedges = storage_buffer(
-            gpu,
-            16 * occ.points.len() as u64,
-            wgpu::BufferUsages::empty(),
-            "sampler edges",
-        )?;
-        let pplanes = storage_buffer(
-            gpu,
-            6 * 8 * np,
-            wgpu::BufferUsages::empty(),
-            "sampler planes",
-        )?;
-        let indirect = storage_buffer(
-            gpu,
-            5 * 16,
-            wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
-            "sampler indirect draws",
-        )?;
         let setup_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("shaders/sampler_setup.wgsl"),
             source: wgpu::ShaderSource::Wgsl(super::SAMPLER_SETUP_WGSL.into()),
@@ -391,6 +371,80 @@ impl<'a> GpuSampler<'a> {
         let reduce = compute("reduce", "sampler reduce pipeline");
         let test = compute("test", "sampler test pipeline");
         let test_tri = compute("test_tri", "sampler triangle test pipeline");
+        scope.check()?;
+        Ok(GpuSamplerScene {
+            polys: n as u32,
+            cap,
+            points_len: occ.points.len() as u64,
+            setup_layout,
+            fill_layout,
+            test_layout,
+            setup,
+            fill,
+            reduce,
+            test,
+            test_tri,
+            poly_buf,
+            points,
+        })
+    }
+}
+
+impl<'a> GpuSampler<'a> {
+    /// A hemicube of `res` pixels across each view (rounded up to a multiple of 16, as
+    /// [`Hemicube::new`]) rendering `scene`'s polygons on `gpu` (the device `scene` was made
+    /// on).
+    ///
+    /// # Errors
+    /// * [`BackendError::PlaneSize`] when `8 × res` exceeds the device's largest texture side;
+    /// * [`BackendError::BufferTooLarge`] when a render's buffers exceed the device's largest
+    ///   storage binding (about 160 bytes per polygon and 16 per point);
+    /// * [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports
+    ///   one while the maps and buffers are created (five `R32Float` layers of `8·res` square:
+    ///   1.3 GB at 1,024 pixels).
+    pub fn new(
+        gpu: &'a GpuBackend,
+        scene: &'a GpuSamplerScene,
+        res: u32,
+    ) -> Result<Self, BackendError> {
+        gpu.check_failure()?;
+        let device = &gpu.device;
+        let hc = Hemicube::new(res);
+        let r = hc.resolution() as u32;
+        let side = SUB * r;
+        if side > gpu.limits.max_texture {
+            return Err(BackendError::PlaneSize {
+                width: side,
+                height: side,
+                max: gpu.limits.max_texture,
+                adapter: gpu.adapter_name.clone(),
+            });
+        }
+        let scope = ErrorScopes::push(device);
+        let draws = storage_buffer(
+            gpu,
+            5 * DRAW_BYTES * u64::from(scene.cap),
+            wgpu::BufferUsages::empty(),
+            "sampler draws",
+        )?;
+        let pedges = storage_buffer(
+            gpu,
+            16 * scene.points_len,
+            wgpu::BufferUsages::empty(),
+            "sampler edges",
+        )?;
+        let pplanes = storage_buffer(
+            gpu,
+            6 * 8 * u64::from(scene.polys),
+            wgpu::BufferUsages::empty(),
+            "sampler planes",
+        )?;
+        let indirect = storage_buffer(
+            gpu,
+            5 * 16,
+            wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
+            "sampler indirect draws",
+        )?;
         let fine = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("sampler sub-pixel depths"),
             size: wgpu::Extent3d {
@@ -446,24 +500,14 @@ impl<'a> GpuSampler<'a> {
         scope.check()?;
         Ok(GpuSampler {
             gpu,
+            scene,
             hc,
-            polys: n as u32,
-            cap,
-            setup_layout,
-            fill_layout,
-            test_layout,
-            setup,
-            fill,
-            reduce,
-            test,
             _fine: fine,
             fine_layers,
             fine_all,
             params,
             norms,
             pixmax,
-            poly_buf,
-            points,
             draws,
             pedges,
             pplanes,
@@ -476,7 +520,6 @@ impl<'a> GpuSampler<'a> {
             staging: None,
             tris: None,
             tflags: None,
-            test_tri,
             last_draws: 0,
             rendered: false,
         })
@@ -592,8 +635,8 @@ impl<'a> GpuSampler<'a> {
         // Never an empty buffer.
         parts_u.push([0; 4]);
         parts_f.push(0.0);
-        let cap = self.cap;
-        let (frame, frame_u) = self.hc.setup_frame(self.polys, cap);
+        let cap = self.scene.cap;
+        let (frame, frame_u) = self.hc.setup_frame(self.scene.polys, cap);
         // The triangles after the eye; one reaching beyond the farthest box is open at once.
         let mut tri_f: Vec<f64> = vec![frame[0], frame[1], frame[2], 0.0];
         let mut tri_codes = vec![0u32; tris.len().max(1)];
@@ -716,7 +759,7 @@ impl<'a> GpuSampler<'a> {
         let pixels = 5 * res * res;
         let reduce_groups = dispatch(pixels.div_ceil(WORKGROUP));
         let test_groups = dispatch(n_parts);
-        let setup_groups = dispatch(self.polys.div_ceil(WORKGROUP));
+        let setup_groups = dispatch(self.scene.polys.div_ceil(WORKGROUP));
         let reduce_p = Params {
             res,
             n: pixels,
@@ -755,12 +798,12 @@ impl<'a> GpuSampler<'a> {
         };
         let setup_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("sampler set-up bind group"),
-            layout: &self.setup_layout,
+            layout: &self.scene.setup_layout,
             entries: &[
                 entry(0, frame_b),
                 entry(1, frame_u_b),
-                entry(2, &self.poly_buf),
-                entry(3, &self.points),
+                entry(2, &self.scene.poly_buf),
+                entry(3, &self.scene.points),
                 entry(4, &self.draws),
                 entry(5, &self.pedges),
                 entry(6, &self.pplanes),
@@ -769,7 +812,7 @@ impl<'a> GpuSampler<'a> {
         });
         let fill_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("sampler fill bind group"),
-            layout: &self.fill_layout,
+            layout: &self.scene.fill_layout,
             entries: &[
                 param_entry.clone(),
                 entry(1, &self.draws),
@@ -780,7 +823,7 @@ impl<'a> GpuSampler<'a> {
         });
         let test_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("sampler test bind group"),
-            layout: &self.test_layout,
+            layout: &self.scene.test_layout,
             entries: &[
                 param_entry,
                 wgpu::BindGroupEntry {
@@ -801,12 +844,12 @@ impl<'a> GpuSampler<'a> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("sampler encoder"),
             });
-        if render && self.polys > 0 {
+        if render && self.scene.polys > 0 {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("sampler set-up pass"),
                 timestamp_writes: None,
             });
-            cp.set_pipeline(&self.setup);
+            cp.set_pipeline(&self.scene.setup);
             cp.set_bind_group(0, &setup_group, &[]);
             cp.dispatch_workgroups(setup_groups.0, setup_groups.1, 1);
         }
@@ -834,7 +877,7 @@ impl<'a> GpuSampler<'a> {
                 multiview_mask: None,
             });
             pass.set_viewport(0.0, 0.0, (SUB * res) as f32, (SUB * rows) as f32, 0.0, 1.0);
-            pass.set_pipeline(&self.fill);
+            pass.set_pipeline(&self.scene.fill);
             pass.set_bind_group(0, &fill_group, &[(k as u64 * PARAM_SLOT) as u32]);
             pass.draw_indirect(&self.indirect, 16 * k as u64);
         }
@@ -843,7 +886,7 @@ impl<'a> GpuSampler<'a> {
                 label: Some("sampler reduce pass"),
                 timestamp_writes: None,
             });
-            cp.set_pipeline(&self.reduce);
+            cp.set_pipeline(&self.scene.reduce);
             cp.set_bind_group(0, &test_group, &[(5 * PARAM_SLOT) as u32]);
             cp.dispatch_workgroups(reduce_groups.0, reduce_groups.1, 1);
         }
@@ -852,7 +895,7 @@ impl<'a> GpuSampler<'a> {
                 label: Some("sampler test pass"),
                 timestamp_writes: None,
             });
-            cp.set_pipeline(&self.test);
+            cp.set_pipeline(&self.scene.test);
             cp.set_bind_group(0, &test_group, &[(6 * PARAM_SLOT) as u32]);
             cp.dispatch_workgroups(test_groups.0, test_groups.1, 1);
         }
@@ -861,7 +904,7 @@ impl<'a> GpuSampler<'a> {
                 label: Some("sampler triangle test pass"),
                 timestamp_writes: None,
             });
-            cp.set_pipeline(&self.test_tri);
+            cp.set_pipeline(&self.scene.test_tri);
             cp.set_bind_group(0, &test_group, &[(7 * PARAM_SLOT) as u32]);
             cp.dispatch_workgroups(tri_groups.0, tri_groups.1, 1);
         }
