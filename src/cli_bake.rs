@@ -858,10 +858,13 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             "sampling    {} — {}{}",
             if result.sampling { "yes" } else { "no" },
             result.sampling_reason,
-            if result.sampling && result.backend != "cpu" {
-                " (on the CPU: the sampler has no GPU half yet)"
-            } else {
-                ""
+            match (
+                result.sampling,
+                backend.as_gpu().map(|g| g.sampler_on_gpu()),
+            ) {
+                (true, Some(true)) => " (on the GPU)",
+                (true, Some(false)) => " (on the CPU: the device has no SHADER_F64)",
+                _ => "",
             }
         );
         if let Some(line) = backend.stats_summary(s.cells) {
