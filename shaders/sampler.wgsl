@@ -23,7 +23,7 @@
 // the CPU's `test_triangle`, the triangle clipped in f64 to the view, each pixel row's and each
 // pixel's pyramid (planes widened), each part tested as a box's. Only the flags are read back.
 //
-// `rounding.wgsl` (f32_up, …) is prepended to this file.
+// `rounding.wgsl` (f32_up, …) and `sampler_views.wgsl` (view_of) are prepended to this file.
 //
 // Draw (two vec4<u32> per draw, `draws`, view k's from 2 · k · capacity):
 //   (first edge (the polygon's first point), edge count | thin << 16, depth bits,
@@ -105,30 +105,7 @@ fn view_f64(p: vec3<f64>) -> vec3<f64> {
 }
 
 fn view_f64_k(k: u32, p: vec3<f64>) -> vec3<f64> {
-    let a = P.axis;
-    let b = (a + 1u) % 3u;
-    let c = (a + 2u) % 3u;
-    var s = -1.0lf;
-    if P.sign == 1u {
-        s = 1.0lf;
-    }
-    switch k {
-        case 0u: {
-            return vec3<f64>(p[b], p[c], s * p[a]);
-        }
-        case 1u: {
-            return vec3<f64>(p[c], s * p[a], p[b]);
-        }
-        case 2u: {
-            return vec3<f64>(p[c], s * p[a], -p[b]);
-        }
-        case 3u: {
-            return vec3<f64>(p[b], s * p[a], p[c]);
-        }
-        default: {
-            return vec3<f64>(p[b], s * p[a], -p[c]);
-        }
-    }
+    return view_of(k, P.axis, P.sign, p);
 }
 
 // Edge k of the polygon whose edges start at `first`, in the pass's view: (a, b, c, s).

@@ -19,7 +19,7 @@
 // cover a tested pixel nearer than a box), and it leaves out polygons of more than MAXP
 // vertices and textured cards (which it does not read).
 //
-// `rounding.wgsl` (f32_up, next_down, …) is prepended to this file.
+// `rounding.wgsl` (f32_up, next_down, …) and `sampler_views.wgsl` are prepended to this file.
 
 const MAXP: u32 = 8u;
 const TILE: u32 = 8u;
@@ -67,32 +67,9 @@ fn len3(a: vec3<f64>) -> f64 {
     return sqrt(dot3(a, a));
 }
 
-// View k's coordinates of a world offset (`View::map`).
+// View k's coordinates of a world offset (`sampler_views.wgsl`).
 fn to_view(k: u32, p: vec3<f64>) -> vec3<f64> {
-    let a = frame_u[0];
-    let b = (a + 1u) % 3u;
-    let c = (a + 2u) % 3u;
-    var s = -1.0lf;
-    if frame_u[1] == 1u {
-        s = 1.0lf;
-    }
-    switch k {
-        case 0u: {
-            return vec3<f64>(p[b], p[c], s * p[a]);
-        }
-        case 1u: {
-            return vec3<f64>(p[c], s * p[a], p[b]);
-        }
-        case 2u: {
-            return vec3<f64>(p[c], s * p[a], -p[b]);
-        }
-        case 3u: {
-            return vec3<f64>(p[b], s * p[a], p[c]);
-        }
-        default: {
-            return vec3<f64>(p[b], s * p[a], -p[c]);
-        }
-    }
+    return view_of(k, frame_u[0], frame_u[1], p);
 }
 
 // `hemicube::round_up`: z · (1 + 1e-6) rounded up to f32.

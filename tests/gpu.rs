@@ -38,9 +38,16 @@ fn shaders_validate_with_naga() {
         // Ray space factorization's charts, the occluders' views and their shared rounding
         // compute in f64 (`SHADER_F64`); the other passes
         // need nothing beyond the defaults.
-        let caps = if ["rsf", "views", "rounding", "sampler", "sampler_setup"]
-            .map(|n| format!("shaders/{n}.wgsl"))
-            .contains(&path.to_string())
+        let caps = if [
+            "rsf",
+            "views",
+            "rounding",
+            "sampler",
+            "sampler_setup",
+            "sampler_views",
+        ]
+        .map(|n| format!("shaders/{n}.wgsl"))
+        .contains(&path.to_string())
         {
             naga::valid::Capabilities::FLOAT64
         } else {

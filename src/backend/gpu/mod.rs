@@ -271,6 +271,7 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shaders/sampler.wgsl",
         concat!(
             include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/sampler_views.wgsl"),
             include_str!("../../../shaders/sampler.wgsl")
         ),
     ),
@@ -278,8 +279,13 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shaders/sampler_setup.wgsl",
         concat!(
             include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/sampler_views.wgsl"),
             include_str!("../../../shaders/sampler_setup.wgsl")
         ),
+    ),
+    (
+        "shaders/sampler_views.wgsl",
+        include_str!("../../../shaders/sampler_views.wgsl"),
     ),
 ];
 
