@@ -25,10 +25,15 @@
 //! a test is within a rounding error of a margin 10⁷ times larger. The GPU leaves out polygons
 //! of more than eight vertices and textured card triangles, which only uncovers pixels.
 //!
+//! # Use
+//! `bake::sampling` renders with it on the GPU backend (one [`GpuSampler`] per thread): per
+//! band of a rectangle, the objects' boxes, then the open ones' pieces, then the open pieces'
+//! triangles ([`GpuSampler::test_triangles`]), each a submission on the same maps.
+//!
 //! # Not yet
-//! This is the twin of one render; the sampler's driver (`bake::sampling`) still renders on
-//! the CPU. Still to come: several sample points per submission, hierarchical culling of the
-//! polygons (the set-up pass takes every one), and the pieces' and triangles' tests.
+//! Several sample points per submission, and hierarchical culling of the polygons on the
+//! device (the set-up pass takes every polygon, where the CPU's traversal skips whole clusters
+//! behind what it has drawn).
 
 use super::GpuBackend;
 use super::device::ErrorScopes;
