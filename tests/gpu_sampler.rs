@@ -404,6 +404,8 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
     let empty = SampleOccluders::from_polygons(&[]);
     let scene = GpuSamplerScene::new(gpu, &empty).expect("GPU sampler scene");
     let mut gs = GpuSampler::new(gpu, &scene, 32).expect("GPU sampler");
+    // Before any `begin` nothing was drawn: every box is open (the CPU's answer too).
+    assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![false, false]);
     gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &boxes);
     assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![false, false]);
     assert_eq!(gs.last_draws(), 0);

@@ -770,6 +770,10 @@ impl Hemicube {
         for v in &self.views {
             u.extend(v.need.map(|x| x as u32));
         }
+        if self.views.is_empty() {
+            // Never begun: no view needs a pixel.
+            u.extend([0; 20]);
+        }
         for v in &self.views {
             u.extend(v.need_z.iter().map(|z| z.to_bits()));
         }
