@@ -72,6 +72,13 @@ fn to_view(k: u32, p: vec3<f64>) -> vec3<f64> {
     return view_of(k, frame_u[0], frame_u[1], p);
 }
 
+// Widens the bound `uv` (u min, u max, v min, v max) by the projection of view point `p`.
+fn widen(uv: ptr<function, vec4<f64>>, p: vec3<f64>) {
+    let u = p.x / p.z;
+    let v = p.y / p.z;
+    *uv = vec4<f64>(min((*uv).x, u), max((*uv).y, u), min((*uv).z, v), max((*uv).w, v));
+}
+
 // `hemicube::round_up`: z · (1 + 1e-6) rounded up to f32.
 fn round_up(z: f64) -> f32 {
     return f32_up(z * (1.0lf + 1e-6lf));
@@ -245,10 +252,8 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
         let zc = 0.5lf * near;
         var zmax = -1e308lf;
         var zmin = 1e308lf;
-        var umin = 1e308lf;
-        var umax = -1e308lf;
-        var vmn = 1e308lf;
-        var vmx = -1e308lf;
+        // The projection's bound (u min, u max, v min, v max) over the part with Z ≥ zc.
+        var uv = vec4<f64>(1e308lf, -1e308lf, 1e308lf, -1e308lf);
         var any = false;
         for (var i = 0u; i < n; i++) {
             let a = to_view(k, q[i]);
@@ -256,34 +261,26 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
             zmax = max(zmax, a.z);
             zmin = min(zmin, a.z);
             if a.z >= zc {
-                let u = a.x / a.z;
-                let v = a.y / a.z;
-                umin = min(umin, u);
-                umax = max(umax, u);
-                vmn = min(vmn, v);
-                vmx = max(vmx, v);
+                widen(&uv, a);
                 any = true;
             }
             if (a.z >= zc) != (b.z >= zc) {
                 let t = (zc - a.z) / (b.z - a.z);
                 var p = a + (b - a) * t;
                 p.z = zc;
-                let u = p.x / p.z;
-                let v = p.y / p.z;
-                umin = min(umin, u);
-                umax = max(umax, u);
-                vmn = min(vmn, v);
-                vmx = max(vmx, v);
+                widen(&uv, p);
                 any = true;
             }
         }
         if !any {
             continue;
         }
-        let pi0 = max(u32(max(floor((umin + 1.0lf) * half), 0.0lf)), need.x);
-        let pi1 = min(u32(clamp(ceil((umax + 1.0lf) * half), 0.0lf, f64(res))), need.y);
-        let pj0 = max(u32(max(floor((vmn - vmin) * half), 0.0lf)), need.z);
-        let pj1 = min(u32(clamp(ceil((vmx - vmin) * half), 0.0lf, f64(rows))), need.w);
+        // Clamped before the conversion (an f64 beyond u32 has no defined u32); the CPU's
+        // saturating `as usize` gives the same pixels.
+        let pi0 = max(u32(clamp(floor((uv.x + 1.0lf) * half), 0.0lf, f64(res))), need.x);
+        let pi1 = min(u32(clamp(ceil((uv.y + 1.0lf) * half), 0.0lf, f64(res))), need.y);
+        let pj0 = max(u32(clamp(floor((uv.z - vmin) * half), 0.0lf, f64(rows))), need.z);
+        let pj1 = min(u32(clamp(ceil((uv.w - vmin) * half), 0.0lf, f64(rows))), need.w);
         if pi0 >= pi1 || pj0 >= pj1 {
             continue;
         }

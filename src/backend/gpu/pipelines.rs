@@ -259,7 +259,7 @@ fn plane_uniforms_entry() -> wgpu::BindGroupLayoutEntry {
 /// A render pipeline into an `R32Float` Depth Map ([`depth_min_target`]): a triangle list from
 /// `entries` (vertex and fragment entry points) of `module`, with one bind group of `layout`,
 /// labelled `name pipeline` (and its layout `name pipeline layout`).
-fn depth_map_pipeline(
+pub(super) fn depth_map_pipeline(
     device: &wgpu::Device,
     name: &str,
     layout: &wgpu::BindGroupLayout,

@@ -328,7 +328,6 @@ impl GpuSamplerScene {
             })
         };
         let setup_pl = layout("sampler set-up pipeline layout", &setup_layout);
-        let fill_pl = layout("sampler fill pipeline layout", &fill_layout);
         let test_pl = layout("sampler test pipeline layout", &test_layout);
         let setup = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("sampler set-up pipeline"),
@@ -338,31 +337,14 @@ impl GpuSamplerScene {
             compilation_options: Default::default(),
             cache: None,
         });
-        let fill = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("sampler fill pipeline"),
-            layout: Some(&fill_pl),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_fill"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_fill"),
-                compilation_options: Default::default(),
-                targets: &[Some(super::pipelines::depth_min_target())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let fill = super::pipelines::depth_map_pipeline(
+            device,
+            "sampler fill",
+            &fill_layout,
+            &module,
+            ("vs_fill", "fs_fill"),
+            &[],
+        );
         let compute = |entry: &'static str, label: &'static str| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
@@ -655,7 +637,8 @@ impl<'a> GpuSampler<'a> {
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let scope = ErrorScopes::push(&gpu.device);
         let mut uploaded = 0u64;
-        for (slot, bytes, label) in [
+        // The frame goes up with the render and stays for later tests of it.
+        let frame_slots = [
             (
                 &mut self.frame,
                 bytemuck::cast_slice::<_, u8>(&frame),
@@ -666,6 +649,9 @@ impl<'a> GpuSampler<'a> {
                 bytemuck::cast_slice(&frame_u),
                 "sampler frame words",
             ),
+        ];
+        let frame_slots = frame_slots.into_iter().filter(|_| !self.rendered);
+        for (slot, bytes, label) in frame_slots.chain([
             (
                 &mut self.parts_u,
                 bytemuck::cast_slice(&parts_u),
@@ -681,7 +667,7 @@ impl<'a> GpuSampler<'a> {
                 bytemuck::cast_slice(&tri_f),
                 "sampler triangles",
             ),
-        ] {
+        ]) {
             gpu.ensure_buffer(slot, bytes.len() as u64, storage, label)?;
             if let Some(b) = slot {
                 gpu.queue.write_buffer(b, 0, bytes);
