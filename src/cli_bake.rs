@@ -858,14 +858,11 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             "sampling    {} — {}{}",
             if result.sampling { "yes" } else { "no" },
             result.sampling_reason,
-            match (
-                result.sampling,
-                backend.as_gpu().map(|g| g.sampler_on_gpu()),
-            ) {
-                (true, Some(true)) => " (on the GPU)",
-                (true, Some(false)) => " (on the CPU: the device has no SHADER_F64)",
-                _ => "",
-            }
+            result
+                .sampling_device
+                .as_ref()
+                .map(|d| format!(" ({d})"))
+                .unwrap_or_default()
         );
         if let Some(line) = backend.stats_summary(s.cells) {
             eprintln!("gpu         {line}");

@@ -10,6 +10,7 @@
 #![cfg(feature = "bake")]
 
 mod common;
+use common::{engine_device, no_adapter};
 
 use glam::{DVec2, DVec3, Vec3};
 use rand::{Rng, SeedableRng};
@@ -97,15 +98,6 @@ fn backend() -> Option<&'static GpuBackend> {
         .as_ref()
 }
 
-/// Without an adapter: `None` after printing why, or a failure when `CI` is set.
-fn no_adapter<T>(why: &str) -> Option<T> {
-    if std::env::var_os("CI").is_some() {
-        panic!("CI is set but the GPU backend found no adapter: {why}");
-    }
-    eprintln!("skipping GPU comparison: {why}");
-    None
-}
-
 #[test]
 fn backend_reports_its_name_and_adapter() {
     let Some(b) = backend() else { return };
@@ -164,44 +156,6 @@ fn oversized_planes_are_refused() {
 
 // ---------------------------------------------------------------------------------------------
 // An engine's device (`GpuBackend::with_device`)
-
-/// A device created the way an engine creates its own — instance, adapter, device — with
-/// `features` and `limits`, or `None` (after printing why) when there is no adapter outside CI.
-fn engine_device(
-    features: wgpu::Features,
-    limits: wgpu::Limits,
-) -> Option<(wgpu::Device, wgpu::Queue)> {
-    // The backends `WGPU_BACKEND` names, as `GpuBackend::new` searches.
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-    if desc.backends.is_empty() {
-        desc.backends = wgpu::Backends::PRIMARY;
-    }
-    let instance = wgpu::Instance::new(desc);
-    let options = wgpu::RequestAdapterOptions {
-        power_preference: wgpu::PowerPreference::HighPerformance,
-        ..Default::default()
-    };
-    let adapter = match pollster::block_on(instance.request_adapter(&options)) {
-        Ok(a) => a,
-        Err(e) => return no_adapter(&format!("no adapter for an engine's device: {e}")),
-    };
-    if !adapter.features().contains(GpuBackend::REQUIRED_FEATURES) {
-        let info = adapter.get_info();
-        return no_adapter(&format!(
-            "the engine's adapter {} ({:?}) lacks {:?}",
-            info.name,
-            info.backend,
-            GpuBackend::REQUIRED_FEATURES
-        ));
-    }
-    let device = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("engine device"),
-        required_features: features,
-        required_limits: limits,
-        ..Default::default()
-    }));
-    Some(device.expect("the engine's adapter creates a device"))
-}
 
 /// Renders `jobs` on `engine` (a backend on an engine's device) and on [`backend`]'s own
 /// device: the maps are identical bit for bit when both run on the same adapter, and within

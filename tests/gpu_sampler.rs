@@ -11,6 +11,8 @@
 //! Without an adapter these tests print why and pass, except in CI (`CI` set), where they fail.
 #![cfg(feature = "bake")]
 
+mod common;
+
 use glam::DVec3;
 use std::sync::OnceLock;
 use umbrasweep::backend::BackendError;
@@ -524,4 +526,49 @@ fn the_sampler_culls_the_same_on_the_gpu_backend() {
             );
         }
     }
+}
+
+/// A device whose largest storage binding cannot hold the forest's polygon points: the GPU
+/// backend's sampler says why and samples on the CPU instead (the same objects hidden as the
+/// CPU backend's, from the same points), where it used to end the bake with `BufferTooLarge`.
+#[test]
+fn a_scene_too_large_for_the_device_is_sampled_on_the_cpu() {
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 64 << 10,
+        ..wgpu::Limits::default()
+    };
+    let features = GpuBackend::REQUIRED_FEATURES | wgpu::Features::SHADER_F64;
+    let Some((device, queue)) = common::engine_device(features, limits) else {
+        return;
+    };
+    let small = GpuBackend::with_device(device, queue).expect("a backend on it");
+    let (scene, cell) = small_forest();
+    let settings = BakeSettings {
+        sampling: SweepChoice::On,
+        ..BakeSettings::default()
+    };
+    let prepared = Prepared::new(&scene, &settings, &[cell]).unwrap();
+    let placed = prepared.sampler_device(&small).expect("a GPU backend");
+    assert!(
+        placed.starts_with("on the CPU: the occluders'")
+            && placed.contains("more than the device's largest (64 KiB)"),
+        "{placed}"
+    );
+    let shared = backend().expect("the engine's adapter is there");
+    assert_eq!(
+        prepared.sampler_device(shared).as_deref(),
+        Some("on the GPU")
+    );
+    assert_eq!(prepared.sampler_device(&CpuBackend::new()), None);
+    let before = small.total_stats().submissions;
+    let (on_small, small_points) = sample_forest(&small);
+    assert_eq!(
+        small.total_stats().submissions,
+        before,
+        "the sampler submitted work to a device that cannot hold the scene"
+    );
+    let (cpu, cpu_points) = sample_forest(&CpuBackend::new());
+    assert_eq!(small_points, cpu_points);
+    assert!(cpu.contains(&true), "the test needs something hidden");
+    assert_eq!(on_small, cpu, "the fallback must be the CPU's sampler");
 }

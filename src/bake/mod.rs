@@ -163,6 +163,10 @@ pub struct BakeResult {
     pub sampling: bool,
     /// Why the sampler ran or not, and its finest ε.
     pub sampling_reason: String,
+    /// With a GPU backend and the sampler on: where it rendered, `on the GPU` or `on the CPU:`
+    /// and why ([`crate::backend::gpu::sampler::GpuSamplerScene::refusal`]); otherwise `None`.
+    #[serde(default)]
+    pub sampling_device: Option<String>,
     /// The names of the cullers every cell ran, in order (read back against
     /// [`CULLER_NAMES`]).
     #[serde(deserialize_with = "pipeline::culler_names")]
@@ -329,6 +333,7 @@ pub fn bake_cells(
         rsf_reason: prepared.rsf_reason.clone(),
         sampling: prepared.sampling,
         sampling_reason: prepared.sampling_reason.clone(),
+        sampling_device: prepared.sampler_device(backend),
         cullers: prepared.culler_names(),
     })
 }

@@ -359,6 +359,18 @@ impl<'a> Prepared<'a> {
         })
     }
 
+    /// With a GPU backend and the sampler on: where the sampler renders, `on the GPU`, or
+    /// `on the CPU: ` and why ([`crate::backend::gpu::sampler::GpuSamplerScene::refusal`]).
+    pub fn sampler_device(&self, backend: &dyn crate::backend::RasterBackend) -> Option<String> {
+        let (g, d) = (backend.as_gpu()?, self.sampler.as_ref()?);
+        Some(
+            match crate::backend::gpu::sampler::GpuSamplerScene::refusal(g, &d.occluders) {
+                None => "on the GPU".to_string(),
+                Some(why) => format!("on the CPU: {why}"),
+            },
+        )
+    }
+
     /// The names of the cullers every cell runs, in order.
     pub fn culler_names(&self) -> Vec<&'static str> {
         self.cullers.iter().map(|c| c.name()).collect()

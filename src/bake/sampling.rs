@@ -287,9 +287,12 @@ impl Culler for SamplingCuller {
             }
         });
         let s = data.settings;
-        // The GPU twin of the hemicube, with the GPU backend where the device has `f64`.
+        // The GPU twin of the hemicube, with the GPU backend where the device has `f64` and
+        // room for the polygons (otherwise the CPU's, which the summary reports).
         let gpu_scene = match backend.as_gpu() {
-            Some(g) if g.sampler_on_gpu() => Some((g, self.gpu_scene(g, &data.occluders)?)),
+            Some(g) if GpuSamplerScene::refusal(g, &data.occluders).is_none() => {
+                Some((g, self.gpu_scene(g, &data.occluders)?))
+            }
             _ => None,
         };
         let eps0 = data.eps * f64::from(1u32 << s.levels.min(20));

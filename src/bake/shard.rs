@@ -293,6 +293,7 @@ mod tests {
             rsf_reason: "off".into(),
             sampling: false,
             sampling_reason: "off".into(),
+            sampling_device: None,
             cullers: vec!["occlusion_sweep"],
         };
         let json = serde_json::to_string(&r).unwrap();

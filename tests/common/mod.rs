@@ -1,7 +1,8 @@
 //! Helpers shared by the integration tests: scene objects (closed boxes, quads) for
 //! `Scene::from_objects`, the unit cell and a one-cell bake that shows every plane, and a
 //! brute-force ray cast that names the first object a ray hits,
-//! to prove a visibility claim independently of the validator.
+//! to prove a visibility claim independently of the validator; a device made the way an engine
+//! makes its own, for the GPU tests.
 #![allow(
     dead_code,
     reason = "each test crate uses its own subset of these helpers, so what is dead differs per crate"
@@ -9,6 +10,7 @@
 
 use glam::{DVec3, Vec3};
 use umbrasweep::backend::cpu::CpuBackend;
+use umbrasweep::backend::gpu::GpuBackend;
 use umbrasweep::bake::{BakeResult, BakeSettings, PlaneObserver, bake_observed};
 use umbrasweep::geom::{Aabb, box_triangles};
 use umbrasweep::scene::Scene;
@@ -124,4 +126,51 @@ pub fn first_hit<'a>(
         }
     }
     best.1
+}
+
+/// Without an adapter: `None` after printing why, or a failure when `CI` is set.
+pub fn no_adapter<T>(why: &str) -> Option<T> {
+    if std::env::var_os("CI").is_some() {
+        panic!("CI is set but the GPU backend found no adapter: {why}");
+    }
+    eprintln!("skipping GPU comparison: {why}");
+    None
+}
+
+/// A device created the way an engine creates its own — instance, adapter, device — with
+/// `features` and `limits`, or `None` (after printing why) when there is no adapter outside CI.
+pub fn engine_device(
+    features: wgpu::Features,
+    limits: wgpu::Limits,
+) -> Option<(wgpu::Device, wgpu::Queue)> {
+    // The backends `WGPU_BACKEND` names, as `GpuBackend::new` searches.
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    if desc.backends.is_empty() {
+        desc.backends = wgpu::Backends::PRIMARY;
+    }
+    let instance = wgpu::Instance::new(desc);
+    let options = wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        ..Default::default()
+    };
+    let adapter = match pollster::block_on(instance.request_adapter(&options)) {
+        Ok(a) => a,
+        Err(e) => return no_adapter(&format!("no adapter for an engine's device: {e}")),
+    };
+    if !adapter.features().contains(GpuBackend::REQUIRED_FEATURES) {
+        let info = adapter.get_info();
+        return no_adapter(&format!(
+            "the engine's adapter {} ({:?}) lacks {:?}",
+            info.name,
+            info.backend,
+            GpuBackend::REQUIRED_FEATURES
+        ));
+    }
+    let device = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("engine device"),
+        required_features: features,
+        required_limits: limits,
+        ..Default::default()
+    }));
+    Some(device.expect("the engine's adapter creates a device"))
 }

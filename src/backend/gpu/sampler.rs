@@ -199,14 +199,43 @@ fn storage_buffer(
     }))
 }
 
+/// Bytes of one polygon point in its storage binding (three `f64`): the scene's largest.
+const POINT_BYTES: u64 = 24;
+
 impl GpuSamplerScene {
+    /// Why the sampler cannot render `occ` on `gpu`'s device, or `None` when it can: the
+    /// device lacks `SHADER_F64`, or the polygons' points (24 bytes each in one storage
+    /// binding) exceed its largest storage binding. A bake then samples on the CPU, with the
+    /// same answers (the GPU's are equal or tighter, see the module docs), and its summary
+    /// says why.
+    pub fn refusal(gpu: &GpuBackend, occ: &SampleOccluders) -> Option<String> {
+        if !gpu.sampler_on_gpu() {
+            return Some("the device has no SHADER_F64".to_string());
+        }
+        let need = POINT_BYTES * occ.points.len() as u64;
+        let max = max_binding(gpu);
+        let size = |b: u64| match b >> 20 {
+            0 => format!("{} KiB", b.div_ceil(1 << 10)),
+            m => format!("{m} MiB"),
+        };
+        (need > max).then(|| {
+            format!(
+                "the occluders' {} polygon points need {} in one storage binding, more than the \
+                 device's largest ({})",
+                occ.points.len(),
+                size(need),
+                size(max)
+            )
+        })
+    }
+
     /// The polygons of `occ` uploaded to `gpu`'s device, and the sampler's pipelines.
     ///
     /// # Errors
     /// * [`BackendError::MissingFeatures`] when the device lacks `SHADER_F64` (the set-up,
     ///   sub-pixel masks and plane depths are the CPU's `f64` expressions);
     /// * [`BackendError::BufferTooLarge`] when the polygons' points exceed the device's largest
-    ///   storage binding (24 bytes per point);
+    ///   storage binding (24 bytes per point; [`GpuSamplerScene::refusal`] says so first);
     /// * [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports
     ///   one while the pipelines and buffers are created.
     pub fn new(gpu: &GpuBackend, occ: &SampleOccluders) -> Result<Self, BackendError> {
