@@ -133,7 +133,7 @@ pub fn no_adapter<T>(why: &str) -> Option<T> {
     if std::env::var_os("CI").is_some() {
         panic!("CI is set but the GPU backend found no adapter: {why}");
     }
-    eprintln!("skipping GPU comparison: {why}");
+    eprintln!("skipping the GPU tests: {why}");
     None
 }
 
