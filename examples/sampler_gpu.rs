@@ -1,20 +1,22 @@
 //! The sampler's hemicube on the CPU and on the GPU (`GpuSampler`) from the same random points
 //! of a cell's faces: objects hidden by each, disagreements, and time per point (the GPU's
-//! split into the CPU's set-up and the submission that draws and tests).
-//! `cargo run --release --example sampler_gpu -- SCENE CELLS CELL EPS RES N`.
+//! split into the CPU's set-up and the submission that draws and tests), for each fill asked
+//! for (`compute`, `render` or `both`; default: the device's, `GpuSamplerScene::default_fill`),
+//! and with `both` the boxes on which the two fills disagree (they should not).
+//! `cargo run --release --example sampler_gpu -- SCENE CELLS CELL EPS RES N [FILL]`.
 
 mod common;
 
 use glam::DVec3;
 use std::time::{Duration, Instant};
 use umbrasweep::backend::gpu::GpuBackend;
-use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
+use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene, SamplerFill};
 use umbrasweep::sampler::{BoxTest, Hemicube};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 7 {
-        eprintln!("usage: sampler_gpu SCENE CELLS CELL EPS RES N");
+        eprintln!("usage: sampler_gpu SCENE CELLS CELL EPS RES N [compute|render|both]");
         std::process::exit(2);
     }
     let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
@@ -27,9 +29,20 @@ fn main() {
     let cell = cells[ci].to_f64();
     let gpu = GpuBackend::new().expect("GPU backend");
     println!("GPU: {}", gpu.adapter_info().name);
+    let fills: Vec<SamplerFill> = match args.get(7).map(String::as_str) {
+        None => vec![GpuSamplerScene::default_fill(&gpu)],
+        Some("both") => vec![SamplerFill::Compute, SamplerFill::Render],
+        Some(f) => vec![f.parse().expect("FILL")],
+    };
     let t = Instant::now();
-    let on_gpu = GpuSamplerScene::new(&gpu, &data.occluders).expect("GPU sampler scene");
-    let mut gs = GpuSampler::new(&gpu, &on_gpu, res).expect("GPU sampler");
+    let scenes: Vec<GpuSamplerScene> = fills
+        .iter()
+        .map(|&f| GpuSamplerScene::with_fill(&gpu, &data.occluders, f).expect("GPU sampler scene"))
+        .collect();
+    let mut samplers: Vec<GpuSampler> = scenes
+        .iter()
+        .map(|s| GpuSampler::new(&gpu, s, res).expect("GPU sampler"))
+        .collect();
     println!(
         "{} polygons uploaded and pipelines made in {:.2} s",
         data.occluders.polys.len(),
@@ -46,9 +59,12 @@ fn main() {
             .wrapping_add(1442695040888963407);
         (seed >> 11) as f64 / (1u64 << 53) as f64
     };
-    let (mut t_cpu, mut t_rec, mut t_dev) = (Duration::ZERO, Duration::ZERO, Duration::ZERO);
-    let (mut h_cpu, mut h_gpu, mut only_cpu, mut only_gpu, mut tested) = (0, 0, 0, 0, 0);
-    let mut draws = 0usize;
+    let nf = fills.len();
+    let mut t_cpu = Duration::ZERO;
+    let (mut t_rec, mut t_dev) = (vec![Duration::ZERO; nf], vec![Duration::ZERO; nf]);
+    let (mut h_cpu, mut tested) = (0, 0);
+    let (mut h_gpu, mut only_cpu, mut only_gpu) = (vec![0; nf], vec![0; nf], vec![0; nf]);
+    let (mut draws, mut fills_differ) = (vec![0usize; nf], 0);
     for k in 0..n {
         let face = common::Face::from_index(k % 6);
         let mut eye = DVec3::ZERO;
@@ -65,33 +81,49 @@ fn main() {
             .map(|b| hc.test_box(b) == BoxTest::Hidden)
             .collect();
         t_cpu += t.elapsed();
-        let t = Instant::now();
-        gs.begin(eye, face.axis, face.sign, eps, boxes);
-        t_rec += t.elapsed();
-        let t = Instant::now();
-        let g = gs.test_boxes(boxes).expect("GPU render");
-        t_dev += t.elapsed();
-        draws += gs.last_draws() as usize;
-        for (c, g) in cpu.iter().zip(&g) {
-            tested += 1;
-            h_cpu += usize::from(*c);
-            h_gpu += usize::from(*g);
-            only_cpu += usize::from(*c && !*g);
-            only_gpu += usize::from(*g && !*c);
+        let mut flags = Vec::new();
+        for (f, gs) in samplers.iter_mut().enumerate() {
+            let t = Instant::now();
+            gs.begin(eye, face.axis, face.sign, eps, boxes);
+            t_rec[f] += t.elapsed();
+            let t = Instant::now();
+            let g = gs.test_boxes(boxes).expect("GPU render");
+            t_dev[f] += t.elapsed();
+            draws[f] += gs.last_draws() as usize;
+            for (c, g) in cpu.iter().zip(&g) {
+                h_gpu[f] += usize::from(*g);
+                only_cpu[f] += usize::from(*c && !*g);
+                only_gpu[f] += usize::from(*g && !*c);
+            }
+            flags.push(g);
+        }
+        tested += cpu.len();
+        h_cpu += cpu.iter().filter(|&&c| c).count();
+        if let [a, b] = &flags[..] {
+            fills_differ += a.iter().zip(b).filter(|(a, b)| a != b).count();
         }
     }
     let per = |d: Duration| d.as_secs_f64() * 1e3 / n.max(1) as f64;
     println!(
-        "{n} points, ε {eps}, {} px: {tested} box tests; hidden by the CPU {h_cpu}, by the GPU \
-         {h_gpu} (CPU only {only_cpu}, GPU only {only_gpu}); {:.0} draws per point",
+        "{n} points, ε {eps}, {} px: {tested} box tests; hidden by the CPU {h_cpu}; CPU ms per \
+         point {:.1}",
         hc.resolution(),
-        draws as f64 / n.max(1) as f64
+        per(t_cpu)
     );
-    println!(
-        "ms per point: CPU {:.1}; GPU {:.1} (set-up on the CPU {:.1}, submission {:.1})",
-        per(t_cpu),
-        per(t_rec + t_dev),
-        per(t_rec),
-        per(t_dev)
-    );
+    for (f, fill) in fills.iter().enumerate() {
+        println!(
+            "{fill} fill: hidden by the GPU {} (CPU only {}, GPU only {}); {:.0} draws per point; \
+             ms per point {:.1} (set-up on the CPU {:.1}, submission {:.1})",
+            h_gpu[f],
+            only_cpu[f],
+            only_gpu[f],
+            draws[f] as f64 / n.max(1) as f64,
+            per(t_rec[f] + t_dev[f]),
+            per(t_rec[f]),
+            per(t_dev[f])
+        );
+    }
+    if nf == 2 {
+        println!("boxes on which the two fills disagree: {fills_differ}");
+    }
 }

@@ -23,7 +23,9 @@
 // the CPU's `test_triangle`, the triangle clipped in f64 to the view, each pixel row's and each
 // pixel's pyramid (planes widened), each part tested as a box's. Only the flags are read back.
 //
-// `rounding.wgsl` (f32_up, …) and `sampler_views.wgsl` (view_of) are prepended to this file.
+// `rounding.wgsl` (f32_up, …) and `sampler_views.wgsl` (view_of) are prepended to this file,
+// and one of `sampler_blend.wgsl` (this render fill's maps) or `sampler_fill.wgsl` (the same
+// fill as a compute pass, with its maps) appended.
 //
 // Draw (two vec4<u32> per draw, `draws`, view k's from 2 · k · capacity):
 //   (first edge (the polygon's first point), edge count | thin << 16, depth bits,
@@ -257,16 +259,13 @@ fn fs_fill(in: FillOut) -> @location(0) vec4<f32> {
 // ---------------------------------------------------------------------------------------------
 // Reduce and test
 
-// (Bindings apart from the fill's: each pipeline's layout holds only its own.)
-@group(0) @binding(5) var fine: texture_2d_array<f32>;
+// (Bindings apart from the fill's: each pipeline's layout holds only its own.) The sub-pixel
+// depths (`sub_depth`, binding 5) come from `sampler_blend.wgsl` (the render fill's `R32Float`
+// layers) or `sampler_fill.wgsl` (the compute fill's `R32Uint` layers), appended to this file.
 @group(0) @binding(6) var<storage, read_write> pixmax: array<f32>;
 @group(0) @binding(7) var<storage, read> parts_u: array<vec4<u32>>;
 @group(0) @binding(8) var<storage, read> parts_f: array<f64>;
 @group(0) @binding(9) var<storage, read_write> flags: array<atomic<u32>>;
-
-fn sub_depth(i: u32, j: u32, k: u32) -> f32 {
-    return textureLoad(fine, vec2<i32>(i32(i), i32(j)), i32(k), 0).r;
-}
 
 @compute @workgroup_size(64)
 fn reduce(@builtin(global_invocation_id) g: vec3<u32>) {

@@ -46,11 +46,15 @@ fn shaders_validate_with_naga() {
             "sampler",
             "sampler_setup",
             "sampler_views",
+            "sampler_blend",
         ]
         .map(|n| format!("shaders/{n}.wgsl"))
         .contains(&path.to_string())
         {
             naga::valid::Capabilities::FLOAT64
+        } else if path == "shaders/sampler_fill.wgsl" {
+            // The sampler's compute fill: `textureAtomicMin` (`TEXTURE_ATOMIC`).
+            naga::valid::Capabilities::FLOAT64 | naga::valid::Capabilities::TEXTURE_ATOMIC
         } else {
             naga::valid::Capabilities::default()
         };

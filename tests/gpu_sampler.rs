@@ -19,7 +19,7 @@ use umbrasweep::backend::BackendError;
 use umbrasweep::backend::RasterBackend;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::backend::gpu::GpuBackend;
-use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
+use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene, SamplerFill};
 use umbrasweep::bake::{BakeSettings, CullState, Culler, Prepared, SamplingCuller, SweepChoice};
 use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube, SampleOccluders};
@@ -281,7 +281,28 @@ fn unblocked_to(
 /// Per item, (CPU hidden, GPU hidden).
 type Pairs = Vec<(bool, bool)>;
 
-/// Renders `cfg` on the CPU and on the GPU: the boxes' and the triangles' answers.
+/// `cfg` rendered on the GPU with `fill`: the boxes' and the triangles' hidden flags.
+fn on_gpu(
+    gpu: &GpuBackend,
+    cfg: &Config,
+    occ: &SampleOccluders,
+    fill: SamplerFill,
+) -> (Vec<bool>, Vec<bool>) {
+    let scene = GpuSamplerScene::with_fill(gpu, occ, fill).expect("GPU sampler scene");
+    assert_eq!(scene.fill(), fill);
+    let mut gs = GpuSampler::new(gpu, &scene, cfg.res).expect("GPU sampler");
+    gs.hemicube().set_subpixel(cfg.subpixel);
+    match cfg.patch {
+        None => gs.begin(cfg.eye, cfg.axis, cfg.sign, cfg.eps, &cfg.boxes),
+        Some(half) => gs.begin_patch(cfg.eye, cfg.axis, cfg.sign, half, &cfg.boxes),
+    }
+    let g_boxes = gs.test_boxes(&cfg.boxes).expect("GPU sampler render");
+    let g_tris = gs.test_triangles(&cfg.tris).expect("GPU triangle test");
+    (g_boxes, g_tris)
+}
+
+/// Renders `cfg` on the CPU and on the GPU: the boxes' and the triangles' answers. The GPU's
+/// two fills must leave the same depths, so give the same answers.
 fn both(gpu: &GpuBackend, cfg: &Config) -> (Pairs, Pairs) {
     let tagged: Vec<(Vec<DVec3>, u32)> = cfg
         .polys
@@ -290,24 +311,27 @@ fn both(gpu: &GpuBackend, cfg: &Config) -> (Pairs, Pairs) {
         .map(|(k, p)| (p.clone(), k as u32))
         .collect();
     let occ = SampleOccluders::from_polygons(&tagged);
-    let scene = GpuSamplerScene::new(gpu, &occ).expect("GPU sampler scene");
-    let mut gs = GpuSampler::new(gpu, &scene, cfg.res).expect("GPU sampler");
+    // Lavapipe and every Vulkan device have TEXTURE_ATOMIC: the compute fill is the default.
+    assert_eq!(GpuSamplerScene::default_fill(gpu), SamplerFill::Compute);
+    let (g_boxes, g_tris) = on_gpu(gpu, cfg, &occ, SamplerFill::Compute);
+    let (r_boxes, r_tris) = on_gpu(gpu, cfg, &occ, SamplerFill::Render);
+    assert_eq!(
+        g_boxes, r_boxes,
+        "the fills disagree on boxes (res {})",
+        cfg.res
+    );
+    assert_eq!(
+        g_tris, r_tris,
+        "the fills disagree on triangles (res {})",
+        cfg.res
+    );
     let mut hc = Hemicube::new(cfg.res);
     hc.set_subpixel(cfg.subpixel);
-    gs.hemicube().set_subpixel(cfg.subpixel);
     match cfg.patch {
-        None => {
-            hc.begin(cfg.eye, cfg.axis, cfg.sign, cfg.eps, &cfg.boxes);
-            gs.begin(cfg.eye, cfg.axis, cfg.sign, cfg.eps, &cfg.boxes);
-        }
-        Some(half) => {
-            hc.begin_patch(cfg.eye, cfg.axis, cfg.sign, half, &cfg.boxes);
-            gs.begin_patch(cfg.eye, cfg.axis, cfg.sign, half, &cfg.boxes);
-        }
+        None => hc.begin(cfg.eye, cfg.axis, cfg.sign, cfg.eps, &cfg.boxes),
+        Some(half) => hc.begin_patch(cfg.eye, cfg.axis, cfg.sign, half, &cfg.boxes),
     }
     hc.draw(&occ);
-    let g_boxes = gs.test_boxes(&cfg.boxes).expect("GPU sampler render");
-    let g_tris = gs.test_triangles(&cfg.tris).expect("GPU triangle test");
     (
         cfg.boxes
             .iter()

@@ -13,9 +13,12 @@ use std::sync::{Arc, Mutex};
 pub(super) const REQUIRED_FEATURES: wgpu::Features = wgpu::Features::FLOAT32_BLENDABLE;
 /// Features the backend's own device takes when the adapter has them: GPU timestamps at the
 /// start and end of each render pass ([`super::RenderStats::pass_time`]), and `f64` in
-/// shaders (ray space factorization's charts on the GPU, [`super::GpuBackend::rsf_on_gpu`]).
-pub(super) const OPTIONAL_FEATURES: wgpu::Features =
-    wgpu::Features::TIMESTAMP_QUERY.union(wgpu::Features::SHADER_F64);
+/// shaders (ray space factorization's charts on the GPU, [`super::GpuBackend::rsf_on_gpu`]),
+/// and atomics on `R32Uint` storage textures (the sampler's compute fill,
+/// [`super::sampler::SamplerFill::Compute`]).
+pub(super) const OPTIONAL_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
+    .union(wgpu::Features::SHADER_F64)
+    .union(wgpu::Features::TEXTURE_ATOMIC);
 
 /// The first device loss or uncaptured error, as the error every later call returns.
 pub(super) type Failure = Arc<Mutex<Option<BackendError>>>;

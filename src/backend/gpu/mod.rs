@@ -272,7 +272,8 @@ pub const SHADERS: &[(&str, &str)] = &[
         concat!(
             include_str!("../../../shaders/rounding.wgsl"),
             include_str!("../../../shaders/sampler_views.wgsl"),
-            include_str!("../../../shaders/sampler.wgsl")
+            include_str!("../../../shaders/sampler.wgsl"),
+            include_str!("../../../shaders/sampler_blend.wgsl")
         ),
     ),
     (
@@ -287,6 +288,25 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shaders/sampler_views.wgsl",
         include_str!("../../../shaders/sampler_views.wgsl"),
     ),
+    (
+        "shaders/sampler_fill.wgsl",
+        concat!(
+            include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/sampler_views.wgsl"),
+            include_str!("../../../shaders/sampler.wgsl"),
+            include_str!("../../../shaders/sampler_fill.wgsl")
+        ),
+    ),
+    // The render fill's depths, validated within `shaders/sampler.wgsl` (this is that module).
+    (
+        "shaders/sampler_blend.wgsl",
+        concat!(
+            include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/sampler_views.wgsl"),
+            include_str!("../../../shaders/sampler.wgsl"),
+            include_str!("../../../shaders/sampler_blend.wgsl")
+        ),
+    ),
 ];
 
 const PROJECTION_WGSL: &str = SHADERS[0].1;
@@ -295,6 +315,7 @@ const RSF_WGSL: &str = SHADERS[2].1;
 const VIEWS_WGSL: &str = SHADERS[3].1;
 const SAMPLER_WGSL: &str = SHADERS[5].1;
 const SAMPLER_SETUP_WGSL: &str = SHADERS[6].1;
+const SAMPLER_FILL_WGSL: &str = SHADERS[8].1;
 
 /// How the GPU backend gets each occluder's Projection (its 8 views intersected), the pixels
 /// it covers. Both keep the contract of [`crate::plane`] with the same coverage up to
