@@ -27,7 +27,7 @@ pub use prepare::{
     split_cell,
 };
 pub use rsf::{RSF_AUTO_UPRIGHT_SHARE, RsfCuller, UPRIGHT_SLOPE, choose_rsf};
-pub use sampling::{SamplerData, SamplingCuller};
+pub use sampling::{GPU_SAMPLERS_BUDGET, SamplerData, SamplingCuller};
 pub use shard::{MergeError, SHARD_FORMAT, SHARD_VERSION, ShardFile, ShardSpec, merge};
 
 use crate::backend::{BackendError, RasterBackend};

@@ -132,6 +132,99 @@ pub struct SamplingCuller {
     /// With the GPU backend: the occluder polygons on its device, uploaded by the first cell
     /// and kept for the bake.
     gpu_scene: Mutex<Option<Arc<GpuSamplerScene>>>,
+    /// Device bytes of the GPU samplers alive in all levels of all cells
+    /// ([`GPU_SAMPLERS_BUDGET`]).
+    gpu_bytes: AtomicU64,
+}
+
+/// Device memory the GPU samplers of a bake may take together (each is its maps, 8× the
+/// resolution squared per view, and per-render buffers: about 0.7 GB at 512 pixels for the
+/// fine forest, 1.8 GB at 1,024). A level makes its first sampler whatever the budget, and more
+/// only while the bake's samplers fit; beyond, its lanes wait for one of its own (a GPU gains
+/// little from more renders in flight than it takes to keep it busy).
+pub const GPU_SAMPLERS_BUDGET: u64 = 4 << 30;
+
+/// The renderers of one level, shared by its lanes: a lane takes a free one, or makes one
+/// (the level's first always; more while `live + bytes ≤ budget`, `live` counting every
+/// level's), or waits until another lane of the level gives one back. A lane holds a renderer
+/// only while it renders its rectangles, which never waits on anything, so a wait ends.
+/// Dropping the pool drops its renderers and gives their bytes back to `live`.
+struct Pool<'l, T> {
+    state: Mutex<(Vec<T>, usize)>,
+    given: std::sync::Condvar,
+    bytes: u64,
+    budget: u64,
+    live: &'l AtomicU64,
+}
+
+impl<'l, T> Pool<'l, T> {
+    /// A pool whose renderers take `bytes` each of a `budget` shared through `live`.
+    fn new(bytes: u64, budget: u64, live: &'l AtomicU64) -> Self {
+        Pool {
+            state: Mutex::new((Vec::new(), 0)),
+            given: std::sync::Condvar::new(),
+            bytes,
+            budget,
+            live,
+        }
+    }
+
+    /// Renderers made (and not failed) so far.
+    #[cfg(test)]
+    fn made(&self) -> usize {
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).1
+    }
+
+    /// Reserves one renderer's bytes when they fit the budget.
+    fn reserve(&self) -> bool {
+        self.live
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |l| {
+                (l.saturating_add(self.bytes) <= self.budget).then_some(l + self.bytes)
+            })
+            .is_ok()
+    }
+
+    /// A renderer: a free one, a new one from `make` (`None` when it fails), or the next one
+    /// given back.
+    fn take(&self, make: impl FnOnce() -> Option<T>) -> Option<T> {
+        let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        loop {
+            if let Some(r) = st.0.pop() {
+                return Some(r);
+            }
+            let first = st.1 == 0;
+            if first || self.reserve() {
+                if first {
+                    self.live.fetch_add(self.bytes, Ordering::AcqRel);
+                }
+                st.1 += 1;
+                drop(st);
+                let r = make();
+                if r.is_none() {
+                    let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+                    st.1 -= 1;
+                    self.live.fetch_sub(self.bytes, Ordering::AcqRel);
+                    self.given.notify_all();
+                }
+                return r;
+            }
+            st = self.given.wait(st).unwrap_or_else(|e| e.into_inner());
+        }
+    }
+
+    /// Gives a renderer back for the level's other lanes.
+    fn give(&self, r: T) {
+        let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        st.0.push(r);
+        self.given.notify_one();
+    }
+}
+
+impl<T> Drop for Pool<'_, T> {
+    fn drop(&mut self) {
+        let made = self.state.get_mut().map_or(0, |st| st.1) as u64;
+        self.live.fetch_sub(made * self.bytes, Ordering::AcqRel);
+    }
 }
 
 impl SamplingCuller {
@@ -389,8 +482,16 @@ impl Culler for SamplingCuller {
             // chunk began and what its lane found since, never with what another lane finds
             // meanwhile, so the results do not depend on the threads.
             // Hemicubes are large (about 100 bytes per pixel): lanes take one from the pool
-            // and give it back, so a level allocates one per thread, not one per lane.
-            let pool: Mutex<Vec<Renderer>> = Mutex::new(Vec::new());
+            // and give it back, so a level allocates one per thread, not one per lane, and
+            // GPU samplers only as many as GPU_SAMPLERS_BUDGET holds.
+            let pool: Pool<Renderer> = match &gpu_scene {
+                None => Pool::new(0, u64::MAX, &self.gpu_bytes),
+                Some((_, scene)) => Pool::new(
+                    GpuSampler::device_bytes(scene, resolution),
+                    GPU_SAMPLERS_BUDGET,
+                    &self.gpu_bytes,
+                ),
+            };
             let new_renderer = || -> Option<Renderer> {
                 match &gpu_scene {
                     None => Some(Renderer::Cpu(Box::new(Hemicube::new(resolution)))),
@@ -411,9 +512,8 @@ impl Culler for SamplingCuller {
                     let lanes: Vec<Vec<Option<Arc<Vec<u32>>>>> = chunk
                         .par_chunks(lane_len)
                         .map(|lane| {
-                            let taken = pool.lock().map(|mut p| p.pop()).ok().flatten();
                             let mut known = known.clone();
-                            let Some(mut r) = taken.or_else(new_renderer) else {
+                            let Some(mut r) = pool.take(new_renderer) else {
                                 // No renderer (the device failed): what the lane would test
                                 // stays visible.
                                 for &i in lane {
@@ -425,9 +525,7 @@ impl Culler for SamplingCuller {
                                 .iter()
                                 .map(|&i| shared.patch(&mut r, level[i].0, &level[i].1, &mut known))
                                 .collect();
-                            if let Ok(mut p) = pool.lock() {
-                                p.push(r);
-                            }
+                            pool.give(r);
                             open
                         })
                         .collect();
@@ -978,6 +1076,54 @@ impl Shared<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pool makes its first renderer whatever the budget, more only while the budget holds
+    /// them (counting another level's), lanes beyond wait for one given back, and dropping it
+    /// gives its bytes back.
+    #[test]
+    fn the_pool_keeps_to_its_budget_and_every_lane_gets_a_renderer() {
+        let live = AtomicU64::new(0);
+        // Another level holds 10 of the 35 bytes: two renderers of 10 fit, a third does not.
+        let other = Pool::<u32>::new(10, 35, &live);
+        assert_eq!(other.take(|| Some(0)), Some(0));
+        let pool = Pool::<u32>::new(10, 35, &live);
+        let holding = std::sync::atomic::AtomicUsize::new(0);
+        let most = std::sync::atomic::AtomicUsize::new(0);
+        let lanes = std::sync::atomic::AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..8 {
+                s.spawn(|| {
+                    for _ in 0..50 {
+                        let r = pool.take(|| Some(7)).expect("a renderer");
+                        let now = holding.fetch_add(1, Ordering::SeqCst) + 1;
+                        most.fetch_max(now, Ordering::SeqCst);
+                        std::thread::yield_now();
+                        holding.fetch_sub(1, Ordering::SeqCst);
+                        lanes.fetch_add(1, Ordering::SeqCst);
+                        pool.give(r);
+                    }
+                });
+            }
+        });
+        assert_eq!(lanes.load(Ordering::SeqCst), 400);
+        assert_eq!(pool.made(), 2, "two fit beside the other level's one");
+        assert!(most.load(Ordering::SeqCst) <= 2);
+        assert_eq!(live.load(Ordering::SeqCst), 30);
+        drop(pool);
+        assert_eq!(live.load(Ordering::SeqCst), 10);
+        // Over budget already: a new level still makes its first, and only that.
+        let big = Pool::<u32>::new(100, 35, &live);
+        assert_eq!(big.take(|| Some(1)), Some(1));
+        big.give(1);
+        assert_eq!(big.take(|| Some(2)), Some(1));
+        assert_eq!(big.made(), 1);
+        // A renderer that cannot be made is not counted.
+        let failing = Pool::<u32>::new(5, 35, &live);
+        assert_eq!(failing.take(|| None), None);
+        assert_eq!(failing.made(), 0);
+        drop((big, failing, other));
+        assert_eq!(live.load(Ordering::SeqCst), 0);
+    }
 
     /// A unit cube at finest ε = 0.25/√2 (squares of side 0.25) has 16 finest rectangles per
     /// face, whatever the levels above; a 4×2×4 cell at 0.042 about its boundary's area

@@ -778,6 +778,26 @@ impl<'a> GpuSampler<'a> {
         })
     }
 
+    /// Device bytes a [`GpuSampler`] of `res` pixels across takes for `scene` (made with
+    /// [`GpuSampler::new`]): its sub-pixel maps (five layers of `8R × 8R`, `R` the resolution
+    /// rounded up to a multiple of 16), its per-pixel layers, and the set-up's output (the
+    /// draws, each polygon point's edge, each polygon's plane); the per-render buffers of the
+    /// boxes and triangles tested come on top.
+    pub fn device_bytes(scene: &GpuSamplerScene, res: u32) -> u64 {
+        let r = u64::from(res.max(16).div_ceil(16) * 16);
+        let side = u64::from(SUB) * r;
+        let per_pixel = match scene.fill {
+            // The pixels' depths, and the compute fill's covered pixels.
+            FillPipelines::Render { .. } => 4,
+            FillPipelines::Compute { .. } => 8,
+        };
+        5 * 4 * side * side
+            + 5 * per_pixel * r * r
+            + 5 * DRAW_BYTES * u64::from(scene.cap)
+            + 16 * scene.points_len
+            + 48 * u64::from(scene.polys)
+    }
+
     /// The CPU hemicube that sets up each render (for its settings:
     /// [`Hemicube::set_subpixel`], [`Hemicube::set_depth_bounded`]).
     pub fn hemicube(&mut self) -> &mut Hemicube {
