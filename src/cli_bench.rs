@@ -62,6 +62,10 @@ pub struct BenchArgs {
     /// the GPU; needs SHADER_F64).
     #[arg(long, value_name = "clipped|counting", default_value_t = GpuProjection::Clipped)]
     pub gpu_projection: GpuProjection,
+    /// Run ray space factorization's charts on the GPU backend's device (needs SHADER_F64)
+    /// instead of the CPU: the same charts, slower on every device measured so far.
+    #[arg(long)]
+    pub rsf_on_gpu: bool,
     /// The shared scene folder (default: ../shared/scenes when it exists).
     #[arg(long, value_name = "DIR")]
     pub shared: Option<PathBuf>,
@@ -152,6 +156,7 @@ impl From<&BenchArgs> for BenchOptions {
             seed: a.seed,
             backend: a.backend.into(),
             gpu_projection: a.gpu_projection,
+            rsf_on_gpu: a.rsf_on_gpu,
             shared: a.shared.clone(),
             scenes: a.scenes.clone(),
             pvs_out: a.pvs_out.clone(),

@@ -92,8 +92,16 @@ fn backend() -> Option<&'static GpuBackend> {
     static BACKEND: OnceLock<Option<GpuBackend>> = OnceLock::new();
     BACKEND
         .get_or_init(|| match GpuBackend::new() {
-            Ok(b) => {
+            Ok(mut b) => {
                 eprintln!("gpu tests on {}", b.adapter().unwrap_or_default());
+                // Ray space factorization's charts on the device, so that the tests compare
+                // them with the CPU's (a bake's backend keeps the CPU's by default).
+                if b.set_rsf_on_gpu(true).is_err() {
+                    assert!(
+                        std::env::var_os("CI").is_none(),
+                        "CI's adapter must have SHADER_F64"
+                    );
+                }
                 Some(b)
             }
             Err(BackendError::NoAdapter(why)) => no_adapter(&why),
@@ -358,16 +366,18 @@ fn rsf_city(blocks: u32) -> (Scene, Vec<Aabb>, BakeSettings) {
     (city.to_scene("city"), city.cells, settings)
 }
 
-/// A bake of a city on the GPU runs ray space factorization's charts on the device (lavapipe
-/// has `SHADER_F64`): its compute passes and bytes show in the backend's counters, and the
-/// bake's culler account says it hid objects, as many as the CPU's.
+/// A bake of a city on a GPU backend that asks for them (`set_rsf_on_gpu`) runs ray space
+/// factorization's charts on the device (lavapipe has `SHADER_F64`): its compute passes and
+/// bytes show in the backend's counters, and the bake's culler account says it hid objects,
+/// as many as the CPU's.
 #[test]
 fn a_city_bake_runs_the_charts_on_the_device() {
     if backend().is_none() {
         return;
     }
-    let b = GpuBackend::new().expect("a second device");
-    if !b.rsf_on_gpu() {
+    let mut b = GpuBackend::new().expect("a second device");
+    assert!(!b.rsf_on_gpu(), "the CPU's charts unless asked");
+    if b.set_rsf_on_gpu(true).is_err() {
         assert!(
             std::env::var_os("CI").is_none(),
             "CI's adapter must have SHADER_F64"
@@ -1877,7 +1887,11 @@ fn an_engine_device_without_f64_keeps_the_charts_on_the_cpu() {
     else {
         return;
     };
-    let engine = GpuBackend::with_device(device, queue).unwrap();
+    let mut engine = GpuBackend::with_device(device, queue).unwrap();
+    assert!(matches!(
+        engine.set_rsf_on_gpu(true),
+        Err(BackendError::MissingFeatures { .. })
+    ));
     assert!(!engine.rsf_on_gpu());
     assert!(!engine.rsf_on_device());
     let (scene, cells, settings) = rsf_city(2);
@@ -1897,7 +1911,10 @@ fn an_engine_device_without_f64_keeps_the_charts_on_the_cpu() {
         GpuBackend::REQUIRED_FEATURES | wgpu::Features::SHADER_F64,
         wgpu::Limits::default(),
     ) {
-        assert!(GpuBackend::with_device(device, queue).unwrap().rsf_on_gpu());
+        let mut with_f64 = GpuBackend::with_device(device, queue).unwrap();
+        assert!(!with_f64.rsf_on_gpu(), "the CPU's charts unless asked");
+        with_f64.set_rsf_on_gpu(true).unwrap();
+        assert!(with_f64.rsf_on_gpu());
     }
 }
 
@@ -1927,8 +1944,8 @@ fn visible_sets(path: &Path) -> Vec<serde_json::Value> {
         .collect()
 }
 
-/// `bake --backend gpu` says where ray space factorization's charts ran, and writes the same
-/// PVS as `--backend cpu`.
+/// `bake --backend gpu` says where ray space factorization's charts ran (the CPU unless
+/// `--rsf-on-gpu`), and writes the same PVS as `--backend cpu`.
 #[test]
 fn the_bake_command_says_where_the_charts_run() {
     let Some(b) = backend() else {
@@ -1938,8 +1955,8 @@ fn the_bake_command_says_where_the_charts_run() {
     let dir = std::env::temp_dir().join(format!("umbrasweep-gpu-cli-{}", std::process::id()));
     let cells_path = two_demo_cells(&dir, "demo_city");
     let mut pvs = Vec::new();
-    for backend in ["gpu", "cpu"] {
-        let out_path = dir.join(format!("{backend}.json"));
+    for (backend, on_gpu) in [("gpu", false), ("gpu", true), ("cpu", false)] {
+        let out_path = dir.join(format!("{backend}-{on_gpu}.json"));
         let out = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
             .arg("bake")
             .arg(root.join("data/demo_city.obj"))
@@ -1947,6 +1964,7 @@ fn the_bake_command_says_where_the_charts_run() {
             .arg(&cells_path)
             .args(["--backend", backend, "--rsf", "-o"])
             .arg(&out_path)
+            .args(on_gpu.then_some("--rsf-on-gpu"))
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
@@ -1955,14 +1973,17 @@ fn the_bake_command_says_where_the_charts_run() {
             .lines()
             .find(|l| l.starts_with("rsf "))
             .expect("the rsf line");
-        match (backend, b.rsf_on_gpu()) {
+        match (backend, on_gpu) {
             ("gpu", true) => assert!(line.ends_with("(on the GPU)"), "{line}"),
-            ("gpu", false) => assert!(line.contains("no SHADER_F64"), "{line}"),
+            ("gpu", false) => assert!(line.contains("charts on the CPU"), "{line}"),
             _ => assert!(!line.contains("GPU"), "{line}"),
         }
         pvs.push(visible_sets(&out_path));
     }
-    assert_eq!(pvs[0], pvs[1]);
+    // The shared backend asks for the device's charts; a bake's own backend does not.
+    assert!(b.rsf_on_gpu(), "lavapipe has SHADER_F64");
+    assert_eq!(pvs[0], pvs[2]);
+    assert_eq!(pvs[1], pvs[2]);
     std::fs::remove_dir_all(&dir).ok();
 }
 

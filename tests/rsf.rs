@@ -184,8 +184,10 @@ fn gpu() -> Option<&'static GpuBackend> {
     static GPU: OnceLock<Option<GpuBackend>> = OnceLock::new();
     GPU.get_or_init(|| {
         let why = match GpuBackend::new() {
-            Ok(b) if b.rsf_on_gpu() => return Some(b),
-            Ok(b) => format!("{} has no SHADER_F64", b.adapter().unwrap_or_default()),
+            Ok(mut b) => match b.set_rsf_on_gpu(true) {
+                Ok(()) => return Some(b),
+                Err(_) => format!("{} has no SHADER_F64", b.adapter().unwrap_or_default()),
+            },
             Err(e) => e.to_string(),
         };
         assert!(

@@ -106,6 +106,9 @@ pub struct BenchOptions {
     /// How the GPU backend makes occluders' Projections
     /// ([`GpuProjection`](crate::backend::gpu::GpuProjection)).
     pub gpu_projection: crate::backend::gpu::GpuProjection,
+    /// Ray space factorization's charts on the GPU backend's device rather than the CPU
+    /// ([`GpuBackend::set_rsf_on_gpu`](crate::backend::gpu::GpuBackend::set_rsf_on_gpu)).
+    pub rsf_on_gpu: bool,
 }
 
 impl Default for BenchOptions {
@@ -128,6 +131,7 @@ impl Default for BenchOptions {
             foliage_sampling_budget: foliage::SAMPLING_BENCH_POINTS,
             foliage_sampling_max_eps: None,
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
+            rsf_on_gpu: false,
             progress: None,
             rsf: crate::settings::SweepChoice::Auto,
         }
@@ -523,7 +527,7 @@ fn build(
     }))
 }
 
-/// The GPU backend with `args`' projection.
+/// The GPU backend with `args`' projection and charts.
 ///
 /// # Errors
 /// [`BenchError::Gpu`] without an adapter, or for a projection the device cannot run.
@@ -531,6 +535,7 @@ pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError>
     let mut g = GpuBackend::new().map_err(BenchError::Gpu)?;
     g.set_projection(args.gpu_projection)
         .map_err(BenchError::Gpu)?;
+    g.set_rsf_on_gpu(args.rsf_on_gpu).map_err(BenchError::Gpu)?;
     Ok(g)
 }
 
