@@ -192,16 +192,17 @@ fn plane_depth(nd: vec4<f64>, u: f64, v: f64) -> f64 {
     return -1.0lf;
 }
 
-@fragment
-fn fs_fill(in: FillOut) -> @location(0) vec4<f32> {
-    let fx = u32(in.pos.x);
-    let fy = u32(in.pos.y);
-    let i = fx / 8u;
-    let j = fy / 8u;
-    let w0 = draws[2u * in.draw];
-    let first = w0.x;
-    let count = w0.y & 0xffffu;
-    let thin = (w0.y >> 16u) != 0u;
+// Pixel (i, j) of the pass's view for a draw whose edges start at `first`: how many of its
+// four corners pass every edge (the CPU's `f32` corner tests), its corner (u0, v0) and the
+// largest of its corners' √(u²+v²+1), which the sub-pixel masks use. Both fills call it.
+struct Pixel {
+    corners: u32,
+    u0: f64,
+    v0: f64,
+    lmax: f64,
+}
+
+fn pixel_corners(first: u32, count: u32, i: u32, j: u32) -> Pixel {
     let res = P.res;
     let ps = 2.0lf / f64(res);
     var vmin = 0.0lf;
@@ -224,35 +225,63 @@ fn fs_fill(in: FillOut) -> @location(0) vec4<f32> {
     corners += u32(corner_passes(first, count, uc1, vc0, l10));
     corners += u32(corner_passes(first, count, uc0, vc1, l01));
     corners += u32(corner_passes(first, count, uc1, vc1, l11));
-    let u0 = -1.0lf + f64(i) * ps;
-    let v0 = vmin + f64(j) * ps;
-    var covered = corners == 4u;
-    if !covered && P.subpixel != 0u && (corners > 0u || thin) {
-        let lmax = f64(max(max(l00, l10), max(l01, l11)));
-        covered = sub_bit(first, count, u0, v0, ps, lmax, fx % 8u, fy % 8u);
+    let lmax = f64(max(max(l00, l10), max(l01, l11)));
+    return Pixel(corners, -1.0lf + f64(i) * ps, vmin + f64(j) * ps, lmax);
+}
+
+// A deep polygon's plane in the pass's view (normal, offset) for `plane_depth`; `plane` is the
+// draw's 1 + polygon.
+fn view_plane(plane: u32) -> vec4<f64> {
+    let pp = 6u * (plane - 1u);
+    let nv = view_f64(vec3<f64>(pplanes[pp], pplanes[pp + 1u], pplanes[pp + 2u]));
+    let qv = view_f64(vec3<f64>(pplanes[pp + 3u], pplanes[pp + 4u], pplanes[pp + 5u]));
+    return vec4<f64>(nv, nv.x * qv.x + nv.y * qv.y + nv.z * qv.z);
+}
+
+// The depth a draw of depth `z` gives the pixel with corner (u0, v0): for a deep polygon
+// (plane `nd`) the largest plane depth at the pixel's corners, rounded up, when nearer.
+fn pixel_depth(z: f32, deep: bool, nd: vec4<f64>, u0: f64, v0: f64) -> f32 {
+    if !deep {
+        return z;
+    }
+    let ps = 2.0lf / f64(P.res);
+    let u1 = u0 + ps;
+    let v1 = v0 + ps;
+    let d00 = plane_depth(nd, u0, v0);
+    let d10 = plane_depth(nd, u1, v0);
+    let d01 = plane_depth(nd, u0, v1);
+    let d11 = plane_depth(nd, u1, v1);
+    if min(min(d00, d10), min(d01, d11)) > 0.0lf {
+        let m = max(max(d00, d10), max(d01, d11)) * (1.0lf + 1e-6lf);
+        if m < F32_BIG {
+            return min(f32_up(m), z);
+        }
+    }
+    return z;
+}
+
+@fragment
+fn fs_fill(in: FillOut) -> @location(0) vec4<f32> {
+    let fx = u32(in.pos.x);
+    let fy = u32(in.pos.y);
+    let w0 = draws[2u * in.draw];
+    let first = w0.x;
+    let count = w0.y & 0xffffu;
+    let thin = (w0.y >> 16u) != 0u;
+    let px = pixel_corners(first, count, fx / 8u, fy / 8u);
+    var covered = px.corners == 4u;
+    if !covered && P.subpixel != 0u && (px.corners > 0u || thin) {
+        let ps = 2.0lf / f64(P.res);
+        covered = sub_bit(first, count, px.u0, px.v0, ps, px.lmax, fx % 8u, fy % 8u);
     }
     if !covered {
         discard;
     }
-    var z = bitcast<f32>(w0.z);
+    var nd = vec4<f64>(0.0lf, 0.0lf, 0.0lf, 0.0lf);
     if w0.w != 0u {
-        let pp = 6u * (w0.w - 1u);
-        let nv = view_f64(vec3<f64>(pplanes[pp], pplanes[pp + 1u], pplanes[pp + 2u]));
-        let qv = view_f64(vec3<f64>(pplanes[pp + 3u], pplanes[pp + 4u], pplanes[pp + 5u]));
-        let nd = vec4<f64>(nv, nv.x * qv.x + nv.y * qv.y + nv.z * qv.z);
-        let u1 = u0 + ps;
-        let v1 = v0 + ps;
-        let d00 = plane_depth(nd, u0, v0);
-        let d10 = plane_depth(nd, u1, v0);
-        let d01 = plane_depth(nd, u0, v1);
-        let d11 = plane_depth(nd, u1, v1);
-        if min(min(d00, d10), min(d01, d11)) > 0.0lf {
-            let m = max(max(d00, d10), max(d01, d11)) * (1.0lf + 1e-6lf);
-            if m < F32_BIG {
-                z = min(f32_up(m), z);
-            }
-        }
+        nd = view_plane(w0.w);
     }
+    let z = pixel_depth(bitcast<f32>(w0.z), w0.w != 0u, nd, px.u0, px.v0);
     return vec4<f32>(z, 0.0, 0.0, 0.0);
 }
 

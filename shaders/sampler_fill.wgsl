@@ -118,67 +118,28 @@ fn fill_draw(draw: u32, li: u32) {
     let first = w0.x;
     let count = w0.y & 0xffffu;
     let thin = (w0.y >> 16u) != 0u;
-    let res = P.res;
-    let ps = 2.0lf / f64(res);
-    var vmin = 0.0lf;
-    var nbase = (res + 1u) * (res + 1u);
-    if P.view == 0u {
-        vmin = -1.0lf;
-        nbase = 0u;
-    }
-    let stride = res + 1u;
+    let ps = 2.0lf / f64(P.res);
     let z_draw = bitcast<f32>(w0.z);
     // A deep polygon's plane in the view (the same for all its pixels).
+    let deep = w0.w != 0u;
     var nd = vec4<f64>(0.0lf, 0.0lf, 0.0lf, 0.0lf);
-    if w0.w != 0u {
-        let pp = 6u * (w0.w - 1u);
-        let nv = view_f64(vec3<f64>(pplanes[pp], pplanes[pp + 1u], pplanes[pp + 2u]));
-        let qv = view_f64(vec3<f64>(pplanes[pp + 3u], pplanes[pp + 4u], pplanes[pp + 5u]));
-        nd = vec4<f64>(nv, nv.x * qv.x + nv.y * qv.y + nv.z * qv.z);
+    if deep {
+        nd = view_plane(w0.w);
     }
     let k = i32(P.view);
     for (var p = li; p < pixels; p += 64u) {
         let i = i0 + p % width;
         let j = j0 + p / width;
-        let uc0 = f32(-1.0lf + f64(i) * ps);
-        let uc1 = f32(-1.0lf + f64(i + 1u) * ps);
-        let vc0 = f32(vmin + f64(j) * ps);
-        let vc1 = f32(vmin + f64(j + 1u) * ps);
-        let l00 = norms[nbase + j * stride + i];
-        let l10 = norms[nbase + j * stride + i + 1u];
-        let l01 = norms[nbase + (j + 1u) * stride + i];
-        let l11 = norms[nbase + (j + 1u) * stride + i + 1u];
-        var corners = 0u;
-        corners += u32(corner_passes(first, count, uc0, vc0, l00));
-        corners += u32(corner_passes(first, count, uc1, vc0, l10));
-        corners += u32(corner_passes(first, count, uc0, vc1, l01));
-        corners += u32(corner_passes(first, count, uc1, vc1, l11));
-        let u0 = -1.0lf + f64(i) * ps;
-        let v0 = vmin + f64(j) * ps;
+        let px = pixel_corners(first, count, i, j);
         var mask = vec2<u32>(0u, 0u);
-        let covered = corners == 4u;
-        if !covered && P.subpixel != 0u && (corners > 0u || thin) {
-            let lmax = f64(max(max(l00, l10), max(l01, l11)));
-            mask = sub_mask(first, count, u0, v0, ps, lmax);
+        let covered = px.corners == 4u;
+        if !covered && P.subpixel != 0u && (px.corners > 0u || thin) {
+            mask = sub_mask(first, count, px.u0, px.v0, ps, px.lmax);
         }
         if !covered && mask.x == 0u && mask.y == 0u {
             continue;
         }
-        var z = z_draw;
-        if w0.w != 0u {
-            let u1 = u0 + ps;
-            let v1 = v0 + ps;
-            let d00 = plane_depth(nd, u0, v0);
-            let d10 = plane_depth(nd, u1, v0);
-            let d01 = plane_depth(nd, u0, v1);
-            let d11 = plane_depth(nd, u1, v1);
-            if min(min(d00, d10), min(d01, d11)) > 0.0lf {
-                let m = max(max(d00, d10), max(d01, d11)) * (1.0lf + 1e-6lf);
-                if m < F32_BIG {
-                    z = min(f32_up(m), z);
-                }
-            }
-        }
+        let z = pixel_depth(z_draw, deep, nd, px.u0, px.v0);
         if !(z >= 0.0) {
             continue;
         }
@@ -192,7 +153,7 @@ fn fill_draw(draw: u32, li: u32) {
             if b >= 32u {
                 word = mask.y;
             }
-            if (word >> (b % 32u) & 1u) != 0u {
+            if ((word >> (b % 32u)) & 1u) != 0u {
                 let sa = b % 8u;
                 let sb = b / 8u;
                 textureAtomicMin(

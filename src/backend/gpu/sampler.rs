@@ -604,8 +604,8 @@ impl<'a> GpuSampler<'a> {
     /// * [`BackendError::BufferTooLarge`] when a render's buffers exceed the device's largest
     ///   storage binding (about 160 bytes per polygon and 16 per point);
     /// * [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports
-    ///   one while the maps and buffers are created (five `R32Float` layers of `8·res` square:
-    ///   1.3 GB at 1,024 pixels).
+    ///   one while the maps and buffers are created (five 32-bit layers of `8·res` square:
+    ///   1.3 GB at 1,024 pixels; [`GpuSampler::device_bytes`] gives the whole).
     pub fn new(
         gpu: &'a GpuBackend,
         scene: &'a GpuSamplerScene,
