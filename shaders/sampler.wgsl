@@ -150,28 +150,43 @@ fn corner_passes(first: u32, count: u32, u: f32, v: f32, l: f32) -> bool {
     return true;
 }
 
+// Edge k's steps over the sub-pixels of the pixel with corner (u0, v0), for the CPU's
+// `pixel_mask`: (c0, du, dv, kind), kind 0 when every sub-pixel passes the edge, 1 when none
+// does, else 2: sub-pixel (sa, sb) passes where `c0 + sb·dv + sa·du ≥ CORNER_MARGIN`.
+fn sub_edge(first: u32, k: u32, u0: f64, v0: f64, ps: f64, lmax: f64) -> vec4<f64> {
+    let margin = f64(CORNER_MARGIN);
+    let h = ps / 8.0lf;
+    let e = edge(first, k);
+    let a = f64(e.x);
+    let b = f64(e.y);
+    let c = f64(e.z);
+    let s = f64(e.w);
+    let base = a * u0 + b * v0 + c - s * lmax;
+    let du = a * h;
+    let dv = b * h;
+    let c0 = base + min(du, 0.0lf) + min(dv, 0.0lf);
+    if c0 + 7.0lf * (min(du, 0.0lf) + min(dv, 0.0lf)) >= margin {
+        return vec4<f64>(c0, du, dv, 0.0lf);
+    }
+    if c0 + 7.0lf * (max(du, 0.0lf) + max(dv, 0.0lf)) < margin {
+        return vec4<f64>(c0, du, dv, 1.0lf);
+    }
+    return vec4<f64>(c0, du, dv, 2.0lf);
+}
+
 // Bit (sa, sb) of the CPU's `pixel_mask` for the pixel with corner (u0, v0).
 fn sub_bit(first: u32, count: u32, u0: f64, v0: f64, ps: f64, lmax: f64, sa: u32, sb: u32) -> bool {
     let margin = f64(CORNER_MARGIN);
-    let h = ps / 8.0lf;
     for (var k = 0u; k < count; k++) {
-        let e = edge(first, k);
-        let a = f64(e.x);
-        let b = f64(e.y);
-        let c = f64(e.z);
-        let s = f64(e.w);
-        let base = a * u0 + b * v0 + c - s * lmax;
-        let du = a * h;
-        let dv = b * h;
-        let c0 = base + min(du, 0.0lf) + min(dv, 0.0lf);
-        if c0 + 7.0lf * (min(du, 0.0lf) + min(dv, 0.0lf)) >= margin {
+        let e = sub_edge(first, k, u0, v0, ps, lmax);
+        if e.w == 0.0lf {
             continue;
         }
-        if c0 + 7.0lf * (max(du, 0.0lf) + max(dv, 0.0lf)) < margin {
+        if e.w == 1.0lf {
             return false;
         }
-        let r = c0 + f64(sb) * dv;
-        if !(r + f64(sa) * du >= margin) {
+        let r = e.x + f64(sb) * e.z;
+        if !(r + f64(sa) * e.y >= margin) {
             return false;
         }
     }

@@ -50,32 +50,23 @@ fn fill_args(@builtin(local_invocation_index) k: u32) {
 }
 
 // The sub-pixels of a pixel every edge passes (bit 8 · sb + sa of rows 0–3 in .x, of rows 4–7
-// in .y): `sub_bit` of `sampler.wgsl` for all 64 at once, with its expressions.
+// in .y): `sub_bit` of `sampler.wgsl` for all 64 at once, with its expressions (`sub_edge`).
 fn sub_mask(first: u32, count: u32, u0: f64, v0: f64, ps: f64, lmax: f64) -> vec2<u32> {
     let margin = f64(CORNER_MARGIN);
-    let h = ps / 8.0lf;
     var m = vec2<u32>(0xffffffffu, 0xffffffffu);
     for (var k = 0u; k < count; k++) {
-        let e = edge(first, k);
-        let a = f64(e.x);
-        let b = f64(e.y);
-        let c = f64(e.z);
-        let s = f64(e.w);
-        let base = a * u0 + b * v0 + c - s * lmax;
-        let du = a * h;
-        let dv = b * h;
-        let c0 = base + min(du, 0.0lf) + min(dv, 0.0lf);
-        if c0 + 7.0lf * (min(du, 0.0lf) + min(dv, 0.0lf)) >= margin {
+        let e = sub_edge(first, k, u0, v0, ps, lmax);
+        if e.w == 0.0lf {
             continue;
         }
-        if c0 + 7.0lf * (max(du, 0.0lf) + max(dv, 0.0lf)) < margin {
+        if e.w == 1.0lf {
             return vec2<u32>(0u, 0u);
         }
         for (var sb = 0u; sb < 8u; sb++) {
-            let r = c0 + f64(sb) * dv;
+            let r = e.x + f64(sb) * e.z;
             var row = 0u;
             for (var sa = 0u; sa < 8u; sa++) {
-                if r + f64(sa) * du >= margin {
+                if r + f64(sa) * e.y >= margin {
                     row |= 1u << sa;
                 }
             }
