@@ -2,7 +2,8 @@
 //! of a cell's faces: objects hidden by each, disagreements, and time per point (the GPU's
 //! split into the CPU's set-up and the submission that draws and tests), for each fill asked
 //! for (`compute`, `render` or `both`; default: the device's, `GpuSamplerScene::default_fill`),
-//! and with `both` the boxes on which the two fills disagree (they should not).
+//! with the GPU's time per phase from its timestamps where the device has them, and with
+//! `both` the boxes on which the two fills disagree (they should not).
 //! `cargo run --release --example sampler_gpu -- SCENE CELLS CELL EPS RES N [FILL]`.
 
 mod common;
@@ -122,6 +123,20 @@ fn main() {
             per(t_rec[f]),
             per(t_dev[f])
         );
+    }
+    for (fill, gs) in fills.iter().zip(&samplers) {
+        let t = gs.gpu_times();
+        if t.passes > 0 {
+            println!(
+                "{fill} fill, GPU ms per point (timestamps, {} passes): set-up {:.1}, fill {:.1}, \
+                 reduce {:.1}, tests {:.1}",
+                t.passes,
+                per(t.setup),
+                per(t.fill),
+                per(t.reduce),
+                per(t.tests)
+            );
+        }
     }
     if nf == 2 {
         println!("boxes on which the two fills disagree: {fills_differ}");

@@ -438,9 +438,17 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
     let occ = SampleOccluders::from_polygons(&[(wall, 0)]);
     let scene = GpuSamplerScene::new(gpu, &occ).expect("GPU sampler scene");
     let mut gs = GpuSampler::new(gpu, &scene, 32).expect("GPU sampler");
+    assert_eq!(gs.gpu_times().passes, 0);
     gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &boxes);
     assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![true, false]);
     assert!(gs.last_draws() >= 1);
+    // With timestamps (lavapipe has them) the render's passes are timed: set-up, the compute
+    // fill's two, the reduction and the test.
+    if gpu.timestamps() {
+        let t = gs.gpu_times();
+        assert_eq!(t.passes, 5, "{t:?}");
+        assert!(t.fill > std::time::Duration::ZERO, "{t:?}");
+    }
     // The same box tested twice in one call gets the same answer, and a render can be tested
     // again.
     assert_eq!(

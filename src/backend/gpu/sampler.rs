@@ -26,6 +26,10 @@
 //! hidden from every point (an H200 runs graphics work on few of its units; the render fill
 //! also repeats each pixel's corner tests 64 times).
 //!
+//! Where the device has [`wgpu::Features::TIMESTAMP_QUERY`] each pass but the compute fill's
+//! clears is timed on the GPU, by phase ([`GpuSampler::gpu_times`], printed by
+//! `examples/sampler_gpu.rs`).
+//!
 //! # Why it is conservative, and what it answers
 //! The passes repeat the CPU's expressions (`f64` where the CPU uses `f64`, its `f32` corner
 //! tests with its table of `√(u²+v²+1)` and margin, its roundings up), so a sub-pixel is
@@ -69,6 +73,34 @@ const MAX_GROUPS: u32 = 65535;
 /// Sub-pixels per pixel side.
 const SUB: u32 = 8;
 
+/// Timestamp pairs one submission writes at most: the set-up, five fill passes, the reduction
+/// and two tests (the compute fill's clears are not timed).
+const STAMP_PAIRS: usize = 9;
+/// Bytes between resolved timestamp pairs (`wgpu::QUERY_RESOLVE_BUFFER_ALIGNMENT`).
+const STAMP_STRIDE: u64 = wgpu::QUERY_RESOLVE_BUFFER_ALIGNMENT;
+
+/// GPU time of a [`GpuSampler`]'s passes by phase, from the device's timestamps, summed over
+/// its submissions since it was made (all zero without [`wgpu::Features::TIMESTAMP_QUERY`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SamplerTimes {
+    /// The set-up pass (every polygon's edges, shrinks, depth and draws).
+    pub setup: std::time::Duration,
+    /// The fill (its compute passes or render passes; not the compute fill's clears).
+    pub fill: std::time::Duration,
+    /// The pixels' largest sub-pixel depths.
+    pub reduce: std::time::Duration,
+    /// The tests of box parts and triangles.
+    pub tests: std::time::Duration,
+    /// Passes timed.
+    pub passes: usize,
+}
+
+/// A sampler's query set and the buffer its pairs are resolved into.
+struct Stamps {
+    set: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+}
+
 /// The uniforms of one pass (`Params` of the shader).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
@@ -83,6 +115,17 @@ struct Params {
     sign: u32,
     base: u32,
     pad: [u32; 3],
+}
+
+/// A compute pass's timestamp writes: the pair at `i` of the query set, if any.
+fn compute_writes(
+    p: Option<(&wgpu::QuerySet, u32)>,
+) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+    p.map(|(query_set, i)| wgpu::ComputePassTimestampWrites {
+        query_set,
+        beginning_of_pass_write_index: Some(i),
+        end_of_pass_write_index: Some(i + 1),
+    })
 }
 
 /// The dispatch size for `groups` workgroups: `(x, y)` with `x ≤ 65535`.
@@ -212,6 +255,9 @@ pub struct GpuSampler<'a> {
     last_draws: u64,
     /// The polygons are drawn for the last `begin` (tests after the first reuse the maps).
     rendered: bool,
+    /// Timestamps, where the device has `TIMESTAMP_QUERY`.
+    stamps: Option<Stamps>,
+    times: SamplerTimes,
 }
 
 /// One scene's occluder polygons on the device, with the sampler's pipelines: made once and
@@ -752,6 +798,19 @@ impl<'a> GpuSampler<'a> {
             wgpu::BufferUsages::empty(),
             "sampler pixel depths",
         )?;
+        let stamps = gpu.timestamp_period.map(|_| Stamps {
+            set: device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("sampler pass timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * STAMP_PAIRS as u32,
+            }),
+            resolved: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sampler resolved timestamps"),
+                size: STAMP_STRIDE * STAMP_PAIRS as u64,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+        });
         scope.check()?;
         Ok(GpuSampler {
             gpu,
@@ -775,6 +834,8 @@ impl<'a> GpuSampler<'a> {
             tflags: None,
             last_draws: 0,
             rendered: false,
+            stamps,
+            times: SamplerTimes::default(),
         })
     }
 
@@ -821,6 +882,11 @@ impl<'a> GpuSampler<'a> {
     ) {
         self.rendered = false;
         self.hc.begin_patch(eye, axis, sign, half, boxes);
+    }
+
+    /// GPU time of this sampler's passes by phase since it was made ([`SamplerTimes`]).
+    pub fn gpu_times(&self) -> SamplerTimes {
+        self.times
     }
 
     /// The draws (one polygon in one view) of the last [`GpuSampler::test_boxes`].
@@ -976,9 +1042,15 @@ impl<'a> GpuSampler<'a> {
         )?;
         // The flags, the triangles' codes, then the five indirect draws (instance counts).
         let read_bytes = flag_bytes + tflag_bytes + 5 * 16;
+        // Then the timestamp pairs.
+        let stamp_bytes = if self.stamps.is_some() {
+            16 * STAMP_PAIRS as u64
+        } else {
+            0
+        };
         gpu.ensure_buffer(
             &mut self.staging,
-            read_bytes,
+            read_bytes + stamp_bytes,
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             "sampler read-back",
         )?;
@@ -1167,10 +1239,19 @@ impl<'a> GpuSampler<'a> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("sampler encoder"),
             });
+        // The phase (0 set-up, 1 fill, 2 reduce, 3 tests) of each timed pass, in the order of
+        // their timestamp pairs.
+        let mut phases: Vec<usize> = Vec::new();
+        let stamps = self.stamps.as_ref();
+        let mut pair = |phase: usize| -> Option<(&wgpu::QuerySet, u32)> {
+            let s = stamps?;
+            phases.push(phase);
+            Some((&s.set, 2 * (phases.len() as u32 - 1)))
+        };
         if render && self.scene.polys > 0 {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("sampler set-up pass"),
-                timestamp_writes: None,
+                timestamp_writes: compute_writes(pair(0)),
             });
             cp.set_pipeline(&self.scene.setup);
             cp.set_bind_group(0, &setup_group, &[]);
@@ -1179,43 +1260,50 @@ impl<'a> GpuSampler<'a> {
         // A layer cleared (to `clear`) by a render pass, which draws into it when `draw`
         // gives the pipeline, bind group, view and rows.
         type Draw<'p> = (&'p wgpu::RenderPipeline, &'p wgpu::BindGroup, usize, u32);
-        let clear_pass =
-            |encoder: &mut wgpu::CommandEncoder, view, clear: f64, draw: Option<Draw<'_>>| {
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("sampler fill pass"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color {
-                                r: clear,
-                                g: 0.0,
-                                b: 0.0,
-                                a: 0.0,
-                            }),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: None,
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                if let Some((pipeline, group, k, rows)) = draw {
-                    pass.set_viewport(0.0, 0.0, (SUB * res) as f32, (SUB * rows) as f32, 0.0, 1.0);
-                    pass.set_pipeline(pipeline);
-                    pass.set_bind_group(0, group, &[(k as u64 * PARAM_SLOT) as u32]);
-                    pass.draw_indirect(&self.indirect, 16 * k as u64);
-                }
-            };
+        let clear_pass = |encoder: &mut wgpu::CommandEncoder,
+                          view,
+                          clear: f64,
+                          draw: Option<Draw<'_>>,
+                          stamp: Option<(&wgpu::QuerySet, u32)>| {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("sampler fill pass"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color {
+                            r: clear,
+                            g: 0.0,
+                            b: 0.0,
+                            a: 0.0,
+                        }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: stamp.map(|(query_set, i)| wgpu::RenderPassTimestampWrites {
+                    query_set,
+                    beginning_of_pass_write_index: Some(i),
+                    end_of_pass_write_index: Some(i + 1),
+                }),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            if let Some((pipeline, group, k, rows)) = draw {
+                pass.set_viewport(0.0, 0.0, (SUB * res) as f32, (SUB * rows) as f32, 0.0, 1.0);
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, group, &[(k as u64 * PARAM_SLOT) as u32]);
+                pass.draw_indirect(&self.indirect, 16 * k as u64);
+            }
+        };
         match (&self.scene.fill, &self.maps) {
             _ if !render => {}
             (FillPipelines::Render { pipeline, .. }, Maps::Render { layers, .. }) => {
                 for (k, view) in layers.iter().enumerate() {
                     let rows = if k == 0 { res } else { res / 2 };
                     let draw = (pipeline, &fill_group, k, rows);
-                    clear_pass(&mut encoder, view, f64::INFINITY, Some(draw));
+                    clear_pass(&mut encoder, view, f64::INFINITY, Some(draw), pair(1));
                 }
             }
             (
@@ -1227,12 +1315,18 @@ impl<'a> GpuSampler<'a> {
                 // Infinity's bits: the clear value of a `R32Uint` target is converted to an
                 // integer.
                 for view in layers {
-                    clear_pass(&mut encoder, view, f64::from(f32::INFINITY.to_bits()), None);
+                    clear_pass(
+                        &mut encoder,
+                        view,
+                        f64::from(f32::INFINITY.to_bits()),
+                        None,
+                        None,
+                    );
                 }
                 {
                     let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                         label: Some("sampler fill arguments pass"),
-                        timestamp_writes: None,
+                        timestamp_writes: compute_writes(pair(1)),
                     });
                     cp.set_pipeline(args);
                     cp.set_bind_group(0, args_group.as_ref(), &[0]);
@@ -1240,7 +1334,7 @@ impl<'a> GpuSampler<'a> {
                 }
                 let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("sampler compute fill pass"),
-                    timestamp_writes: None,
+                    timestamp_writes: compute_writes(pair(1)),
                 });
                 cp.set_pipeline(fill);
                 for k in 0..5u64 {
@@ -1253,7 +1347,7 @@ impl<'a> GpuSampler<'a> {
         if render {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("sampler reduce pass"),
-                timestamp_writes: None,
+                timestamp_writes: compute_writes(pair(2)),
             });
             cp.set_pipeline(&self.scene.reduce);
             cp.set_bind_group(0, &test_group, &[(5 * PARAM_SLOT) as u32]);
@@ -1262,7 +1356,7 @@ impl<'a> GpuSampler<'a> {
         if n_parts > 0 {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("sampler test pass"),
-                timestamp_writes: None,
+                timestamp_writes: compute_writes(pair(3)),
             });
             cp.set_pipeline(&self.scene.test);
             cp.set_bind_group(0, &test_group, &[(6 * PARAM_SLOT) as u32]);
@@ -1271,7 +1365,7 @@ impl<'a> GpuSampler<'a> {
         if n_tris > 0 {
             let mut cp = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("sampler triangle test pass"),
-                timestamp_writes: None,
+                timestamp_writes: compute_writes(pair(3)),
             });
             cp.set_pipeline(&self.scene.test_tri);
             cp.set_bind_group(0, &test_group, &[(7 * PARAM_SLOT) as u32]);
@@ -1280,6 +1374,25 @@ impl<'a> GpuSampler<'a> {
         encoder.copy_buffer_to_buffer(flags_b, 0, staging, 0, flag_bytes);
         encoder.copy_buffer_to_buffer(tflags_b, 0, staging, flag_bytes, tflag_bytes);
         encoder.copy_buffer_to_buffer(&self.indirect, 0, staging, flag_bytes + tflag_bytes, 80);
+        if let Some(st) = stamps {
+            for p in 0..phases.len() as u64 {
+                let first = 2 * p as u32;
+                encoder.resolve_query_set(
+                    &st.set,
+                    first..first + 2,
+                    &st.resolved,
+                    STAMP_STRIDE * p,
+                );
+                encoder.copy_buffer_to_buffer(
+                    &st.resolved,
+                    STAMP_STRIDE * p,
+                    staging,
+                    read_bytes + 16 * p,
+                    16,
+                );
+            }
+        }
+        let read_bytes = read_bytes + 16 * phases.len() as u64;
         let submission = gpu.queue.submit([encoder.finish()]);
         scope.check()?;
         let (tx, rx) = std::sync::mpsc::channel();
@@ -1310,6 +1423,17 @@ impl<'a> GpuSampler<'a> {
             let hidden: Vec<bool> = words[..boxes.len()].iter().map(|&w| w == 0).collect();
             let codes: Vec<u32> = words[open.len()..open.len() + tris.len()].to_vec();
             let base = open.len() + tri_codes.len();
+            // The timestamp pairs after the draw counts.
+            let ticks = &words[base + 20..];
+            let period = gpu.timestamp_period.unwrap_or(0.0);
+            for (k, &phase) in phases.iter().enumerate() {
+                let at = |w: usize| u64::from(ticks[w]) | u64::from(ticks[w + 1]) << 32;
+                let dt = at(4 * k + 2).saturating_sub(at(4 * k));
+                let d = std::time::Duration::from_nanos((dt as f64 * period).round() as u64);
+                let t = &mut self.times;
+                *[&mut t.setup, &mut t.fill, &mut t.reduce, &mut t.tests][phase] += d;
+                t.passes += 1;
+            }
             let draws: Vec<u64> = (0..5).map(|k| u64::from(words[base + 4 * k + 1])).collect();
             (hidden, codes, draws)
         };
