@@ -369,7 +369,8 @@ pub trait RasterBackend: Send + Sync {
     }
     /// Empty ray-space-factorization charts of `cell` ([`RayCharts::new`]'s arguments) on this
     /// backend, for one cell's traversal. The default is the CPU's [`RayCharts`]; the GPU
-    /// backend has its own where the device computes in double precision.
+    /// backend has its own where they were asked for and the device computes in double
+    /// precision.
     ///
     /// # Errors
     /// [`BackendError`] when the device fails.
