@@ -11,6 +11,7 @@ use super::{SampleCard, SampleOccluders};
 use crate::geom::DAabb;
 use crate::scene::alpha::Coverage;
 use glam::{DVec2, DVec3};
+use std::collections::HashMap;
 
 /// Pixels per tile side (tiles keep the largest depth of their pixels).
 const TILE: usize = 8;
@@ -181,54 +182,115 @@ fn footprint_opaque(
     cov.uv_rect_opaque([lo.x, hi.x], [lo.y, hi.y])
 }
 
-/// Partial layers a pixel keeps: sub-pixel masks, each with the largest depth of the polygons
-/// whose bits it holds, sorted nearest first.
+/// Partial layers a pixel keeps inline: sub-pixel masks, each with the largest depth of the
+/// polygons whose bits it holds, sorted nearest first. A pixel that needs more keeps the rest
+/// in its view's [`Spill`], so no layer is ever merged into another.
 const LAYERS: usize = 8;
 
+/// Per pixel index, the partial layers beyond the [`LAYERS`] inline ones (sorted nearest
+/// first, all farther than the inline ones). A pixel has an entry only while all its inline
+/// layers are in use.
+type Spill = HashMap<usize, Vec<(u64, f32)>>;
+
 /// Adds the sub-pixels `bits` of a polygon at depth `z` to a pixel's partial layers (`masks`,
-/// `wz`; sorted nearest first, empty layers last) whose pixel depth is `d > z`. Layers no
-/// nearer than `d` are dropped first; bits at a depth some layer already has join it; with
-/// every layer in use the two farthest merge (their union at the larger depth, which only
-/// loses). When the layers up to some depth together hold all 64 sub-pixels, the pixel is
-/// covered at that depth: it is returned and the layers from there on are dropped.
+/// `wz`, sorted nearest first, empty layers last, and the pixel's entry `idx` in `spill`)
+/// whose pixel depth is `d > z`. The layers keep every sub-pixel's own nearest depth: a
+/// sub-pixel belongs to at most one layer, its nearest. Layers no nearer than `d` are dropped
+/// first; bits that a layer nearer than `z` holds add nothing; bits at a depth some layer
+/// already has join it, and leave the farther layers (a layer left empty goes). When the
+/// layers up to some depth together hold all 64 sub-pixels, the pixel is covered at that
+/// depth: it is returned and the layers from there on are dropped. Nothing is merged, so the
+/// result is the same as keeping each of the 64 sub-pixels' nearest depths (the GPU twin's
+/// representation).
 fn add_layer(
     masks: &mut [u64; LAYERS],
     wz: &mut [f32; LAYERS],
+    spill: &mut Spill,
+    idx: usize,
     bits: u64,
     z: f32,
     d: f32,
 ) -> Option<f32> {
+    if masks[LAYERS - 1] != 0
+        && !spill.is_empty()
+        && let Some(mut ls) = spill.remove(&idx)
+    {
+        // The slow path: all the pixel's layers in one list.
+        let mut all: Vec<(u64, f32)> = masks.iter().copied().zip(wz.iter().copied()).collect();
+        all.append(&mut ls);
+        let keep = all.iter().position(|l| l.1 >= d).unwrap_or(all.len());
+        all.truncate(keep);
+        all.push((0, 0.0));
+        let mut n = keep;
+        let covered = insert_layer(&mut all, &mut n, bits, z);
+        all.truncate(n);
+        masks.fill(0);
+        wz.fill(0.0);
+        for (k, (m, w)) in all.iter().take(LAYERS).enumerate() {
+            masks[k] = *m;
+            wz[k] = *w;
+        }
+        if all.len() > LAYERS {
+            all.drain(..LAYERS);
+            spill.insert(idx, all);
+        }
+        return covered;
+    }
     let mut n = 0;
     while n < LAYERS && masks[n] != 0 && wz[n] < d {
         n += 1;
     }
-    masks[n..].fill(0);
-    wz[n..].fill(0.0);
-    if let Some(k) = (0..n).find(|&k| wz[k] == z) {
-        masks[k] |= bits;
-    } else {
-        if n == LAYERS {
-            masks[LAYERS - 2] |= masks[LAYERS - 1];
-            wz[LAYERS - 2] = wz[LAYERS - 2].max(wz[LAYERS - 1]);
-            n -= 1;
-        }
-        let pos = (0..n).find(|&k| wz[k] > z).unwrap_or(n);
-        for k in (pos..n).rev() {
-            masks[k + 1] = masks[k];
-            wz[k + 1] = wz[k];
-        }
-        masks[pos] = bits;
-        wz[pos] = z;
-        n += 1;
-    }
-    let mut acc = 0u64;
+    let mut ls = [(0u64, 0f32); LAYERS + 1];
     for k in 0..n {
-        acc |= masks[k];
+        ls[k] = (masks[k], wz[k]);
+    }
+    let covered = insert_layer(&mut ls, &mut n, bits, z);
+    for k in 0..LAYERS {
+        (masks[k], wz[k]) = if k < n { ls[k] } else { (0, 0.0) };
+    }
+    if n > LAYERS {
+        spill.insert(idx, vec![ls[LAYERS]]);
+    }
+    covered
+}
+
+/// [`add_layer`]'s work on the first `*n` entries of `ls` (sorted nearest first, all nearer
+/// than the pixel's depth, disjoint masks; `ls` has room for one more): adds `bits` at `z`,
+/// updating `*n`, and returns the pixel's new depth when the layers now cover it.
+fn insert_layer(ls: &mut [(u64, f32)], n: &mut usize, bits: u64, z: f32) -> Option<f32> {
+    let mut pos = 0;
+    let mut nearer = 0u64;
+    while pos < *n && ls[pos].1 < z {
+        nearer |= ls[pos].0;
+        pos += 1;
+    }
+    let bits = bits & !nearer;
+    if bits == 0 {
+        return None;
+    }
+    if pos < *n && ls[pos].1 == z {
+        ls[pos].0 |= bits;
+    } else {
+        ls.copy_within(pos..*n, pos + 1);
+        ls[pos] = (bits, z);
+        *n += 1;
+    }
+    // Farther layers lose these sub-pixels: their nearest depth is now `z`.
+    let mut m = pos + 1;
+    for k in pos + 1..*n {
+        let l = (ls[k].0 & !bits, ls[k].1);
+        if l.0 != 0 {
+            ls[m] = l;
+            m += 1;
+        }
+    }
+    *n = m;
+    let mut acc = nearer;
+    for k in pos..*n {
+        acc |= ls[k].0;
         if acc == u64::MAX {
-            let depth = wz[k];
-            masks[k..].fill(0);
-            wz[k..].fill(0.0);
-            return Some(depth);
+            *n = k;
+            return Some(ls[k].1);
         }
     }
     None
@@ -325,6 +387,8 @@ struct View {
     /// an empty mask is unused, and so are all after it).
     mask: Vec<[u64; LAYERS]>,
     wz: Vec<[f32; LAYERS]>,
+    /// The layers of pixels that need more than [`LAYERS`] (cleared with every render).
+    spill: Spill,
     tile_max: Vec<f32>,
     /// Per tile, the largest farthest depth of the occludee boxes whose pixels reach it this
     /// render (0 where none does): a polygon no nearer than that in every tile it touches
@@ -335,6 +399,22 @@ struct View {
 }
 
 impl View {
+    /// Pixel `idx`'s partial layers, nearest first: the inline ones, then its spilled ones
+    /// (an unused layer has an empty mask, and all after it are unused).
+    fn layers(&self, idx: usize) -> impl Iterator<Item = (u64, f32)> + '_ {
+        let inline = self.mask[idx]
+            .iter()
+            .copied()
+            .zip(self.wz[idx].iter().copied());
+        let spilled = (self.mask[idx][LAYERS - 1] != 0)
+            .then(|| self.spill.get(&idx))
+            .flatten()
+            .into_iter()
+            .flatten()
+            .copied();
+        inline.chain(spilled)
+    }
+
     /// The world direction (not normalised) through the centre of pixel `(i, j)`, `ps` the
     /// pixel size in `u`/`v`.
     fn pixel_direction(&self, ps: f64, i: usize, j: usize) -> DVec3 {
@@ -515,6 +595,7 @@ impl Hemicube {
                         depth: vec![f32::INFINITY; res * h],
                         mask: vec![[0; LAYERS]; res * h],
                         wz: vec![[0.0; LAYERS]; res * h],
+                        spill: Spill::new(),
                         tile_max: vec![f32::INFINITY; (res / TILE) * (h / TILE)],
                         need_z: vec![0.0; (res / TILE) * (h / TILE)],
                         need: [0; 4],
@@ -564,6 +645,7 @@ impl Hemicube {
             }
             // Clear the needed pixels (and their tiles, rounded out to whole tiles).
             let [i0, i1, j0, j1] = v.need;
+            v.spill.clear();
             let (ti0, ti1, tj0, tj1) = (i0 / TILE, i1.div_ceil(TILE), j0 / TILE, j1.div_ceil(TILE));
             for tj in tj0..tj1 {
                 for row in tj * TILE..(tj + 1) * TILE {
@@ -1158,7 +1240,15 @@ impl Hemicube {
                     let new_depth = if cover == u64::MAX {
                         Some(z)
                     } else {
-                        add_layer(&mut view.mask[idx], &mut view.wz[idx], cover, z, d)
+                        add_layer(
+                            &mut view.mask[idx],
+                            &mut view.wz[idx],
+                            &mut view.spill,
+                            idx,
+                            cover,
+                            z,
+                            d,
+                        )
                     };
                     if let Some(nd) = new_depth {
                         view.depth[idx] = nd;
@@ -1208,7 +1298,7 @@ impl Hemicube {
     fn sub_covered(&self, v: &View, idx: usize, r: &Rect, i: usize, j: usize, z: f64) -> bool {
         // The layers are sorted nearest first: those nearer than `z` are a prefix.
         let mut m = 0u64;
-        for (&bits, &wz) in v.mask[idx].iter().zip(&v.wz[idx]) {
+        for (bits, wz) in v.layers(idx) {
             if bits == 0 || (wz as f64).partial_cmp(&z) != Some(std::cmp::Ordering::Less) {
                 break;
             }
@@ -1280,12 +1370,11 @@ impl Hemicube {
                 return None;
             }
             let idx = j * self.res + i;
-            let m = v.mask[idx].iter().fold(0, |a, b| a | b);
-            let wz = v.mask[idx]
-                .iter()
-                .zip(&v.wz[idx])
-                .filter(|(b, _)| **b != 0)
-                .fold(0.0f32, |a, (_, z)| a.max(*z));
+            let m = v.layers(idx).fold(0, |a, (b, _)| a | b);
+            let wz = v
+                .layers(idx)
+                .filter(|(b, _)| *b != 0)
+                .fold(0.0f32, |a, (_, z)| a.max(z));
             return Some((v.depth[idx], m, wz));
         }
         None
@@ -1486,6 +1575,75 @@ mod tests {
             x ^= x << 17;
             (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
         }
+    }
+
+    /// A pixel's layers keep every sub-pixel's own nearest depth however many depths it
+    /// gathers (more than the inline [`LAYERS`] spill, nothing is merged): after each polygon,
+    /// the union of the layers nearer than any depth `t`, and the pixel's depth, are those
+    /// of 64 separate nearest depths. The old merge of the two farthest layers failed this.
+    #[test]
+    fn layers_keep_every_sub_pixels_nearest_depth() {
+        let mut rnd = uniform(0x1a7e5);
+        let mut spilled = 0;
+        for case in 0..400 {
+            let (mut masks, mut wz) = ([0u64; LAYERS], [0f32; LAYERS]);
+            let mut spill = Spill::new();
+            let idx = case % 7;
+            // The model: each sub-pixel's nearest depth, and the pixel's depth.
+            let mut near = [f32::INFINITY; 64];
+            let mut d = f32::INFINITY;
+            // Few bits per polygon and many distinct depths, so that pixels need many layers.
+            let dense = case % 4 == 0;
+            for _ in 0..60 {
+                let z = ((rnd() + 1.0) * 20.0).floor() as f32 + 1.0;
+                let mut bits = 0u64;
+                for _ in 0..if dense { 24 } else { 3 } {
+                    bits |= 1 << (((rnd() + 1.0) * 32.0) as u32).min(63);
+                }
+                if z >= d {
+                    continue;
+                }
+                let got = add_layer(&mut masks, &mut wz, &mut spill, idx, bits, z, d);
+                for (s, n) in near.iter_mut().enumerate() {
+                    if bits >> s & 1 == 1 {
+                        *n = n.min(z);
+                    }
+                }
+                let all = near.iter().fold(0f32, |a, &n| a.max(n));
+                let want = (all < d).then_some(all);
+                assert_eq!(got, want, "case {case}: the pixel's new depth");
+                if let Some(nd) = got {
+                    d = nd;
+                }
+                spilled += usize::from(spill.contains_key(&idx));
+                // The layers, inline then spilled, as `View::layers` reads them.
+                let mut layers: Vec<(u64, f32)> = masks.iter().copied().zip(wz).collect();
+                if masks[LAYERS - 1] != 0 {
+                    layers.extend(spill.get(&idx).into_iter().flatten().copied());
+                }
+                for t in 0..=42 {
+                    let t = t as f32 + 0.5;
+                    if t > d {
+                        break;
+                    }
+                    let mut m = 0u64;
+                    for &(bits, w) in &layers {
+                        if bits == 0 || w >= t {
+                            break;
+                        }
+                        m |= bits;
+                    }
+                    let want = (0..64)
+                        .filter(|&s| near[s] < t)
+                        .fold(0u64, |a, s| a | 1 << s);
+                    assert_eq!(m, want, "case {case}: sub-pixels nearer than {t}");
+                }
+            }
+        }
+        assert!(
+            spilled > 100,
+            "pixels with more than {LAYERS} layers: {spilled}"
+        );
     }
 
     /// A sub-pixel is set only when the exact (curved) test holds all over it, and with

@@ -80,10 +80,12 @@
 //! `l_max` is the largest of `√(u²+v²+1)` at the pixel's corners (the root is convex, so that
 //! is its maximum over the pixel, and `s ≥ 0`): wherever the linear test holds the exact one
 //! does. A sub-pixel passes a linear test everywhere iff its worst corner does, so a set bit
-//! means the whole sub-pixel lies inside `L`'s shrunk silhouette. The pixel keeps up to eight
-//! partial **layers**, nearest first, each a mask with the largest depth of the polygons whose
-//! bits it holds (bits at a layer's exact depth join it; with all eight in use the two farthest
-//! merge into their union at the larger depth, which only loses). When the layers up to some
+//! means the whole sub-pixel lies inside `L`'s shrunk silhouette. The pixel keeps partial
+//! **layers**, nearest first, each a mask with the largest depth of the polygons whose bits it
+//! holds; a sub-pixel belongs only to its nearest layer (bits at a layer's exact depth join it,
+//! bits a nearer layer holds add nothing, and a new layer takes its bits from farther ones).
+//! Eight layers are kept inline and any more spill to a side table, so nothing is ever merged:
+//! each sub-pixel has its own nearest depth, as on the GPU twin. When the layers up to some
 //! depth together hold all 64 bits, every direction of the pixel lies in the shrunk silhouette
 //! of some polygon no deeper than that, and the pixel is covered at it. Seams between leaves
 //! and leaves narrower than a pixel fuse at eight times the resolution; the layers keep a near

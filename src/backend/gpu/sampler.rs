@@ -34,10 +34,10 @@
 //! The passes repeat the CPU's expressions (`f64` where the CPU uses `f64`, its `f32` corner
 //! tests with its table of `√(u²+v²+1)` and margin, its roundings up), so a sub-pixel is
 //! covered only where the CPU's argument ([`crate::sampler`]) covers it. Each sub-pixel keeps
-//! its own nearest depth, where the CPU keeps at most eight partial layers per pixel and merges
-//! the two farthest (which only loses): the GPU hides every box the CPU hides, and more where
-//! pixels gather more than eight depths (from two points of the fine forest's cell at ε 0.05
-//! and 512 px, 3,889 objects against the CPU's 3,789; `examples/sampler_gpu.rs`). A driver
+//! its own nearest depth, as the CPU's layers do (it spills layers past eight instead of
+//! merging them), so both hide the same boxes: from two points of the fine forest's cell at
+//! ε 0.05 and 512 px, 3,889 objects each with no disagreement (`examples/sampler_gpu.rs`;
+//! before the CPU stopped merging, it hid 3,789). A driver
 //! rounding an `f64` operation differently (a fused multiply-add) moves a decision only where
 //! a test is within a rounding error of a margin 10⁷ times larger. The GPU leaves out polygons
 //! of more than eight vertices and textured card triangles, which only uncovers pixels.
