@@ -958,6 +958,12 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 "culler      {}: hid {:.1} objects per cell ({:.1} only it), {:.1} ms per cell{points}",
                 c.name, c.hidden, c.only, c.ms
             );
+            if let Some(why) = &c.cpu_fallback {
+                eprintln!(
+                    "            some renders ran on the CPU's hemicube (same answers, slower): \
+                     the device could not make a GPU sampler at {why}"
+                );
+            }
             for (k, l) in c.levels.iter().enumerate() {
                 let probe = if l.probe_only > 0.0 {
                     format!(

@@ -20,7 +20,9 @@ use umbrasweep::backend::RasterBackend;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::backend::gpu::GpuBackend;
 use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene, SamplerFill};
-use umbrasweep::bake::{BakeSettings, CullState, Culler, Prepared, SamplingCuller, SweepChoice};
+use umbrasweep::bake::{
+    BakeSettings, CullState, Culler, CullerWork, Prepared, SamplingCuller, SweepChoice,
+};
 use umbrasweep::geom::DAabb;
 use umbrasweep::sampler::{BoxTest, Hemicube, SampleOccluders};
 use umbrasweep::settings::SamplingSettings;
@@ -476,6 +478,12 @@ fn small_forest() -> (umbrasweep::Scene, umbrasweep::geom::Aabb) {
 /// The sampler alone on [`small_forest`]'s cell with `backend`: what it hid, and the points
 /// it rendered.
 fn sample_forest(backend: &dyn RasterBackend) -> (Vec<bool>, u64) {
+    let (hidden, work) = sample_forest_work(backend);
+    (hidden, work.points)
+}
+
+/// [`sample_forest`] with the sampler's whole account.
+fn sample_forest_work(backend: &dyn RasterBackend) -> (Vec<bool>, CullerWork) {
     let (scene, cell) = small_forest();
     let settings = BakeSettings {
         sampling: SweepChoice::On,
@@ -496,7 +504,7 @@ fn sample_forest(backend: &dyn RasterBackend) -> (Vec<bool>, u64) {
     let work = SamplingCuller::default()
         .cull(&prepared, &cell, backend, &mut state, &mut |_, _, _| {})
         .unwrap();
-    (state.hidden, work.points)
+    (state.hidden, work)
 }
 
 /// `bake --sampling --backend gpu` samples on the device: the same objects hidden as on the
@@ -578,4 +586,36 @@ fn a_scene_too_large_for_the_device_is_sampled_on_the_cpu() {
     assert_eq!(small_points, cpu_points);
     assert!(cpu.contains(&true), "the test needs something hidden");
     assert_eq!(on_small, cpu, "the fallback must be the CPU's sampler");
+}
+
+/// A device whose textures cannot hold the sampler's maps at the level's resolution (8 × 48
+/// pixels and more, against a 256-texel limit): every GPU sampler of the level is replaced by
+/// the CPU's hemicube, the account says why, and the objects hidden are the CPU backend's,
+/// where `GpuSampler::new`'s `PlaneSize` used to end the bake.
+#[test]
+fn a_level_the_device_cannot_render_is_sampled_on_the_cpu() {
+    let limits = wgpu::Limits {
+        max_texture_dimension_2d: 256,
+        ..wgpu::Limits::default()
+    };
+    let features = GpuBackend::REQUIRED_FEATURES | wgpu::Features::SHADER_F64;
+    let Some((device, queue)) = common::engine_device(features, limits) else {
+        return;
+    };
+    let small = GpuBackend::with_device(device, queue).expect("a backend on it");
+    assert!(
+        small.sampler_on_gpu(),
+        "the scene fits: only the maps do not"
+    );
+    let (on_small, work) = sample_forest_work(&small);
+    let why = work.cpu_fallback.expect("the account names the fallback");
+    assert!(
+        why.contains("px") && why.contains("256"),
+        "the reason names the resolution and the limit: {why}"
+    );
+    let (cpu, cpu_work) = sample_forest_work(&CpuBackend::new());
+    assert_eq!(cpu_work.cpu_fallback, None);
+    assert!(cpu.contains(&true), "the test needs something hidden");
+    assert_eq!(on_small, cpu, "the fallback must be the CPU's sampler");
+    assert_eq!(work.points, cpu_work.points);
 }

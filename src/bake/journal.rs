@@ -327,6 +327,9 @@ mod tests {
                         hidden: k,
                         probe_only: k.is_multiple_of(2),
                     }],
+                    cpu_fallback: k
+                        .is_multiple_of(3)
+                        .then(|| "512 px: GPU error: plane size 4096 × 4096".to_string()),
                 },
             }],
             // A subdivided cell's halves travel with it.

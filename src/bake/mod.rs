@@ -612,6 +612,10 @@ pub fn culler_summary(result: &BakeResult) -> Vec<PvsCullerSummary> {
                     .iter()
                     .filter_map(|c| c.cullers.get(k).and_then(|s| s.work.finest_eps))
                     .reduce(f64::min),
+                cpu_fallback: result
+                    .cells
+                    .iter()
+                    .find_map(|c| c.cullers.get(k).and_then(|s| s.work.cpu_fallback.clone())),
                 levels: level_summary(
                     &result
                         .cells

@@ -45,6 +45,11 @@ pub struct CullerWork {
     /// for a cell baked in sub-cells).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub levels: Vec<crate::pvs::SamplingLevel>,
+    /// The sampler on the GPU backend: why some of its renders ran on the CPU's hemicube (the
+    /// device could not make a GPU sampler at a level's resolution; the first reason), `None`
+    /// when none did. The answers are the same either way.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_fallback: Option<String>,
 }
 
 impl CullerWork {
@@ -59,6 +64,9 @@ impl CullerWork {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         };
+        if self.cpu_fallback.is_none() {
+            self.cpu_fallback.clone_from(&o.cpu_fallback);
+        }
     }
 }
 

@@ -245,11 +245,21 @@ impl SamplingCuller {
 }
 
 /// What renders a rectangle: the CPU's hemicube, or its GPU twin (with the GPU backend on a
-/// device with `SHADER_F64`), which gives the same answers or hides more (module docs of
-/// `backend::gpu::sampler`).
+/// device with `SHADER_F64`), which gives the same answers (module docs of
+/// `backend::gpu::sampler`; it leaves out cards and polygons of more than eight vertices, so
+/// with those it can hide less). A level whose GPU sampler the device cannot make renders
+/// on the CPU's ([`falls_back`]).
 enum Renderer<'a> {
     Cpu(Box<Hemicube>),
     Gpu(Box<GpuSampler<'a>>),
+}
+
+/// Whether a failure to make a GPU sampler leaves the device usable, so that the CPU's
+/// hemicube can render in its place: the sampler does not fit (its textures or buffers exceed
+/// the device's limits) or its memory could not be had. A lost or failing device ends the
+/// bake instead.
+fn falls_back(e: &BackendError) -> bool {
+    !e.device_failed() || matches!(e, BackendError::OutOfMemory { .. })
 }
 
 /// Certifying rays per undecided object and sample point at most.
@@ -315,6 +325,9 @@ struct Shared<'a> {
     start: Instant,
     /// The first device failure (the rectangles it hit gave their objects up as visible).
     failed: Mutex<Option<BackendError>>,
+    /// Why some GPU sampler could not be made and the CPU's hemicube rendered instead (the
+    /// first reason; [`CullerWork::cpu_fallback`]).
+    fallback: Mutex<Option<String>>,
 }
 
 impl Culler for SamplingCuller {
@@ -412,6 +425,7 @@ impl Culler for SamplingCuller {
             hid: AtomicU64::new(0),
             start: Instant::now(),
             failed: Mutex::new(None),
+            fallback: Mutex::new(None),
         };
         // Top-level patches: a grid per face whose rectangles' half diagonals are at most eps0.
         let mut top: Vec<(Patch, Arc<Vec<u32>>)> = Vec::new();
@@ -492,16 +506,28 @@ impl Culler for SamplingCuller {
                     &self.gpu_bytes,
                 ),
             };
+            // A GPU sampler the device cannot make at this level's resolution (textures
+            // larger than it takes, or out of memory) is replaced by the CPU's hemicube, which
+            // gives the same answers, and so is every later one of the level.
+            let level_on_cpu = AtomicBool::new(false);
             let new_renderer = || -> Option<Renderer> {
+                let cpu = || Some(Renderer::Cpu(Box::new(Hemicube::new(resolution))));
                 match &gpu_scene {
-                    None => Some(Renderer::Cpu(Box::new(Hemicube::new(resolution)))),
-                    Some((g, scene)) => match GpuSampler::new(g, scene, resolution) {
-                        Ok(gs) => Some(Renderer::Gpu(Box::new(gs))),
-                        Err(e) => {
-                            shared.fail(e);
-                            None
+                    Some((g, scene)) if !level_on_cpu.load(Ordering::Relaxed) => {
+                        match GpuSampler::new(g, scene, resolution) {
+                            Ok(gs) => Some(Renderer::Gpu(Box::new(gs))),
+                            Err(e) if falls_back(&e) => {
+                                level_on_cpu.store(true, Ordering::Relaxed);
+                                shared.fall_back(resolution, &e);
+                                cpu()
+                            }
+                            Err(e) => {
+                                shared.fail(e);
+                                None
+                            }
                         }
-                    },
+                    }
+                    _ => cpu(),
                 }
             };
             let sample = |indices: &[usize]| -> Vec<Option<Arc<Vec<u32>>>> {
@@ -623,11 +649,17 @@ impl Culler for SamplingCuller {
             }
         }
         let finest = f64::from_bits(shared.finest.load(Ordering::Relaxed));
+        let cpu_fallback = shared
+            .fallback
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
         Ok(CullerWork {
             points: shared.points.load(Ordering::Relaxed),
             polygons: shared.polygons.load(Ordering::Relaxed),
             finest_eps: finest.is_finite().then_some(finest),
             levels: curve,
+            cpu_fallback,
             ..CullerWork::default()
         })
     }
@@ -794,6 +826,14 @@ impl Shared<'_> {
     fn mark_visible(&self, list: &[u32]) {
         for &o in list {
             self.done[o as usize].store(true, Ordering::Relaxed);
+        }
+    }
+
+    /// Records the first reason a GPU sampler was replaced by the CPU's hemicube.
+    fn fall_back(&self, resolution: u32, e: &BackendError) {
+        let mut f = self.fallback.lock().unwrap_or_else(|e| e.into_inner());
+        if f.is_none() {
+            *f = Some(format!("{resolution} px: {e}"));
         }
     }
 

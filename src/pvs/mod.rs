@@ -246,6 +246,11 @@ pub struct PvsCullerSummary {
     /// `.pvs` files).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub levels: Vec<PvsLevelSummary>,
+    /// The sampler on the GPU backend: why some cell's renders ran on the CPU's hemicube
+    /// instead (the device could not make a GPU sampler at a level's resolution), the first
+    /// such reason; absent when none did (not kept in `.pvs` files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_fallback: Option<String>,
 }
 
 /// One level of the sampler's mean cost curve: means over the cells of their

@@ -286,11 +286,11 @@ fn insert_layer(ls: &mut [(u64, f32)], n: &mut usize, bits: u64, z: f32) -> Opti
     }
     *n = m;
     let mut acc = nearer;
-    for k in pos..*n {
-        acc |= ls[k].0;
+    for (k, l) in ls[..*n].iter().enumerate().skip(pos) {
+        acc |= l.0;
         if acc == u64::MAX {
             *n = k;
-            return Some(ls[k].1);
+            return Some(l.1);
         }
     }
     None

@@ -337,8 +337,9 @@ impl GpuSamplerScene {
     /// Why the sampler cannot render `occ` on `gpu`'s device, or `None` when it can: the
     /// device lacks `SHADER_F64`, or the polygons' points (24 bytes each in one storage
     /// binding) exceed its largest storage binding. A bake then samples on the CPU, with the
-    /// same answers (the GPU's are equal or tighter, see the module docs), and its summary
-    /// says why.
+    /// same answers (see the module docs), and its summary says why. A device that takes the
+    /// polygons but not one level's textures (`GpuSampler::new` fails) samples that level
+    /// on the CPU (`CullerWork::cpu_fallback` says why).
     pub fn refusal(gpu: &GpuBackend, occ: &SampleOccluders) -> Option<String> {
         if !gpu.sampler_on_gpu() {
             return Some("the device has no SHADER_F64".to_string());
