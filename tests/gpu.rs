@@ -24,7 +24,10 @@ use umbrasweep::backend::{BackendError, RasterBackend};
 use umbrasweep::bake::{BakeResult, BakeSettings, bake};
 use umbrasweep::generate::{self, CityOptions};
 use umbrasweep::geom::{Aabb, DAabb};
-use umbrasweep::plane::{DepthMap, OccluderSet, PlaneFrame, PlaneJob, Reprojection, depth_up};
+use umbrasweep::hdm::Hdm;
+use umbrasweep::plane::{
+    DepthMap, OccluderSet, PlaneFrame, PlaneJob, PlaneResult, RectQuery, Reprojection, depth_up,
+};
 use umbrasweep::scene::Scene;
 
 // ---------------------------------------------------------------------------------------------
@@ -421,6 +424,51 @@ fn small_storage_bindings_split_the_draws_and_keep_the_maps() {
     assert!(stats.draws >= 3 * stats.passes, "{stats:?}");
 }
 
+/// On a device whose storage bindings hold 64 KiB, a plane whose queries (16 bytes each) or
+/// pyramid would not fit (with the submission's others: each is one binding) comes back as
+/// its map; the others are answered on the device, as the pyramid answers.
+#[test]
+fn queries_beyond_a_storage_binding_bring_the_map_back() {
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 64 << 10,
+        ..wgpu::Limits::default()
+    };
+    let Some((device, queue)) = engine_device(GpuBackend::REQUIRED_FEATURES, limits) else {
+        return;
+    };
+    let engine = GpuBackend::with_device(device, queue).expect("a backend on it");
+    // A 64 × 64 map's pyramid (6,826 floats) fits, two together too; a 256 × 256 one does not.
+    let jobs = random_jobs(45, Shape::Quad, 60, &[64, 256]);
+    let few = |w: u32| RectQuery {
+        rect: [0, 0, w / 2, w / 3],
+        depth: 5.0,
+    };
+    let queries: Vec<Option<Vec<RectQuery>>> = jobs
+        .iter()
+        .enumerate()
+        .map(|(k, j)| {
+            let n = if k == 1 { 5000 } else { 100 };
+            Some(vec![few(j.frame.width); n])
+        })
+        .collect();
+    let maps = engine.render(&jobs).unwrap();
+    let results = engine.render_tested(&jobs, &queries).unwrap();
+    let mut answered = 0;
+    for (k, ((r, job), map)) in results.iter().zip(&jobs).zip(&maps).enumerate() {
+        let may_fit = job.frame.width == 64 && k != 1;
+        match r {
+            PlaneResult::Answers(a) => {
+                assert!(may_fit, "job {k} ({}²) was answered", job.frame.width);
+                let want = Hdm::build(map).answer(&few(job.frame.width));
+                assert!(a.iter().all(|&x| x == want), "job {k}");
+                answered += 1;
+            }
+            PlaneResult::Map(m) => assert_eq!(m, map, "job {k}"),
+        }
+    }
+    assert!(answered >= 2, "{answered} jobs answered on the device");
+}
+
 /// A device created without `FLOAT32_BLENDABLE` is refused with a message that says what to
 /// request.
 #[test]
@@ -800,9 +848,8 @@ fn check_halves_and_minimum_depth(b: &GpuBackend) {
     run_and_compare(b, &jobs);
 }
 
-#[test]
-fn slices_match_the_cpu_exactly() {
-    let Some(b) = backend() else { return };
+/// Slice rings and squares on every resolution, half the jobs with occluders too.
+fn slice_jobs() -> Vec<PlaneJob> {
     let mut rng = Pcg64::seed_from_u64(7);
     let mut jobs = Vec::new();
     for (n, res) in [16u32, 32, 64, 128, 256].into_iter().enumerate() {
@@ -823,6 +870,13 @@ fn slices_match_the_cpu_exactly() {
             reproject: Vec::new(),
         });
     }
+    jobs
+}
+
+#[test]
+fn slices_match_the_cpu_exactly() {
+    let Some(b) = backend() else { return };
+    let jobs = slice_jobs();
     let gpu_maps = b.render(&jobs).unwrap();
     for (job, g) in jobs.iter().zip(&gpu_maps) {
         let c = cpu::render_job(job);
@@ -833,6 +887,106 @@ fn slices_match_the_cpu_exactly() {
             compare(job, g, &c);
         }
     }
+}
+
+/// Occludee tests answered on the device (`render_tested`: the maps' pyramids built and the
+/// rectangle queries answered in a compute pass, only the answers read back) give exactly
+/// what `Hdm::test` gives on the same device's maps: random triangles, maps stretched both
+/// ways, slice masks merged on the device, rectangles from one pixel to the whole map, and
+/// Depths equal to pixels' (strictly nearer is hidden), just above them, 0 and +inf. A job
+/// without queries comes back as its map, and the maps of tested jobs are not read back.
+#[test]
+fn occludee_tests_on_the_device_match_the_pyramid() {
+    let Some(b) = backend() else { return };
+    let mut jobs = random_jobs(11, Shape::Triangle, 60, &[16, 64, 256]);
+    jobs.extend(stretched_jobs());
+    jobs.extend(slice_jobs());
+    let maps = b.render(&jobs).unwrap();
+    let mut rng = Pcg64::seed_from_u64(12);
+    let queries: Vec<Option<Vec<RectQuery>>> = jobs
+        .iter()
+        .zip(&maps)
+        .enumerate()
+        .map(|(k, (job, map))| {
+            if k % 7 == 3 {
+                return None;
+            }
+            let (w, h) = (job.frame.width, job.frame.height);
+            let mut q = vec![RectQuery {
+                rect: [0, 0, w - 1, h - 1],
+                depth: f32::INFINITY,
+            }];
+            for _ in 0..400 {
+                let (i0, j0) = (rng.random_range(0..w), rng.random_range(0..h));
+                let span = [1u32, 2, 3, 8, 40, 300][rng.random_range(0..6usize)];
+                let i1 = (i0 + rng.random_range(0..span)).min(w - 1);
+                let j1 = (j0 + rng.random_range(0..span)).min(h - 1);
+                let px =
+                    map.depth[(rng.random_range(j0..=j1) * w + rng.random_range(i0..=i1)) as usize];
+                let depth = match rng.random_range(0..5) {
+                    0 => px,
+                    1 => px.next_up(),
+                    2 => 0.0,
+                    3 => f32::INFINITY,
+                    _ => rng.random_range(0.0f32..20.0),
+                };
+                q.push(RectQuery {
+                    rect: [i0, j0, i1, j1],
+                    depth,
+                });
+            }
+            Some(q)
+        })
+        .collect();
+    let results = b.render_tested(&jobs, &queries).unwrap();
+    let stats = b.last_stats();
+    let mut counts = [0usize; 3];
+    let mut read_back = 0u64;
+    let mut skipped = 0;
+    for (k, ((r, q), map)) in results.iter().zip(&queries).zip(&maps).enumerate() {
+        match (r, q) {
+            (PlaneResult::Map(m), None) => {
+                assert_eq!(m, map, "job {k}: an untested job's map");
+                read_back += (u64::from(m.width) * 4).next_multiple_of(256) * u64::from(m.height);
+            }
+            (PlaneResult::Map(m), Some(_)) => {
+                // A job with nothing for the device to draw (its map made on the CPU).
+                assert_eq!(m, map, "job {k}: a job the device did not draw");
+                assert!(
+                    m.depth.iter().all(|d| *d == 0.0 || d.is_infinite()),
+                    "job {k}"
+                );
+                skipped += 1;
+            }
+            (PlaneResult::Answers(a), Some(q)) => {
+                assert_eq!(a.len(), q.len(), "job {k}");
+                let hdm = Hdm::build(map);
+                for (n, (got, q)) in a.iter().zip(q).enumerate() {
+                    assert_eq!(*got, hdm.answer(q), "job {k} query {n}: {q:?}");
+                    counts[*got as usize] += 1;
+                }
+                read_back += 4 * q.len() as u64;
+            }
+            (r, q) => panic!(
+                "job {k}: {} for {} queries",
+                match r {
+                    PlaneResult::Map(_) => "a map",
+                    PlaneResult::Answers(_) => "answers",
+                },
+                q.as_ref().map_or(0, Vec::len)
+            ),
+        }
+    }
+    eprintln!("[hidden, empty, partial]: {counts:?}; {skipped} jobs not drawn");
+    assert!(skipped < jobs.len() / 4, "{skipped} jobs not drawn");
+    assert!(
+        counts.iter().all(|&c| c > 200),
+        "every answer is exercised: {counts:?}"
+    );
+    assert_eq!(
+        stats.bytes_read_back, read_back,
+        "only the answers of tested jobs come back"
+    );
 }
 
 /// Planes without occluders, planes whose occluders are all rejected, and repeated calls

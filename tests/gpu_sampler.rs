@@ -502,7 +502,13 @@ fn sample_forest_work(backend: &dyn RasterBackend) -> (Vec<bool>, CullerWork) {
         known_visible: None,
     };
     let work = SamplingCuller::default()
-        .cull(&prepared, &cell, backend, &mut state, &mut |_, _, _| {})
+        .cull(
+            &prepared,
+            &cell,
+            backend,
+            &mut state,
+            &mut umbrasweep::bake::NoPlanes,
+        )
         .unwrap();
     (state.hidden, work)
 }

@@ -123,7 +123,7 @@ fn run_sampler(
             cell,
             &CpuBackend::new(),
             &mut state,
-            &mut |_, _, _| {},
+            &mut umbrasweep::bake::NoPlanes,
         )
         .unwrap();
     (state.hidden, work)

@@ -363,6 +363,31 @@ pub trait RasterBackend: Send + Sync {
     /// # Errors
     /// [`BackendError`] when the device fails; never a partial result.
     fn render(&self, jobs: &[plane::PlaneJob]) -> Result<Vec<plane::DepthMap>, BackendError>;
+    /// Renders `jobs` as [`Self::render`] does, with occludee tests: `queries[k]` holds job
+    /// `k`'s rectangle queries (`None`: its map is wanted). A backend answers a job's queries
+    /// on the device where it can ([`plane::PlaneResult::Answers`], in order, each exactly as
+    /// [`crate::hdm::Hdm::test`] answers it on the job's map) and gives back its map
+    /// otherwise. The default gives back every map.
+    ///
+    /// # Errors
+    /// As [`Self::render`].
+    fn render_tested(
+        &self,
+        jobs: &[plane::PlaneJob],
+        queries: &[Option<Vec<plane::RectQuery>>],
+    ) -> Result<Vec<plane::PlaneResult>, BackendError> {
+        debug_assert_eq!(jobs.len(), queries.len());
+        Ok(self
+            .render(jobs)?
+            .into_iter()
+            .map(plane::PlaneResult::Map)
+            .collect())
+    }
+    /// True when [`Self::render_tested`] may answer queries on the device: only then is it
+    /// worth making them (the default, and the CPU backend, give maps back).
+    fn tests_on_device(&self) -> bool {
+        false
+    }
     /// True when [`Self::rsf_charts`] gives charts on the device rather than the CPU's.
     fn rsf_on_device(&self) -> bool {
         false

@@ -19,7 +19,9 @@ mod shard;
 pub use journal::{
     JOURNAL_MAGIC, JOURNAL_VERSION, Journal, JournalError, inputs_hash, journal_path,
 };
-pub use pipeline::{CULLER_NAMES, CullState, Culler, CullerStats, CullerWork, cullers};
+pub use pipeline::{
+    CULLER_NAMES, CullState, Culler, CullerStats, CullerWork, NoPlanes, PlaneSink, cullers,
+};
 pub use planes::{PlaneCuller, SWEEP_TEST_REACH};
 pub use prepare::{
     MIN_CELL_FRACTION, MIN_SPLIT_GAIN, PIECE_LEVELS, PIECE_MIN_TRIANGLES, Prepared,
@@ -303,10 +305,14 @@ pub fn bake_cells(
                 None => prepared.cell(c, backend),
                 Some(f) => {
                     let mut k = 0;
-                    prepared.cell_observed(c, backend, &mut |job, map, hdm| {
-                        f(ci, k, job, map, hdm);
-                        k += 1;
-                    })
+                    prepared.cell_observed(
+                        c,
+                        backend,
+                        &mut |job: &PlaneJob, map: &DepthMap, hdm: &Hdm| {
+                            f(ci, k, job, map, hdm);
+                            k += 1;
+                        },
+                    )
                 }
             }?;
             if let Some(f) = hooks.on_cell {

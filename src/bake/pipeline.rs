@@ -131,8 +131,42 @@ pub trait Culler: Send + Sync {
         cell: &Aabb,
         backend: &dyn RasterBackend,
         state: &mut CullState,
-        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        observe: &mut dyn PlaneSink,
     ) -> Result<CullerWork, BakeError>;
+}
+
+/// What a culler hands its rendered planes to: dumps and reports ([`super::Prepared::cell_observed`]).
+/// Any `FnMut(&PlaneJob, &DepthMap, &Hdm)` is one that wants every plane's map; [`NoPlanes`]
+/// wants none, which lets a backend answer the occludee tests of separate planes on its
+/// device and keep their maps there ([`RasterBackend::render_tested`]).
+pub trait PlaneSink {
+    /// True when every rendered plane's Depth Map must come back to [`Self::plane`].
+    fn wants_maps(&self) -> bool;
+    /// A rendered plane: its job, its Depth Map and its Hierarchical Depth Map, before its
+    /// occludees are tested.
+    fn plane(&mut self, job: &PlaneJob, map: &DepthMap, hdm: &Hdm);
+}
+
+impl<F: FnMut(&PlaneJob, &DepthMap, &Hdm)> PlaneSink for F {
+    fn wants_maps(&self) -> bool {
+        true
+    }
+
+    fn plane(&mut self, job: &PlaneJob, map: &DepthMap, hdm: &Hdm) {
+        self(job, map, hdm);
+    }
+}
+
+/// A [`PlaneSink`] that wants no plane (a plain bake).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoPlanes;
+
+impl PlaneSink for NoPlanes {
+    fn wants_maps(&self) -> bool {
+        false
+    }
+
+    fn plane(&mut self, _: &PlaneJob, _: &DepthMap, _: &Hdm) {}
 }
 
 /// The cullers of a bake, in order: ray space factorization where `rsf`; the occlusion sweep
@@ -215,7 +249,7 @@ pub(super) fn run(
     backend: &dyn RasterBackend,
     known_visible: Option<&[bool]>,
     inherited: Option<&[bool]>,
-    observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+    observe: &mut dyn PlaneSink,
     account: &mut CellAccount,
 ) -> Result<Vec<bool>, BakeError> {
     let n = prepared.scene.objects.len();

@@ -13,20 +13,35 @@
 //! standard Projection, exact extremes) or satisfying Property 2 (the improved Projections,
 //! [`crate::project::occludee::improved_rects`]) holds a Depth strictly below the box's nearest
 //! Depth rounded down. Objects touching the cell are always visible.
+//!
+//! # Tests on the device
+//! On a backend that answers occludee tests itself ([`RasterBackend::tests_on_device`]), when
+//! nothing wants the maps ([`super::NoPlanes`]), each separate plane's walk is run twice: first
+//! over every node, object and piece not yet decided, recording each pixel rectangle and Depth
+//! it tests (`Prepared::record_queries`, every test answered "partly covered" so that a
+//! box's later tests are recorded too), then, after the backend has answered them all with
+//! its own pyramid of the map ([`RasterBackend::render_tested`]), for real, reading the
+//! answers. The real walk asks only recorded tests (it skips more as it marks, never less),
+//! and each answer is the one [`Hdm::test`] gives on that map, so the result is the walk's
+//! on the CPU; a test it did not record would stay open (a debug assertion catches it).
 
 use super::BakeError;
-use super::pipeline::{CullState, Culler, CullerWork};
+use super::pipeline::{CullState, Culler, CullerWork, PlaneSink};
 use super::prepare::Prepared;
 use crate::backend::RasterBackend;
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
-use crate::plane::{DepthMap, OpenSides, PlaneFrame, PlaneJob, Reprojection, depth_down};
+use crate::plane::{
+    DepthMap, OpenSides, PlaneFrame, PlaneJob, PlaneResult, RectQuery, Reprojection, depth_down,
+};
 use crate::project::occludee::{improved_rects, pixel_rect, span, standard_rect};
 use crate::project::planes::{
     DirectionPlan, LeaveOut, PlaneSettings, SweepInputs, plan_directions, plane_job,
 };
 use obvhs::bvh2::Bvh2;
 use rayon::prelude::*;
+use std::cell::RefCell;
+use std::collections::HashMap;
 use std::sync::Arc;
 
 /// Extended projections on a cell's planes: separate planes, or the occlusion sweep.
@@ -50,7 +65,7 @@ impl Culler for PlaneCuller {
         cell: &Aabb,
         backend: &dyn RasterBackend,
         state: &mut CullState,
-        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        observe: &mut dyn PlaneSink,
     ) -> Result<CullerWork, BakeError> {
         prepared.cull_planes(cell, backend, state, observe, self.sweep)
     }
@@ -73,7 +88,7 @@ impl Prepared<'_> {
         cell: &Aabb,
         backend: &dyn RasterBackend,
         state: &mut CullState,
-        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        observe: &mut dyn PlaneSink,
         sweep: bool,
     ) -> Result<CullerWork, BakeError> {
         let known_visible = state.known_visible;
@@ -111,13 +126,39 @@ impl Prepared<'_> {
             if planned.is_empty() {
                 continue;
             }
-            let rendered = render_round(&round, backend, planned)?;
+            // Separate planes' tests can be answered on the device when no map is wanted
+            // here: every test the traversal may ask, from what is known now.
+            let queries: Vec<Option<Vec<RectQuery>>> =
+                if backend.tests_on_device() && !observe.wants_maps() {
+                    planned
+                        .par_iter()
+                        .map(|p| {
+                            (!plans[p.dir].is_sweep()).then(|| {
+                                let after = round.range(p.dir, false);
+                                self.record_queries(
+                                    &p.job,
+                                    &cell64,
+                                    after,
+                                    &hidden,
+                                    &node_done,
+                                    &piece_hidden,
+                                    &skip_test,
+                                )
+                            })
+                        })
+                        .collect()
+                } else {
+                    vec![None; planned.len()]
+                };
+            let rendered = render_round(&round, backend, planned, queries)?;
             for r in &rendered {
-                observe(&r.job, &r.map, &r.hdm);
-                let after = round.test_range(r);
+                if let Tested::Map { map, hdm } = &r.tested {
+                    observe.plane(&r.job, map, hdm);
+                }
+                let after = round.range(r.dir, r.ends);
                 self.traverse(
                     &r.job,
-                    &r.hdm,
+                    &r.tested.tests(),
                     &cell64,
                     after,
                     &mut hidden,
@@ -168,7 +209,7 @@ impl Prepared<'_> {
                     // Occluders the previous plane already proves hidden add nothing.
                     hidden: &|b| {
                         dir.prev.as_ref().is_some_and(|(f, h)| {
-                            self.test_box(f, h, b, round.cell, (0.0, f64::INFINITY))
+                            self.test_box(f, &Tests::Hdm(h), b, round.cell, (0.0, f64::INFINITY))
                                 == Coverage::Hidden
                         })
                     },
@@ -266,7 +307,7 @@ impl Prepared<'_> {
     fn traverse(
         &self,
         job: &PlaneJob,
-        hdm: &Hdm,
+        tests: &Tests,
         cell: &DAabb,
         after: (f64, f64),
         hidden: &mut [bool],
@@ -285,7 +326,7 @@ impl Prepared<'_> {
                 min: glam::Vec3::from(node.aabb.min).as_dvec3(),
                 max: glam::Vec3::from(node.aabb.max).as_dvec3(),
             };
-            match self.test_box(&job.frame, hdm, &b, cell, after) {
+            match self.test_box(&job.frame, tests, &b, cell, after) {
                 Coverage::Hidden => {
                     mark_hidden(bvh, ni, hidden, node_hidden);
                     continue;
@@ -300,7 +341,7 @@ impl Prepared<'_> {
                         continue;
                     }
                     let ob = self.scene.objects[o].bounds.to_f64();
-                    match self.test_box(&job.frame, hdm, &ob, cell, after) {
+                    match self.test_box(&job.frame, tests, &ob, cell, after) {
                         Coverage::Hidden => hidden[o] = true,
                         Coverage::Empty => {}
                         Coverage::Partial => {
@@ -315,7 +356,7 @@ impl Prepared<'_> {
                                 if !piece_hidden[pi] {
                                     piece_hidden[pi] = self.test_box(
                                         &job.frame,
-                                        hdm,
+                                        tests,
                                         &self.piece_boxes[pi],
                                         cell,
                                         after,
@@ -347,6 +388,59 @@ impl Prepared<'_> {
         }
     }
 
+    /// Every rectangle query [`Self::traverse`] may ask on the plane of `job` from this state
+    /// on: those of every node not done, every object of theirs still to test and every piece
+    /// of those not yet hidden — what the traversal reaches is a subset, as it only skips more
+    /// while it marks. For a backend to answer on its device ([`RasterBackend::render_tested`]).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the traversal's own inputs, read-only here"
+    )]
+    fn record_queries(
+        &self,
+        job: &PlaneJob,
+        cell: &DAabb,
+        after: (f64, f64),
+        hidden: &[bool],
+        node_done: &[bool],
+        piece_hidden: &[bool],
+        skip_test: &(dyn Fn(usize, &[bool]) -> bool + Sync),
+    ) -> Vec<RectQuery> {
+        let queries = RefCell::new(Queries::default());
+        let tests = Tests::Record(&queries);
+        let Some(bvh) = &self.bvh else {
+            return Vec::new();
+        };
+        for (ni, node) in bvh.nodes.iter().enumerate() {
+            if node_done[ni] {
+                continue;
+            }
+            let b = DAabb {
+                min: glam::Vec3::from(node.aabb.min).as_dvec3(),
+                max: glam::Vec3::from(node.aabb.max).as_dvec3(),
+            };
+            self.test_box(&job.frame, &tests, &b, cell, after);
+            if !node.is_leaf() {
+                continue;
+            }
+            for k in 0..node.prim_count {
+                let o = bvh.primitive_indices[(node.first_index + k) as usize] as usize;
+                if skip_test(o, hidden) {
+                    continue;
+                }
+                let ob = self.scene.objects[o].bounds.to_f64();
+                self.test_box(&job.frame, &tests, &ob, cell, after);
+                for pi in self.pieces[o].clone() {
+                    let pi = pi as usize;
+                    if !piece_hidden[pi] {
+                        self.test_box(&job.frame, &tests, &self.piece_boxes[pi], cell, after);
+                    }
+                }
+            }
+        }
+        queries.into_inner().list
+    }
+
     /// The occlusion test of one box on one plane: `Hidden`; `Empty` when nothing inside the
     /// box can be hidden on this plane (it lies on the cell's side of the face, its Projection
     /// misses the plane's rectangle, or covers no occluded pixel of it — a child's Projection
@@ -359,7 +453,7 @@ impl Prepared<'_> {
     fn test_box(
         &self,
         frame: &PlaneFrame,
-        hdm: &Hdm,
+        tests: &Tests,
         b: &DAabb,
         cell: &DAabb,
         range: (f64, f64),
@@ -386,7 +480,7 @@ impl Prepared<'_> {
         let depth = depth_down(sp.depth);
         let (lo, hi) = standard_rect(frame, b);
         let standard = match pixel_rect(frame, lo, hi) {
-            Some([i0, j0, i1, j1]) => hdm.test(i0, j0, i1, j1, depth),
+            Some([i0, j0, i1, j1]) => tests.test(i0, j0, i1, j1, depth),
             None => {
                 // Partly outside the plane: only the part inside can hold a descendant.
                 let (clo, chi) = (lo.max(frame.rect_min), hi.min(frame.rect_max));
@@ -395,7 +489,7 @@ impl Prepared<'_> {
                 }
                 match pixel_rect(frame, clo, chi) {
                     Some([i0, j0, i1, j1])
-                        if hdm.test(i0, j0, i1, j1, f32::INFINITY) == Coverage::Empty =>
+                        if tests.test(i0, j0, i1, j1, f32::INFINITY) == Coverage::Empty =>
                     {
                         Coverage::Empty
                     }
@@ -408,8 +502,9 @@ impl Prepared<'_> {
         }
         // Either improved Projection, covered, proves the box hidden (each is sound alone).
         let hidden = improved_rects(frame, b).any(|(lo, hi)| {
-            pixel_rect(frame, lo, hi)
-                .is_some_and(|[i0, j0, i1, j1]| hdm.test(i0, j0, i1, j1, depth) == Coverage::Hidden)
+            pixel_rect(frame, lo, hi).is_some_and(|[i0, j0, i1, j1]| {
+                tests.test(i0, j0, i1, j1, depth) == Coverage::Hidden
+            })
         });
         if hidden {
             Coverage::Hidden
@@ -448,14 +543,15 @@ struct Round<'a> {
 }
 
 impl Round<'_> {
-    /// The distances beyond the face of the boxes plane `r` tests (see `test_box`'s `range`).
-    /// In a sweep, boxes far behind this plane wait for later planes (the last plane, or one
-    /// whose umbra covers its whole frame and so ends the direction, tests everything): the
-    /// umbra is rarely finished this far in front of them, and testing every box on every
-    /// plane is most of a forest's bake time.
-    fn test_range(&self, r: &RenderedPlane) -> (f64, f64) {
-        let plan = &self.plans[r.dir];
-        let last = self.k + 1 == plan.distances.len() || r.ends;
+    /// The distances beyond the face of the boxes this round's plane of direction `dir` tests
+    /// (see `test_box`'s `range`; `ends`: the plane ends its sweep). In a sweep, boxes far
+    /// behind this plane wait for later planes (the last plane, or one whose umbra covers its
+    /// whole frame and so ends the direction, tests everything): the umbra is rarely finished
+    /// this far in front of them, and testing every box on every plane is most of a forest's
+    /// bake time.
+    fn range(&self, dir: usize, ends: bool) -> (f64, f64) {
+        let plan = &self.plans[dir];
+        let last = self.k + 1 == plan.distances.len() || ends;
         if plan.is_sweep() && !last {
             (
                 plan.slab_start(self.k),
@@ -487,15 +583,77 @@ struct PlannedPlane {
     relevant: Rect,
 }
 
-/// A rendered plane: [`PlannedPlane`] with its Depth Map, its Hierarchical Depth Map and
+/// A rendered plane: [`PlannedPlane`] with what its occludees are tested against and
 /// whether it ends its direction's sweep ([`ends_sweep`]).
 struct RenderedPlane {
     dir: usize,
     job: PlaneJob,
     relevant: Rect,
-    map: DepthMap,
-    hdm: Hdm,
+    tested: Tested,
     ends: bool,
+}
+
+/// What a rendered plane's occludees are tested against.
+enum Tested {
+    /// Its Depth Map and Hierarchical Depth Map, on the CPU.
+    Map { map: DepthMap, hdm: Hdm },
+    /// The device's answers to its queries ([`Prepared::record_queries`]), by query.
+    Answers(HashMap<QueryKey, Coverage>),
+}
+
+impl Tested {
+    fn tests(&self) -> Tests<'_> {
+        match self {
+            Tested::Map { hdm, .. } => Tests::Hdm(hdm),
+            Tested::Answers(a) => Tests::Answers(a),
+        }
+    }
+}
+
+/// A rectangle query's key: its pixels and its Depth's bits.
+type QueryKey = ([u32; 4], u32);
+
+/// The queries a plane's traversal may ask, each once, in the order first asked.
+#[derive(Default)]
+struct Queries {
+    index: HashMap<QueryKey, usize>,
+    list: Vec<RectQuery>,
+}
+
+/// Where [`Prepared::test_box`] tests a plane's pixel rectangles.
+enum Tests<'a> {
+    /// The plane's Hierarchical Depth Map.
+    Hdm(&'a Hdm),
+    /// The device's answers ([`RasterBackend::render_tested`]).
+    Answers(&'a HashMap<QueryKey, Coverage>),
+    /// Recording every query asked, each answered `Partial` so that a box's every later
+    /// query is asked too ([`Prepared::record_queries`]).
+    Record(&'a RefCell<Queries>),
+}
+
+impl Tests<'_> {
+    /// The pixels `[i0, i1] × [j0, j1]` against an occludee Depth (as [`Hdm::test`]).
+    fn test(&self, i0: u32, j0: u32, i1: u32, j1: u32, depth: f32) -> Coverage {
+        let key = ([i0, j0, i1, j1], depth.to_bits());
+        match self {
+            Tests::Hdm(h) => h.test(i0, j0, i1, j1, depth),
+            Tests::Answers(a) => {
+                let found = a.get(&key).copied();
+                debug_assert!(found.is_some(), "query {key:?} was not recorded");
+                // (Unrecorded, it would stay open: never a cull.)
+                found.unwrap_or(Coverage::Partial)
+            }
+            Tests::Record(r) => {
+                let mut q = r.borrow_mut();
+                if !q.index.contains_key(&key) {
+                    let n = q.list.len();
+                    q.index.insert(key, n);
+                    q.list.push(RectQuery { rect: key.0, depth });
+                }
+                Coverage::Partial
+            }
+        }
+    }
 }
 
 /// A rendered sweep plane kept for later reprojections.
@@ -511,8 +669,9 @@ struct SweepPlane {
     open: OpenSides,
 }
 
-/// Renders a round's planes on the backend (one call for all) and builds their Hierarchical
-/// Depth Maps in parallel.
+/// Renders a round's planes on the backend (one call for all), with `queries` (per plane,
+/// or `None`) for the backend to answer on its device where it can, and builds the
+/// Hierarchical Depth Maps of the planes whose maps came back, in parallel.
 ///
 /// # Errors
 /// The backend's failure.
@@ -520,22 +679,46 @@ fn render_round(
     round: &Round,
     backend: &dyn RasterBackend,
     planned: Vec<PlannedPlane>,
+    queries: Vec<Option<Vec<RectQuery>>>,
 ) -> Result<Vec<RenderedPlane>, BakeError> {
     let (jobs, meta): (Vec<PlaneJob>, Vec<(usize, Rect)>) = planned
         .into_iter()
         .map(|p| (p.job, (p.dir, p.relevant)))
         .unzip();
-    let maps = backend.render(&jobs)?;
-    let hdms: Vec<Hdm> = maps.par_iter().map(Hdm::build).collect();
-    Ok((jobs.into_iter().zip(meta).zip(maps).zip(hdms))
-        .map(|(((job, (dir, relevant)), map), hdm)| {
-            let ends = ends_sweep(&round.plans[dir], round.k, &job, &map, relevant);
+    let results = backend.render_tested(&jobs, &queries)?;
+    let tested: Vec<Tested> = results
+        .into_par_iter()
+        .zip(queries)
+        .map(|(r, q)| match r {
+            PlaneResult::Map(map) => {
+                let hdm = Hdm::build(&map);
+                Tested::Map { map, hdm }
+            }
+            PlaneResult::Answers(a) => {
+                let q = q.expect("answers come only for queries");
+                debug_assert_eq!(a.len(), q.len());
+                Tested::Answers(
+                    q.iter()
+                        .map(|q| (q.rect, q.depth.to_bits()))
+                        .zip(a)
+                        .collect(),
+                )
+            }
+        })
+        .collect();
+    Ok((jobs.into_iter().zip(meta).zip(tested))
+        .map(|((job, (dir, relevant)), tested)| {
+            let ends = match &tested {
+                Tested::Map { map, .. } => {
+                    ends_sweep(&round.plans[dir], round.k, &job, map, relevant)
+                }
+                Tested::Answers(_) => false,
+            };
             RenderedPlane {
                 dir,
                 job,
                 relevant,
-                map,
-                hdm,
+                tested,
                 ends,
             }
         })
@@ -549,12 +732,15 @@ fn carry_round(round: &Round, dirs: &mut [DirectionState], rendered: Vec<Rendere
         if !round.plans[r.dir].is_sweep() {
             continue;
         }
+        let Tested::Map { map, hdm } = r.tested else {
+            unreachable!("sweep planes come back as maps");
+        };
         let dir = &mut dirs[r.dir];
         dir.finished = r.ends;
-        let map = Arc::new(r.map);
+        let map = Arc::new(map);
         let umbra = crate::sweep::umbra_bounds(&r.job.frame, &map);
         let open = crate::sweep::open_sides(&r.job.frame, r.relevant);
-        dir.prev = Some((r.job.frame.clone(), r.hdm));
+        dir.prev = Some((r.job.frame.clone(), hdm));
         push_history(
             &mut dir.history,
             SweepPlane {

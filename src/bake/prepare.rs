@@ -3,12 +3,10 @@
 //! choice of the occlusion sweep ([`choose_sweep`]), and the per-cell driver that runs the
 //! culler pipeline on each cell or on each of its sub-cells.
 
-use super::pipeline::{self, CellAccount, Culler};
+use super::pipeline::{self, CellAccount, Culler, PlaneSink};
 use super::{BakeError, BakeSettings, CellResult, SweepChoice};
 use crate::backend::RasterBackend;
 use crate::geom::{Aabb, DAabb};
-use crate::hdm::Hdm;
-use crate::plane::{DepthMap, PlaneJob};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::Sliceable;
 use crate::scene::Scene;
@@ -381,7 +379,7 @@ impl<'a> Prepared<'a> {
     /// # Errors
     /// The backend's failure.
     pub fn cell(&self, cell: &Aabb, backend: &dyn RasterBackend) -> Result<CellResult, BakeError> {
-        self.cell_observed(cell, backend, &mut |_, _, _| {})
+        self.cell_observed(cell, backend, &mut super::NoPlanes)
     }
 
     /// Bakes one cell, handing every rendered plane to `observe` (its job, its Depth Map and
@@ -395,7 +393,7 @@ impl<'a> Prepared<'a> {
         &self,
         cell: &Aabb,
         backend: &dyn RasterBackend,
-        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        observe: &mut dyn PlaneSink,
     ) -> Result<CellResult, BakeError> {
         let min_size = self
             .settings
@@ -416,7 +414,7 @@ impl<'a> Prepared<'a> {
         inherited: Option<(&[bool], u64)>,
         min_size: f64,
         backend: &dyn RasterBackend,
-        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        observe: &mut dyn PlaneSink,
     ) -> Result<CellResult, BakeError> {
         let (mut result, hidden) =
             self.cell_once(cell, inherited.map(|h| h.0), backend, observe)?;
@@ -452,7 +450,7 @@ impl<'a> Prepared<'a> {
         cell: &Aabb,
         inherited: Option<&[bool]>,
         backend: &dyn RasterBackend,
-        observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        observe: &mut dyn PlaneSink,
     ) -> Result<(CellResult, Vec<bool>), BakeError> {
         let start = Instant::now();
         let n = self.scene.objects.len();

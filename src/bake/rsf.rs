@@ -24,12 +24,10 @@
 //! out.
 
 use super::BakeError;
-use super::pipeline::{CullState, Culler, CullerWork};
+use super::pipeline::{CullState, Culler, CullerWork, PlaneSink};
 use super::prepare::Prepared;
 use crate::backend::{BackendError, RasterBackend, RsfCharts, RsfOccluder};
 use crate::geom::{Aabb, DAabb};
-use crate::hdm::Hdm;
-use crate::plane::{DepthMap, PlaneJob};
 use crate::project::occluders::{Occluders, PartKind};
 use crate::project::planes::shrink_bent_polygon;
 use crate::rsf::RayCharts;
@@ -58,7 +56,7 @@ impl Culler for RsfCuller {
         cell: &Aabb,
         backend: &dyn RasterBackend,
         state: &mut CullState,
-        _observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        _observe: &mut dyn PlaneSink,
     ) -> Result<CullerWork, BakeError> {
         let settings = &prepared.settings;
         let mut charts =

@@ -51,14 +51,12 @@
 //! objects earlier cullers hid (they are real geometry: blocking rays with them is sound).
 
 use super::BakeError;
-use super::pipeline::{CullState, Culler, CullerWork};
+use super::pipeline::{CullState, Culler, CullerWork, PlaneSink};
 use super::prepare::Prepared;
 use crate::backend::gpu::GpuBackend;
 use crate::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
 use crate::backend::{BackendError, RasterBackend};
 use crate::geom::{Aabb, DAabb};
-use crate::hdm::Hdm;
-use crate::plane::{DepthMap, PlaneJob};
 use crate::pvs::SamplingLevel;
 use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
 use crate::settings::SamplingSettings;
@@ -341,7 +339,7 @@ impl Culler for SamplingCuller {
         cell: &Aabb,
         backend: &dyn RasterBackend,
         state: &mut CullState,
-        _observe: &mut dyn FnMut(&PlaneJob, &DepthMap, &Hdm),
+        _observe: &mut dyn PlaneSink,
     ) -> Result<CullerWork, BakeError> {
         let Some(data) = prepared.sampler.as_ref() else {
             return Ok(CullerWork::default());

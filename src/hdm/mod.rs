@@ -8,7 +8,8 @@
 //! spans at most 2×2 texels and descends only into texels whose maximum is not already below
 //! `d`.
 
-use crate::plane::DepthMap;
+pub use crate::plane::Coverage;
+use crate::plane::{DepthMap, RectQuery};
 
 /// Max and min pyramids of one Depth Map (width and height powers of two).
 #[derive(Clone, Debug)]
@@ -23,17 +24,6 @@ pub struct Hdm {
     pub max: Vec<Vec<f32>>,
     /// Like `max`, but each texel holds the smallest Depth of its pixels.
     pub min: Vec<Vec<f32>>,
-}
-
-/// What the pyramid says about a rectangle of pixels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Coverage {
-    /// Every pixel holds a Depth strictly below the occludee's: hidden.
-    Hidden,
-    /// No pixel is covered at all: nothing below this box can be hidden on this plane.
-    Empty,
-    /// Some pixels are covered, not all with a closer Depth.
-    Partial,
 }
 
 impl Hdm {
@@ -83,6 +73,12 @@ impl Hdm {
     /// The texels `(columns, rows)` of level `k`.
     pub fn level_size(&self, k: usize) -> (u32, u32) {
         ((self.width >> k).max(1), (self.height >> k).max(1))
+    }
+
+    /// Answers a [`RectQuery`] ([`Hdm::test`]).
+    pub fn answer(&self, q: &RectQuery) -> Coverage {
+        let [i0, j0, i1, j1] = q.rect;
+        self.test(i0, j0, i1, j1, q.depth)
     }
 
     /// Tests the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the map) against an

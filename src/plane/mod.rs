@@ -236,6 +236,42 @@ impl DepthMap {
     }
 }
 
+/// What a Depth Map says about a rectangle of pixels for an occludee Depth (the answer of
+/// [`crate::hdm::Hdm::test`] and of a [`RectQuery`] answered on the device).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coverage {
+    /// Every pixel holds a Depth strictly below the occludee's: hidden.
+    Hidden,
+    /// No pixel is covered at all: nothing below this box can be hidden on this plane.
+    Empty,
+    /// Some pixels are covered, not all with a closer Depth.
+    Partial,
+}
+
+/// An occludee test on a plane: the pixels `[i0, i1] × [j0, j1]` (`rect`, inclusive, inside
+/// the map) against the Depth `depth`, answered as [`crate::hdm::Hdm::test`] answers it —
+/// `Hidden` exactly when every pixel holds a Depth strictly below `depth`; `Empty` when the
+/// pyramid's texels at the finest level where the rectangle spans at most 2 × 2 of them are
+/// all uncovered (they may reach past the rectangle); `Partial` otherwise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RectQuery {
+    /// `[i0, j0, i1, j1]`.
+    pub rect: [u32; 4],
+    /// The occludee's Depth (rounded down by the caller).
+    pub depth: f32,
+}
+
+/// A rendered plane as a backend gives it back from
+/// [`RasterBackend::render_tested`](crate::backend::RasterBackend::render_tested): its Depth
+/// Map, or only the answers to its queries (in their order) when the device answered them.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PlaneResult {
+    /// The Depth Map (the caller answers the queries itself).
+    Map(DepthMap),
+    /// The answers to the plane's queries, in order.
+    Answers(Vec<Coverage>),
+}
+
 /// Rounds an `f64` Depth up to the nearest `f32` at or above it (conservative for occluders).
 pub fn depth_up(d: f64) -> f32 {
     crate::geom::f32_up(d)

@@ -218,6 +218,7 @@
 //! [`Reprojection::mask`]: crate::plane::Reprojection::mask
 
 mod device;
+mod hdm;
 mod pipelines;
 mod prepare;
 mod rsf;
@@ -229,7 +230,7 @@ mod wave;
 pub use device::hardware_adapter_available;
 
 use super::{BackendError, RasterBackend};
-use crate::plane::{DepthMap, PlaneJob};
+use crate::plane::{DepthMap, PlaneJob, PlaneResult, RectQuery};
 use device::{DeviceLimits, Failure};
 use pipelines::Pipelines;
 use prepare::{Prepared, merge_mask, prepare};
@@ -297,6 +298,10 @@ pub const SHADERS: &[(&str, &str)] = &[
             include_str!("../../../shaders/sampler_fill.wgsl")
         ),
     ),
+    (
+        "shaders/hdm.wgsl",
+        include_str!("../../../shaders/hdm.wgsl"),
+    ),
     // The render fill's depths, validated within `shaders/sampler.wgsl` (this is that module).
     (
         "shaders/sampler_blend.wgsl",
@@ -316,6 +321,7 @@ const VIEWS_WGSL: &str = SHADERS[3].1;
 const SAMPLER_WGSL: &str = SHADERS[5].1;
 const SAMPLER_SETUP_WGSL: &str = SHADERS[6].1;
 const SAMPLER_FILL_WGSL: &str = SHADERS[8].1;
+const HDM_WGSL: &str = SHADERS[9].1;
 
 /// How the GPU backend gets each occluder's Projection (its 8 views intersected), the pixels
 /// it covers. Both keep the contract of [`crate::plane`] with the same coverage up to
@@ -398,6 +404,8 @@ pub struct GpuBackend {
     rsf_pool: Mutex<Vec<rsf::RsfBuffers>>,
     /// The views pass and counted draw, where the device has `SHADER_F64`.
     view_pipelines: Option<pipelines::ViewPipelines>,
+    /// The pyramid and occludee tests of the planes whose tests the device answers.
+    hdm_pipelines: hdm::HdmPipelines,
     /// How occluders' Projections are made ([`GpuBackend::set_projection`]).
     projection: GpuProjection,
     /// Reprojection sources' summed-area tables kept on the device across calls.
@@ -581,6 +589,9 @@ impl GpuBackend {
     ) -> Result<Self, BackendError> {
         let limits = DeviceLimits::check(device.features(), &device.limits())?;
         let pipelines = Pipelines::new(&device)?;
+        let scope = device::ErrorScopes::push(&device);
+        let hdm_pipelines = hdm::HdmPipelines::new(&device);
+        scope.check()?;
         let timestamp_period = device
             .features()
             .contains(wgpu::Features::TIMESTAMP_QUERY)
@@ -611,6 +622,7 @@ impl GpuBackend {
             rsf_wanted: false,
             rsf_pool: Mutex::default(),
             view_pipelines,
+            hdm_pipelines,
             projection: GpuProjection::default(),
             tables: tables::TableCache::default(),
         })
@@ -763,7 +775,7 @@ impl GpuBackend {
 fn skip_the_gpu(
     jobs: &[PlaneJob],
     prepared: &[Prepared],
-    out: &mut [Option<DepthMap>],
+    out: &mut [Option<PlaneResult>],
 ) -> Vec<usize> {
     let mut gpu_jobs = Vec::new();
     for (j, p) in prepared.iter().enumerate() {
@@ -772,7 +784,7 @@ fn skip_the_gpu(
             if let Some(mask) = &p.mask {
                 merge_mask(&mut map, mask);
             }
-            out[j] = Some(map);
+            out[j] = Some(PlaneResult::Map(map));
         } else {
             gpu_jobs.push(j);
         }
@@ -875,6 +887,31 @@ impl RasterBackend for GpuBackend {
     /// GPU their maps, and renders the others in waves bounded in memory, with a resource pool
     /// of its own (other threads' calls run meanwhile with theirs).
     fn render(&self, jobs: &[PlaneJob]) -> Result<Vec<DepthMap>, BackendError> {
+        let none = vec![None; jobs.len()];
+        Ok(self
+            .render_tested(jobs, &none)?
+            .into_iter()
+            .map(|r| match r {
+                PlaneResult::Map(m) => m,
+                PlaneResult::Answers(_) => unreachable!("no queries, no answers"),
+            })
+            .collect())
+    }
+
+    fn tests_on_device(&self) -> bool {
+        true
+    }
+
+    fn render_tested(
+        &self,
+        jobs: &[PlaneJob],
+        queries: &[Option<Vec<RectQuery>>],
+    ) -> Result<Vec<PlaneResult>, BackendError> {
+        assert_eq!(
+            jobs.len(),
+            queries.len(),
+            "one query list (or None) per job"
+        );
         self.check_failure()?;
         self.check_jobs(jobs)?;
         let t0 = Instant::now();
@@ -895,7 +932,7 @@ impl RasterBackend for GpuBackend {
             })
             .collect::<Result<_, _>>()?;
         stats.setup = t0.elapsed();
-        let mut out: Vec<Option<DepthMap>> = vec![None; jobs.len()];
+        let mut out: Vec<Option<PlaneResult>> = vec![None; jobs.len()];
         let gpu_jobs = skip_the_gpu(jobs, &prepared, &mut out);
         let waves = plan_waves(jobs, &prepared, &gpu_jobs, &self.limits);
         stats.gpu_planes = gpu_jobs.len();
@@ -909,7 +946,9 @@ impl RasterBackend for GpuBackend {
                 .unwrap_or_default();
             let t1 = Instant::now();
             let done = waves.iter().try_for_each(|wave| {
-                self.render_wave(&mut pool, jobs, &prepared, wave, &mut out, &mut stats)
+                self.render_wave(
+                    &mut pool, jobs, &prepared, queries, wave, &mut out, &mut stats,
+                )
             });
             self.pools
                 .lock()

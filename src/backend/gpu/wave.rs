@@ -9,20 +9,23 @@
 //! 3. upload ([`GpuBackend::upload`]): geometry, records and edges, windows, uniforms, tables;
 //! 4. encode ([`GpuBackend::encode`]): with [`GpuProjection::Counting`], one compute pass
 //!    for the views of every counted occluder of the wave; then per plane one render pass and
-//!    one copy into its read-back buffer, in one command buffer;
+//!    one copy into its read-back buffer — or, for a plane whose occludee tests the device
+//!    answers, no copy: one compute pass for all such planes builds their pyramids and answers
+//!    their queries ([`super::hdm`]) — in one command buffer;
 //! 5. submit ([`GpuBackend::submit`]) and map every read-back buffer;
 //! 6. wait ([`GpuBackend::wait`]), polling with a timeout;
-//! 7. read back ([`read_back`]): the Depth Maps, with the slice masks merged.
+//! 7. read back ([`read_back`]): the Depth Maps, with the slice masks merged, and the answers.
 
 #[cfg(doc)]
 use super::GpuProjection;
 use super::device::{DeviceLimits, ErrorScopes};
+use super::hdm::{self, TestBuffers, TestedPlane};
 use super::prepare::{Prepared, TableSource, merge_mask};
 use super::setup::Vertex;
 use super::tables::{Cached, SweepTable};
 use super::{GpuBackend, RenderStats, UNIFORM_STRIDE};
 use crate::backend::BackendError;
-use crate::plane::{DepthMap, PlaneJob};
+use crate::plane::{Coverage, DepthMap, PlaneJob, PlaneResult, RectQuery};
 use std::collections::HashMap;
 use std::num::NonZeroU64;
 use std::sync::Arc;
@@ -33,6 +36,9 @@ use std::time::{Duration, Instant};
 const TARGET_BUDGET: u64 = 256 << 20;
 /// Bytes of vertex + record/edge data one submission may use (also capped by the device).
 const DATA_BUDGET: u64 = 512 << 20;
+/// Bytes of occludee queries, and of depth pyramids, one submission may use (also capped by
+/// the device's largest storage binding); planes beyond it send their maps back instead.
+const TEST_BUDGET: u64 = 64 << 20;
 /// How long one poll blocks before the device-lost flag and the deadline are checked again.
 const POLL_SLICE: Duration = Duration::from_millis(250);
 /// A submission not finished after this long is reported as a device failure.
@@ -56,6 +62,8 @@ pub(super) struct Pool {
     /// Timestamp query sets, each for [`TIMESTAMPS_PER_SET`] / 2 render passes of a
     /// submission (with timestamps only).
     timestamps: Vec<TimestampSet>,
+    /// The occludee tests' buffers, absent until a wave has tested planes.
+    tests: Option<TestBuffers>,
 }
 
 /// The buffers of the views pass and the counted draws (`shaders/views.wgsl`).
@@ -224,6 +232,8 @@ struct PlaneLayout {
     target: Slot,
     /// Its counted occluders: the first in the wave's occluder buffer and how many.
     counted: (u32, u32),
+    /// Where its occludee tests lie, when the device answers them (its map stays there).
+    tested: Option<TestedPlane>,
 }
 
 /// A wave's layout: its planes, in order, and the bytes each shared buffer must hold.
@@ -237,6 +247,13 @@ struct WaveLayout {
     counted: usize,
     counted_f64s: usize,
     counted_words: usize,
+    /// Tested planes of the wave, their queries, their pyramids' `f32`s and dispatches, and
+    /// the words of their slice masks.
+    tested: u32,
+    queries: u32,
+    pyramid_floats: u64,
+    params: u32,
+    mask_words: u32,
 }
 
 impl WaveLayout {
@@ -245,7 +262,16 @@ impl WaveLayout {
     /// `storage_align`), their uniforms [`UNIFORM_STRIDE`] apart, and the `k`-th plane of a
     /// size (the `k`-th table of a source size) in the pool's `k`-th target (table) of that
     /// size.
-    fn new(todo: &[usize], jobs: &[PlaneJob], prepared: &[Prepared], storage_align: u64) -> Self {
+    fn new(
+        todo: &[usize],
+        jobs: &[PlaneJob],
+        prepared: &[Prepared],
+        queries: &[Option<Vec<RectQuery>>],
+        limits: &DeviceLimits,
+    ) -> Self {
+        let storage_align = limits.storage_align;
+        // The tests' largest buffers (queries, pyramids) are each one storage binding.
+        let test_cap = TEST_BUDGET.min(limits.max_chunk_words as u64 * 16);
         let (mut vertex_bytes, mut data_bytes, mut window_bytes) = (0u64, 0u64, 0u64);
         let mut targets_taken: HashMap<(u32, u32), usize> = HashMap::new();
         let take = |taken: &mut HashMap<(u32, u32), usize>, size: (u32, u32)| {
@@ -255,6 +281,8 @@ impl WaveLayout {
         };
         let mut planes = Vec::with_capacity(todo.len());
         let (mut counted, mut counted_f64s, mut counted_words) = (0usize, 0usize, 0usize);
+        let (mut tested, mut n_queries, mut pyramid_floats, mut params) = (0u32, 0u32, 0u64, 0u32);
+        let mut mask_words = 0u32;
         for (w, &j) in todo.iter().enumerate() {
             let p = &prepared[j];
             let c = (counted as u32, p.counted.len() as u32);
@@ -274,6 +302,35 @@ impl WaveLayout {
                 window_bytes += (sw.words.len() as u64 * 8).next_multiple_of(storage_align);
             }
             let f = &jobs[j].frame;
+            // The device answers a plane's queries when asked (its slices' mask goes up as
+            // bits and is merged there).
+            let fits = |q: &[RectQuery]| {
+                (u64::from(n_queries) + q.len() as u64) * hdm::QUERY_BYTES <= test_cap
+                    && (pyramid_floats + hdm::pyramid_floats(f.width, f.height)) * 4 <= test_cap
+            };
+            let t = match &queries[j] {
+                Some(q) if fits(q) => {
+                    let mask = p.mask.as_ref().map(|m| {
+                        let at = mask_words;
+                        mask_words += m.depth.len().div_ceil(32) as u32;
+                        at
+                    });
+                    let levels = hdm::level_params(f.width, f.height, pyramid_floats as u32, mask);
+                    let t = TestedPlane {
+                        index: tested,
+                        queries: (n_queries, q.len() as u32),
+                        first_param: params,
+                        levels,
+                        mask,
+                    };
+                    tested += 1;
+                    n_queries += q.len() as u32;
+                    pyramid_floats += hdm::pyramid_floats(f.width, f.height);
+                    params += t.levels.len() as u32;
+                    Some(t)
+                }
+                _ => None,
+            };
             planes.push(PlaneLayout {
                 job: j,
                 first_vertex,
@@ -282,6 +339,7 @@ impl WaveLayout {
                 uniform_offset: w as u64 * UNIFORM_STRIDE,
                 target: take(&mut targets_taken, (f.width, f.height)),
                 counted: c,
+                tested: t,
             });
         }
         WaveLayout {
@@ -293,7 +351,20 @@ impl WaveLayout {
             counted,
             counted_f64s,
             counted_words,
+            tested,
+            queries: n_queries,
+            pyramid_floats,
+            params,
+            mask_words,
         }
+    }
+
+    /// The read-back mappings: one per plane whose map comes back, one per timestamp set, and
+    /// one for the answers when the wave has tested planes.
+    fn mappings(&self, timestamp_sets: usize) -> usize {
+        self.planes.iter().filter(|p| p.tested.is_none()).count()
+            + timestamp_sets
+            + usize::from(self.tested > 0)
     }
 
     /// Passes timed with timestamps: every plane's render pass, then the views pass when the
@@ -338,7 +409,18 @@ impl WaveLayout {
             stats.edges += p.out.data.len() - p.occluders;
             stats.bytes_uploaded += p.out.data.len() as u64 * 16;
             let f = &jobs[plane.job].frame;
-            stats.bytes_read_back += (f.width as u64 * 4).next_multiple_of(256) * f.height as u64;
+            if plane.tested.is_none() {
+                stats.bytes_read_back +=
+                    (f.width as u64 * 4).next_multiple_of(256) * f.height as u64;
+            }
+        }
+        if self.tested > 0 {
+            stats.bytes_uploaded += u64::from(self.queries) * hdm::QUERY_BYTES
+                + u64::from(self.tested) * hdm::PLANE_BYTES
+                + u64::from(self.params) * std::mem::size_of::<hdm::LevelParams>() as u64
+                + u64::from(self.mask_words) * 4
+                + 16;
+            stats.bytes_read_back += u64::from(self.queries) * 4;
         }
     }
 }
@@ -383,21 +465,27 @@ impl GpuBackend {
     /// [`BackendError::BufferTooLarge`] when a buffer would exceed the device's limits;
     /// [`BackendError::Validation`] or [`BackendError::OutOfMemory`] from the error scopes;
     /// otherwise as [`Self::wait`] and [`read_back`].
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the call's jobs, their set-up and queries, the wave, its outputs and counters"
+    )]
     pub(super) fn render_wave(
         &self,
         pool: &mut Pool,
         jobs: &[PlaneJob],
         prepared: &[Prepared],
+        queries: &[Option<Vec<RectQuery>>],
         todo: &[usize],
-        out: &mut [Option<DepthMap>],
+        out: &mut [Option<PlaneResult>],
         stats: &mut RenderStats,
     ) -> Result<(), BackendError> {
         let scope = ErrorScopes::push(&self.device);
-        let layout = WaveLayout::new(todo, jobs, prepared, self.limits.storage_align);
+        let layout = WaveLayout::new(todo, jobs, prepared, queries, &self.limits);
         let tables = self.allocate(pool, &layout, prepared)?;
         let pool = &*pool;
         let buffers = WaveBuffers::of(pool, tables);
         self.upload(&buffers, &layout, jobs, prepared);
+        self.upload_tests(pool, &layout, prepared, queries);
         layout.count(jobs, prepared, stats);
         let timestamps = self.timestamp_period.map(|period| Timestamps {
             sets: &pool.timestamps[..timestamp_sets(layout.timed_passes())],
@@ -407,7 +495,7 @@ impl GpuBackend {
         let commands = self.encode(pool, &buffers, &layout, prepared, timestamps.as_ref());
         let (submission, mapped) = self.submit(pool, &layout, commands, timestamps.as_ref());
         scope.check()?;
-        let waited = layout.planes.len() + timestamps.as_ref().map_or(0, |t| t.sets.len());
+        let waited = layout.mappings(timestamps.as_ref().map_or(0, |t| t.sets.len()));
         self.wait(submission, mapped, waited)?;
         self.check_failure()?;
         if let Some(t) = &timestamps {
@@ -418,7 +506,8 @@ impl GpuBackend {
                 stats.views_time += last;
             }
         }
-        read_back(pool, &layout, prepared, out)
+        read_back(pool, &layout, prepared, out)?;
+        read_answers(pool, &layout, out)
     }
 
     /// Allocation step: grows the shared buffers to the layout's sizes and adds to the pools
@@ -469,6 +558,59 @@ impl GpuBackend {
                 layout.counted_words as u64 * 16,
                 wgpu::BufferUsages::STORAGE,
                 "counted occluder records and view edges",
+            )?;
+        }
+        if layout.tested > 0 {
+            let t = pool.tests.get_or_insert_with(TestBuffers::default);
+            let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+            let q = u64::from(layout.queries).max(1);
+            self.ensure_buffer(
+                &mut t.pyramid,
+                layout.pyramid_floats * 4,
+                wgpu::BufferUsages::STORAGE,
+                "depth pyramids",
+            )?;
+            self.ensure_buffer(
+                &mut t.params,
+                u64::from(layout.params) * UNIFORM_STRIDE,
+                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                "depth pyramid levels",
+            )?;
+            self.ensure_buffer(
+                &mut t.planes,
+                u64::from(layout.tested) * hdm::PLANE_BYTES,
+                storage,
+                "tested planes",
+            )?;
+            self.ensure_buffer(
+                &mut t.queries,
+                q * hdm::QUERY_BYTES,
+                storage,
+                "occludee queries",
+            )?;
+            self.ensure_buffer(
+                &mut t.answers,
+                q * 4,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                "occludee answers",
+            )?;
+            self.ensure_buffer(
+                &mut t.masks,
+                u64::from(layout.mask_words.max(1)) * 4,
+                storage,
+                "slice masks",
+            )?;
+            self.ensure_buffer(
+                &mut t.count,
+                16,
+                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                "occludee query count",
+            )?;
+            self.ensure_buffer(
+                &mut t.staging,
+                q * 4,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                "occludee answers read-back",
             )?;
         }
         if layout.window_bytes > 0 {
@@ -608,6 +750,178 @@ impl GpuBackend {
         }
     }
 
+    /// Upload step of the occludee tests: each dispatch's level parameters, the tested planes,
+    /// their queries (`plane, i0 | j0 << 16, i1 | j1 << 16, depth`) and their count.
+    fn upload_tests(
+        &self,
+        pool: &Pool,
+        layout: &WaveLayout,
+        prepared: &[Prepared],
+        queries: &[Option<Vec<RectQuery>>],
+    ) {
+        let Some(t) = pool.tests.as_ref().filter(|_| layout.tested > 0) else {
+            return;
+        };
+        let (Some(params), Some(planes), Some(qbuf), Some(count), Some(masks)) =
+            (&t.params, &t.planes, &t.queries, &t.count, &t.masks)
+        else {
+            unreachable!("test buffers were just ensured");
+        };
+        let mut mask_words: Vec<u32> = Vec::with_capacity(layout.mask_words as usize);
+        let mut param_bytes = vec![0u8; (u64::from(layout.params) * UNIFORM_STRIDE) as usize];
+        let mut plane_words: Vec<u32> = Vec::with_capacity(layout.tested as usize * 4);
+        let mut query_words: Vec<u32> = Vec::with_capacity(layout.queries as usize * 4);
+        for plane in &layout.planes {
+            let Some(tp) = &plane.tested else { continue };
+            for (k, lp) in tp.levels.iter().enumerate() {
+                let o = hdm::param_offset(tp.first_param + k as u32) as usize;
+                let b = bytemuck::bytes_of(lp);
+                param_bytes[o..o + b.len()].copy_from_slice(b);
+            }
+            plane_words.extend_from_slice(&hdm::plane_words(tp));
+            if let Some(m) = &prepared[plane.job].mask {
+                debug_assert_eq!(tp.mask, Some(mask_words.len() as u32));
+                mask_words.extend(hdm::mask_bits(m));
+            }
+            for q in queries[plane.job].iter().flatten() {
+                let [i0, j0, i1, j1] = q.rect;
+                query_words.extend_from_slice(&[
+                    tp.index,
+                    i0 | j0 << 16,
+                    i1 | j1 << 16,
+                    q.depth.to_bits(),
+                ]);
+            }
+        }
+        self.queue.write_buffer(params, 0, &param_bytes);
+        if !mask_words.is_empty() {
+            self.queue
+                .write_buffer(masks, 0, bytemuck::cast_slice(&mask_words));
+        }
+        self.queue
+            .write_buffer(planes, 0, bytemuck::cast_slice(&plane_words));
+        if !query_words.is_empty() {
+            self.queue
+                .write_buffer(qbuf, 0, bytemuck::cast_slice(&query_words));
+        }
+        self.queue
+            .write_buffer(count, 0, bytemuck::cast_slice(&[layout.queries, 0, 0, 0]));
+    }
+
+    /// The occludee tests of the wave's tested planes, after their render passes: one compute
+    /// pass copies each target into the pyramid buffer and reduces it level by level, then
+    /// answers every query; the answers are copied into their read-back buffer.
+    fn encode_tests(&self, encoder: &mut wgpu::CommandEncoder, pool: &Pool, layout: &WaveLayout) {
+        let Some(t) = pool.tests.as_ref().filter(|_| layout.tested > 0) else {
+            return;
+        };
+        let (Some(pyramid), Some(params), Some(planes), Some(queries), Some(answers)) =
+            (&t.pyramid, &t.params, &t.planes, &t.queries, &t.answers)
+        else {
+            unreachable!("test buffers were just ensured");
+        };
+        let (Some(count), Some(staging), Some(masks)) = (&t.count, &t.staging, &t.masks) else {
+            unreachable!("test buffers were just ensured");
+        };
+        let p = &self.hdm_pipelines;
+        // Each binding just the wave's part: the buffers grow in powers of two, past what a
+        // device's largest binding may be.
+        fn part(buffer: &wgpu::Buffer, bytes: u64) -> wgpu::BindingResource<'_> {
+            wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer,
+                offset: 0,
+                size: NonZeroU64::new(bytes.max(16)),
+            })
+        }
+        let q = u64::from(layout.queries);
+        let level_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hdm level bind group"),
+            layout: &p.level_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: params,
+                        offset: 0,
+                        size: NonZeroU64::new(std::mem::size_of::<hdm::LevelParams>() as u64),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: part(pyramid, layout.pyramid_floats * 4),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: part(masks, u64::from(layout.mask_words) * 4),
+                },
+            ],
+        });
+        let answer_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hdm answer bind group"),
+            layout: &p.answer_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: part(pyramid, layout.pyramid_floats * 4),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: part(planes, u64::from(layout.tested) * hdm::PLANE_BYTES),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: part(queries, q * hdm::QUERY_BYTES),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: part(answers, q * 4),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: part(count, 16),
+                },
+            ],
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("occludee tests"),
+                timestamp_writes: None,
+            });
+            for plane in &layout.planes {
+                let Some(tp) = &plane.tested else { continue };
+                let (size, k) = plane.target;
+                let map_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("hdm map bind group"),
+                    layout: &p.map_layout,
+                    entries: &[wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(&pool.targets[&size][k].view),
+                    }],
+                });
+                for (l, lp) in tp.levels.iter().enumerate() {
+                    let offset = hdm::param_offset(tp.first_param + l as u32) as u32;
+                    if l == 0 {
+                        pass.set_pipeline(&p.base);
+                        pass.set_bind_group(1, &map_group, &[]);
+                    } else if l == 1 {
+                        pass.set_pipeline(&p.reduce);
+                    }
+                    pass.set_bind_group(0, &level_group, &[offset]);
+                    let (x, y) = hdm::level_groups(lp);
+                    pass.dispatch_workgroups(x, y, 1);
+                }
+            }
+            if layout.queries > 0 {
+                pass.set_pipeline(&p.answer);
+                pass.set_bind_group(0, &answer_group, &[]);
+                pass.dispatch_workgroups(hdm::answer_groups(layout.queries), 1, 1);
+            }
+        }
+        if layout.queries > 0 {
+            encoder.copy_buffer_to_buffer(answers, 0, staging, 0, u64::from(layout.queries) * 4);
+        }
+    }
+
     /// Encoding step: every plane of the wave ([`Self::encode_plane`]) in one command buffer.
     fn encode(
         &self,
@@ -637,6 +951,7 @@ impl GpuBackend {
                 writes,
             );
         }
+        self.encode_tests(&mut encoder, pool, layout);
         if let Some(t) = timestamps {
             t.resolve(&mut encoder);
         }
@@ -706,6 +1021,10 @@ impl GpuBackend {
                     pass.draw(0..3, 0..1);
                 }
             }
+        }
+        if plane.tested.is_some() {
+            // Its map stays on the device: the occludee tests read it (`encode_tests`).
+            return;
         }
         encoder.copy_texture_to_buffer(
             wgpu::TexelCopyTextureInfo {
@@ -902,25 +1221,43 @@ impl GpuBackend {
     ) -> (wgpu::SubmissionIndex, Mapped) {
         let submission = self.queue.submit([commands]);
         let (tx, rx) = mpsc::channel();
+        // Each mapping reports its own index, 0 .. `layout.mappings(..)`.
+        let mut w = 0;
+        let mut next = || {
+            w += 1;
+            w - 1
+        };
         if let Some(t) = timestamps {
-            // After the planes' mappings in the count the wait expects.
             for (k, set) in t.sets.iter().enumerate() {
                 let tx = tx.clone();
-                let w = layout.planes.len() + k;
+                let w = next();
                 set.read_back
                     .map_async(wgpu::MapMode::Read, ..t.bytes(k), move |r| {
                         let _ = tx.send((w, r));
                     });
             }
         }
-        for (w, plane) in layout.planes.iter().enumerate() {
+        for plane in layout.planes.iter().filter(|p| p.tested.is_none()) {
             let tx = tx.clone();
+            let w = next();
             let (size, k) = plane.target;
             pool.targets[&size][k]
                 .staging
                 .map_async(wgpu::MapMode::Read, .., move |r| {
                     let _ = tx.send((w, r));
                 });
+        }
+        if let Some(staging) = pool
+            .tests
+            .as_ref()
+            .and_then(|t| t.staging.as_ref())
+            .filter(|_| layout.tested > 0)
+        {
+            let w = next();
+            let bytes = (u64::from(layout.queries) * 4).max(4);
+            staging.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+                let _ = tx.send((w, r));
+            });
         }
         (submission, rx)
     }
@@ -1070,7 +1407,9 @@ impl GpuBackend {
             "depth map",
             (w, h),
             wgpu::TextureFormat::R32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::COPY_SRC
+                | wgpu::TextureUsages::TEXTURE_BINDING,
         );
         let padded_row = (w * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -1244,9 +1583,9 @@ fn read_back(
     pool: &Pool,
     layout: &WaveLayout,
     prepared: &[Prepared],
-    out: &mut [Option<DepthMap>],
+    out: &mut [Option<PlaneResult>],
 ) -> Result<(), BackendError> {
-    for plane in &layout.planes {
+    for plane in layout.planes.iter().filter(|p| p.tested.is_none()) {
         let ((width, height), k) = plane.target;
         let target = &pool.targets[&(width, height)][k];
         let mut map = DepthMap {
@@ -1272,7 +1611,56 @@ fn read_back(
         if let Some(mask) = &prepared[plane.job].mask {
             merge_mask(&mut map, mask);
         }
-        out[plane.job] = Some(map);
+        out[plane.job] = Some(PlaneResult::Map(map));
+    }
+    Ok(())
+}
+
+/// Read-back step of the occludee tests: each tested plane's answers (`shaders/hdm.wgsl`'s
+/// codes) into `out`.
+///
+/// # Errors
+/// [`BackendError::ReadBack`] when the mapped range cannot be read or holds an unknown code.
+fn read_answers(
+    pool: &Pool,
+    layout: &WaveLayout,
+    out: &mut [Option<PlaneResult>],
+) -> Result<(), BackendError> {
+    let Some(staging) = pool
+        .tests
+        .as_ref()
+        .and_then(|t| t.staging.as_ref())
+        .filter(|_| layout.tested > 0)
+    else {
+        return Ok(());
+    };
+    let bytes = (u64::from(layout.queries) * 4).max(4);
+    let codes: Vec<u32> = {
+        let view = staging
+            .get_mapped_range(..bytes)
+            .map_err(|e| BackendError::ReadBack {
+                step: "answers mapping",
+                message: e.to_string(),
+            })?;
+        bytemuck::cast_slice::<u8, u32>(&view)[..layout.queries as usize].to_vec()
+    };
+    staging.unmap();
+    for plane in &layout.planes {
+        let Some(tp) = &plane.tested else { continue };
+        let (first, n) = (tp.queries.0 as usize, tp.queries.1 as usize);
+        let answers = codes[first..first + n]
+            .iter()
+            .map(|&c| match c {
+                0 => Ok(Coverage::Partial),
+                1 => Ok(Coverage::Hidden),
+                2 => Ok(Coverage::Empty),
+                _ => Err(BackendError::ReadBack {
+                    step: "answers",
+                    message: format!("unknown answer code {c}"),
+                }),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        out[plane.job] = Some(PlaneResult::Answers(answers));
     }
     Ok(())
 }

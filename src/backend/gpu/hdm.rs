@@ -1,0 +1,298 @@
+//! The Hierarchical Depth Map on the device: for the planes whose occludee tests the caller
+//! asks the device to answer ([`RasterBackend::render_tested`]), their maps stay on the GPU.
+//! One compute pass per submission copies each such plane's target into a storage buffer,
+//! builds its max/min pyramid level by level and answers every query of the submission
+//! (`shaders/hdm.wgsl`); only the answers come back, four bytes a query, instead of the maps.
+//!
+//! # Why the answers are the CPU's
+//! The shader is [`crate::hdm::Hdm::build`] and [`crate::hdm::Hdm::test`] written again: the
+//! same children per texel, the same finest level spanning at most 2 × 2 texels, the same
+//! descent into border texels. Depths are only compared (`max`, `min`, `<`, `>=`), never
+//! computed with, and the comparisons of `f32` values are exact on every device, so each answer
+//! equals the CPU's on the same map. The descent's explicit stack holds at most `4 + 3` entries
+//! per level (64 for up to 20 levels); were it ever full the answer would be `Partial`, which
+//! culls nothing.
+//!
+//! [`RasterBackend::render_tested`]: crate::backend::RasterBackend::render_tested
+
+use super::UNIFORM_STRIDE;
+use std::num::NonZeroU64;
+
+/// Bytes of one query (`Query` in `shaders/hdm.wgsl`).
+pub(super) const QUERY_BYTES: u64 = 16;
+/// Bytes of one tested plane's entry (`Plane` in `shaders/hdm.wgsl`).
+pub(super) const PLANE_BYTES: u64 = 16;
+/// Invocations per workgroup of the answer pass.
+const ANSWER_WORKGROUP: u32 = 64;
+/// Invocations per workgroup side of the pyramid passes.
+const LEVEL_WORKGROUP: u32 = 8;
+
+/// The sizes of the pyramid's levels over a `w × h` map, finest first, down to 1 × 1
+/// (`Hdm::build`'s levels).
+pub(super) fn level_sizes(w: u32, h: u32) -> Vec<(u32, u32)> {
+    let mut sizes = vec![(w, h)];
+    let (mut pw, mut ph) = (w, h);
+    while pw > 1 || ph > 1 {
+        (pw, ph) = ((pw / 2).max(1), (ph / 2).max(1));
+        sizes.push((pw, ph));
+    }
+    sizes
+}
+
+/// `f32`s a plane's pyramid takes: its map, then a max and a min per coarser level.
+pub(super) fn pyramid_floats(w: u32, h: u32) -> u64 {
+    let sizes = level_sizes(w, h);
+    let map = u64::from(w) * u64::from(h);
+    map + sizes[1..]
+        .iter()
+        .map(|&(a, b)| 2 * u64::from(a) * u64::from(b))
+        .sum::<u64>()
+}
+
+/// One `base` or `reduce` dispatch's parameters (`Level` in `shaders/hdm.wgsl`), each at its
+/// own [`UNIFORM_STRIDE`] of the params buffer.
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub(super) struct LevelParams {
+    src: u32,
+    src_min: u32,
+    dst: u32,
+    dst_min: u32,
+    src_w: u32,
+    src_h: u32,
+    dst_w: u32,
+    dst_h: u32,
+}
+
+/// The dispatches of one plane's pyramid whose map is `w × h` at `base` in the pyramid
+/// buffer: the copy of the map (with its slice mask from word `mask` of the masks buffer, if
+/// any), then one reduction per coarser level.
+pub(super) fn level_params(w: u32, h: u32, base: u32, mask: Option<u32>) -> Vec<LevelParams> {
+    let sizes = level_sizes(w, h);
+    let mut out = vec![LevelParams {
+        src: mask.unwrap_or(0),
+        src_w: u32::from(mask.is_some()),
+        dst: base,
+        dst_min: base,
+        dst_w: w,
+        dst_h: h,
+        ..LevelParams::default()
+    }];
+    let (mut src, mut src_min) = (base, base);
+    let mut next = base + w * h;
+    for k in 1..sizes.len() {
+        let ((sw, sh), (dw, dh)) = (sizes[k - 1], sizes[k]);
+        let p = LevelParams {
+            src,
+            src_min,
+            dst: next,
+            dst_min: next + dw * dh,
+            src_w: sw,
+            src_h: sh,
+            dst_w: dw,
+            dst_h: dh,
+        };
+        (src, src_min) = (p.dst, p.dst_min);
+        next += 2 * dw * dh;
+        out.push(p);
+    }
+    out
+}
+
+/// The three compute pipelines of `shaders/hdm.wgsl` and their bind group layouts.
+#[derive(Debug)]
+pub(super) struct HdmPipelines {
+    /// Copies a target into the pyramid buffer.
+    pub base: wgpu::ComputePipeline,
+    /// One level of the pyramid from the one below.
+    pub reduce: wgpu::ComputePipeline,
+    /// The queries.
+    pub answer: wgpu::ComputePipeline,
+    /// Group 0 of `base` and `reduce`: the level's parameters (dynamic offset), the pyramid.
+    pub level_layout: wgpu::BindGroupLayout,
+    /// Group 1 of `base`: the plane's target.
+    pub map_layout: wgpu::BindGroupLayout,
+    /// Group 0 of `answer`: the pyramid, the planes, the queries, the answers, the count.
+    pub answer_layout: wgpu::BindGroupLayout,
+}
+
+impl HdmPipelines {
+    /// Compiles `shaders/hdm.wgsl` and creates its pipelines on `device`, every object
+    /// labelled.
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("hdm.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(super::HDM_WGSL.into()),
+        });
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let storage = |binding: u32, read_only: bool, size: u64| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: cs,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: NonZeroU64::new(size),
+            },
+            count: None,
+        };
+        let uniform = |binding: u32, dynamic: bool, size: u64| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: cs,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: dynamic,
+                min_binding_size: NonZeroU64::new(size),
+            },
+            count: None,
+        };
+        let level_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("hdm level bind group layout"),
+            entries: &[
+                uniform(0, true, std::mem::size_of::<LevelParams>() as u64),
+                storage(1, false, 4),
+                storage(7, true, 4),
+            ],
+        });
+        let map_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("hdm map bind group layout"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: cs,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            }],
+        });
+        let answer_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("hdm answer bind group layout"),
+            entries: &[
+                storage(2, true, 4),
+                storage(3, true, PLANE_BYTES),
+                storage(4, true, QUERY_BYTES),
+                storage(5, false, 4),
+                uniform(6, false, 16),
+            ],
+        });
+        let pipeline = |name: &str, entry: &str, layouts: &[Option<&wgpu::BindGroupLayout>]| {
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(&format!("hdm {name} pipeline layout")),
+                bind_group_layouts: layouts,
+                immediate_size: 0,
+            });
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(&format!("hdm {name} pipeline")),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        HdmPipelines {
+            base: pipeline("base", "base", &[Some(&level_layout), Some(&map_layout)]),
+            reduce: pipeline("reduce", "reduce", &[Some(&level_layout)]),
+            answer: pipeline("answer", "answer", &[Some(&answer_layout)]),
+            level_layout,
+            map_layout,
+            answer_layout,
+        }
+    }
+}
+
+/// The buffers of a submission's occludee tests, grown as needed and kept in the pool.
+#[derive(Default)]
+pub(super) struct TestBuffers {
+    pub pyramid: Option<wgpu::Buffer>,
+    pub params: Option<wgpu::Buffer>,
+    pub planes: Option<wgpu::Buffer>,
+    pub queries: Option<wgpu::Buffer>,
+    pub answers: Option<wgpu::Buffer>,
+    pub count: Option<wgpu::Buffer>,
+    pub masks: Option<wgpu::Buffer>,
+    pub staging: Option<wgpu::Buffer>,
+}
+
+/// Where one tested plane lies in a submission's test buffers.
+#[derive(Clone, Debug)]
+pub(super) struct TestedPlane {
+    /// Its index among the submission's tested planes (`planes` in `shaders/hdm.wgsl`).
+    pub index: u32,
+    /// Its first query in the submission's query buffer, and how many.
+    pub queries: (u32, u32),
+    /// Its pyramid's dispatches (the first copies the map).
+    pub levels: Vec<LevelParams>,
+    /// Its first dispatch's slot in the params buffer.
+    pub first_param: u32,
+    /// Its slice mask's first word in the masks buffer, when the job has slices.
+    pub mask: Option<u32>,
+}
+
+/// A slice mask (`0` inside the slices, `+inf` elsewhere: `prepare::slice_mask`) as bits, a
+/// bit per pixel set where it is `0`, 32 pixels a word.
+pub(super) fn mask_bits(mask: &crate::plane::DepthMap) -> Vec<u32> {
+    let mut words = vec![0u32; mask.depth.len().div_ceil(32)];
+    for (k, &m) in mask.depth.iter().enumerate() {
+        debug_assert!(m == 0.0 || m == f32::INFINITY, "slice masks hold 0 or +inf");
+        if m == 0.0 {
+            words[k / 32] |= 1 << (k % 32);
+        }
+    }
+    words
+}
+
+/// Workgroups of a `base` or `reduce` dispatch over a level.
+pub(super) fn level_groups(p: &LevelParams) -> (u32, u32) {
+    (
+        p.dst_w.div_ceil(LEVEL_WORKGROUP),
+        p.dst_h.div_ceil(LEVEL_WORKGROUP),
+    )
+}
+
+/// Workgroups of the answer pass over `queries` queries.
+pub(super) fn answer_groups(queries: u32) -> u32 {
+    queries.div_ceil(ANSWER_WORKGROUP)
+}
+
+/// A plane's entry (`Plane` in `shaders/hdm.wgsl`): width, height, levels, pyramid offset.
+pub(super) fn plane_words(t: &TestedPlane) -> [u32; 4] {
+    let l0 = &t.levels[0];
+    [l0.dst_w, l0.dst_h, t.levels.len() as u32, l0.dst]
+}
+
+/// Byte offset of params slot `k`.
+pub(super) fn param_offset(k: u32) -> u64 {
+    u64::from(k) * UNIFORM_STRIDE
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pyramid's levels and offsets follow `Hdm::build`: halving each side down to 1,
+    /// level 0 its own max and min, then a max and a min per level, back to back.
+    #[test]
+    fn levels_are_laid_out_as_the_cpu_builds_them() {
+        assert_eq!(level_sizes(4, 1), vec![(4, 1), (2, 1), (1, 1)]);
+        assert_eq!(level_sizes(2, 8), vec![(2, 8), (1, 4), (1, 2), (1, 1)]);
+        let p = level_params(4, 2, 100, None);
+        assert_eq!(p.len(), 3);
+        assert_eq!(
+            (p[0].dst, p[0].dst_min, p[0].dst_w, p[0].dst_h),
+            (100, 100, 4, 2)
+        );
+        assert_eq!(
+            (p[1].src, p[1].src_min, p[1].dst, p[1].dst_min),
+            (100, 100, 108, 110)
+        );
+        assert_eq!(
+            (p[2].src, p[2].src_min, p[2].dst, p[2].dst_min),
+            (108, 110, 112, 113)
+        );
+        assert_eq!(pyramid_floats(4, 2), 8 + 2 * 2 + 2);
+        let last = p.last().unwrap();
+        assert_eq!(u64::from(last.dst_min + 1 - 100), pyramid_floats(4, 2));
+    }
+}
