@@ -8,7 +8,9 @@
 // at `base`, then per level k ≥ 1 its max then its min, each `size(k)` texels,
 // `size(k) = max(w >> k, 1) × max(h >> k, 1)`, until a level of 1 × 1.
 
-// One dispatch of `base` or `reduce` (at a dynamic offset of the params buffer).
+// One plane's level: `base`'s parameters (at a dynamic offset of the params buffer), or
+// `reduce`'s (`steps[plane · MAX_LEVELS + k]`; the params slot of a `reduce` dispatch holds
+// only its level `k`, in `src`).
 struct Level {
     // Offsets in f32s of the source level's max and min (`reduce`); `base`: the first word
     // of the plane's slice mask in `masks` when `src_w` is 1.
@@ -28,6 +30,8 @@ struct Level {
 // The planes' slice masks, a bit per pixel (row-major, 32 a word): set where the CPU's
 // `fill_slices` sets the map to 0.
 @group(0) @binding(7) var<storage, read> masks: array<u32>;
+// Every tested plane's levels, `MAX_LEVELS` slots a plane (unused ones zero: nothing to do).
+@group(0) @binding(8) var<storage, read> steps: array<Level>;
 @group(1) @binding(0) var map: texture_2d<f32>;
 
 @compute @workgroup_size(8, 8)
@@ -44,25 +48,27 @@ fn base(@builtin(global_invocation_id) id: vec3<u32>) {
     pyr[lv.dst + pixel] = d;
 }
 
+// Level `lv.src` of every tested plane at once, plane `id.z`.
 @compute @workgroup_size(8, 8)
 fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= lv.dst_w || id.y >= lv.dst_h {
+    let s = steps[id.z * MAX_LEVELS + lv.src];
+    if id.x >= s.dst_w || id.y >= s.dst_h {
         return;
     }
     // Children of texel (x, y): columns 2x, 2x+1 and rows 2y, 2y+1 that exist (`Hdm::build`).
-    let dx = select(0u, 1u, lv.src_w > 1u);
-    let dy = select(0u, 1u, lv.src_h > 1u);
-    let r0 = 2u * id.y * lv.src_w;
-    let r1 = (2u * id.y + dy) * lv.src_w;
+    let dx = select(0u, 1u, s.src_w > 1u);
+    let dy = select(0u, 1u, s.src_h > 1u);
+    let r0 = 2u * id.y * s.src_w;
+    let r1 = (2u * id.y + dy) * s.src_w;
     let a = r0 + 2u * id.x;
     let b = a + dx;
     let c = r1 + 2u * id.x;
     let d = c + dx;
-    let o = id.y * lv.dst_w + id.x;
-    pyr[lv.dst + o] = max(max(pyr[lv.src + a], pyr[lv.src + b]), max(pyr[lv.src + c], pyr[lv.src + d]));
-    pyr[lv.dst_min + o] = min(
-        min(pyr[lv.src_min + a], pyr[lv.src_min + b]),
-        min(pyr[lv.src_min + c], pyr[lv.src_min + d]),
+    let o = id.y * s.dst_w + id.x;
+    pyr[s.dst + o] = max(max(pyr[s.src + a], pyr[s.src + b]), max(pyr[s.src + c], pyr[s.src + d]));
+    pyr[s.dst_min + o] = min(
+        min(pyr[s.src_min + a], pyr[s.src_min + b]),
+        min(pyr[s.src_min + c], pyr[s.src_min + d]),
     );
 }
 

@@ -116,6 +116,12 @@ pub struct BakeArgs {
     /// an NVIDIA H200 328 ms per city cell against 84 on its CPU). Ignored on the CPU backend.
     #[arg(long)]
     pub rsf_on_gpu: bool,
+    /// Read the GPU backend's Depth Maps of separate planes back and test occludees against
+    /// them on the CPU, instead of building their pyramids and answering the tests on the
+    /// device (the default: only the answers come back). The same PVS; for comparisons.
+    /// Ignored on the CPU backend.
+    #[arg(long)]
+    pub tests_on_cpu: bool,
     /// Depth Map resolution per side (a power of two).
     #[arg(long, default_value_t = BakeSettings::default_settings().resolution)]
     pub resolution: u32,
@@ -443,6 +449,7 @@ pub fn make_backend(
     choice: BackendChoice,
     projection: GpuProjection,
     rsf_on_gpu: bool,
+    tests_on_cpu: bool,
 ) -> anyhow::Result<Box<dyn RasterBackend>> {
     use umbrasweep::backend::gpu::{GpuBackend, hardware_adapter_available};
     match choice {
@@ -459,6 +466,7 @@ pub fn make_backend(
                 if let Err(e) = b.set_rsf_on_gpu(rsf_on_gpu) {
                     bail!("--rsf-on-gpu: {e} (leave it out: the CPU's charts are the same)");
                 }
+                b.set_tests_on_device(!tests_on_cpu);
                 Ok(Box::new(b))
             }
             Err(e) => bail!("--backend gpu: {e} (use --backend cpu)"),
@@ -620,7 +628,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             );
         }
     }
-    let backend = make_backend(a.backend, a.gpu_projection, a.rsf_on_gpu)?;
+    let backend = make_backend(a.backend, a.gpu_projection, a.rsf_on_gpu, a.tests_on_cpu)?;
     let backend = backend.as_ref();
     let which: Vec<usize> = match a.shard {
         Some(s) => s.cells(cells.len()),

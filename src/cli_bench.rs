@@ -66,6 +66,10 @@ pub struct BenchArgs {
     /// instead of the CPU: the same charts, slower on every device measured so far.
     #[arg(long)]
     pub rsf_on_gpu: bool,
+    /// Read the GPU backend's Depth Maps of separate planes back and test occludees on the
+    /// CPU instead of on the device (the default): the same PVS, to compare the two.
+    #[arg(long)]
+    pub tests_on_cpu: bool,
     /// The shared scene folder (default: ../shared/scenes when it exists).
     #[arg(long, value_name = "DIR")]
     pub shared: Option<PathBuf>,
@@ -157,6 +161,7 @@ impl From<&BenchArgs> for BenchOptions {
             backend: a.backend.into(),
             gpu_projection: a.gpu_projection,
             rsf_on_gpu: a.rsf_on_gpu,
+            tests_on_cpu: a.tests_on_cpu,
             shared: a.shared.clone(),
             scenes: a.scenes.clone(),
             pvs_out: a.pvs_out.clone(),

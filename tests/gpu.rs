@@ -2141,6 +2141,67 @@ fn the_bake_command_says_where_the_charts_run() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `bake --backend gpu` answers separate planes' occludee tests on the device and reads back
+/// a small share of what `--tests-on-cpu` (every map back) does, with the same PVS as both
+/// that and the CPU backend.
+#[test]
+fn the_bake_command_tests_occludees_on_the_device() {
+    if backend().is_none() {
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::temp_dir().join(format!("umbrasweep-gpu-tests-{}", std::process::id()));
+    let cells_path = two_demo_cells(&dir, "demo_city");
+    let mut pvs = Vec::new();
+    let mut read_back = Vec::new();
+    for (backend, flag) in [
+        ("gpu", None),
+        ("gpu", Some("--tests-on-cpu")),
+        ("cpu", None),
+    ] {
+        let out_path = dir.join(format!("{backend}-{}.json", flag.is_some()));
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_umbrasweep"))
+            .arg("bake")
+            .arg(root.join("data/demo_city.obj"))
+            .arg("--cells")
+            .arg(&cells_path)
+            .args(["--backend", backend, "--no-rsf", "-o"])
+            .arg(&out_path)
+            .args(flag)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{err}");
+        if backend == "gpu" {
+            // "… KB uploaded, N KB read back; …"
+            let line = err
+                .lines()
+                .find(|l| l.contains("KB read back"))
+                .expect(&err);
+            let kb: f64 = line
+                .split(" KB read back")
+                .next()
+                .and_then(|s| s.rsplit(' ').next())
+                .and_then(|s| s.parse().ok())
+                .unwrap_or_else(|| panic!("{line}"));
+            read_back.push(kb);
+        }
+        pvs.push(visible_sets(&out_path));
+    }
+    eprintln!(
+        "KB read back per cell: on the device {}, on the CPU {}",
+        read_back[0], read_back[1]
+    );
+    assert!(
+        read_back[1] > 1000.0,
+        "maps come back with --tests-on-cpu: {read_back:?}"
+    );
+    assert!(read_back[0] * 20.0 < read_back[1], "{read_back:?}");
+    assert_eq!(pvs[0], pvs[2]);
+    assert_eq!(pvs[1], pvs[2]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 // ---------------------------------------------------------------------------------------------
 // Views counted on the GPU (`GpuProjection::Counting`)
 

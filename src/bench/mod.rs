@@ -109,6 +109,9 @@ pub struct BenchOptions {
     /// Ray space factorization's charts on the GPU backend's device rather than the CPU
     /// ([`GpuBackend::set_rsf_on_gpu`](crate::backend::gpu::GpuBackend::set_rsf_on_gpu)).
     pub rsf_on_gpu: bool,
+    /// Separate planes' maps read back and occludees tested on the CPU rather than on the
+    /// device ([`GpuBackend::set_tests_on_device`](crate::backend::gpu::GpuBackend::set_tests_on_device)).
+    pub tests_on_cpu: bool,
 }
 
 impl Default for BenchOptions {
@@ -132,6 +135,7 @@ impl Default for BenchOptions {
             foliage_sampling_max_eps: None,
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             rsf_on_gpu: false,
+            tests_on_cpu: false,
             progress: None,
             rsf: crate::settings::SweepChoice::Auto,
         }
@@ -536,6 +540,7 @@ pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError>
     g.set_projection(args.gpu_projection)
         .map_err(BenchError::Gpu)?;
     g.set_rsf_on_gpu(args.rsf_on_gpu).map_err(BenchError::Gpu)?;
+    g.set_tests_on_device(!args.tests_on_cpu);
     Ok(g)
 }
 

@@ -26,6 +26,11 @@ pub(super) const PLANE_BYTES: u64 = 16;
 const ANSWER_WORKGROUP: u32 = 64;
 /// Invocations per workgroup side of the pyramid passes.
 const LEVEL_WORKGROUP: u32 = 8;
+/// Level slots per plane in the steps buffer (`MAX_LEVELS` in `shaders/hdm.wgsl`): maps up
+/// to 2^15 pixels a side.
+pub(super) const MAX_LEVELS: usize = 16;
+/// Bytes of one level's parameters.
+pub(super) const LEVEL_BYTES: u64 = std::mem::size_of::<LevelParams>() as u64;
 
 /// The sizes of the pyramid's levels over a `w × h` map, finest first, down to 1 × 1
 /// (`Hdm::build`'s levels).
@@ -49,8 +54,8 @@ pub(super) fn pyramid_floats(w: u32, h: u32) -> u64 {
         .sum::<u64>()
 }
 
-/// One `base` or `reduce` dispatch's parameters (`Level` in `shaders/hdm.wgsl`), each at its
-/// own [`UNIFORM_STRIDE`] of the params buffer.
+/// One level's parameters (`Level` in `shaders/hdm.wgsl`): a `base` dispatch's at its own
+/// [`UNIFORM_STRIDE`] of the params buffer, a `reduce` level's in the steps buffer.
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub(super) struct LevelParams {
@@ -60,8 +65,16 @@ pub(super) struct LevelParams {
     dst_min: u32,
     src_w: u32,
     src_h: u32,
-    dst_w: u32,
-    dst_h: u32,
+    pub dst_w: u32,
+    pub dst_h: u32,
+}
+
+/// The params slot of the `reduce` dispatch of level `k` (every plane's): only `k`.
+pub(super) fn reduce_slot(k: u32) -> LevelParams {
+    LevelParams {
+        src: k,
+        ..LevelParams::default()
+    }
 }
 
 /// The dispatches of one plane's pyramid whose map is `w × h` at `base` in the pyramid
@@ -148,9 +161,10 @@ impl HdmPipelines {
         let level_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("hdm level bind group layout"),
             entries: &[
-                uniform(0, true, std::mem::size_of::<LevelParams>() as u64),
+                uniform(0, true, LEVEL_BYTES),
                 storage(1, false, 4),
                 storage(7, true, 4),
+                storage(8, true, LEVEL_BYTES),
             ],
         });
         let map_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -212,6 +226,7 @@ pub(super) struct TestBuffers {
     pub answers: Option<wgpu::Buffer>,
     pub count: Option<wgpu::Buffer>,
     pub masks: Option<wgpu::Buffer>,
+    pub steps: Option<wgpu::Buffer>,
     pub staging: Option<wgpu::Buffer>,
 }
 
@@ -222,10 +237,8 @@ pub(super) struct TestedPlane {
     pub index: u32,
     /// Its first query in the submission's query buffer, and how many.
     pub queries: (u32, u32),
-    /// Its pyramid's dispatches (the first copies the map).
+    /// Its pyramid's levels (the first copies the map).
     pub levels: Vec<LevelParams>,
-    /// Its first dispatch's slot in the params buffer.
-    pub first_param: u32,
     /// Its slice mask's first word in the masks buffer, when the job has slices.
     pub mask: Option<u32>,
 }
@@ -243,12 +256,9 @@ pub(super) fn mask_bits(mask: &crate::plane::DepthMap) -> Vec<u32> {
     words
 }
 
-/// Workgroups of a `base` or `reduce` dispatch over a level.
-pub(super) fn level_groups(p: &LevelParams) -> (u32, u32) {
-    (
-        p.dst_w.div_ceil(LEVEL_WORKGROUP),
-        p.dst_h.div_ceil(LEVEL_WORKGROUP),
-    )
+/// Workgroups of a `base` or `reduce` dispatch over a level `w × h` texels.
+pub(super) fn level_groups((w, h): (u32, u32)) -> (u32, u32) {
+    (w.div_ceil(LEVEL_WORKGROUP), h.div_ceil(LEVEL_WORKGROUP))
 }
 
 /// Workgroups of the answer pass over `queries` queries.

@@ -406,6 +406,8 @@ pub struct GpuBackend {
     view_pipelines: Option<pipelines::ViewPipelines>,
     /// The pyramid and occludee tests of the planes whose tests the device answers.
     hdm_pipelines: hdm::HdmPipelines,
+    /// Occludee tests answered on the device ([`GpuBackend::set_tests_on_device`]).
+    tests_wanted: bool,
     /// How occluders' Projections are made ([`GpuBackend::set_projection`]).
     projection: GpuProjection,
     /// Reprojection sources' summed-area tables kept on the device across calls.
@@ -623,6 +625,7 @@ impl GpuBackend {
             rsf_pool: Mutex::default(),
             view_pipelines,
             hdm_pipelines,
+            tests_wanted: true,
             projection: GpuProjection::default(),
             tables: tables::TableCache::default(),
         })
@@ -661,6 +664,13 @@ impl GpuBackend {
         }
         self.rsf_wanted = on;
         Ok(())
+    }
+
+    /// Answers separate planes' occludee tests on the device (`on`, the default: the maps
+    /// stay there and only the answers come back, [`RasterBackend::render_tested`]) or reads
+    /// every map back for the CPU's pyramid (for comparisons). The same PVS either way.
+    pub fn set_tests_on_device(&mut self, on: bool) {
+        self.tests_wanted = on;
     }
 
     /// How occluders' Projections are made ([`GpuBackend::set_projection`]).
@@ -899,7 +909,7 @@ impl RasterBackend for GpuBackend {
     }
 
     fn tests_on_device(&self) -> bool {
-        true
+        self.tests_wanted
     }
 
     fn render_tested(

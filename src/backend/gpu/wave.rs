@@ -247,13 +247,14 @@ struct WaveLayout {
     counted: usize,
     counted_f64s: usize,
     counted_words: usize,
-    /// Tested planes of the wave, their queries, their pyramids' `f32`s and dispatches, and
-    /// the words of their slice masks.
+    /// Tested planes of the wave, their queries, their pyramids' `f32`s, the words of their
+    /// slice masks, and per reduction level `k ≥ 1` (all planes in one dispatch) the largest
+    /// size of that level.
     tested: u32,
     queries: u32,
     pyramid_floats: u64,
-    params: u32,
     mask_words: u32,
+    reduce: Vec<(u32, u32)>,
 }
 
 impl WaveLayout {
@@ -281,7 +282,9 @@ impl WaveLayout {
         };
         let mut planes = Vec::with_capacity(todo.len());
         let (mut counted, mut counted_f64s, mut counted_words) = (0usize, 0usize, 0usize);
-        let (mut tested, mut n_queries, mut pyramid_floats, mut params) = (0u32, 0u32, 0u64, 0u32);
+        let (mut tested, mut n_queries, mut pyramid_floats) = (0u32, 0u32, 0u64);
+        // Per reduction level k ≥ 1, the largest level-k size over the tested planes.
+        let mut reduce: Vec<(u32, u32)> = Vec::new();
         let mut mask_words = 0u32;
         for (w, &j) in todo.iter().enumerate() {
             let p = &prepared[j];
@@ -319,14 +322,19 @@ impl WaveLayout {
                     let t = TestedPlane {
                         index: tested,
                         queries: (n_queries, q.len() as u32),
-                        first_param: params,
                         levels,
                         mask,
                     };
                     tested += 1;
                     n_queries += q.len() as u32;
                     pyramid_floats += hdm::pyramid_floats(f.width, f.height);
-                    params += t.levels.len() as u32;
+                    for (k, l) in t.levels.iter().enumerate().skip(1) {
+                        if reduce.len() < k {
+                            reduce.push((0, 0));
+                        }
+                        let r = &mut reduce[k - 1];
+                        *r = (r.0.max(l.dst_w), r.1.max(l.dst_h));
+                    }
                     Some(t)
                 }
                 _ => None,
@@ -354,9 +362,15 @@ impl WaveLayout {
             tested,
             queries: n_queries,
             pyramid_floats,
-            params,
             mask_words,
+            reduce,
         }
+    }
+
+    /// Slots of the params buffer: each tested plane's `base` dispatch, then each reduction
+    /// level's.
+    fn params(&self) -> u32 {
+        self.tested + self.reduce.len() as u32
     }
 
     /// The read-back mappings: one per plane whose map comes back, one per timestamp set, and
@@ -417,7 +431,8 @@ impl WaveLayout {
         if self.tested > 0 {
             stats.bytes_uploaded += u64::from(self.queries) * hdm::QUERY_BYTES
                 + u64::from(self.tested) * hdm::PLANE_BYTES
-                + u64::from(self.params) * std::mem::size_of::<hdm::LevelParams>() as u64
+                + u64::from(self.params()) * hdm::LEVEL_BYTES
+                + u64::from(self.tested) * hdm::MAX_LEVELS as u64 * hdm::LEVEL_BYTES
                 + u64::from(self.mask_words) * 4
                 + 16;
             stats.bytes_read_back += u64::from(self.queries) * 4;
@@ -571,8 +586,14 @@ impl GpuBackend {
                 "depth pyramids",
             )?;
             self.ensure_buffer(
+                &mut t.steps,
+                u64::from(layout.tested) * hdm::MAX_LEVELS as u64 * hdm::LEVEL_BYTES,
+                storage,
+                "depth pyramid steps",
+            )?;
+            self.ensure_buffer(
                 &mut t.params,
-                u64::from(layout.params) * UNIFORM_STRIDE,
+                u64::from(layout.params()) * UNIFORM_STRIDE,
                 wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 "depth pyramid levels",
             )?;
@@ -762,22 +783,30 @@ impl GpuBackend {
         let Some(t) = pool.tests.as_ref().filter(|_| layout.tested > 0) else {
             return;
         };
-        let (Some(params), Some(planes), Some(qbuf), Some(count), Some(masks)) =
-            (&t.params, &t.planes, &t.queries, &t.count, &t.masks)
-        else {
+        let (Some(params), Some(planes), Some(qbuf), Some(count), Some(masks), Some(steps)) = (
+            &t.params, &t.planes, &t.queries, &t.count, &t.masks, &t.steps,
+        ) else {
             unreachable!("test buffers were just ensured");
         };
+        let mut step_words: Vec<hdm::LevelParams> =
+            vec![hdm::LevelParams::default(); layout.tested as usize * hdm::MAX_LEVELS];
         let mut mask_words: Vec<u32> = Vec::with_capacity(layout.mask_words as usize);
-        let mut param_bytes = vec![0u8; (u64::from(layout.params) * UNIFORM_STRIDE) as usize];
+        let mut param_bytes = vec![0u8; (u64::from(layout.params()) * UNIFORM_STRIDE) as usize];
+        let mut put = |slot: u32, lp: &hdm::LevelParams| {
+            let o = hdm::param_offset(slot) as usize;
+            let b = bytemuck::bytes_of(lp);
+            param_bytes[o..o + b.len()].copy_from_slice(b);
+        };
+        for k in 1..=layout.reduce.len() as u32 {
+            put(layout.tested + k - 1, &hdm::reduce_slot(k));
+        }
         let mut plane_words: Vec<u32> = Vec::with_capacity(layout.tested as usize * 4);
         let mut query_words: Vec<u32> = Vec::with_capacity(layout.queries as usize * 4);
         for plane in &layout.planes {
             let Some(tp) = &plane.tested else { continue };
-            for (k, lp) in tp.levels.iter().enumerate() {
-                let o = hdm::param_offset(tp.first_param + k as u32) as usize;
-                let b = bytemuck::bytes_of(lp);
-                param_bytes[o..o + b.len()].copy_from_slice(b);
-            }
+            put(tp.index, &tp.levels[0]);
+            let first = tp.index as usize * hdm::MAX_LEVELS;
+            step_words[first..first + tp.levels.len()].copy_from_slice(&tp.levels);
             plane_words.extend_from_slice(&hdm::plane_words(tp));
             if let Some(m) = &prepared[plane.job].mask {
                 debug_assert_eq!(tp.mask, Some(mask_words.len() as u32));
@@ -794,6 +823,8 @@ impl GpuBackend {
             }
         }
         self.queue.write_buffer(params, 0, &param_bytes);
+        self.queue
+            .write_buffer(steps, 0, bytemuck::cast_slice(&step_words));
         if !mask_words.is_empty() {
             self.queue
                 .write_buffer(masks, 0, bytemuck::cast_slice(&mask_words));
@@ -820,7 +851,9 @@ impl GpuBackend {
         else {
             unreachable!("test buffers were just ensured");
         };
-        let (Some(count), Some(staging), Some(masks)) = (&t.count, &t.staging, &t.masks) else {
+        let (Some(count), Some(staging), Some(masks), Some(steps)) =
+            (&t.count, &t.staging, &t.masks, &t.steps)
+        else {
             unreachable!("test buffers were just ensured");
         };
         let p = &self.hdm_pipelines;
@@ -853,6 +886,13 @@ impl GpuBackend {
                 wgpu::BindGroupEntry {
                     binding: 7,
                     resource: part(masks, u64::from(layout.mask_words) * 4),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: part(
+                        steps,
+                        u64::from(layout.tested) * hdm::MAX_LEVELS as u64 * hdm::LEVEL_BYTES,
+                    ),
                 },
             ],
         });
@@ -898,18 +938,20 @@ impl GpuBackend {
                         resource: wgpu::BindingResource::TextureView(&pool.targets[&size][k].view),
                     }],
                 });
-                for (l, lp) in tp.levels.iter().enumerate() {
-                    let offset = hdm::param_offset(tp.first_param + l as u32) as u32;
-                    if l == 0 {
-                        pass.set_pipeline(&p.base);
-                        pass.set_bind_group(1, &map_group, &[]);
-                    } else if l == 1 {
-                        pass.set_pipeline(&p.reduce);
-                    }
-                    pass.set_bind_group(0, &level_group, &[offset]);
-                    let (x, y) = hdm::level_groups(lp);
-                    pass.dispatch_workgroups(x, y, 1);
-                }
+                let base = &tp.levels[0];
+                pass.set_pipeline(&p.base);
+                pass.set_bind_group(1, &map_group, &[]);
+                pass.set_bind_group(0, &level_group, &[hdm::param_offset(tp.index) as u32]);
+                let (x, y) = hdm::level_groups((base.dst_w, base.dst_h));
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            // Each coarser level of every plane in one dispatch (plane = z).
+            pass.set_pipeline(&p.reduce);
+            for (k, &size) in layout.reduce.iter().enumerate() {
+                let slot = layout.tested + k as u32;
+                pass.set_bind_group(0, &level_group, &[hdm::param_offset(slot) as u32]);
+                let (x, y) = hdm::level_groups(size);
+                pass.dispatch_workgroups(x, y, layout.tested);
             }
             if layout.queries > 0 {
                 pass.set_pipeline(&p.answer);
