@@ -71,6 +71,11 @@ impl Culler for PlaneCuller {
     }
 }
 
+/// Separate planes' occludee tests go to the device only while at most this many boxes (nodes,
+/// objects, pieces) are undecided: every one is recorded, where the walk on the CPU prunes,
+/// so past this the map comes back instead (at most 3 queries of 16 bytes per box).
+pub const MAX_RECORDED_BOXES: usize = 16_384;
+
 /// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
 /// `SWEEP_TEST_REACH · t` (the last plane tests all). Measured on 5 path cells: reach 4, 8,
 /// 16 and unbounded culled 67.0, 71.1, 72.0 and 72.1 % of the paper-size forest, with 16 as
@@ -133,18 +138,18 @@ impl Prepared<'_> {
                     planned
                         .par_iter()
                         .map(|p| {
-                            (!plans[p.dir].is_sweep()).then(|| {
-                                let after = round.range(p.dir, false);
-                                self.record_queries(
-                                    &p.job,
-                                    &cell64,
-                                    after,
-                                    &hidden,
-                                    &node_done,
-                                    &piece_hidden,
-                                    &skip_test,
-                                )
-                            })
+                            if plans[p.dir].is_sweep() {
+                                return None;
+                            }
+                            self.record_queries(
+                                &p.job,
+                                &cell64,
+                                round.range(p.dir, false),
+                                &hidden,
+                                &node_done,
+                                &piece_hidden,
+                                &skip_test,
+                            )
                         })
                         .collect()
                 } else {
@@ -392,6 +397,8 @@ impl Prepared<'_> {
     /// on: those of every node not done, every object of theirs still to test and every piece
     /// of those not yet hidden — what the traversal reaches is a subset, as it only skips more
     /// while it marks. For a backend to answer on its device ([`RasterBackend::render_tested`]).
+    /// `None` when more than [`MAX_RECORDED_BOXES`] boxes are undecided: recording them all
+    /// would cost more than the walk, which prunes, and the map comes back instead.
     #[expect(
         clippy::too_many_arguments,
         reason = "the traversal's own inputs, read-only here"
@@ -405,12 +412,31 @@ impl Prepared<'_> {
         node_done: &[bool],
         piece_hidden: &[bool],
         skip_test: &(dyn Fn(usize, &[bool]) -> bool + Sync),
-    ) -> Vec<RectQuery> {
+    ) -> Option<Vec<RectQuery>> {
         let queries = RefCell::new(Queries::default());
         let tests = Tests::Record(&queries);
         let Some(bvh) = &self.bvh else {
-            return Vec::new();
+            return Some(Vec::new());
         };
+        let undecided = (bvh.nodes.iter().enumerate())
+            .filter(|&(ni, _)| !node_done[ni])
+            .map(|(_, node)| {
+                let objects = (0..node.prim_count)
+                    .map(|k| bvh.primitive_indices[(node.first_index + k) as usize] as usize)
+                    .filter(|&o| !skip_test(o, hidden));
+                1 + objects
+                    .map(|o| {
+                        1 + self.pieces[o]
+                            .clone()
+                            .filter(|&p| !piece_hidden[p as usize])
+                            .count()
+                    })
+                    .sum::<usize>()
+            })
+            .sum::<usize>();
+        if undecided > MAX_RECORDED_BOXES {
+            return None;
+        }
         for (ni, node) in bvh.nodes.iter().enumerate() {
             if node_done[ni] {
                 continue;
@@ -438,7 +464,7 @@ impl Prepared<'_> {
                 }
             }
         }
-        queries.into_inner().list
+        Some(queries.into_inner().list)
     }
 
     /// The occlusion test of one box on one plane: `Hidden`; `Empty` when nothing inside the
