@@ -36,8 +36,9 @@ use std::time::{Duration, Instant};
 const TARGET_BUDGET: u64 = 256 << 20;
 /// Bytes of vertex + record/edge data one submission may use (also capped by the device).
 const DATA_BUDGET: u64 = 512 << 20;
-/// Bytes of occludee queries, and of depth pyramids, one submission may use (also capped by
-/// the device's largest storage binding); planes beyond it send their maps back instead.
+/// Bytes of occludee queries, of depth pyramids and of slice masks one submission may use
+/// (each also capped by the device's largest storage binding); planes beyond it send their
+/// maps back instead.
 const TEST_BUDGET: u64 = 64 << 20;
 /// How long one poll blocks before the device-lost flag and the deadline are checked again.
 const POLL_SLICE: Duration = Duration::from_millis(250);
@@ -308,8 +309,14 @@ impl WaveLayout {
             // The device answers a plane's queries when asked (its slices' mask goes up as
             // bits and is merged there).
             let fits = |q: &[RectQuery]| {
+                let mask = p
+                    .mask
+                    .as_ref()
+                    .map_or(0, |m| m.depth.len().div_ceil(32) as u64);
                 (u64::from(n_queries) + q.len() as u64) * hdm::QUERY_BYTES <= test_cap
                     && (pyramid_floats + hdm::pyramid_floats(f.width, f.height)) * 4 <= test_cap
+                    && (u64::from(mask_words) + mask) * 4 <= test_cap
+                    && hdm::level_sizes(f.width, f.height).len() <= hdm::MAX_LEVELS
             };
             let t = match &queries[j] {
                 Some(q) if fits(q) => {
@@ -431,7 +438,7 @@ impl WaveLayout {
         if self.tested > 0 {
             stats.bytes_uploaded += u64::from(self.queries) * hdm::QUERY_BYTES
                 + u64::from(self.tested) * hdm::PLANE_BYTES
-                + u64::from(self.params()) * hdm::LEVEL_BYTES
+                + u64::from(self.params()) * UNIFORM_STRIDE
                 + u64::from(self.tested) * hdm::MAX_LEVELS as u64 * hdm::LEVEL_BYTES
                 + u64::from(self.mask_words) * 4
                 + 16;
