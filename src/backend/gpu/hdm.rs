@@ -29,6 +29,10 @@ const LEVEL_WORKGROUP: u32 = 8;
 /// Level slots per plane in the steps buffer (`MAX_LEVELS` in `shaders/hdm.wgsl`): maps up
 /// to 2^15 pixels a side.
 pub(super) const MAX_LEVELS: usize = 16;
+/// Largest map side whose tests the device answers: the answer pass packs texel coordinates
+/// in 14 bits (`level << 28 | tx << 14 | ty` in `shaders/hdm.wgsl`) and pixel coordinates in
+/// 16. A larger map (possible on devices with 32,768-texel textures) comes back instead.
+pub(super) const MAX_SIDE: u32 = 1 << 14;
 /// Bytes of one level's parameters.
 pub(super) const LEVEL_BYTES: u64 = std::mem::size_of::<LevelParams>() as u64;
 

@@ -316,7 +316,7 @@ impl WaveLayout {
                 (u64::from(n_queries) + q.len() as u64) * hdm::QUERY_BYTES <= test_cap
                     && (pyramid_floats + hdm::pyramid_floats(f.width, f.height)) * 4 <= test_cap
                     && (u64::from(mask_words) + mask) * 4 <= test_cap
-                    && hdm::level_sizes(f.width, f.height).len() <= hdm::MAX_LEVELS
+                    && f.width.max(f.height) <= hdm::MAX_SIDE
             };
             let t = match &queries[j] {
                 Some(q) if fits(q) => {
