@@ -23,6 +23,8 @@ fn main() {
     let mut hc = Hemicube::new(res);
     // A seventh argument `whole` turns sub-pixel masks off.
     hc.set_subpixel(args.get(7).map(String::as_str) != Some("whole"));
+    // `TUCK=1` turns the tuck pass on.
+    hc.set_tuck(std::env::var("TUCK").is_ok_and(|v| v == "1"));
     let mut seed = 7u64;
     let mut rnd = || {
         seed = seed
@@ -35,6 +37,7 @@ fn main() {
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
         .collect();
     let t = Instant::now();
+    let (mut tucked, mut drawn) = (0u64, 0u64);
     for k in 0..n {
         let face = common::Face::from_index(k % 6);
         let (axis, sign) = (face.axis, face.sign);
@@ -45,7 +48,9 @@ fn main() {
         let eye = face.onto(&cell, eye);
         let (ids, boxes) = &beyond[k % 6];
         hc.begin(eye, axis, sign, eps, boxes);
-        hc.draw(&data.occluders);
+        let st = hc.draw(&data.occluders);
+        tucked += st.tucked;
+        drawn += st.polygons;
         let mut opened = 0;
         for (&o, b) in ids.iter().zip(boxes) {
             seen_from[o] += 1;
@@ -102,7 +107,10 @@ fn main() {
             );
         }
     }
-    println!("{n} points in {:.1} s", t.elapsed().as_secs_f64());
+    println!(
+        "{n} points in {:.1} s ({drawn} polygons drawn, {tucked} drawn again with tucked edges)",
+        t.elapsed().as_secs_f64()
+    );
     let mut hist = [0usize; 8];
     let mut never = 0;
     for o in 0..scene.objects.len() {

@@ -271,6 +271,16 @@ pub struct BakeArgs {
     /// occludees need: more culled for more renders. 0: one render per point.
     #[arg(long, value_name = "RATIO", default_value_t = BakeSettings::default_settings().sampling_settings.band_ratio)]
     pub sampling_band_ratio: f64,
+    /// The sampler's tuck pass: after each render, leaf edges whose whole image is already
+    /// covered nearer than them are drawn again unshrunk, so that leaves fuse across edges
+    /// other leaves cover (more hidden per point, about 2.5× the time per point on the fine
+    /// forest). It runs on the CPU's hemicube only: with `--backend gpu` the sampler then
+    /// renders on the CPU. Default: off.
+    #[arg(long, conflicts_with = "no_sampling_tuck")]
+    pub sampling_tuck: bool,
+    /// The sampler without the tuck pass (the default; every edge shrunk).
+    #[arg(long)]
+    pub no_sampling_tuck: bool,
     /// Split every object larger than SIZE (scene units) along some axis into clusters that
     /// fit: its connected components, grouped or cut along the longest axis. For files whose
     /// objects span the level (materials, one ground mesh, one mesh per tree). The PVS lists
@@ -517,6 +527,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         },
         rays: a.sampling_rays,
         band_ratio: a.sampling_band_ratio,
+        tuck: a.sampling_tuck,
         ..BakeSettings::default_settings().sampling_settings
     };
     if let Some(b) = &a.sampling_budget {
@@ -967,10 +978,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 c.name, c.hidden, c.only, c.ms
             );
             if let Some(why) = &c.cpu_fallback {
-                eprintln!(
-                    "            some renders ran on the CPU's hemicube (same answers, slower): \
-                     the device could not make a GPU sampler at {why}"
-                );
+                eprintln!("            some renders ran on the CPU's hemicube: {why}");
             }
             for (k, l) in c.levels.iter().enumerate() {
                 let probe = if l.probe_only > 0.0 {

@@ -194,6 +194,10 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
         ),
         (&["--sampling-levels", "40"][..], "--sampling-levels 40"),
         (&["--sampling", "--no-sampling"][..], "--no-sampling"),
+        (
+            &["--sampling-tuck", "--no-sampling-tuck"][..],
+            "--no-sampling-tuck",
+        ),
     ] {
         let mut a = vec!["--cells", c];
         a.extend_from_slice(args);
@@ -223,6 +227,7 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
             // No certifying rays: the sampler tests every object the planes left.
             "--sampling-rays",
             "0",
+            "--sampling-tuck",
         ])
         .arg("-o")
         .arg(&out)
@@ -246,6 +251,7 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
     assert_eq!(s["sampling_budget_seconds"], serde_json::json!(60.0));
     assert_eq!(s["sampling_eps"], serde_json::json!(0.5));
     assert_eq!(s["sampling_max_eps"], serde_json::json!(2.0));
+    assert_eq!(s["sampling_tuck"], serde_json::json!(true));
     // The resolution is chosen per cell and level (recorded as null in the settings).
     assert_eq!(s["sampling_resolution"], serde_json::Value::Null);
     let mut levels = 0;

@@ -300,27 +300,27 @@ fn run_placed(build: impl Fn(Xf) -> Case) {
             ..BakeSettings::default()
         };
         // The shrunk-occluder sampler after the planes, on both backends (the GPU's twin of
-        // its hemicube): no certifying rays, so that it tests every object the planes left, a
+        // its hemicube, without the tuck pass, which only the CPU has; the CPU with it, the
+        // default): no certifying rays, so that it tests every object the planes left, a
         // small budget (smaller on the GPU: lavapipe renders a point in about 0.3 s, and the
         // whole budget made this suite 35× slower).
-        let sampling = |budget_points| BakeSettings {
+        let sampling = |budget_points, tuck| BakeSettings {
             sampling: SweepChoice::On,
             sampling_settings: umbrasweep::settings::SamplingSettings {
                 rays: 0,
                 budget_points,
                 resolution: Some(64),
+                tuck,
                 ..Default::default()
             },
             ..BakeSettings::default()
         };
         let runs = |backend: &dyn RasterBackend| {
+            let cpu = backend.name() == "cpu";
             [
                 (BakeSettings::default(), true),
                 (sweep.clone(), false),
-                (
-                    sampling(if backend.name() == "cpu" { 3000 } else { 150 }),
-                    false,
-                ),
+                (sampling(if cpu { 3000 } else { 150 }, cpu), false),
             ]
         };
         for (backend, (settings, tight)) in backends()

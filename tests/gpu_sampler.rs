@@ -478,12 +478,13 @@ fn small_forest() -> (umbrasweep::Scene, umbrasweep::geom::Aabb) {
 /// The sampler alone on [`small_forest`]'s cell with `backend`: what it hid, and the points
 /// it rendered.
 fn sample_forest(backend: &dyn RasterBackend) -> (Vec<bool>, u64) {
-    let (hidden, work) = sample_forest_work(backend);
+    let (hidden, work) = sample_forest_work(backend, false);
     (hidden, work.points)
 }
 
-/// [`sample_forest`] with the sampler's whole account.
-fn sample_forest_work(backend: &dyn RasterBackend) -> (Vec<bool>, CullerWork) {
+/// [`sample_forest`] with the sampler's whole account, with or without the tuck pass (which
+/// has no GPU twin: with it the GPU backend samples on the CPU).
+fn sample_forest_work(backend: &dyn RasterBackend, tuck: bool) -> (Vec<bool>, CullerWork) {
     let (scene, cell) = small_forest();
     let settings = BakeSettings {
         sampling: SweepChoice::On,
@@ -492,6 +493,7 @@ fn sample_forest_work(backend: &dyn RasterBackend) -> (Vec<bool>, CullerWork) {
             levels: 1,
             resolution: Some(48),
             rays: 0,
+            tuck,
             ..SamplingSettings::default()
         },
         ..BakeSettings::default()
@@ -511,6 +513,37 @@ fn sample_forest_work(backend: &dyn RasterBackend) -> (Vec<bool>, CullerWork) {
         )
         .unwrap();
     (state.hidden, work)
+}
+
+/// With the tuck pass (the default), which has no GPU twin, the GPU backend's sampler renders
+/// on the CPU's hemicube: nothing is submitted, the account says why, and the answers are the
+/// CPU backend's, which hide more than without the pass.
+#[test]
+fn with_the_tuck_pass_the_gpu_backend_samples_on_the_cpu() {
+    let Some(gpu) = backend() else {
+        return;
+    };
+    let before = gpu.total_stats().submissions;
+    let (on_gpu, work) = sample_forest_work(gpu, true);
+    assert_eq!(
+        gpu.total_stats().submissions,
+        before,
+        "the sampler submitted to the device with the tuck pass on"
+    );
+    let why = work.cpu_fallback.expect("the account names the tuck pass");
+    assert!(why.contains("tuck"), "{why}");
+    let (cpu, cpu_work) = sample_forest_work(&CpuBackend::new(), true);
+    assert_eq!(cpu_work.cpu_fallback, None);
+    assert_eq!(on_gpu, cpu, "the answers must be the CPU backend's");
+    assert_eq!(work.points, cpu_work.points);
+    let (plain, _) = sample_forest_work(&CpuBackend::new(), false);
+    let count = |h: &[bool]| h.iter().filter(|&&h| h).count();
+    assert!(
+        count(&cpu) > count(&plain),
+        "the tuck pass hid {} objects, without it {}",
+        count(&cpu),
+        count(&plain)
+    );
 }
 
 /// `bake --sampling --backend gpu` samples on the device: the same objects hidden as on the
@@ -613,13 +646,13 @@ fn a_level_the_device_cannot_render_is_sampled_on_the_cpu() {
         small.sampler_on_gpu(),
         "the scene fits: only the maps do not"
     );
-    let (on_small, work) = sample_forest_work(&small);
+    let (on_small, work) = sample_forest_work(&small, false);
     let why = work.cpu_fallback.expect("the account names the fallback");
     assert!(
         why.contains("px") && why.contains("256"),
         "the reason names the resolution and the limit: {why}"
     );
-    let (cpu, cpu_work) = sample_forest_work(&CpuBackend::new());
+    let (cpu, cpu_work) = sample_forest_work(&CpuBackend::new(), false);
     assert_eq!(cpu_work.cpu_fallback, None);
     assert!(cpu.contains(&true), "the test needs something hidden");
     assert_eq!(on_small, cpu, "the fallback must be the CPU's sampler");

@@ -393,7 +393,9 @@ impl Culler for SamplingCuller {
         let s = data.settings;
         // The GPU twin of the hemicube, with the GPU backend where the device has `f64` and
         // room for the polygons (otherwise the CPU's, which the summary reports).
+        // The tuck pass has no GPU twin yet: with it the GPU backend samples on the CPU.
         let gpu_scene = match backend.as_gpu() {
+            Some(_) if s.tuck => None,
             Some(g) if GpuSamplerScene::refusal(g, &data.occluders).is_none() => {
                 Some((g, self.gpu_scene(g, &data.occluders)?))
             }
@@ -423,7 +425,11 @@ impl Culler for SamplingCuller {
             hid: AtomicU64::new(0),
             start: Instant::now(),
             failed: Mutex::new(None),
-            fallback: Mutex::new(None),
+            fallback: Mutex::new((backend.as_gpu().is_some() && s.tuck).then(|| {
+                "the tuck pass (--sampling-tuck) has no GPU twin yet; \
+                 without it the sampler renders on the device"
+                    .to_string()
+            })),
         };
         // Top-level patches: a grid per face whose rectangles' half diagonals are at most eps0.
         let mut top: Vec<(Patch, Arc<Vec<u32>>)> = Vec::new();
@@ -509,7 +515,11 @@ impl Culler for SamplingCuller {
             // gives the same answers, and so is every later one of the level.
             let level_on_cpu = AtomicBool::new(false);
             let new_renderer = || -> Option<Renderer> {
-                let cpu = || Some(Renderer::Cpu(Box::new(Hemicube::new(resolution))));
+                let cpu = || {
+                    let mut hc = Hemicube::new(resolution);
+                    hc.set_tuck(s.tuck);
+                    Some(Renderer::Cpu(Box::new(hc)))
+                };
                 match &gpu_scene {
                     Some((g, scene)) if !level_on_cpu.load(Ordering::Relaxed) => {
                         match GpuSampler::new(g, scene, resolution) {
@@ -831,7 +841,9 @@ impl Shared<'_> {
     fn fall_back(&self, resolution: u32, e: &BackendError) {
         let mut f = self.fallback.lock().unwrap_or_else(|e| e.into_inner());
         if f.is_none() {
-            *f = Some(format!("{resolution} px: {e}"));
+            *f = Some(format!(
+                "the device could not make a GPU sampler at {resolution} px: {e}"
+            ));
         }
     }
 

@@ -3,9 +3,10 @@
 //! views), polygons drawn with shrunk silhouettes and inner-conservative coverage at their
 //! farthest depth (a pixel is covered when its four corners pass every edge's test), a
 //! per-tile maximum for hierarchical tests, the BVH traversed front to back with whole
-//! clusters skipped when they can no longer lower a pixel that matters, and occludee boxes
-//! tested with outer-conservative rectangles at their nearest depth. The argument is in the
-//! parent module's docs.
+//! clusters skipped when they can no longer lower a pixel that matters, an optional tuck pass
+//! that draws again, with those edges unshrunk, polygons whose edges lie wholly behind what
+//! was drawn (`segment_hidden`), and occludee boxes tested with outer-conservative rectangles
+//! at their nearest depth. The argument is in the parent module's docs.
 
 use super::{SampleCard, SampleOccluders};
 use crate::geom::DAabb;
@@ -349,6 +350,8 @@ pub struct RenderStats {
     pub polygons: u64,
     /// Polygons reached by the traversal.
     pub reached: u64,
+    /// Polygons drawn again with tucked edges ([`Hemicube::set_tuck`]).
+    pub tucked: u64,
 }
 
 /// An occludee box's part in one view, as [`Hemicube::box_rects`] gives it to a GPU twin: the
@@ -476,6 +479,13 @@ pub struct Hemicube {
     /// Whether edges are shrunk only as much as occludees no farther than `max_dist` need
     /// ([`Hemicube::set_depth_bounded`]).
     depth_bounded: bool,
+    /// Whether edges hidden behind nearer coverage are drawn unshrunk
+    /// ([`Hemicube::set_tuck`]).
+    tuck: bool,
+    /// The edges (bit per edge) of the polygon being drawn that are drawn unshrunk.
+    tucked: u32,
+    /// The polygons the traversal reached, for the tuck pass.
+    scratch_reached: Vec<u32>,
 }
 
 impl Hemicube {
@@ -515,7 +525,19 @@ impl Hemicube {
             scratch_ev: Vec::new(),
             subpixel: true,
             depth_bounded: true,
+            tuck: false,
+            tucked: 0,
+            scratch_reached: Vec::new(),
         }
+    }
+
+    /// Turns the tuck pass on or off (off by default). With it, after every polygon is drawn,
+    /// each polygon reached again has every edge whose whole image is already covered nearer
+    /// than the edge (an occludee test of the edge as a segment) drawn without its shrink, and
+    /// is drawn again: the leaves' edges that lie under nearer leaves no longer open gaps.
+    /// See the module docs for why this stays conservative.
+    pub fn set_tuck(&mut self, on: bool) {
+        self.tuck = on;
     }
 
     /// Whether each edge is shrunk only as much as the occludees of this render need (on by
@@ -740,6 +762,8 @@ impl Hemicube {
             return st;
         }
         let mut stack = std::mem::take(&mut self.stack);
+        let mut reached = std::mem::take(&mut self.scratch_reached);
+        reached.clear();
         stack.clear();
         stack.push(0);
         while let Some(id) = stack.pop() {
@@ -756,6 +780,9 @@ impl Hemicube {
                 for k in node.first_index..node.first_index + node.prim_count {
                     let poly = bvh.primitive_indices[k as usize] as usize;
                     st.reached += 1;
+                    if self.tuck {
+                        reached.push(poly as u32);
+                    }
                     if self.draw_poly(occ, poly) {
                         st.polygons += 1;
                     }
@@ -777,6 +804,42 @@ impl Hemicube {
             }
         }
         self.stack = stack;
+        // The tuck pass: edges whose image is covered nearer than them lose their shrink.
+        let mut ts = Vec::new();
+        for &poly in &reached {
+            let poly = poly as usize;
+            // Cards are never drawn again; nor is a polygon that can lower no pixel that
+            // matters now.
+            if occ.card(poly).is_some() || !self.useful(&occ.bounds[poly]) {
+                continue;
+            }
+            let pts = occ.poly_points(poly);
+            let n = pts.len().min(32);
+            let mut mask = 0u32;
+            let outer = |pt: DVec3| self.sign * (pt[self.axis] - self.eye[self.axis]) > 0.0;
+            for k in 0..n {
+                let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
+                // Only an edge wholly on the outer side of the face plane: the test covers
+                // only the views, and any point of the edge may be where a segment leaves.
+                if outer(a)
+                    && outer(b)
+                    && self.anything_nearer(a)
+                    && self.anything_nearer(b)
+                    && self.anything_nearer((a + b) * 0.5)
+                    && self.segment_hidden(a, b, &mut ts)
+                {
+                    mask |= 1 << k;
+                }
+            }
+            if mask != 0 {
+                self.tucked = mask;
+                if self.draw_poly(occ, poly) {
+                    st.tucked += 1;
+                }
+                self.tucked = 0;
+            }
+        }
+        self.scratch_reached = reached;
         st
     }
 
@@ -985,6 +1048,9 @@ impl Hemicube {
             let r = cl / el;
             let reach = edges[k].1;
             let mut s = reach / r;
+            if self.tucked >> k & 1 == 1 {
+                s = 0.0;
+            }
             if self.depth_bounded {
                 let dd = self.max_dist * (1.0 + 1e-9);
                 let den = 1.0 - std::f64::consts::SQRT_2 * reach / (r * dd).sqrt();
@@ -1378,6 +1444,159 @@ impl Hemicube {
             return Some((v.depth[idx], m, wz));
         }
         None
+    }
+
+    /// Whether every point of the segment `a b` (world space) lies beyond what was drawn:
+    /// [`Hemicube::test_triangle`] for a segment, cheaper. Per view, the segment is clipped
+    /// to the view's frustum (planes widened, the parameter interval widened), then cut where
+    /// it crosses pixel boundaries (`u` and `v` are monotonic along it); each piece's pixels
+    /// (its `u`/`v` bounds, widened) must hold a depth strictly nearer than the piece's
+    /// nearest view depth (less a relative 1e-9), or their layers nearer than that must hold
+    /// every sub-pixel of the piece's bounds. Parts outside every view are not tested, so
+    /// only a segment wholly on the outer side of the face plane may rely on the answer.
+    fn segment_hidden(&self, a: DVec3, b: DVec3, ts: &mut Vec<f64>) -> bool {
+        if !(a.is_finite() && b.is_finite()) || self.beyond_bound(&[a, b]) {
+            return false;
+        }
+        let res = self.res;
+        let ps = 2.0 / res as f64;
+        let half = res as f64 / 2.0;
+        const W: f64 = 1e-9;
+        for v in &self.views {
+            let map = v.map;
+            let to = |p: DVec3| {
+                let q = p - self.eye;
+                DVec3::new(
+                    map[0].1 * q[map[0].0],
+                    map[1].1 * q[map[1].0],
+                    map[2].1 * q[map[2].0],
+                )
+            };
+            let (pa, pb) = (to(a), to(b));
+            let d = pb - pa;
+            let vmax = v.vmin + v.h as f64 * ps;
+            let (mut t0, mut t1) = (0f64, 1f64);
+            for n in [
+                DVec3::new(1.0, 0.0, 1.0 + W),
+                DVec3::new(-1.0, 0.0, 1.0 + W),
+                DVec3::new(0.0, 1.0, -v.vmin + W),
+                DVec3::new(0.0, -1.0, vmax + W),
+            ] {
+                let (fa, fd) = (n.dot(pa), n.dot(d));
+                if fd == 0.0 {
+                    if fa < 0.0 {
+                        t1 = -1.0;
+                    }
+                } else if fd > 0.0 {
+                    t0 = t0.max(-fa / fd);
+                } else {
+                    t1 = t1.min(-fa / fd);
+                }
+            }
+            if t0 > t1 {
+                continue;
+            }
+            let (t0, t1) = ((t0 - 1e-12).max(0.0), (t1 + 1e-12).min(1.0));
+            let at = |t: f64| pa + d * t;
+            let (p0, p1) = (at(t0), at(t1));
+            if !(p0.z > 0.0 && p1.z > 0.0) {
+                return false;
+            }
+            // Pixel units along u and v of a point.
+            let upx = |p: DVec3| (p.x / p.z + 1.0) * half;
+            let vpx = |p: DVec3| (p.y / p.z - v.vmin) * half;
+            ts.clear();
+            ts.extend([t0, t1]);
+            for (coord, lo, hi) in [
+                (0usize, upx(p0).min(upx(p1)), upx(p0).max(upx(p1))),
+                (1, vpx(p0).min(vpx(p1)), vpx(p0).max(vpx(p1))),
+            ] {
+                let (k0, k1) = (lo.ceil().max(0.0), hi.floor().min(res as f64));
+                let span = k1 - k0;
+                if span.is_nan() || span >= 4.0 * res as f64 {
+                    return false;
+                }
+                let mut k = k0;
+                while k <= k1 {
+                    // The boundary w = k / half + offset: X − w·Z = 0 (or Y).
+                    let w = if coord == 0 {
+                        k / half - 1.0
+                    } else {
+                        k / half + v.vmin
+                    };
+                    let den = d[coord] - w * d.z;
+                    if den != 0.0 {
+                        let t = (w * pa.z - pa[coord]) / den;
+                        if t > t0 && t < t1 {
+                            ts.push(t);
+                        }
+                    }
+                    k += 1.0;
+                }
+            }
+            ts.sort_unstable_by(f64::total_cmp);
+            for w in ts.windows(2) {
+                let (q0, q1) = (at(w[0]), at(w[1]));
+                let (ua, ub) = (upx(q0), upx(q1));
+                let (va, vb) = (vpx(q0), vpx(q1));
+                let pu = [ua.min(ub) - 1e-6, ua.max(ub) + 1e-6];
+                let pv = [va.min(vb) - 1e-6, va.max(vb) + 1e-6];
+                let i0 = pu[0].floor().clamp(0.0, res as f64 - 1.0) as usize;
+                let i1 = pu[1].floor().clamp(0.0, res as f64 - 1.0) as usize;
+                let j0 = pv[0].floor().clamp(0.0, v.h as f64 - 1.0) as usize;
+                let j1 = pv[1].floor().clamp(0.0, v.h as f64 - 1.0) as usize;
+                if i0 < v.need[0] || i1 >= v.need[1] || j0 < v.need[2] || j1 >= v.need[3] {
+                    return false;
+                }
+                let z = q0.z.min(q1.z) * (1.0 - 1e-9);
+                for j in j0..=j1 {
+                    for i in i0..=i1 {
+                        let idx = j * res + i;
+                        if (v.depth[idx] as f64).partial_cmp(&z) == Some(std::cmp::Ordering::Less) {
+                            continue;
+                        }
+                        let r = Rect {
+                            i: [i, i + 1],
+                            j: [j, j + 1],
+                            pu,
+                            pv,
+                            z,
+                        };
+                        if !self.sub_covered(v, idx, &r, i, j, z) {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    /// Whether the pixel that point `pt` (world space) falls in holds anything nearer than
+    /// `pt`: a depth or a partial layer. A necessary condition for a test of anything through
+    /// `pt` to find it hidden there (false outside the pixels drawn this render).
+    fn anything_nearer(&self, pt: DVec3) -> bool {
+        let dir = pt - self.eye;
+        let half = self.res as f64 / 2.0;
+        for v in &self.views {
+            let c = v.map.map(|(ax, s)| s * dir[ax]);
+            if c[2] <= 0.0 {
+                continue;
+            }
+            let (u, w) = (c[0] / c[2], c[1] / c[2]);
+            if !(-1.0..1.0).contains(&u) || w < v.vmin || w >= v.vmin + v.h as f64 / half {
+                continue;
+            }
+            let i = ((u + 1.0) * half) as usize;
+            let j = ((w - v.vmin) * half) as usize;
+            if i < v.need[0] || i >= v.need[1] || j < v.need[2] || j >= v.need[3] {
+                return false;
+            }
+            let idx = j * self.res + i;
+            let z = c[2] as f32;
+            return v.depth[idx] < z || v.layers(idx).any(|(b, wz)| b != 0 && wz < z);
+        }
+        false
     }
 
     /// Whether the box spanned by `pts` reaches farther from the eye than the farthest corner
@@ -1842,6 +2061,107 @@ mod tests {
             assert!(matches!(hc.test_triangle(across), BoxTest::Open { .. }));
             assert!(matches!(hc.test_triangle(nearer), BoxTest::Open { .. }));
         }
+    }
+
+    #[test]
+    fn segments_found_hidden_lie_beyond_what_was_drawn_at_every_point() {
+        // Random leaves between 1.5 and 4 in front of the eye, partly covering the view.
+        let mut r = uniform(0x5E6);
+        let mut polys = Vec::new();
+        for k in 0..400 {
+            let c = DVec3::new(r() * 1.5, r() * 1.5, 2.75 + 1.25 * r());
+            let (e1, e2) = (
+                DVec3::new(r(), r(), 0.3 * r()).normalize() * 0.4,
+                DVec3::new(r(), r(), 0.3 * r()).normalize() * 0.4,
+            );
+            polys.push((vec![c - e1, c + e2, c + e1], k));
+        }
+        let occ = SampleOccluders::from_polygons(&polys);
+        let far = DAabb {
+            min: DVec3::new(-3.0, -3.0, 1.0),
+            max: DVec3::new(3.0, 3.0, 9.0),
+        };
+        let mut hc = Hemicube::new(64);
+        let mut ts = Vec::new();
+        let (mut hidden, mut open) = (0, 0);
+        for tuck in [false, true] {
+            hc.set_tuck(tuck);
+            hc.begin(DVec3::ZERO, 2, 1.0, 0.02, &[far]);
+            hc.draw(&occ);
+            for _ in 0..3000 {
+                let a = DVec3::new(r() * 1.2, r() * 1.2, 4.5 + 2.0 * r());
+                let b = a + DVec3::new(r(), r(), r()) * 0.3;
+                if !hc.segment_hidden(a, b, &mut ts) {
+                    open += 1;
+                    continue;
+                }
+                hidden += 1;
+                assert_eq!(hc.test_triangle([a, b, b]), BoxTest::Hidden, "{a} {b}");
+                // Every point of it lies in a sub-pixel covered strictly nearer than itself.
+                for k in 0..=400 {
+                    let p = a + (b - a) * (k as f64 / 400.0);
+                    let v = &hc.views[0];
+                    let half = hc.res as f64 / 2.0;
+                    let (u, w) = ((p.x / p.z + 1.0) * half, (p.y / p.z + 1.0) * half);
+                    let (i, j) = (u.floor() as usize, w.floor() as usize);
+                    let idx = j * hc.res + i;
+                    let bit =
+                        1u64 << (8 * ((w - j as f64) * 8.0) as u32 + ((u - i as f64) * 8.0) as u32);
+                    let z = p.z as f32;
+                    assert!(
+                        v.depth[idx] < z || v.layers(idx).any(|(m, wz)| m & bit != 0 && wz < z),
+                        "point {p} of the segment {a} {b} is not covered nearer"
+                    );
+                }
+            }
+        }
+        assert!(hidden > 300 && open > 300, "hidden {hidden}, open {open}");
+    }
+
+    /// A leaf whose edge lies under a nearer leaf: with the tuck pass that edge is drawn
+    /// unshrunk, and a box seen just inside it, which the shrinks left open, is hidden.
+    #[test]
+    fn the_tuck_pass_fuses_a_leaf_across_an_edge_a_nearer_leaf_covers() {
+        // Seen from the eye (x/z): the far leaf (depth 4) spans up to 0.3, shrunk to about
+        // 0.22 at ε 0.4; the near leaf (depth 2) starts at 0.05, shrunk to about 0.25 (more
+        // away from the centre), and covers the far leaf's edge at 0.3 (y/z within ±0.25).
+        // The box lies in the gap, 0.24–0.255.
+        let far_leaf = vec![
+            DVec3::new(-3.0, -1.0, 4.0),
+            DVec3::new(1.2, -1.0, 4.0),
+            DVec3::new(1.2, 1.0, 4.0),
+            DVec3::new(-3.0, 1.0, 4.0),
+        ];
+        let near_leaf = vec![
+            DVec3::new(0.1, -1.6, 2.0),
+            DVec3::new(1.6, -1.6, 2.0),
+            DVec3::new(1.6, 1.6, 2.0),
+            DVec3::new(0.1, 1.6, 2.0),
+        ];
+        let occ = SampleOccluders::from_polygons(&[(far_leaf, 0), (near_leaf, 1)]);
+        let bx = DAabb {
+            min: DVec3::new(2.4, -0.1, 10.0),
+            max: DVec3::new(2.55, 0.1, 10.0),
+        };
+        // Only the pixels the boxes given to `begin` reach are drawn and tested: a wide box
+        // behind takes in the far leaf's edge.
+        let wide = DAabb {
+            min: DVec3::new(0.0, -6.0, 10.0),
+            max: DVec3::new(5.0, 6.0, 10.0),
+        };
+        let mut hc = Hemicube::new(512);
+        let mut run = |tuck: bool| {
+            hc.set_tuck(tuck);
+            hc.begin(DVec3::ZERO, 2, 1.0, 0.4, &[bx, wide]);
+            let st = hc.draw(&occ);
+            (hc.test_box(&bx), st.tucked)
+        };
+        let (without, none) = run(false);
+        assert!(matches!(without, BoxTest::Open { .. }), "{without:?}");
+        assert_eq!(none, 0);
+        let (with, tucked) = run(true);
+        assert_eq!(with, BoxTest::Hidden);
+        assert_eq!(tucked, 1, "only the far leaf has a covered edge");
     }
 
     #[test]
