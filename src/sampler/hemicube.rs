@@ -1420,6 +1420,19 @@ impl Hemicube {
     /// (`examples/sampler_leaks.rs`): its depth, its partial mask and that mask's depth. None
     /// when the direction is outside the hemisphere or outside the pixels drawn this render.
     pub fn pixel_state(&self, dir: DVec3) -> Option<(f32, u64, f32)> {
+        let (v, idx, _) = self.locate(dir)?;
+        let m = v.layers(idx).fold(0, |a, (b, _)| a | b);
+        let wz = v
+            .layers(idx)
+            .filter(|(b, _)| *b != 0)
+            .fold(0.0f32, |a, (_, z)| a.max(z));
+        Some((v.depth[idx], m, wz))
+    }
+
+    /// The view and pixel that direction `dir` (world space) falls in, and its view depth
+    /// (`dir`'s own); None when it is outside the hemisphere or outside the pixels drawn this
+    /// render.
+    fn locate(&self, dir: DVec3) -> Option<(&View, usize, f64)> {
         let half = self.res as f64 / 2.0;
         for v in &self.views {
             let c = v.map.map(|(ax, s)| s * dir[ax]);
@@ -1435,13 +1448,7 @@ impl Hemicube {
             if i < v.need[0] || i >= v.need[1] || j < v.need[2] || j >= v.need[3] {
                 return None;
             }
-            let idx = j * self.res + i;
-            let m = v.layers(idx).fold(0, |a, (b, _)| a | b);
-            let wz = v
-                .layers(idx)
-                .filter(|(b, _)| *b != 0)
-                .fold(0.0f32, |a, (_, z)| a.max(z));
-            return Some((v.depth[idx], m, wz));
+            return Some((v, j * self.res + i, c[2]));
         }
         None
     }
@@ -1576,27 +1583,10 @@ impl Hemicube {
     /// `pt`: a depth or a partial layer. A necessary condition for a test of anything through
     /// `pt` to find it hidden there (false outside the pixels drawn this render).
     fn anything_nearer(&self, pt: DVec3) -> bool {
-        let dir = pt - self.eye;
-        let half = self.res as f64 / 2.0;
-        for v in &self.views {
-            let c = v.map.map(|(ax, s)| s * dir[ax]);
-            if c[2] <= 0.0 {
-                continue;
-            }
-            let (u, w) = (c[0] / c[2], c[1] / c[2]);
-            if !(-1.0..1.0).contains(&u) || w < v.vmin || w >= v.vmin + v.h as f64 / half {
-                continue;
-            }
-            let i = ((u + 1.0) * half) as usize;
-            let j = ((w - v.vmin) * half) as usize;
-            if i < v.need[0] || i >= v.need[1] || j < v.need[2] || j >= v.need[3] {
-                return false;
-            }
-            let idx = j * self.res + i;
-            let z = c[2] as f32;
-            return v.depth[idx] < z || v.layers(idx).any(|(b, wz)| b != 0 && wz < z);
-        }
-        false
+        self.locate(pt - self.eye).is_some_and(|(v, idx, z)| {
+            let z = z as f32;
+            v.depth[idx] < z || v.layers(idx).any(|(b, wz)| b != 0 && wz < z)
+        })
     }
 
     /// Whether the box spanned by `pts` reaches farther from the eye than the farthest corner
