@@ -1048,7 +1048,8 @@ impl Hemicube {
             let r = cl / el;
             let reach = edges[k].1;
             let mut s = reach / r;
-            if self.tucked >> k & 1 == 1 {
+            // (Polygons of more than 32 edges have only their first 32 tucked.)
+            if k < 32 && self.tucked >> k & 1 == 1 {
                 s = 0.0;
             }
             if self.depth_bounded {
