@@ -1,6 +1,7 @@
 //! For one cell: renders N random sample points on its faces and reports, per object, at how
 //! many points it is open (box and triangles tested). `cargo run --release --example
-//! sampler_points -- SCENE CELLS CELL EPS RES N [whole]`.
+//! sampler_points -- SCENE CELLS CELL EPS RES N [whole]`; `TUCK=1` in the environment turns
+//! the hemicube's tuck pass on.
 
 mod common;
 
