@@ -46,7 +46,8 @@ pub struct CullerWork {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub levels: Vec<crate::pvs::SamplingLevel>,
     /// The sampler on the GPU backend: why some of its renders ran on the CPU's hemicube (the
-    /// device could not make a GPU sampler at a level's resolution; the first reason), `None`
+    /// device could not make a GPU sampler at a level's resolution, or the tuck pass was on;
+    /// the first reason), `None`
     /// when none did. The answers are the same either way.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cpu_fallback: Option<String>,

@@ -247,8 +247,8 @@ pub struct PvsCullerSummary {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub levels: Vec<PvsLevelSummary>,
     /// The sampler on the GPU backend: why some cell's renders ran on the CPU's hemicube
-    /// instead (the device could not make a GPU sampler at a level's resolution), the first
-    /// such reason; absent when none did (not kept in `.pvs` files).
+    /// instead (the device could not make a GPU sampler at a level's resolution, or the tuck
+    /// pass, which has no GPU twin, was on), the first such reason; absent when none did (not kept in `.pvs` files).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cpu_fallback: Option<String>,
 }
