@@ -16,6 +16,8 @@ use std::collections::HashMap;
 
 /// Pixels per tile side (tiles keep the largest depth of their pixels).
 const TILE: usize = 8;
+/// The largest footprint (in pixels) [`Hemicube::footprint`] checks pixel by pixel.
+const PIXEL_CHECK: usize = 64;
 /// Margin of the `f32` corner test (its rounding error is below 1e-6: unit normals,
 /// `|u|, |v| ≤ 1`, `√(u²+v²+1) ≤ √3`).
 const CORNER_MARGIN: f32 = 4e-6;
@@ -350,7 +352,7 @@ pub struct RenderStats {
     pub polygons: u64,
     /// Polygons reached by the traversal.
     pub reached: u64,
-    /// Polygons drawn again with tucked edges ([`Hemicube::set_tuck`]).
+    /// Polygons rasterised with at least one tucked edge ([`Hemicube::set_tuck`]).
     pub tucked: u64,
 }
 
@@ -372,6 +374,16 @@ pub struct BoxRect {
     pub pv: [f64; 2],
     /// The depth to beat.
     pub z: f64,
+}
+
+/// A polygon's footprint in one view ([`Hemicube::footprint`]).
+struct Footprint {
+    /// The needed pixels `[i0, i1) × [j0, j1)` its projection's bound touches.
+    pixels: [usize; 4],
+    /// Its farthest depth, rounded up: the depth it is drawn at.
+    z: f32,
+    /// Deep in this view: it takes its plane's depth per pixel instead.
+    deep: bool,
 }
 
 /// One view: which scene axes give its coordinates, its pixels and depths.
@@ -484,8 +496,8 @@ pub struct Hemicube {
     tuck: bool,
     /// The edges (bit per edge) of the polygon being drawn that are drawn unshrunk.
     tucked: u32,
-    /// The polygons the traversal reached, for the tuck pass.
-    scratch_reached: Vec<u32>,
+    /// The tuck pass's segment parameters ([`Hemicube::segment_hidden`]).
+    scratch_ts: Vec<f64>,
 }
 
 impl Hemicube {
@@ -527,15 +539,16 @@ impl Hemicube {
             depth_bounded: true,
             tuck: false,
             tucked: 0,
-            scratch_reached: Vec::new(),
+            scratch_ts: Vec::new(),
         }
     }
 
-    /// Turns the tuck pass on or off (off by default). With it, after every polygon is drawn,
-    /// each polygon reached again has every edge whose whole image is already covered nearer
-    /// than the edge (an occludee test of the edge as a segment) drawn without its shrink, and
-    /// is drawn again: the leaves' edges that lie under nearer leaves no longer open gaps.
-    /// See the module docs for why this stays conservative.
+    /// Turns the tuck pass on or off (off by default). With it, each polygon the traversal
+    /// (nearest first) draws has every edge whose whole image is already covered nearer than
+    /// the edge (an occludee test of the edge as a segment) drawn without its shrink: the
+    /// leaves' edges that lie under nearer leaves no longer open gaps. The edges are tested
+    /// only for polygons whose draw could lower some pixel. See the module docs for why this
+    /// stays conservative.
     pub fn set_tuck(&mut self, on: bool) {
         self.tuck = on;
     }
@@ -762,8 +775,7 @@ impl Hemicube {
             return st;
         }
         let mut stack = std::mem::take(&mut self.stack);
-        let mut reached = std::mem::take(&mut self.scratch_reached);
-        reached.clear();
+        let mut ts = std::mem::take(&mut self.scratch_ts);
         stack.clear();
         stack.push(0);
         while let Some(id) = stack.pop() {
@@ -780,12 +792,20 @@ impl Hemicube {
                 for k in node.first_index..node.first_index + node.prim_count {
                     let poly = bvh.primitive_indices[k as usize] as usize;
                     st.reached += 1;
-                    if self.tuck {
-                        reached.push(poly as u32);
+                    // The tuck pass: the edges that lie beyond what was drawn before this
+                    // polygon are drawn unshrunk (only where the draw could lower a pixel:
+                    // elsewhere it changes nothing, and the edge tests are its cost).
+                    if self.tuck && occ.card(poly).is_none() {
+                        let pts = occ.poly_points(poly);
+                        if self.could_lower(pts) {
+                            self.tucked = self.tuck_mask(pts, &mut ts);
+                        }
                     }
                     if self.draw_poly(occ, poly) {
                         st.polygons += 1;
+                        st.tucked += u64::from(self.tucked != 0);
                     }
+                    self.tucked = 0;
                 }
             } else {
                 let (l, r) = (node.first_index, node.first_index + 1);
@@ -804,42 +824,7 @@ impl Hemicube {
             }
         }
         self.stack = stack;
-        // The tuck pass: edges whose image is covered nearer than them lose their shrink.
-        let mut ts = Vec::new();
-        for &poly in &reached {
-            let poly = poly as usize;
-            // Cards are never drawn again; nor is a polygon that can lower no pixel that
-            // matters now.
-            if occ.card(poly).is_some() || !self.useful(&occ.bounds[poly]) {
-                continue;
-            }
-            let pts = occ.poly_points(poly);
-            let n = pts.len().min(32);
-            let mut mask = 0u32;
-            let outer = |pt: DVec3| self.sign * (pt[self.axis] - self.eye[self.axis]) > 0.0;
-            for k in 0..n {
-                let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
-                // Only an edge wholly on the outer side of the face plane: the test covers
-                // only the views, and any point of the edge may be where a segment leaves.
-                if outer(a)
-                    && outer(b)
-                    && self.anything_nearer(a)
-                    && self.anything_nearer(b)
-                    && self.anything_nearer((a + b) * 0.5)
-                    && self.segment_hidden(a, b, &mut ts)
-                {
-                    mask |= 1 << k;
-                }
-            }
-            if mask != 0 {
-                self.tucked = mask;
-                if self.draw_poly(occ, poly) {
-                    st.tucked += 1;
-                }
-                self.tucked = 0;
-            }
-        }
-        self.scratch_reached = reached;
+        self.scratch_ts = ts;
         st
     }
 
@@ -964,6 +949,61 @@ impl Hemicube {
         false
     }
 
+    /// The edges of polygon `pts` (world space; its first 32) that may be drawn unshrunk:
+    /// those wholly on the outer side of the face plane whose every point lies beyond what
+    /// was drawn ([`Hemicube::segment_hidden`]).
+    fn tuck_mask(&self, pts: &[DVec3], ts: &mut Vec<f64>) -> u32 {
+        let n = pts.len().min(32);
+        let mut mask = 0u32;
+        let outer = |pt: DVec3| self.sign * (pt[self.axis] - self.eye[self.axis]) > 0.0;
+        for k in 0..n {
+            let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
+            // Only an edge wholly on the outer side of the face plane: the test covers only
+            // the views, and any point of the edge may be where a segment leaves.
+            if outer(a)
+                && outer(b)
+                && self.anything_nearer(a)
+                && self.anything_nearer(b)
+                && self.anything_nearer((a + b) * 0.5)
+                && self.segment_hidden(a, b, ts)
+            {
+                mask |= 1 << k;
+            }
+        }
+        mask
+    }
+
+    /// Whether drawing the polygon `pts` (world space), with any shrink, could lower a pixel
+    /// now: the footprint test [`Hemicube::draw_in_view`] starts with, in some view. False
+    /// only where a draw would write nothing.
+    fn could_lower(&mut self, pts: &[DVec3]) -> bool {
+        let n = pts.len();
+        if n < 3 {
+            return false;
+        }
+        let mut q = std::mem::take(&mut self.scratch_q);
+        q.clear();
+        q.extend(pts.iter().map(|&p| p - self.eye));
+        // The distance of the polygon's plane, as `draw_poly_with` finds it (the footprint is
+        // clipped at half of it).
+        let mut normal = DVec3::ZERO;
+        let mut centroid = DVec3::ZERO;
+        for k in 0..n {
+            normal += q[k].cross(q[(k + 1) % n]);
+            centroid += q[k];
+        }
+        let nl = normal.length();
+        let near = (normal / nl).dot(centroid / n as f64).abs();
+        let lowers = nl > 0.0
+            && nl.is_finite()
+            && (0..5).any(|k| {
+                let v = &self.views[k];
+                v.need[0] < v.need[1] && self.footprint(k, &q, 0.5 * near).is_some()
+            });
+        self.scratch_q = q;
+        lowers
+    }
+
     /// Draws polygon `poly` into every view it reaches; false when it was left out or
     /// covered no pixel.
     fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize) -> bool {
@@ -1071,16 +1111,14 @@ impl Hemicube {
         drawn
     }
 
-    fn draw_in_view(
-        &mut self,
-        k: usize,
-        q: &[DVec3],
-        edges: &[(DVec3, f64)],
-        normal: DVec3,
-        card: Option<(&SampleCard, &Coverage)>,
-    ) -> bool {
+    /// Polygon `q`'s (relative to the eye) footprint in view `k`, clipped at `Z ≥ zc` (its
+    /// part with smaller `Z` is outside the frustum, where `|P| ≤ √3·Z`: with `zc` half the
+    /// distance of its plane, all its points are at least that far from the eye): the needed
+    /// pixels its projection's bound touches and its depth. `None` when it touches none, or
+    /// when every tile it touches is already covered at least as near, so that drawing it
+    /// (with any shrink) can lower no pixel.
+    fn footprint(&self, k: usize, q: &[DVec3], zc: f64) -> Option<Footprint> {
         let res = self.res;
-        let ps = 2.0 / res as f64;
         let view = &self.views[k];
         let map = view.map;
         let to_view = |p: DVec3| {
@@ -1090,9 +1128,6 @@ impl Hemicube {
                 map[2].1 * p[map[2].0],
             )
         };
-        let zc = 0.5 * self.near;
-        // Clip at Z ≥ zc (the polygon's part with smaller Z is outside the frustum, where
-        // |P| ≤ √3·Z: all its points are at least `near` from the eye) and bound the projection.
         let mut zmax = f64::NEG_INFINITY;
         let mut zmin = f64::INFINITY;
         let (mut umin, mut umax, mut vmin, mut vmax) = (
@@ -1127,7 +1162,7 @@ impl Hemicube {
             }
         }
         if !any {
-            return false;
+            return None;
         }
         let half = res as f64 / 2.0;
         let [ni0, ni1, nj0, nj1] = view.need;
@@ -1137,29 +1172,63 @@ impl Hemicube {
         let pj0 = (((vmin - view.vmin) * half).floor().max(0.0) as usize).max(nj0);
         let pj1 = (((vmax - view.vmin) * half).ceil().clamp(0.0, view.h as f64) as usize).min(nj1);
         if pi0 >= pi1 || pj0 >= pj1 {
-            return false;
+            return None;
         }
         let z = round_up(zmax);
-        // A polygon at one depth lowers no pixel when every tile it touches is already
-        // covered at least as near.
         let deep = zmax - zmin > 0.05 * zmax;
-        {
-            // A deep polygon's pixel depths are at least about its nearest vertex's (a skip
-            // decided on a rounded bound only loses coverage, never soundness).
-            let zs = if deep {
-                (zmin as f32).next_down().max(0.0)
-            } else {
-                z
-            };
-            let tw = res / TILE;
-            let lowers = (pj0 / TILE..pj1.div_ceil(TILE)).any(|tj| {
-                (pi0 / TILE..pi1.div_ceil(TILE))
-                    .any(|ti| view.tile_max[tj * tw + ti] > zs && view.need_z[tj * tw + ti] > zs)
-            });
-            if !lowers {
-                return false;
-            }
-        }
+        // A deep polygon's pixel depths are at least about its nearest vertex's (a skip
+        // decided on a rounded bound only loses coverage, never soundness).
+        let zs = if deep {
+            (zmin as f32).next_down().max(0.0)
+        } else {
+            z
+        };
+        let tw = res / TILE;
+        let lowers = (pj0 / TILE..pj1.div_ceil(TILE)).any(|tj| {
+            (pi0 / TILE..pi1.div_ceil(TILE))
+                .any(|ti| view.tile_max[tj * tw + ti] > zs && view.need_z[tj * tw + ti] > zs)
+        });
+        // A small footprint is checked pixel by pixel too: a draw changes only pixels
+        // (depths or layers) whose depth is beyond its own.
+        let lowers = lowers
+            && ((pi1 - pi0) * (pj1 - pj0) > PIXEL_CHECK
+                || (pj0..pj1).any(|j| {
+                    view.depth[j * res + pi0..j * res + pi1]
+                        .iter()
+                        .zip(pi0..pi1)
+                        .any(|(&d, i)| d > zs && view.need_z[(j / TILE) * tw + i / TILE] > zs)
+                }));
+        lowers.then_some(Footprint {
+            pixels: [pi0, pi1, pj0, pj1],
+            z,
+            deep,
+        })
+    }
+
+    fn draw_in_view(
+        &mut self,
+        k: usize,
+        q: &[DVec3],
+        edges: &[(DVec3, f64)],
+        normal: DVec3,
+        card: Option<(&SampleCard, &Coverage)>,
+    ) -> bool {
+        let res = self.res;
+        let ps = 2.0 / res as f64;
+        let view = &self.views[k];
+        let map = view.map;
+        let to_view = |p: DVec3| {
+            DVec3::new(
+                map[0].1 * p[map[0].0],
+                map[1].1 * p[map[1].0],
+                map[2].1 * p[map[2].0],
+            )
+        };
+        let Some(fp) = self.footprint(k, q, 0.5 * self.near) else {
+            return false;
+        };
+        let [pi0, pi1, pj0, pj1] = fp.pixels;
+        let (z, deep) = (fp.z, fp.deep);
         // A card triangle covers whole pixels only (where its texel footprint is opaque).
         let subpixel = self.subpixel && card.is_none();
         // The card's plane seen from the eye: its normal toward the plane, in view
@@ -2153,6 +2222,8 @@ mod tests {
         let (with, tucked) = run(true);
         assert_eq!(with, BoxTest::Hidden);
         assert_eq!(tucked, 1, "only the far leaf has a covered edge");
+        // The near leaf is drawn first (nearest first); had the far leaf come first, its
+        // edge would have had nothing drawn to tuck under.
     }
 
     #[test]

@@ -124,15 +124,15 @@
 //! surely opaque texel, where every renderer draws the card. Card triangles get no sub-pixel
 //! masks.
 //!
-//! **Tucked edges** ([`Hemicube::set_tuck`], on in the bake by default). Call a drawn
-//! depth *sound* when, for every direction `d` of its pixel (or sub-pixel) and every point
-//! `x` along `d` beyond it within `D` of `p`, every segment from the region `R` (ball or
-//! rectangle) to `x` crosses some polygon: everything above shows that each depth drawn is
-//! sound. After the ordinary draw, the tuck pass takes every polygon `L` the traversal
-//! reached again and finds its *tucked* edges: edges lying wholly on the outer side of the
-//! face's plane whose every point lies beyond a sound depth (`segment_hidden`, an occludee
-//! test of the edge as a segment). It draws `L` again with those edges unshrunk (the other
-//! edges keep their shrink; `L` is still left out when its plane is within `ε`), at its
+//! **Tucked edges** ([`Hemicube::set_tuck`]; `bake --sampling-tuck`, off by default). Call a
+//! drawn depth *sound* when, for every direction `d` of its pixel (or sub-pixel) and every
+//! point `x` along `d` beyond it within `D` of `p`, every segment from the region `R` (ball
+//! or rectangle) to `x` crosses some polygon: everything above shows that each depth drawn
+//! with every edge shrunk is sound. With the tuck pass, before the traversal draws a polygon
+//! `L` it finds `L`'s *tucked* edges: edges lying wholly on the outer side of the face's
+//! plane whose every point lies beyond a depth drawn so far (`segment_hidden`, an occludee
+//! test of the edge as a segment). It draws `L` with those edges unshrunk (the other edges
+//! keep their shrink; `L` is still left out when its plane is within `ε`), at its
 //! farthest depth as before. Claim: every depth this draws is sound too.
 //!
 //! *Proof.* Let `d` be a direction of the partly shrunk silhouette, `q` beyond `L` along `d`
@@ -147,12 +147,13 @@
 //! of a point `z` of `e`. The point `y` of `σ` with that direction lies beyond `plane(L)`
 //! (between `q` and `x_L`), so beyond `z` along the ray. `z` lies beyond a sound depth, so
 //! `y` does, and `|y − p| ≤ max(|q − p|, |b − p|) ≤ D`: every segment from `R` to `y`
-//! crosses a polygon, and the one from `b` is part of `σ`. ∎ Drawing only adds sound depths,
-//! so later polygons may rely on what earlier ones tucked. Edges reaching behind the face's
+//! crosses a polygon, and the one from `b` is part of `σ`. ∎ By induction over the order of
+//! drawing, every depth drawn is sound, so each polygon may rely on what any earlier one drew,
+//! tucked or not. Edges reaching behind the face's
 //! plane are never tucked: the views test only its outer side, and `z` may be anywhere on
 //! `e`. `segment_hidden` is outer-conservative as the triangle test is (pieces between the
 //! segment's crossings of pixel boundaries, bounds widened, depths strictly nearer). Cards
-//! are never drawn again. `tests/sampler_proof.rs` runs every family with the pass.
+//! are never tucked. `tests/sampler_proof.rs` runs every family with the pass.
 //!
 //! **The hemisphere.** A sample point lies on a face `F` of the cell with outward normal `n`;
 //! the five views (front, and the halves `v ≥ 0` of the four side views, `v` along `n`) cover
