@@ -202,8 +202,9 @@ pub struct SamplingSettings {
     pub max_eps: Option<f64>,
     /// Levels other than the finest are first sampled at a probe of their rectangles (every
     /// [`SamplingSettings::PROBE_STRIDE`]-th, at least [`SamplingSettings::PROBE_MIN`]); when
-    /// the probe proves hidden less than this fraction of the objects it tests, the rest of the
-    /// level is split without sampling. Default 0.01; 0 samples every level whole.
+    /// the probe proves hidden less than this fraction of the objects it tests, or hides no
+    /// undecided object at every probed rectangle that tests it, the rest of the level is
+    /// split without sampling. Default 0.01; 0 samples every level whole.
     #[serde(rename = "sampling_probe", default = "default_probe")]
     pub probe: f64,
     /// At most this many sample points per cell; objects still undecided then stay visible.

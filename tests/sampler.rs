@@ -470,6 +470,67 @@ fn a_level_whose_probe_proves_nothing_is_split_unsampled() {
     brute_force_hidden(&scene, &cell, 0);
 }
 
+/// A level whose probe hides objects at some rectangles, but none at every probed rectangle
+/// that tests it, is split unsampled too: the rest of the level could cull nothing. The cell
+/// `[-0.5, 0.5]³` under a wall (z = 1.5) with a window; the target, beyond the window's edge
+/// as seen from the cell, is hidden from the top face's rectangles far from the window and
+/// left open (by the shrink) at the near ones, at the coarsest level. Finer levels hide it
+/// from everywhere.
+#[test]
+fn a_level_whose_probe_hides_nothing_everywhere_is_split_unsampled() {
+    let mut obj = String::new();
+    let mut nv = 0;
+    cube(
+        &mut obj,
+        &mut nv,
+        "target",
+        DVec3::new(3.7, -0.2, 4.0),
+        DVec3::new(4.1, 0.2, 4.2),
+    );
+    // The wall: four quads around the window x ∈ [0.3, 0.5], y ∈ [-0.15, 0.15].
+    writeln!(obj, "o wall").unwrap();
+    for [x0, x1, y0, y1] in [
+        [-20.0, 0.3, -20.0, 20.0],
+        [0.5, 20.0, -20.0, 20.0],
+        [0.3, 0.5, -20.0, -0.15],
+        [0.3, 0.5, 0.15, 20.0],
+    ] {
+        for (x, y) in [(x0, y0), (x1, y0), (x1, y1), (x0, y1)] {
+            writeln!(obj, "v {x} {y} 1.5").unwrap();
+        }
+        writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
+        nv += 4;
+    }
+    let file = tempfile::Builder::new()
+        .prefix("umbrasweep-sampler-window-")
+        .suffix(".obj")
+        .tempfile()
+        .unwrap();
+    std::fs::write(file.path(), obj).unwrap();
+    let scene = umbrasweep::scene::load(file.path()).unwrap();
+    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let run = |probe: f64| {
+        let mut s = settings();
+        s.sampling_settings.levels = 3;
+        s.sampling_settings.eps = Some(0.05);
+        s.sampling_settings.resolution = Some(256);
+        s.sampling_settings.probe = probe;
+        run_sampler(&scene, &cell, &s)
+    };
+    let (whole_hidden, whole) = run(0.0);
+    let (probed_hidden, probed) = run(0.01);
+    // Sampled whole, the coarsest level hides the target from no more than some rectangles.
+    assert!(!whole.levels[0].probe_only, "{:?}", whole.levels);
+    assert_eq!(whole.levels[0].hidden, 0, "{:?}", whole.levels);
+    // Its probe hid the target somewhere (more than 1 % of what it tested), yet the level
+    // was split unsampled.
+    assert!(probed.levels[0].probe_only, "{:?}", probed.levels);
+    assert!(!probed.levels.last().unwrap().probe_only);
+    assert_eq!(probed_hidden, whole_hidden);
+    assert!(probed_hidden[0], "the finest level hides the target");
+    brute_force_hidden(&scene, &cell, 0);
+}
+
 /// `--max-memory`'s estimate holds one hemicube per worker thread at the largest resolution
 /// the sampler may render (the fixed one, or the automatic rule's greatest), and none without
 /// the sampler.

@@ -33,8 +33,9 @@
 //!    Levels coarser than `--sampling-max-eps` are split without being sampled: their
 //!    quadrants cover them exactly and inherit every candidate. So is the rest of a level
 //!    (never the finest) whose probe, every 16th of its rectangles, proves hidden less than
-//!    `--sampling-probe` of the objects it tests: the probed rectangles pass on what they
-//!    left open, the others every candidate still undecided.
+//!    `--sampling-probe` of the objects it tests, or hides no undecided object at every probed
+//!    rectangle that tests it (then the rest could cull nothing at this level): the probed
+//!    rectangles pass on what they left open, the others every candidate still undecided.
 //! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
 //!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
 //!    candidate list; that can only keep objects in the PVS.
@@ -587,8 +588,25 @@ impl Culler for SamplingCuller {
                 }
                 let tested = shared.tested.load(Ordering::Relaxed) - t0;
                 let hid = shared.hid.load(Ordering::Relaxed) - h0;
+                // Per-rectangle hides add up to a cull only for an object hidden at every
+                // rectangle that tests it: unless some object still undecided was hidden at
+                // every probed rectangle that tested it, the rest of the level cannot cull
+                // anything either (it only prunes the next level's lists).
+                let mut seen = vec![0u8; n];
+                for &i in &probe {
+                    for &o in level[i].1.iter() {
+                        seen[o as usize] |= 1;
+                    }
+                    for &o in open[i].iter().flat_map(|l| l.iter()) {
+                        seen[o as usize] |= 2;
+                    }
+                }
+                let may_cull = seen
+                    .iter()
+                    .enumerate()
+                    .any(|(o, &f)| f == 1 && !shared.done[o].load(Ordering::Relaxed));
                 let rest: Vec<usize> = (0..level.len()).filter(|i| i % stride != 0).collect();
-                if (hid as f64) < s.probe * tested as f64 && !shared.spent() {
+                if ((hid as f64) < s.probe * tested as f64 || !may_cull) && !shared.spent() {
                     probe_only = true;
                     // Their quadrants drop what was decided meanwhile (`patch` filters).
                     for i in rest {
