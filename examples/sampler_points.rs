@@ -109,7 +109,7 @@ fn main() {
         }
     }
     println!(
-        "{n} points in {:.1} s ({drawn} polygons drawn, {tucked} drawn again with tucked edges)",
+        "{n} points in {:.1} s ({drawn} polygons drawn, {tucked} of them with tucked edges)",
         t.elapsed().as_secs_f64()
     );
     let mut hist = [0usize; 8];

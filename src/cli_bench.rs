@@ -143,6 +143,10 @@ pub struct BenchArgs {
     /// sampled (e.g. 0.05 on the fine forest, whose coarser levels hide nothing).
     #[arg(long, value_name = "E", requires = "foliage")]
     pub foliage_sampling_max_eps: Option<f64>,
+    /// Turn the sampler rows' tuck pass on (their --sampling-tuck): leaf edges that nearer
+    /// leaves cover are drawn unshrunk.
+    #[arg(long, requires = "foliage")]
+    pub foliage_sampling_tuck: bool,
 }
 
 /// Prints a progress line on stderr.
@@ -179,6 +183,7 @@ impl From<&BenchArgs> for BenchOptions {
             foliage_trees: a.foliage_trees,
             foliage_sampling_budget: a.foliage_sampling_budget,
             foliage_sampling_max_eps: a.foliage_sampling_max_eps,
+            foliage_sampling_tuck: a.foliage_sampling_tuck,
             progress: Some(progress),
         }
     }

@@ -249,6 +249,14 @@ impl SamplingSettings {
     /// A level's probe takes at least this many rectangles (all when it has fewer).
     pub const PROBE_MIN: usize = 8;
 
+    /// Why these settings keep the sampler off the GPU whatever the device offers (`None`:
+    /// they do not). The one place that decides it: the bake's summary line and the
+    /// sampler's choice of renderer both ask here.
+    pub fn gpu_refusal(&self) -> Option<&'static str> {
+        self.tuck
+            .then_some("the tuck pass (--sampling-tuck) has no GPU twin yet")
+    }
+
     /// The automatic resolution's pixels per unit of `h/ε` (see [`Self::auto_resolution`]).
     pub const AUTO_PIXELS: f64 = 8.0;
     /// The automatic resolution's least and greatest values.

@@ -361,10 +361,8 @@ impl<'a> Prepared<'a> {
     /// `on the CPU: ` and why ([`crate::backend::gpu::sampler::GpuSamplerScene::refusal`]).
     pub fn sampler_device(&self, backend: &dyn crate::backend::RasterBackend) -> Option<String> {
         let (g, d) = (backend.as_gpu()?, self.sampler.as_ref()?);
-        if d.settings.tuck {
-            return Some(
-                "on the CPU: the tuck pass (--sampling-tuck) has no GPU twin yet".to_string(),
-            );
+        if let Some(why) = d.settings.gpu_refusal() {
+            return Some(format!("on the CPU: {why}"));
         }
         Some(
             match crate::backend::gpu::sampler::GpuSamplerScene::refusal(g, &d.occluders) {

@@ -394,9 +394,9 @@ impl Culler for SamplingCuller {
         let s = data.settings;
         // The GPU twin of the hemicube, with the GPU backend where the device has `f64` and
         // room for the polygons (otherwise the CPU's, which the summary reports).
-        // The tuck pass has no GPU twin yet: with it the GPU backend samples on the CPU.
+        // Settings without a GPU twin (the tuck pass) keep the sampler on the CPU.
         let gpu_scene = match backend.as_gpu() {
-            Some(_) if s.tuck => None,
+            Some(_) if s.gpu_refusal().is_some() => None,
             Some(g) if GpuSamplerScene::refusal(g, &data.occluders).is_none() => {
                 Some((g, self.gpu_scene(g, &data.occluders)?))
             }
@@ -426,11 +426,12 @@ impl Culler for SamplingCuller {
             hid: AtomicU64::new(0),
             start: Instant::now(),
             failed: Mutex::new(None),
-            fallback: Mutex::new((backend.as_gpu().is_some() && s.tuck).then(|| {
-                "the tuck pass (--sampling-tuck) has no GPU twin yet; \
-                 without it the sampler renders on the device"
-                    .to_string()
-            })),
+            fallback: Mutex::new(
+                backend
+                    .as_gpu()
+                    .and(s.gpu_refusal())
+                    .map(|why| format!("{why}; without it the sampler renders on the device")),
+            ),
         };
         // Top-level patches: a grid per face whose rectangles' half diagonals are at most eps0.
         let mut top: Vec<(Patch, Arc<Vec<u32>>)> = Vec::new();

@@ -218,9 +218,14 @@ fn sampled(cells: usize) -> Variant {
     }
 }
 
-/// `list` with its sampler rows ([`variants`]) given `budget` points per cell and, if any,
-/// `max_eps` (`--sampling-max-eps`), their labels saying so.
-pub fn with_sampler(mut list: Vec<Variant>, budget: u64, max_eps: Option<f64>) -> Vec<Variant> {
+/// `list` with its sampler rows ([`variants`]) given `budget` points per cell, if any
+/// `max_eps` (`--sampling-max-eps`) and the tuck pass when `tuck`, their labels saying so.
+pub fn with_sampler(
+    mut list: Vec<Variant>,
+    budget: u64,
+    max_eps: Option<f64>,
+    tuck: bool,
+) -> Vec<Variant> {
     for v in &mut list {
         if v.settings.sampling != SweepChoice::On {
             continue;
@@ -228,9 +233,13 @@ pub fn with_sampler(mut list: Vec<Variant>, budget: u64, max_eps: Option<f64>) -
         let sa = &mut v.settings.sampling_settings;
         sa.budget_points = budget;
         sa.max_eps = max_eps;
+        sa.tuck = tuck;
         v.label = format!("--sweep --sampling --sampling-budget {budget}");
         if let Some(e) = max_eps {
             v.label += &format!(" --sampling-max-eps {e}");
+        }
+        if tuck {
+            v.label += " --sampling-tuck";
         }
     }
     list
@@ -386,6 +395,9 @@ pub fn describe(s: &BakeSettings) -> String {
         if let Some(e) = sa.max_eps {
             let _ = write!(out, ", levels ε ≤{e}");
         }
+        if sa.tuck {
+            out.push_str(", tuck pass");
+        }
     }
     out
 }
@@ -442,6 +454,8 @@ pub struct FoliageBench {
     pub sampling_budget_points: u64,
     /// The sampler rows' `--sampling-max-eps`, if given (`--foliage-sampling-max-eps`).
     pub sampling_max_eps: Option<f64>,
+    /// Whether the sampler rows ran the tuck pass (`--foliage-sampling-tuck`).
+    pub sampling_tuck: bool,
     /// The test-only tree count of the procedural forests, if given.
     pub trees_override: Option<u32>,
     /// Seed of forests and rays.
@@ -468,6 +482,7 @@ struct Plan {
     model_trees: u32,
     sampling_budget: u64,
     sampling_max_eps: Option<f64>,
+    sampling_tuck: bool,
 }
 
 impl Plan {
@@ -493,6 +508,7 @@ impl Plan {
             model_trees: args.foliage_model_trees,
             sampling_budget: args.foliage_sampling_budget,
             sampling_max_eps: args.foliage_sampling_max_eps,
+            sampling_tuck: args.foliage_sampling_tuck,
         };
         let counts = [
             ("--cells", plan.cells as u64),
@@ -762,6 +778,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
             variants(study, plan.subcell_cells),
             plan.sampling_budget,
             plan.sampling_max_eps,
+            plan.sampling_tuck,
         );
         // Sample every cell a row bakes before the first bake, so that the ray index is not
         // held during the bakes (their peak memory).
@@ -882,6 +899,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
         model_trees: plan.model_trees,
         sampling_budget_points: plan.sampling_budget,
         sampling_max_eps: plan.sampling_max_eps,
+        sampling_tuck: plan.sampling_tuck,
         trees_override: args.foliage_trees,
         seed: args.seed,
         threads: rayon::current_num_threads(),
@@ -1143,7 +1161,7 @@ mod tests {
     fn the_sampler_rows_take_the_runs_budget_and_max_eps() {
         for study in ["coarse", "fine"] {
             let plain = variants(study, 3);
-            let set = with_sampler(variants(study, 3), 40_000, Some(0.05));
+            let set = with_sampler(variants(study, 3), 40_000, Some(0.05), true);
             assert_eq!(plain.len(), set.len());
             let mut sampled = 0;
             for (p, v) in plain.iter().zip(&set) {
@@ -1154,12 +1172,18 @@ mod tests {
                 }
                 sampled += 1;
                 let sa = &v.settings.sampling_settings;
-                assert_eq!((sa.budget_points, sa.max_eps), (40_000, Some(0.05)));
+                assert_eq!(
+                    (sa.budget_points, sa.max_eps, sa.tuck),
+                    (40_000, Some(0.05), true)
+                );
                 assert_eq!(
                     v.label,
-                    "--sweep --sampling --sampling-budget 40000 --sampling-max-eps 0.05"
+                    "--sweep --sampling --sampling-budget 40000 --sampling-max-eps 0.05 \
+                     --sampling-tuck"
                 );
-                assert!(describe(&v.settings).ends_with("≤40000 points, levels ε ≤0.05"));
+                assert!(
+                    describe(&v.settings).ends_with("≤40000 points, levels ε ≤0.05, tuck pass")
+                );
                 assert!(v.settings.check().is_ok());
             }
             assert_eq!(sampled, 1, "{study}");

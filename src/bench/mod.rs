@@ -98,6 +98,8 @@ pub struct BenchOptions {
     /// The sampler rows' `--sampling-max-eps` (levels coarser than this are split without
     /// being sampled), if any.
     pub foliage_sampling_max_eps: Option<f64>,
+    /// Whether the sampler rows run the tuck pass (`--sampling-tuck`).
+    pub foliage_sampling_tuck: bool,
     /// Receives the progress lines; none are reported when `None`.
     pub progress: Option<ProgressLog>,
     /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
@@ -133,6 +135,7 @@ impl Default for BenchOptions {
             foliage_trees: None,
             foliage_sampling_budget: foliage::SAMPLING_BENCH_POINTS,
             foliage_sampling_max_eps: None,
+            foliage_sampling_tuck: false,
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             rsf_on_gpu: false,
             tests_on_cpu: false,
