@@ -79,17 +79,20 @@ fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
         nv += 3;
         n += 1;
     }
-    // A file of its own per call (tests run in parallel threads of one process), removed
-    // when the handle drops.
+    let scene = load_obj(&format!("leaves-{}", hole.is_some()), &obj);
+    (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
+}
+
+/// The scene of the OBJ text `obj`, through a file of its own (tests run in parallel threads
+/// of one process) removed once it is read.
+fn load_obj(name: &str, obj: &str) -> umbrasweep::Scene {
     let file = tempfile::Builder::new()
-        .prefix(&format!("umbrasweep-sampler-leaves-{}-", hole.is_some()))
+        .prefix(&format!("umbrasweep-sampler-{name}-"))
         .suffix(".obj")
         .tempfile()
         .unwrap();
     std::fs::write(file.path(), obj).unwrap();
-    let path = file.path();
-    let scene = umbrasweep::scene::load(path).unwrap();
-    (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
+    umbrasweep::scene::load(file.path()).unwrap()
 }
 
 fn settings() -> BakeSettings {
@@ -501,13 +504,7 @@ fn a_level_whose_probe_hides_nothing_everywhere_is_split_unsampled() {
         writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
         nv += 4;
     }
-    let file = tempfile::Builder::new()
-        .prefix("umbrasweep-sampler-window-")
-        .suffix(".obj")
-        .tempfile()
-        .unwrap();
-    std::fs::write(file.path(), obj).unwrap();
-    let scene = umbrasweep::scene::load(file.path()).unwrap();
+    let scene = load_obj("window", &obj);
     let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
     let run = |probe: f64| {
         let mut s = settings();

@@ -376,6 +376,16 @@ pub struct BoxRect {
     pub z: f64,
 }
 
+/// `p` (relative to the eye) in the coordinates of the view whose axes are `map`
+/// ([`View::map`]).
+fn view_coords(map: [(usize, f64); 3], p: DVec3) -> DVec3 {
+    DVec3::new(
+        map[0].1 * p[map[0].0],
+        map[1].1 * p[map[1].0],
+        map[2].1 * p[map[2].0],
+    )
+}
+
 /// A polygon's footprint in one view ([`Hemicube::footprint`]).
 struct Footprint {
     /// The needed pixels `[i0, i1) × [j0, j1)` its projection's bound touches.
@@ -975,7 +985,7 @@ impl Hemicube {
 
     /// Whether drawing the polygon `pts` (world space), with any shrink, could lower a pixel
     /// now: the footprint test [`Hemicube::draw_in_view`] starts with, in some view. False
-    /// only where a draw would write nothing.
+    /// only where a draw would change no pixel a test reads.
     fn could_lower(&mut self, pts: &[DVec3]) -> bool {
         let n = pts.len();
         if n < 3 {
@@ -1115,19 +1125,14 @@ impl Hemicube {
     /// part with smaller `Z` is outside the frustum, where `|P| ≤ √3·Z`: with `zc` half the
     /// distance of its plane, all its points are at least that far from the eye): the needed
     /// pixels its projection's bound touches and its depth. `None` when it touches none, or
-    /// when every tile it touches is already covered at least as near, so that drawing it
-    /// (with any shrink) can lower no pixel.
+    /// when every tile it touches (and, for a footprint of at most [`PIXEL_CHECK`] pixels,
+    /// every pixel) is already covered at least as near or matters to no occludee, so that
+    /// drawing it (with any shrink) can change no pixel a test reads.
     fn footprint(&self, k: usize, q: &[DVec3], zc: f64) -> Option<Footprint> {
         let res = self.res;
         let view = &self.views[k];
         let map = view.map;
-        let to_view = |p: DVec3| {
-            DVec3::new(
-                map[0].1 * p[map[0].0],
-                map[1].1 * p[map[1].0],
-                map[2].1 * p[map[2].0],
-            )
-        };
+        let to_view = |p: DVec3| view_coords(map, p);
         let mut zmax = f64::NEG_INFINITY;
         let mut zmin = f64::INFINITY;
         let (mut umin, mut umax, mut vmin, mut vmax) = (
@@ -1217,13 +1222,7 @@ impl Hemicube {
         let ps = 2.0 / res as f64;
         let view = &self.views[k];
         let map = view.map;
-        let to_view = |p: DVec3| {
-            DVec3::new(
-                map[0].1 * p[map[0].0],
-                map[1].1 * p[map[1].0],
-                map[2].1 * p[map[2].0],
-            )
-        };
+        let to_view = |p: DVec3| view_coords(map, p);
         let Some(fp) = self.footprint(k, q, 0.5 * self.near) else {
             return false;
         };
@@ -1541,14 +1540,7 @@ impl Hemicube {
         const W: f64 = 1e-9;
         for v in &self.views {
             let map = v.map;
-            let to = |p: DVec3| {
-                let q = p - self.eye;
-                DVec3::new(
-                    map[0].1 * q[map[0].0],
-                    map[1].1 * q[map[1].0],
-                    map[2].1 * q[map[2].0],
-                )
-            };
+            let to = |p: DVec3| view_coords(map, p - self.eye);
             let (pa, pb) = (to(a), to(b));
             let d = pb - pa;
             let vmax = v.vmin + v.h as f64 * ps;
@@ -1754,14 +1746,7 @@ impl Hemicube {
             let v = &self.views[k];
             let map = v.map;
             poly.clear();
-            poly.extend(tri.iter().map(|p| {
-                let q = *p - self.eye;
-                DVec3::new(
-                    map[0].1 * q[map[0].0],
-                    map[1].1 * q[map[1].0],
-                    map[2].1 * q[map[2].0],
-                )
-            }));
+            poly.extend(tri.iter().map(|p| view_coords(map, *p - self.eye)));
             // The view's frustum, widened: u ∈ [−1, 1], v ∈ [vmin, vmax].
             let vmax = v.vmin + v.h as f64 * ps;
             for n in [
