@@ -34,7 +34,8 @@
 //!    quadrants cover them exactly and inherit every candidate. So is the rest of a level
 //!    (never the finest) whose probe, every 16th of its rectangles, proves hidden less than
 //!    `--sampling-probe` of the objects it tests, or hides no undecided object at every probed
-//!    rectangle that tests it (then the rest could cull nothing at this level): the probed
+//!    rectangle that tests it (a heuristic: the level then rarely culls anything, and only
+//!    which rectangles are sampled depends on it, never soundness): the probed
 //!    rectangles pass on what they left open, the others every candidate still undecided.
 //! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
 //!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
@@ -591,8 +592,10 @@ impl Culler for SamplingCuller {
                 let hid = shared.hid.load(Ordering::Relaxed) - h0;
                 // Per-rectangle hides add up to a cull only for an object hidden at every
                 // rectangle that tests it: unless some object still undecided was hidden at
-                // every probed rectangle that tested it, the rest of the level cannot cull
-                // anything either (it only prunes the next level's lists).
+                // every probed rectangle that tested it, the rest of the level will rarely cull
+                // anything (it mostly prunes the next level's lists). Only an object that no
+                // probed rectangle tests escapes this guess; unsampled rectangles pass every
+                // candidate on, so it costs points, never soundness.
                 let mut seen = vec![0u8; n];
                 for &i in &probe {
                     for &o in level[i].1.iter() {
