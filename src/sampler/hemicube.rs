@@ -387,6 +387,7 @@ fn view_coords(map: [(usize, f64); 3], p: DVec3) -> DVec3 {
 }
 
 /// A polygon's footprint in one view ([`Hemicube::footprint`]).
+#[derive(Clone, Copy, Debug)]
 struct Footprint {
     /// The needed pixels `[i0, i1) × [j0, j1)` its projection's bound touches.
     pixels: [usize; 4],
@@ -802,16 +803,7 @@ impl Hemicube {
                 for k in node.first_index..node.first_index + node.prim_count {
                     let poly = bvh.primitive_indices[k as usize] as usize;
                     st.reached += 1;
-                    // The tuck pass: the edges that lie beyond what was drawn before this
-                    // polygon are drawn unshrunk (only where the draw could lower a pixel:
-                    // elsewhere it changes nothing, and the edge tests are its cost).
-                    if self.tuck && occ.card(poly).is_none() {
-                        let pts = occ.poly_points(poly);
-                        if self.could_lower(pts) {
-                            self.tucked = self.tuck_mask(pts, &mut ts);
-                        }
-                    }
-                    if self.draw_poly(occ, poly) {
+                    if self.draw_poly(occ, poly, &mut ts) {
                         st.polygons += 1;
                         st.tucked += u64::from(self.tucked != 0);
                     }
@@ -983,46 +975,17 @@ impl Hemicube {
         mask
     }
 
-    /// Whether drawing the polygon `pts` (world space), with any shrink, could lower a pixel
-    /// now: the footprint test [`Hemicube::draw_in_view`] starts with, in some view. False
-    /// only where a draw would change no pixel a test reads.
-    fn could_lower(&mut self, pts: &[DVec3]) -> bool {
-        let n = pts.len();
-        if n < 3 {
-            return false;
-        }
-        let mut q = std::mem::take(&mut self.scratch_q);
-        q.clear();
-        q.extend(pts.iter().map(|&p| p - self.eye));
-        // The distance of the polygon's plane, as `draw_poly_with` finds it (the footprint is
-        // clipped at half of it).
-        let mut normal = DVec3::ZERO;
-        let mut centroid = DVec3::ZERO;
-        for k in 0..n {
-            normal += q[k].cross(q[(k + 1) % n]);
-            centroid += q[k];
-        }
-        let nl = normal.length();
-        let near = (normal / nl).dot(centroid / n as f64).abs();
-        let lowers = nl > 0.0
-            && nl.is_finite()
-            && (0..5).any(|k| {
-                let v = &self.views[k];
-                v.need[0] < v.need[1] && self.footprint(k, &q, 0.5 * near).is_some()
-            });
-        self.scratch_q = q;
-        lowers
-    }
-
     /// Draws polygon `poly` into every view it reaches; false when it was left out or
-    /// covered no pixel.
-    fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize) -> bool {
+    /// covered no pixel. With the tuck pass, a polygon (not a card) that could lower a pixel
+    /// in some view is drawn with the edges [`Hemicube::tuck_mask`] finds unshrunk
+    /// (`self.tucked`, which the caller clears); `ts` is the pass's scratch.
+    fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize, ts: &mut Vec<f64>) -> bool {
         let mut q = std::mem::take(&mut self.scratch_q);
         let mut edges = std::mem::take(&mut self.scratch_edges);
         let card = occ
             .card(poly)
             .map(|c| (c, &*occ.coverages[c.coverage as usize]));
-        let drawn = self.draw_poly_with(occ.poly_points(poly), card, &mut q, &mut edges);
+        let drawn = self.draw_poly_with(occ.poly_points(poly), card, &mut q, &mut edges, ts);
         self.scratch_q = q;
         self.scratch_edges = edges;
         drawn
@@ -1034,6 +997,7 @@ impl Hemicube {
         card: Option<(&SampleCard, &Coverage)>,
         q: &mut Vec<DVec3>,
         edges: &mut Vec<(DVec3, f64)>,
+        ts: &mut Vec<f64>,
     ) -> bool {
         let n = pts.len();
         if n < 3 {
@@ -1082,6 +1046,25 @@ impl Hemicube {
             return false;
         }
         self.near = plane_dist;
+        // The footprint in each view, before any edge is set up: most polygons the traversal
+        // reaches can lower no pixel (footprints do not depend on the shrinks, and each view
+        // reads only its own pixels, so all five are found before any is drawn).
+        let mut fps = [None; 5];
+        for (k, fp) in fps.iter_mut().enumerate() {
+            let v = &self.views[k];
+            if v.need[0] < v.need[1] {
+                *fp = self.footprint(k, q, 0.5 * plane_dist);
+            }
+        }
+        if fps.iter().all(Option::is_none) {
+            return false;
+        }
+        // The tuck pass: the edges that lie beyond what was drawn before this polygon are
+        // drawn unshrunk (only for a polygon that can lower a pixel: elsewhere it changes
+        // nothing, and the edge tests are its cost).
+        if self.tuck && card.is_none() {
+            self.tucked = self.tuck_mask(pts, ts);
+        }
         // The edge planes' unit normals toward the inside, and the shrink per edge.
         for k in 0..n {
             let (a, b) = (q[k], q[(k + 1) % n]);
@@ -1112,11 +1095,10 @@ impl Hemicube {
             edges[k] = (m, s * (1.0 + 1e-6));
         }
         let mut drawn = false;
-        for k in 0..5 {
-            if self.views[k].need[0] >= self.views[k].need[1] {
-                continue;
+        for (k, fp) in fps.into_iter().enumerate() {
+            if let Some(fp) = fp {
+                drawn |= self.draw_in_view(k, fp, q, edges, normal / nl, card);
             }
-            drawn |= self.draw_in_view(k, q, edges, normal / nl, card);
         }
         drawn
     }
@@ -1213,6 +1195,7 @@ impl Hemicube {
     fn draw_in_view(
         &mut self,
         k: usize,
+        fp: Footprint,
         q: &[DVec3],
         edges: &[(DVec3, f64)],
         normal: DVec3,
@@ -1223,9 +1206,6 @@ impl Hemicube {
         let view = &self.views[k];
         let map = view.map;
         let to_view = |p: DVec3| view_coords(map, p);
-        let Some(fp) = self.footprint(k, q, 0.5 * self.near) else {
-            return false;
-        };
         let [pi0, pi1, pj0, pj1] = fp.pixels;
         let (z, deep) = (fp.z, fp.deep);
         // A card triangle covers whole pixels only (where its texel footprint is opaque).
