@@ -147,6 +147,16 @@ pub struct BenchArgs {
     /// leaves cover are drawn unshrunk.
     #[arg(long, requires = "foliage")]
     pub foliage_sampling_tuck: bool,
+    /// The sampler rows' finest ε (their --sampling-eps E; default: the bake's, from the
+    /// leaves' size). With --foliage-sampling-levels, the cost curve's range: e.g.
+    /// `--foliage-sampling-eps 0.022 --foliage-sampling-levels 4` on the coarse forest samples
+    /// ε 0.35 down to 0.022.
+    #[arg(long, value_name = "E", requires = "foliage")]
+    pub foliage_sampling_eps: Option<f64>,
+    /// The sampler rows' refinement levels (their --sampling-levels N): the coarsest level's ε
+    /// is 2^N × the finest.
+    #[arg(long, value_name = "N", requires = "foliage")]
+    pub foliage_sampling_levels: Option<u32>,
 }
 
 /// Prints a progress line on stderr.
@@ -184,6 +194,8 @@ impl From<&BenchArgs> for BenchOptions {
             foliage_sampling_budget: a.foliage_sampling_budget,
             foliage_sampling_max_eps: a.foliage_sampling_max_eps,
             foliage_sampling_tuck: a.foliage_sampling_tuck,
+            foliage_sampling_eps: a.foliage_sampling_eps,
+            foliage_sampling_levels: a.foliage_sampling_levels,
             progress: Some(progress),
         }
     }

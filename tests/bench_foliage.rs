@@ -110,7 +110,41 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
             .count(),
         1
     );
+    // The sampler rows' cost curves: points, seconds and objects hidden grow level by level,
+    // the last level gives the row's own % culled, and each curve is printed and in the JSON.
+    let sampled: Vec<_> = bench
+        .rows
+        .iter()
+        .filter(|r| r.variant.contains("--sampling"))
+        .collect();
+    assert!(sampled.iter().any(|r| !r.sampling_curve.is_empty()));
+    for r in &bench.rows {
+        let c = &r.sampling_curve;
+        if !r.variant.contains("--sampling") {
+            assert!(c.is_empty(), "{} {}", r.study, r.variant);
+            continue;
+        }
+        if c.is_empty() {
+            continue;
+        }
+        for w in c.windows(2) {
+            assert!(w[1].eps < w[0].eps, "{} {}: {w:?}", r.study, r.variant);
+            assert!(w[1].points >= w[0].points && w[1].seconds >= w[0].seconds);
+            assert!(w[1].sampler_hidden >= w[0].sampler_hidden);
+            assert!(w[1].objects_culled_percent >= w[0].objects_culled_percent);
+        }
+        let last = c.last().unwrap();
+        assert!((last.objects_culled_percent - r.row.objects_culled_percent).abs() < 1e-9);
+        assert!(tables.contains(&format!("cost curve of [{}]", r.variant)));
+    }
     let json = serde_json::to_value(&bench).unwrap();
+    let curved = json["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r.get("sampling_curve").is_some())
+        .expect("a row with a cost curve");
+    assert!(curved["sampling_curve"][0]["objects_culled_percent"].is_number());
     let row = &json["rows"][0];
     assert_eq!(row["variant"], "--sweep");
     assert_eq!(row["scene"], "coarse_forest");

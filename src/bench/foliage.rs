@@ -218,27 +218,56 @@ fn sampled(cells: usize) -> Variant {
     }
 }
 
-/// `list` with its sampler rows ([`variants`]) given `budget` points per cell, if any
-/// `max_eps` (`--sampling-max-eps`) and the tuck pass when `tuck`, their labels saying so.
-pub fn with_sampler(
-    mut list: Vec<Variant>,
-    budget: u64,
-    max_eps: Option<f64>,
-    tuck: bool,
-) -> Vec<Variant> {
+/// What a run asks of the foliage study's sampler rows (`--foliage-sampling-…`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SamplerRow {
+    /// Sample points per cell (`--sampling-budget`).
+    pub budget: u64,
+    /// `--sampling-max-eps`: levels coarser than this are split without sampling.
+    pub max_eps: Option<f64>,
+    /// The tuck pass (`--sampling-tuck`).
+    pub tuck: bool,
+    /// The finest ε (`--sampling-eps`; `None`: the bake's default from the leaves' size).
+    pub eps: Option<f64>,
+    /// Refinement levels (`--sampling-levels`; `None`: the bake's default).
+    pub levels: Option<u32>,
+}
+
+impl Default for SamplerRow {
+    fn default() -> Self {
+        SamplerRow {
+            budget: SAMPLING_BENCH_POINTS,
+            max_eps: None,
+            tuck: false,
+            eps: None,
+            levels: None,
+        }
+    }
+}
+
+/// `list` with its sampler rows ([`variants`]) set as `row` asks, their labels saying so.
+pub fn with_sampler(mut list: Vec<Variant>, row: &SamplerRow) -> Vec<Variant> {
     for v in &mut list {
         if v.settings.sampling != SweepChoice::On {
             continue;
         }
         let sa = &mut v.settings.sampling_settings;
-        sa.budget_points = budget;
-        sa.max_eps = max_eps;
-        sa.tuck = tuck;
-        v.label = format!("--sweep --sampling --sampling-budget {budget}");
-        if let Some(e) = max_eps {
+        sa.budget_points = row.budget;
+        sa.max_eps = row.max_eps;
+        sa.tuck = row.tuck;
+        v.label = format!("--sweep --sampling --sampling-budget {}", row.budget);
+        if let Some(e) = row.eps {
+            sa.eps = Some(e);
+            v.label += &format!(" --sampling-eps {e}");
+        }
+        if let Some(n) = row.levels {
+            sa.levels = n;
+            v.label += &format!(" --sampling-levels {n}");
+        }
+        if let Some(e) = row.max_eps {
             v.label += &format!(" --sampling-max-eps {e}");
         }
-        if tuck {
+        if row.tuck {
             v.label += " --sampling-tuck";
         }
     }
@@ -392,6 +421,9 @@ pub fn describe(s: &BakeSettings) -> String {
             sa.eps.map_or("auto".to_string(), |e| e.to_string()),
             sa.budget_points
         );
+        if sa.levels != BakeSettings::default_settings().sampling_settings.levels {
+            let _ = write!(out, ", {} levels", sa.levels);
+        }
         if let Some(e) = sa.max_eps {
             let _ = write!(out, ", levels ε ≤{e}");
         }
@@ -418,6 +450,60 @@ pub struct FoliageRow {
     /// The process's peak resident memory during the bake, MiB (`VmHWM`, reset before the
     /// bake); `None` where `/proc/self/status` is unavailable.
     pub peak_mib: Option<f64>,
+    /// The sampler's cost curve (rows with the sampler; empty otherwise): per level it ran,
+    /// what a budget that ran out right after that level gives, mean per cell.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sampling_curve: Vec<CurvePoint>,
+}
+
+/// One point of a sampler row's cost curve: the state at the end of one level (all levels
+/// so far), mean per cell over the row's cells ([`crate::pvs::PvsLevelSummary`] with the
+/// share of objects culled).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CurvePoint {
+    /// The level's ε (the largest half diagonal of its sample rectangles, any cell).
+    pub eps: f64,
+    /// Pixels across each 90° view at this level (the largest of the cells).
+    pub resolution: u32,
+    /// Sample points rendered so far.
+    pub points: f64,
+    /// Seconds of sampling so far.
+    pub seconds: f64,
+    /// Objects the sampler had proved hidden so far.
+    pub sampler_hidden: f64,
+    /// Objects culled by all cullers had the sampler stopped after this level, % (the row's
+    /// `objects_culled_percent` less what later levels hid).
+    pub objects_culled_percent: f64,
+    /// The share of the cells where only the level's probe was sampled.
+    pub probe_only: f64,
+}
+
+/// The cost curve of a bake's sampler ([`FoliageRow::sampling_curve`]): its levels from the
+/// culler summary, each with the % culled that stopping there gives (`culled_percent` is the
+/// whole bake's, of `objects` objects). Empty when the sampler did not run.
+fn cost_curve(
+    result: &crate::bake::BakeResult,
+    objects: usize,
+    culled_percent: f64,
+) -> Vec<CurvePoint> {
+    let summary = crate::bake::culler_summary(result);
+    let Some(s) = summary.iter().find(|c| c.name == "shrunk_sampling") else {
+        return Vec::new();
+    };
+    let last = s.levels.last().map_or(0.0, |l| l.hidden);
+    s.levels
+        .iter()
+        .map(|l| CurvePoint {
+            eps: l.eps,
+            resolution: l.resolution,
+            points: l.points,
+            seconds: l.seconds,
+            sampler_hidden: l.hidden,
+            objects_culled_percent: culled_percent
+                - 100.0 * (last - l.hidden) / objects.max(1) as f64,
+            probe_only: l.probe_only,
+        })
+        .collect()
 }
 
 /// One study's heading: what its forest is.
@@ -456,6 +542,10 @@ pub struct FoliageBench {
     pub sampling_max_eps: Option<f64>,
     /// Whether the sampler rows ran the tuck pass (`--foliage-sampling-tuck`).
     pub sampling_tuck: bool,
+    /// The sampler rows' finest ε, if given (`--foliage-sampling-eps`).
+    pub sampling_eps: Option<f64>,
+    /// The sampler rows' refinement levels, if given (`--foliage-sampling-levels`).
+    pub sampling_levels: Option<u32>,
     /// The test-only tree count of the procedural forests, if given.
     pub trees_override: Option<u32>,
     /// Seed of forests and rays.
@@ -480,9 +570,7 @@ struct Plan {
     subcell_cells: usize,
     paper_cells: usize,
     model_trees: u32,
-    sampling_budget: u64,
-    sampling_max_eps: Option<f64>,
-    sampling_tuck: bool,
+    sampler: SamplerRow,
 }
 
 impl Plan {
@@ -506,9 +594,13 @@ impl Plan {
             subcell_cells: args.foliage_subcell_cells,
             paper_cells: args.foliage_paper_cells,
             model_trees: args.foliage_model_trees,
-            sampling_budget: args.foliage_sampling_budget,
-            sampling_max_eps: args.foliage_sampling_max_eps,
-            sampling_tuck: args.foliage_sampling_tuck,
+            sampler: SamplerRow {
+                budget: args.foliage_sampling_budget,
+                max_eps: args.foliage_sampling_max_eps,
+                tuck: args.foliage_sampling_tuck,
+                eps: args.foliage_sampling_eps,
+                levels: args.foliage_sampling_levels,
+            },
         };
         let counts = [
             ("--cells", plan.cells as u64),
@@ -517,18 +609,34 @@ impl Plan {
             ("--foliage-paper-cells", plan.paper_cells as u64),
             ("--foliage-model-trees", plan.model_trees as u64),
             ("--foliage-trees", args.foliage_trees.unwrap_or(1) as u64),
-            ("--foliage-sampling-budget", plan.sampling_budget),
+            ("--foliage-sampling-budget", plan.sampler.budget),
         ];
         if let Some((flag, _)) = counts.iter().find(|c| c.1 == 0) {
             return Err(BenchError::Zero(flag));
         }
-        if let Some(e) = plan.sampling_max_eps
-            && !(e.is_finite() && e > 0.0)
+        for (flag, e) in [
+            ("--foliage-sampling-max-eps", plan.sampler.max_eps),
+            ("--foliage-sampling-eps", plan.sampler.eps),
+        ] {
+            if let Some(e) = e
+                && !(e.is_finite() && e > 0.0)
+            {
+                return Err(BenchError::BadValue {
+                    flag,
+                    value: e.to_string(),
+                    why: "must be a positive distance in scene units (e.g. 0.05 on the fine \
+                          forest)",
+                });
+            }
+        }
+        if let Some(n) = plan.sampler.levels
+            && n > 12
         {
             return Err(BenchError::BadValue {
-                flag: "--foliage-sampling-max-eps",
-                value: e.to_string(),
-                why: "must be a positive distance in scene units (e.g. 0.05 on the fine forest)",
+                flag: "--foliage-sampling-levels",
+                value: n.to_string(),
+                why: "must be between 0 and 12 (each level halves ε and costs about 4× the \
+                      points)",
             });
         }
         Ok(plan)
@@ -774,12 +882,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
             skipped.push(why);
             continue;
         }
-        let list = with_sampler(
-            variants(study, plan.subcell_cells),
-            plan.sampling_budget,
-            plan.sampling_max_eps,
-            plan.sampling_tuck,
-        );
+        let list = with_sampler(variants(study, plan.subcell_cells), &plan.sampler);
         // Sample every cell a row bakes before the first bake, so that the ray index is not
         // held during the bakes (their peak memory).
         let mut ids: Vec<usize> = list
@@ -835,10 +938,11 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                     if row.backend == "gpu" {
                         row.gpu_projection = Some(args.gpu_projection.to_string());
                     }
-                    (row, peak)
+                    let curve = cost_curve(&r, f.scene.objects.len(), row.objects_culled_percent);
+                    (row, peak, curve)
                 })
             }));
-            let (row, peak) = match run {
+            let (row, peak, sampling_curve) = match run {
                 Ok(Ok(r)) => r,
                 Ok(Err(e)) => {
                     let why = format!("{study} [{}]: FAILED, {e}", v.label);
@@ -877,6 +981,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                 settings: v.settings.clone(),
                 row,
                 peak_mib: peak,
+                sampling_curve,
             });
         }
     }
@@ -897,9 +1002,11 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
         subcell_cells: plan.subcell_cells,
         paper_cells: plan.paper_cells,
         model_trees: plan.model_trees,
-        sampling_budget_points: plan.sampling_budget,
-        sampling_max_eps: plan.sampling_max_eps,
-        sampling_tuck: plan.sampling_tuck,
+        sampling_budget_points: plan.sampler.budget,
+        sampling_max_eps: plan.sampler.max_eps,
+        sampling_tuck: plan.sampler.tuck,
+        sampling_eps: plan.sampler.eps,
+        sampling_levels: plan.sampler.levels,
         trees_override: args.foliage_trees,
         seed: args.seed,
         threads: rayon::current_num_threads(),
@@ -909,6 +1016,18 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
         seconds: start.elapsed().as_secs_f64(),
     })
 }
+
+/// The columns of a sampler row's cost curve, in order.
+pub const CURVE_COLUMNS: [&str; 8] = [
+    "level",
+    "ε",
+    "px",
+    "points",
+    "s",
+    "hidden by the sampler",
+    "% culled",
+    "probe only",
+];
 
 /// The columns of each study's table, in order.
 pub const COLUMNS: [&str; 12] = [
@@ -981,6 +1100,36 @@ impl FoliageBench {
                 })
                 .collect();
             markdown_table(&mut out, &COLUMNS, &cells, &left);
+            for r in self.rows.iter().filter(|r| &r.study == study) {
+                if r.sampling_curve.is_empty() {
+                    continue;
+                }
+                let _ = writeln!(
+                    out,
+                    "\ncost curve of [{}] (mean per cell; each level: what a budget that ran \
+                     out after it gives):\n",
+                    r.variant
+                );
+                let rows: Vec<Vec<String>> = (r.sampling_curve.iter().enumerate())
+                    .map(|(k, c)| {
+                        vec![
+                            k.to_string(),
+                            format!("{:.4}", c.eps),
+                            c.resolution.to_string(),
+                            format!("{:.0}", c.points),
+                            format!("{:.1}", c.seconds),
+                            format!("{:.1}", c.sampler_hidden),
+                            format!("{:.1}", c.objects_culled_percent),
+                            if c.probe_only > 0.0 {
+                                format!("{:.0} %", 100.0 * c.probe_only)
+                            } else {
+                                "–".into()
+                            },
+                        ]
+                    })
+                    .collect();
+                markdown_table(&mut out, &CURVE_COLUMNS, &rows, &[false; 8]);
+            }
         }
         out.push('\n');
         if let Some(a) = &self.adapter {
@@ -1154,6 +1303,20 @@ mod tests {
             .to_string();
             assert!(err.contains(flag), "{err}");
         }
+        for (eps, levels, flag) in [
+            (Some(-1.0), None, "--foliage-sampling-eps"),
+            (Some(f64::INFINITY), None, "--foliage-sampling-eps"),
+            (None, Some(13), "--foliage-sampling-levels"),
+        ] {
+            let err = collect(&BenchOptions {
+                foliage_sampling_eps: eps,
+                foliage_sampling_levels: levels,
+                ..BenchOptions::default()
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(err.contains(flag), "{err}");
+        }
     }
 
     /// The sampler rows take the run's budget and `--sampling-max-eps`, and only they do.
@@ -1161,7 +1324,13 @@ mod tests {
     fn the_sampler_rows_take_the_runs_budget_and_max_eps() {
         for study in ["coarse", "fine"] {
             let plain = variants(study, 3);
-            let set = with_sampler(variants(study, 3), 40_000, Some(0.05), true);
+            let row = SamplerRow {
+                budget: 40_000,
+                max_eps: Some(0.05),
+                tuck: true,
+                ..SamplerRow::default()
+            };
+            let set = with_sampler(variants(study, 3), &row);
             assert_eq!(plain.len(), set.len());
             let mut sampled = 0;
             for (p, v) in plain.iter().zip(&set) {
@@ -1187,6 +1356,29 @@ mod tests {
                 assert!(v.settings.check().is_ok());
             }
             assert_eq!(sampled, 1, "{study}");
+            // The cost curve's range: the finest ε and the levels.
+            let row = SamplerRow {
+                eps: Some(0.022),
+                levels: Some(4),
+                ..SamplerRow::default()
+            };
+            let v = with_sampler(variants(study, 3), &row)
+                .into_iter()
+                .find(|v| v.settings.sampling == SweepChoice::On)
+                .unwrap();
+            assert_eq!(
+                v.label,
+                "--sweep --sampling --sampling-budget 2000 --sampling-eps 0.022 \
+                 --sampling-levels 4"
+            );
+            let sa = &v.settings.sampling_settings;
+            assert_eq!((sa.eps, sa.levels), (Some(0.022), 4));
+            assert!(
+                describe(&v.settings).ends_with("sampling ε 0.022, ≤2000 points, 4 levels"),
+                "{}",
+                describe(&v.settings)
+            );
+            assert!(v.settings.check().is_ok());
         }
     }
 }

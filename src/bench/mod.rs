@@ -100,6 +100,10 @@ pub struct BenchOptions {
     pub foliage_sampling_max_eps: Option<f64>,
     /// Whether the sampler rows run the tuck pass (`--sampling-tuck`).
     pub foliage_sampling_tuck: bool,
+    /// The sampler rows' finest ε (`--sampling-eps`), if any.
+    pub foliage_sampling_eps: Option<f64>,
+    /// The sampler rows' refinement levels (`--sampling-levels`), if any.
+    pub foliage_sampling_levels: Option<u32>,
     /// Receives the progress lines; none are reported when `None`.
     pub progress: Option<ProgressLog>,
     /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
@@ -136,6 +140,8 @@ impl Default for BenchOptions {
             foliage_sampling_budget: foliage::SAMPLING_BENCH_POINTS,
             foliage_sampling_max_eps: None,
             foliage_sampling_tuck: false,
+            foliage_sampling_eps: None,
+            foliage_sampling_levels: None,
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             rsf_on_gpu: false,
             tests_on_cpu: false,
