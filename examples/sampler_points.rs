@@ -38,7 +38,7 @@ fn main() {
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
         .collect();
     let t = Instant::now();
-    let (mut tucked, mut drawn) = (0u64, 0u64);
+    let (mut tucked, mut drawn, mut reached, mut nodes) = (0u64, 0u64, 0u64, 0u64);
     for k in 0..n {
         let face = common::Face::from_index(k % 6);
         let (axis, sign) = (face.axis, face.sign);
@@ -52,6 +52,8 @@ fn main() {
         let st = hc.draw(&data.occluders);
         tucked += st.tucked;
         drawn += st.polygons;
+        reached += st.reached;
+        nodes += st.nodes;
         let mut opened = 0;
         for (&o, b) in ids.iter().zip(boxes) {
             seen_from[o] += 1;
@@ -109,7 +111,8 @@ fn main() {
         }
     }
     println!(
-        "{n} points in {:.1} s ({drawn} polygons drawn, {tucked} of them with tucked edges)",
+        "{n} points in {:.1} s ({drawn} polygons drawn, {tucked} of them with tucked edges; \
+         {reached} reached, {nodes} BVH nodes visited)",
         t.elapsed().as_secs_f64()
     );
     let mut hist = [0usize; 8];
