@@ -1289,26 +1289,17 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(err.contains("--foliage-paper-cells"), "{err}");
-        for (budget, max_eps, flag) in [
-            (0, None, "--foliage-sampling-budget"),
-            (10, Some(0.0), "--foliage-sampling-max-eps"),
-            (10, Some(f64::NAN), "--foliage-sampling-max-eps"),
+        for (budget, max_eps, eps, levels, flag) in [
+            (0, None, None, None, "--foliage-sampling-budget"),
+            (10, Some(0.0), None, None, "--foliage-sampling-max-eps"),
+            (10, Some(f64::NAN), None, None, "--foliage-sampling-max-eps"),
+            (10, None, Some(-1.0), None, "--foliage-sampling-eps"),
+            (10, None, Some(0.0), None, "--foliage-sampling-eps"),
+            (10, None, None, Some(13), "--foliage-sampling-levels"),
         ] {
             let err = collect(&BenchOptions {
                 foliage_sampling_budget: budget,
                 foliage_sampling_max_eps: max_eps,
-                ..BenchOptions::default()
-            })
-            .unwrap_err()
-            .to_string();
-            assert!(err.contains(flag), "{err}");
-        }
-        for (eps, levels, flag) in [
-            (Some(-1.0), None, "--foliage-sampling-eps"),
-            (Some(f64::INFINITY), None, "--foliage-sampling-eps"),
-            (None, Some(13), "--foliage-sampling-levels"),
-        ] {
-            let err = collect(&BenchOptions {
                 foliage_sampling_eps: eps,
                 foliage_sampling_levels: levels,
                 ..BenchOptions::default()
