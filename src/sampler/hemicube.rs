@@ -442,6 +442,27 @@ impl View {
         inline.chain(spilled)
     }
 
+    /// Whether a draw no nearer than `z` in any pixel of `[i0, i1) × [j0, j1)` (needed
+    /// pixels of this view, `res` across) could change a pixel a test reads: some tile it
+    /// touches holds a depth beyond `z` where an occludee needs one, and, for a rectangle of
+    /// at most [`PIXEL_CHECK`] pixels, some pixel of it does (a draw changes only pixels, depths
+    /// or layers, whose depth lies beyond its own). False only where the draw changes nothing.
+    fn may_lower(&self, res: usize, [i0, i1, j0, j1]: [usize; 4], z: f32) -> bool {
+        let tw = res / TILE;
+        let tiles = (j0 / TILE..j1.div_ceil(TILE)).any(|tj| {
+            (i0 / TILE..i1.div_ceil(TILE))
+                .any(|ti| self.tile_max[tj * tw + ti] > z && self.need_z[tj * tw + ti] > z)
+        });
+        tiles
+            && ((i1 - i0) * (j1 - j0) > PIXEL_CHECK
+                || (j0..j1).any(|j| {
+                    self.depth[j * res + i0..j * res + i1]
+                        .iter()
+                        .zip(i0..i1)
+                        .any(|(&d, i)| d > z && self.need_z[(j / TILE) * tw + i / TILE] > z)
+                }))
+    }
+
     /// The world direction (not normalised) through the centre of pixel `(i, j)`, `ps` the
     /// pixel size in `u`/`v`.
     fn pixel_direction(&self, ps: f64, i: usize, j: usize) -> DVec3 {
@@ -506,8 +527,6 @@ pub struct Hemicube {
     /// Whether edges hidden behind nearer coverage are drawn unshrunk
     /// ([`Hemicube::set_tuck`]).
     tuck: bool,
-    /// The edges (bit per edge) of the polygon being drawn that are drawn unshrunk.
-    tucked: u32,
     /// The tuck pass's segment parameters ([`Hemicube::segment_hidden`]).
     scratch_ts: Vec<f64>,
 }
@@ -550,7 +569,6 @@ impl Hemicube {
             subpixel: true,
             depth_bounded: true,
             tuck: false,
-            tucked: 0,
             scratch_ts: Vec::new(),
         }
     }
@@ -804,11 +822,10 @@ impl Hemicube {
                 for k in node.first_index..node.first_index + node.prim_count {
                     let poly = bvh.primitive_indices[k as usize] as usize;
                     st.reached += 1;
-                    if self.draw_poly(occ, poly, &mut ts) {
+                    if let Some(tucked) = self.draw_poly(occ, poly, &mut ts) {
                         st.polygons += 1;
-                        st.tucked += u64::from(self.tucked != 0);
+                        st.tucked += u64::from(tucked != 0);
                     }
-                    self.tucked = 0;
                 }
             } else {
                 let (l, r) = (node.first_index, node.first_index + 1);
@@ -924,7 +941,6 @@ impl Hemicube {
         if dist > self.max_dist {
             return false;
         }
-        let tw = self.res / TILE;
         for k in 0..5 {
             let v = &self.views[k];
             if v.need[0] >= v.need[1] {
@@ -940,29 +956,10 @@ impl Hemicube {
             if i0 >= i1 || j0 >= j1 {
                 continue;
             }
-            let z = r.z as f32;
-            if (i1 - i0) * (j1 - j0) <= PIXEL_CHECK {
-                // A small rectangle pixel by pixel, as a polygon's footprint is: a polygon in
-                // the box is drawn no nearer than `z` in any pixel (its depth there is at least
-                // its nearest point's there, and rounded up), and a draw changes only pixels
-                // whose depth lies beyond its own.
-                let res = self.res;
-                if (j0..j1).any(|j| {
-                    v.depth[j * res + i0..j * res + i1]
-                        .iter()
-                        .zip(i0..i1)
-                        .any(|(&d, i)| d > z && v.need_z[(j / TILE) * tw + i / TILE] > z)
-                }) {
-                    return true;
-                }
-                continue;
-            }
-            for tj in j0 / TILE..j1.div_ceil(TILE) {
-                for ti in i0 / TILE..i1.div_ceil(TILE) {
-                    if v.tile_max[tj * tw + ti] > z && v.need_z[tj * tw + ti] > z {
-                        return true;
-                    }
-                }
+            // A polygon in the box is drawn no nearer than `z` in any pixel (its depth there
+            // is at least its nearest point's there, rounded up).
+            if v.may_lower(self.res, [i0, i1, j0, j1], r.z as f32) {
+                return true;
             }
         }
         false
@@ -992,11 +989,11 @@ impl Hemicube {
         mask
     }
 
-    /// Draws polygon `poly` into every view it reaches; false when it was left out or
-    /// covered no pixel. With the tuck pass, a polygon (not a card) that could lower a pixel
-    /// in some view is drawn with the edges [`Hemicube::tuck_mask`] finds unshrunk
-    /// (`self.tucked`, which the caller clears); `ts` is the pass's scratch.
-    fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize, ts: &mut Vec<f64>) -> bool {
+    /// Draws polygon `poly` into every view it reaches: the mask of the edges it drew
+    /// unshrunk, or `None` when it was left out or covered no pixel. With the tuck pass, a
+    /// polygon (not a card) that could lower a pixel in some view is drawn with the edges
+    /// [`Hemicube::tuck_mask`] finds unshrunk; `ts` is the pass's scratch.
+    fn draw_poly(&mut self, occ: &SampleOccluders, poly: usize, ts: &mut Vec<f64>) -> Option<u32> {
         let mut q = std::mem::take(&mut self.scratch_q);
         let mut edges = std::mem::take(&mut self.scratch_edges);
         let card = occ
@@ -1015,10 +1012,10 @@ impl Hemicube {
         q: &mut Vec<DVec3>,
         edges: &mut Vec<(DVec3, f64)>,
         ts: &mut Vec<f64>,
-    ) -> bool {
+    ) -> Option<u32> {
         let n = pts.len();
         if n < 3 {
-            return false;
+            return None;
         }
         let eps = self.eps;
         q.clear();
@@ -1054,13 +1051,13 @@ impl Hemicube {
         }
         let nl = normal.length();
         if !(nl > 0.0 && nl.is_finite()) {
-            return false;
+            return None;
         }
         let plane_dist = (normal / nl).dot(centroid).abs();
         if plane_dist.partial_cmp(&(most * (1.0 + 1e-6) + 1e-12 * centroid.length()))
             != Some(std::cmp::Ordering::Greater)
         {
-            return false;
+            return None;
         }
         self.near = plane_dist;
         // The footprint in each view, before any edge is set up: most polygons the traversal
@@ -1074,14 +1071,16 @@ impl Hemicube {
             }
         }
         if fps.iter().all(Option::is_none) {
-            return false;
+            return None;
         }
         // The tuck pass: the edges that lie beyond what was drawn before this polygon are
         // drawn unshrunk (only for a polygon that can lower a pixel: elsewhere it changes
         // nothing, and the edge tests are its cost).
-        if self.tuck && card.is_none() {
-            self.tucked = self.tuck_mask(pts, ts);
-        }
+        let tucked = if self.tuck && card.is_none() {
+            self.tuck_mask(pts, ts)
+        } else {
+            0
+        };
         // The edge planes' unit normals toward the inside, and the shrink per edge.
         for k in 0..n {
             let (a, b) = (q[k], q[(k + 1) % n]);
@@ -1089,7 +1088,7 @@ impl Hemicube {
             let cl = cr.length();
             let el = (b - a).length();
             if !(cl > 0.0 && el > 0.0 && cl.is_finite()) {
-                return false;
+                return None;
             }
             let mut m = cr / cl;
             if m.dot(centroid) < 0.0 {
@@ -1099,7 +1098,7 @@ impl Hemicube {
             let reach = edges[k].1;
             let mut s = reach / r;
             // (Polygons of more than 32 edges have only their first 32 tucked.)
-            if k < 32 && self.tucked >> k & 1 == 1 {
+            if k < 32 && tucked >> k & 1 == 1 {
                 s = 0.0;
             }
             if self.depth_bounded {
@@ -1117,7 +1116,7 @@ impl Hemicube {
                 drawn |= self.draw_in_view(k, fp, q, edges, normal / nl, card);
             }
         }
-        drawn
+        drawn.then_some(tucked)
     }
 
     /// Polygon `q`'s (relative to the eye) footprint in view `k`, clipped at `Z ≥ zc` (its
@@ -1187,21 +1186,7 @@ impl Hemicube {
         } else {
             z
         };
-        let tw = res / TILE;
-        let lowers = (pj0 / TILE..pj1.div_ceil(TILE)).any(|tj| {
-            (pi0 / TILE..pi1.div_ceil(TILE))
-                .any(|ti| view.tile_max[tj * tw + ti] > zs && view.need_z[tj * tw + ti] > zs)
-        });
-        // A small footprint is checked pixel by pixel too: a draw changes only pixels
-        // (depths or layers) whose depth is beyond its own.
-        let lowers = lowers
-            && ((pi1 - pi0) * (pj1 - pj0) > PIXEL_CHECK
-                || (pj0..pj1).any(|j| {
-                    view.depth[j * res + pi0..j * res + pi1]
-                        .iter()
-                        .zip(pi0..pi1)
-                        .any(|(&d, i)| d > zs && view.need_z[(j / TILE) * tw + i / TILE] > zs)
-                }));
+        let lowers = view.may_lower(res, [pi0, pi1, pj0, pj1], zs);
         lowers.then_some(Footprint {
             pixels: [pi0, pi1, pj0, pj1],
             z,
