@@ -250,6 +250,10 @@ impl SamplingSettings {
     /// A level's probe takes at least this many rectangles (all when it has fewer).
     pub const PROBE_MIN: usize = 8;
 
+    /// The most refinement levels (`--sampling-levels`): each costs about 4× the points of
+    /// the one before.
+    pub const MAX_LEVELS: u32 = 12;
+
     /// Why these settings keep the sampler off the GPU whatever the device offers (`None`:
     /// they do not). The one place that decides it: the bake's summary line and the
     /// sampler's choice of renderer both ask here.
@@ -594,7 +598,7 @@ impl BakeSettings {
                 "must be a positive distance in scene units (e.g. 0.2 for leaves 0.5 across)",
             ));
         }
-        if sa.levels > 12 {
+        if sa.levels > SamplingSettings::MAX_LEVELS {
             return Err(SettingsError::new(
                 "sampling-levels",
                 sa.levels,

@@ -228,6 +228,9 @@ impl<T> Drop for Pool<'_, T> {
 }
 
 impl SamplingCuller {
+    /// The culler's name ([`Culler::name`]; in [`crate::bake::CULLER_NAMES`]).
+    pub const NAME: &'static str = "shrunk_sampling";
+
     /// The occluder polygons on `gpu`'s device (uploaded once per bake).
     fn gpu_scene(
         &self,
@@ -332,7 +335,7 @@ struct Shared<'a> {
 
 impl Culler for SamplingCuller {
     fn name(&self) -> &'static str {
-        "shrunk_sampling"
+        Self::NAME
     }
 
     fn cull(

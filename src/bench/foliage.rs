@@ -487,7 +487,10 @@ fn cost_curve(
     culled_percent: f64,
 ) -> Vec<CurvePoint> {
     let summary = crate::bake::culler_summary(result);
-    let Some(s) = summary.iter().find(|c| c.name == "shrunk_sampling") else {
+    let Some(s) = summary
+        .iter()
+        .find(|c| c.name == crate::bake::SamplingCuller::NAME)
+    else {
         return Vec::new();
     };
     let last = s.levels.last().map_or(0.0, |l| l.hidden);
@@ -630,7 +633,7 @@ impl Plan {
             }
         }
         if let Some(n) = plan.sampler.levels
-            && n > 12
+            && n > crate::settings::SamplingSettings::MAX_LEVELS
         {
             return Err(BenchError::BadValue {
                 flag: "--foliage-sampling-levels",
