@@ -894,3 +894,133 @@ fn cli_hunt_exits_1_on_a_false_cull_and_0_on_a_good_pvs() {
     assert_eq!(v["rays_per_culled_object"], 2);
     assert_eq!(v["false_culls"], 0);
 }
+
+fn confirm_opts(rays: u64, confirm_rays: u64) -> CheckOptions {
+    CheckOptions {
+        confirm_rays,
+        ..opts(rays)
+    }
+}
+
+#[test]
+fn confirmation_finds_the_slit_object_the_sample_misses_and_never_a_hidden_one() {
+    // The slit scene with a correct PVS that keeps everything: the plain sampling of 2,000
+    // rays sees only the wall (see `hunt_finds_a_false_cull_that_plain_sampling_misses`), so
+    // PVS/VS is 1,002. The confirmation's 400,000 rays go to the 1,001 objects it did not
+    // see, 100 each in the first round; about 1 % of those aimed at the target pass the slit.
+    let s = corner_slit_scene();
+    let all: Vec<u32> = (0..s.objects.len() as u32).collect();
+    let d = doc(&s, all, false);
+    let plain = check(&s, &d, &opts(2_000)).unwrap();
+    assert_eq!(plain.cells[0].visible, vec![SLIT_WALL]);
+    assert!(plain.confirm_rays.is_none() && plain.cells[0].confirmed.is_none());
+
+    let r = check(&s, &d, &confirm_opts(2_000, 400_000)).unwrap();
+    let c = &r.cells[0];
+    // The sample itself is unchanged.
+    assert_eq!(c.visible, plain.cells[0].visible);
+    assert_eq!((c.vs, c.pvs), (1, s.objects.len()));
+    // The target, and none of the boxes behind the closed wall.
+    assert_eq!(
+        c.confirmed.as_deref(),
+        Some(&[SLIT_TARGET][..]),
+        "{}",
+        r.table()
+    );
+    assert_eq!(c.pvs_over_confirmed_vs, Some(s.objects.len() as f64 / 2.0));
+    assert_eq!(c.pvs_over_vs, Some(s.objects.len() as f64));
+    assert_eq!(
+        (r.confirm_rays, r.confirmed_objects),
+        (Some(400_000), Some(1))
+    );
+    assert_eq!(r.pvs_over_confirmed_vs, c.pvs_over_confirmed_vs);
+    // Every hidden box got its share of every round: the whole budget but what the integer
+    // shares leave (under 1,001 rays a round) and the rays the target's chunk did not need.
+    let confirming = r.rays_cast - plain.rays_cast;
+    assert!(
+        confirming >= 400_000 - 4 * 1_001 - 100,
+        "{confirming} confirming rays"
+    );
+    assert!(r.rays_cast <= plain.rays_cast + 400_000);
+    assert_eq!(r.false_culls, 0);
+    let table = r.table();
+    assert!(
+        table.contains("|VS+|") && table.contains("PVS/VS+") && table.contains("501.00"),
+        "{table}"
+    );
+    assert!(table.contains("found 1 of them visible"), "{table}");
+
+    // Not in the JSON unless asked for.
+    let v = serde_json::to_value(&plain).unwrap();
+    for k in ["confirm_rays", "confirmed_objects", "pvs_over_confirmed_vs"] {
+        assert!(v.get(k).is_none(), "{k}");
+    }
+    assert!(v["cells"][0].get("confirmed").is_none());
+    let v = serde_json::to_value(&r).unwrap();
+    assert_eq!(v["cells"][0]["confirmed"], serde_json::json!([SLIT_TARGET]));
+    assert_eq!(v["confirmed_objects"], 1);
+}
+
+#[test]
+fn confirmation_gives_the_same_report_on_one_and_two_threads() {
+    // Three cells, each PVS keeping everything: the confirmation's rounds split the budget
+    // between every object the sample missed, in several chunks each.
+    let s = corner_slit_scene();
+    let all: Vec<u32> = (0..s.objects.len() as u32).collect();
+    let cells = vec![
+        (cell(), all.clone()),
+        (
+            Aabb::new(vec3(-1.0, -1.0, -3.0), vec3(1.0, 1.0, -1.5)),
+            all.clone(),
+        ),
+        (Aabb::new(vec3(1.0, 1.0, 0.0), vec3(2.0, 2.0, 1.0)), all),
+    ];
+    let d = doc_cells(&s, cells, false);
+    same_report_on_one_and_two_threads(&s, &d, &confirm_opts(3_000, 200_003), |r| {
+        assert_eq!(r.confirm_rays, Some(200_003));
+        assert!(r.cells.iter().all(|c| c.confirmed.is_some()));
+    });
+}
+
+#[test]
+fn cli_confirm_rays_adds_columns_and_refuses_hunt() {
+    let s = corner_slit_scene();
+    let dir = tmpdir();
+    let Some(obj) = obj_scene(dir.path(), &s) else {
+        return;
+    };
+    let pvs = dir.path().join("pvs.json");
+    let json = dir.path().join("out.json");
+    let all: Vec<u32> = (0..s.objects.len() as u32).collect();
+    write_doc(&doc(&s, all, false), &pvs);
+    let base: Vec<&std::ffi::OsStr> = vec![
+        obj.as_os_str(),
+        pvs.as_os_str(),
+        "--rays".as_ref(),
+        "2000".as_ref(),
+        "--seed".as_ref(),
+        "7".as_ref(),
+        "--confirm-rays".as_ref(),
+        "400000".as_ref(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ];
+    let out = validate(&base);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}");
+    assert!(stdout.contains("PVS/VS+"), "{stdout}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(v["confirm_rays"], 400000);
+    assert_eq!(v["cells"][0]["confirmed"], serde_json::json!([SLIT_TARGET]));
+
+    // With --hunt it is refused (the hunt measures no visible set to add to).
+    let mut hunt = base.clone();
+    hunt.push("--hunt".as_ref());
+    let out = validate(&hunt);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--confirm-rays") && stderr.contains("--hunt"),
+        "{stderr}"
+    );
+}

@@ -1,8 +1,10 @@
 //! Checking a PVS document against ray-sampled visible sets: input checks (scene/PVS match,
 //! cells, ray count), the per-cell and total [`Report`] (the `--json` document) and its
 //! human-readable table. With [`CheckOptions::hunt`] the rays go to the culled objects instead
-//! (`super::hunt`).
+//! (`super::hunt`); with [`CheckOptions::confirm_rays`] more rays go to the PVS objects the
+//! sample did not see (`super::confirm`).
 
+use super::confirm::{ConfirmCell, confirm_cells};
 use super::hunt::{HuntCell, HuntResult, hunt_cells};
 use super::sample::{CellSample, Witness, sample_cell_progress};
 use super::trace::SceneRays;
@@ -72,6 +74,11 @@ pub struct CheckOptions {
     /// visible set. The visible set is then not measured: [`Report::hunt`] is true and the
     /// VS fields of the report are empty (see [`CellReport::visible`]). Default `false`.
     pub hunt: bool,
+    /// `--confirm-rays`: after the sampling, up to this many more rays per cell aimed at the
+    /// objects of the cell's PVS that the sample did not see (`super::confirm`), so that
+    /// [`CellReport::pvs_over_confirmed_vs`] measures the PVS against a fuller visible set.
+    /// 0 (the default) confirms nothing; ignored with [`Self::hunt`].
+    pub confirm_rays: u64,
 }
 
 impl Default for CheckOptions {
@@ -81,6 +88,7 @@ impl Default for CheckOptions {
             seed: 0,
             progress: None,
             hunt: false,
+            confirm_rays: 0,
         }
     }
 }
@@ -92,6 +100,7 @@ impl std::fmt::Debug for CheckOptions {
             .field("seed", &self.seed)
             .field("progress", &self.progress.as_ref().map(|_| "Fn(Progress)"))
             .field("hunt", &self.hunt)
+            .field("confirm_rays", &self.confirm_rays)
             .finish()
     }
 }
@@ -170,6 +179,14 @@ pub struct CellReport {
     /// and at least 1 (0 when the cell culls nothing).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rays_per_culled_object: Option<u64>,
+    /// `--confirm-rays` only (absent otherwise): the objects of the PVS outside the sampled
+    /// VS that a confirming ray saw, ascending. They are visible: the VS plus these is a
+    /// fuller visible set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confirmed: Option<Vec<u32>>,
+    /// `--confirm-rays` only: |PVS| / (|VS| + confirmed) (`None` when both are empty).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pvs_over_confirmed_vs: Option<f64>,
 }
 
 /// The check of a whole PVS document: the `--json` output of `umbrasweep validate`.
@@ -220,6 +237,16 @@ pub struct Report {
     /// does).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rays_per_culled_object: Option<u64>,
+    /// `--confirm-rays` only: the confirmation budget per cell.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confirm_rays: Option<u64>,
+    /// `--confirm-rays` only: objects confirmed visible over all cells (the sum of the cells'
+    /// [`CellReport::confirmed`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confirmed_objects: Option<u64>,
+    /// `--confirm-rays` only: sum of |PVS| over sum of |VS| + confirmed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pvs_over_confirmed_vs: Option<f64>,
     /// Wall-clock seconds spent tracing (not serialised, so reports stay comparable).
     #[serde(skip)]
     pub seconds: f64,
@@ -322,43 +349,88 @@ impl Report {
         s
     }
 
-    /// The per-cell and total lines of the plain sampling.
+    /// The per-cell and total lines of the plain sampling; with `--confirm-rays`, two more
+    /// columns: the VS with the confirmed objects (`|VS+|`) and the PVS over it.
     fn rows(&self) -> String {
         let mut s = String::new();
-        let _ = writeln!(
-            s,
-            "{:>6} {:>7} {:>7} {:>7} {:>10} {:>10} {:>5} {:>11}",
-            "cell", "|PVS|", "|VS|", "PVS/VS", "obj cull%", "tri cull%", "late", "false culls"
-        );
+        let confirm = self.confirm_rays.is_some();
         let ratio = |r: Option<f64>| r.map_or_else(|| "-".to_string(), |r| format!("{r:.2}"));
-        for (i, c) in self.cells.iter().enumerate() {
-            let _ = writeln!(
+        let row = |s: &mut String, cols: [String; 8], plus: Option<[String; 2]>| {
+            let _ = write!(
                 s,
-                "{:>6} {:>7} {:>7} {:>7} {:>10.1} {:>10.1} {:>5} {:>11}",
-                i,
-                c.pvs,
-                c.vs,
-                ratio(c.pvs_over_vs),
-                c.objects_culled_percent,
-                c.triangles_culled_percent,
-                c.late_found,
-                c.false_culls.len()
+                "{:>6} {:>7} {:>7} {:>7} {:>10} {:>10} {:>5} {:>11}",
+                cols[0], cols[1], cols[2], cols[3], cols[4], cols[5], cols[6], cols[7]
+            );
+            if let Some([a, b]) = plus {
+                let _ = write!(s, " {a:>7} {b:>8}");
+            }
+            s.push('\n');
+        };
+        let head = |a: &str| a.to_string();
+        row(
+            &mut s,
+            [
+                "cell",
+                "|PVS|",
+                "|VS|",
+                "PVS/VS",
+                "obj cull%",
+                "tri cull%",
+                "late",
+                "false culls",
+            ]
+            .map(head),
+            confirm.then(|| ["|VS+|", "PVS/VS+"].map(head)),
+        );
+        for (i, c) in self.cells.iter().enumerate() {
+            let plus = c
+                .confirmed
+                .as_ref()
+                .map(|f| [(c.vs + f.len()).to_string(), ratio(c.pvs_over_confirmed_vs)]);
+            row(
+                &mut s,
+                [
+                    i.to_string(),
+                    c.pvs.to_string(),
+                    c.vs.to_string(),
+                    ratio(c.pvs_over_vs),
+                    format!("{:.1}", c.objects_culled_percent),
+                    format!("{:.1}", c.triangles_culled_percent),
+                    c.late_found.to_string(),
+                    c.false_culls.len().to_string(),
+                ],
+                plus,
             );
         }
         // Totals: sums of |PVS| and |VS| (and their ratio), mean culled percentages (the same
         // as the percentages of all cells' objects and triangles), sums of the counts.
-        let _ = writeln!(
-            s,
-            "{:>6} {:>7} {:>7} {:>7} {:>10.1} {:>10.1} {:>5} {:>11}",
-            "total",
-            self.cells.iter().map(|c| c.pvs).sum::<usize>(),
-            self.cells.iter().map(|c| c.vs).sum::<usize>(),
-            ratio(self.pvs_over_vs),
-            self.objects_culled_percent,
-            self.triangles_culled_percent,
-            self.late_found,
-            self.false_culls
+        let sum_vs: usize = self.cells.iter().map(|c| c.vs).sum();
+        row(
+            &mut s,
+            [
+                "total".to_string(),
+                self.cells.iter().map(|c| c.pvs).sum::<usize>().to_string(),
+                sum_vs.to_string(),
+                ratio(self.pvs_over_vs),
+                format!("{:.1}", self.objects_culled_percent),
+                format!("{:.1}", self.triangles_culled_percent),
+                self.late_found.to_string(),
+                self.false_culls.to_string(),
+            ],
+            self.confirmed_objects.map(|n| {
+                [
+                    (sum_vs as u64 + n).to_string(),
+                    ratio(self.pvs_over_confirmed_vs),
+                ]
+            }),
         );
+        if let (Some(rays), Some(n)) = (self.confirm_rays, self.confirmed_objects) {
+            let _ = writeln!(
+                s,
+                "confirmation: up to {rays} more rays per cell at the PVS objects the sample did \
+                 not see found {n} of them visible (|VS+|, PVS/VS+)"
+            );
+        }
         s
     }
 
@@ -481,7 +553,8 @@ pub fn check_with(
     if opts.hunt {
         return Ok(hunt_with(index, scene, doc, opts));
     }
-    let progress = start_progress(opts, opts.rays.saturating_mul(doc.cells.len() as u64));
+    let per_cell = opts.rays.saturating_add(opts.confirm_rays);
+    let progress = start_progress(opts, per_cell.saturating_mul(doc.cells.len() as u64));
     let start = std::time::Instant::now();
     let mut cells = Vec::with_capacity(doc.cells.len());
     for (i, c) in doc.cells.iter().enumerate() {
@@ -491,9 +564,81 @@ pub fn check_with(
         );
         cells.push(cell_report(scene, c, &sample));
     }
+    let confirm_cast =
+        (opts.confirm_rays > 0).then(|| confirm(index, scene, doc, opts, &mut cells, progress));
     let seconds = start.elapsed().as_secs_f64();
     finish_progress(progress);
-    Ok(summarize(scene, opts, alpha, cells, seconds))
+    let mut report = summarize(scene, opts, alpha, cells, seconds);
+    if let Some(cast) = confirm_cast {
+        let sum_pvs: usize = report.cells.iter().map(|c| c.pvs).sum();
+        let sum_vs: usize = report
+            .cells
+            .iter()
+            .map(|c| c.vs + c.confirmed.as_ref().map_or(0, Vec::len))
+            .sum();
+        report.confirm_rays = Some(opts.confirm_rays);
+        report.confirmed_objects = Some(
+            report
+                .cells
+                .iter()
+                .map(|c| c.confirmed.as_ref().map_or(0, Vec::len) as u64)
+                .sum(),
+        );
+        report.pvs_over_confirmed_vs = (sum_vs > 0).then(|| sum_pvs as f64 / sum_vs as f64);
+        report.rays_cast = report.rays_cast.saturating_add(cast);
+    }
+    Ok(report)
+}
+
+/// `--confirm-rays` (`super::confirm`): spends the confirmation budget of every cell on the
+/// objects of its PVS with area that its sample did not see (objects overlapping the cell are
+/// visible by definition, and in the sample), and fills in the cells' `confirmed` and
+/// `pvs_over_confirmed_vs`. Returns the rays cast.
+fn confirm(
+    index: &SceneRays,
+    scene: &Scene,
+    doc: &PvsDocument,
+    opts: &CheckOptions,
+    cells: &mut [CellReport],
+    progress: Option<&ProgressFn>,
+) -> u64 {
+    let jobs: Vec<ConfirmCell> = doc
+        .cells
+        .iter()
+        .zip(cells.iter())
+        .enumerate()
+        .map(|(i, (c, r))| {
+            let in_pvs = pvs_mask(scene, c);
+            ConfirmCell {
+                cell: Aabb::new(Vec3::from(c.min), Vec3::from(c.max)),
+                cell_index: i as u64,
+                doubt: index
+                    .targetable_objects()
+                    .iter()
+                    .copied()
+                    .filter(|&o| in_pvs[o as usize] && r.visible.binary_search(&o).is_err())
+                    .collect(),
+            }
+        })
+        .collect();
+    let alpha = doc.settings.bake.alpha_occluders;
+    let found = confirm_cells(
+        index,
+        scene,
+        &jobs,
+        opts.confirm_rays,
+        opts.seed,
+        alpha,
+        progress,
+    );
+    let mut cast = 0u64;
+    for (r, f) in cells.iter_mut().zip(found) {
+        cast = cast.saturating_add(f.rays_cast);
+        let seen = r.vs + f.objects.len();
+        r.pvs_over_confirmed_vs = (seen > 0).then(|| r.pvs as f64 / seen as f64);
+        r.confirmed = Some(f.objects);
+    }
+    cast
 }
 
 /// The PVS of `cell` as a mask over the scene's objects.
@@ -632,6 +777,8 @@ pub fn cell_report(scene: &Scene, cell: &crate::pvs::PvsCell, sample: &CellSampl
         rays: sample.rays_cast,
         hunted: None,
         rays_per_culled_object: None,
+        confirmed: None,
+        pvs_over_confirmed_vs: None,
     }
 }
 
@@ -689,6 +836,9 @@ fn summarize(
         hunt: false,
         hunted_objects: None,
         rays_per_culled_object: None,
+        confirm_rays: None,
+        confirmed_objects: None,
+        pvs_over_confirmed_vs: None,
         seconds,
         cells,
     }

@@ -17,9 +17,16 @@
 //! The plain sampling finds a false cull only if it finds the object among all the visible
 //! ones; the hunt gives every culled object its share of the whole budget.
 //!
+//! With [`CheckOptions::confirm_rays`] (`--confirm-rays`) the plain sampling is followed by
+//! rays aimed, the hunt's way, at the objects of each cell's PVS that the sample did not see:
+//! those they reach are visible too, and `PVS/VS+` measures the PVS against that fuller
+//! visible set (the sample alone misses objects seen through slits, so `PVS/VS` over-states
+//! how loose a tight PVS is).
+//!
 //! * `trace` — the BVH, the watertight ray/triangle test, point sampling on objects;
 //! * `sample` — ray budget, phases, random streams, deterministic merge;
 //! * `hunt` — `--hunt`: rays aimed at the culled objects, in deterministic waves;
+//! * `confirm` — `--confirm-rays`: rays aimed at the PVS objects the sample did not see;
 //! * `check` — input checks, the report and its table.
 //!
 //! ```no_run
@@ -35,6 +42,7 @@
 //! ```
 
 mod check;
+mod confirm;
 mod hunt;
 mod sample;
 mod trace;
@@ -43,6 +51,7 @@ pub use check::{
     CellReport, CheckOptions, FalseCull, Progress, ProgressFn, Report, ValidateError, cell_report,
     check, check_input, check_with,
 };
+pub use confirm::CONFIRM_ROUNDS;
 pub use hunt::{HUNT_PHASE, rays_per_culled_object};
 pub use sample::{CHUNK, CellSample, Witness, sample_cell};
 pub(crate) use sample::{chunk_rng, sphere_direction, uniform_origin};
