@@ -149,4 +149,63 @@ fn a_tiny_foliage_bench_has_every_row_and_no_false_cull() {
     assert_eq!(row["variant"], "--sweep");
     assert_eq!(row["scene"], "coarse_forest");
     assert!(row.get("peak_mib").is_some() && row.get("false_culls").is_some());
+    // No harder checks unless asked for.
+    assert!(row.get("hunt").is_none() && row.get("confirm").is_none());
+    assert!(json.get("hunt_rays").is_none() && !tables.contains("harder checks"));
+}
+
+#[test]
+fn harder_checks_hunt_and_confirm_every_row() {
+    let bench = collect(&BenchOptions {
+        foliage_studies: Some(vec!["coarse".into()]),
+        foliage_trees: Some(60),
+        cells: Some(1),
+        rays: Some(2000),
+        foliage_hunt_rays: Some(30_000),
+        foliage_confirm_rays: Some(40_000),
+        backend: BenchBackend::Cpu,
+        ..BenchOptions::default()
+    })
+    .unwrap();
+    assert_eq!(bench.rows.len(), 4);
+    let mut culled_any = false;
+    for r in &bench.rows {
+        let h = r.hunt.as_ref().expect("hunted");
+        let c = r.confirm.as_ref().expect("confirmed");
+        // The hunt's culled objects are the row's: those with area outside its PVS (every
+        // object of the forest has area), each with the whole budget split between them.
+        let culled = (r.row.objects_culled_percent / 100.0 * r.row.objects as f64).round();
+        assert_eq!(h.hunted_objects as f64, culled, "{}", r.variant);
+        culled_any |= h.hunted_objects > 0;
+        if h.hunted_objects > 0 {
+            assert_eq!(h.rays_per_culled_object, 30_000 / h.hunted_objects);
+        }
+        assert_eq!(
+            (h.rays_per_cell, h.false_culls),
+            (30_000, 0),
+            "{}",
+            r.variant
+        );
+        // With no false cull, the confirmed visible set lies inside the PVS.
+        assert_eq!(c.confirm_rays, 40_000);
+        let pvs = r.row.objects as f64 - culled;
+        assert!(c.vs_plus >= 1.0 && c.vs_plus <= pvs, "{}: {c:?}", r.variant);
+        let ratio = c.pvs_over_confirmed_vs.expect("something is seen");
+        assert!(
+            (ratio - pvs / c.vs_plus).abs() < 1e-9,
+            "{}: {c:?}",
+            r.variant
+        );
+    }
+    assert!(culled_any, "some row of the tiny coarse forest culls");
+    let tables = bench.tables();
+    assert!(
+        tables.contains("harder checks, hunt 30000 rays per cell, confirm 40000 rays per cell"),
+        "{tables}"
+    );
+    assert!(tables.contains("| hunt false culls |"), "{tables}");
+    let json = serde_json::to_value(&bench).unwrap();
+    assert_eq!(json["hunt_rays"], 30_000);
+    assert_eq!(json["rows"][0]["hunt"]["false_culls"], 0);
+    assert!(json["rows"][0]["confirm"]["pvs_over_confirmed_vs"].is_number());
 }

@@ -104,6 +104,12 @@ pub struct BenchOptions {
     pub foliage_sampling_eps: Option<f64>,
     /// The sampler rows' refinement levels (`--sampling-levels`), if any.
     pub foliage_sampling_levels: Option<u32>,
+    /// `--foliage-hunt-rays`: every foliage row's PVS is also hunted (`validate --hunt`) with
+    /// this many rays per cell, if any.
+    pub foliage_hunt_rays: Option<u64>,
+    /// `--foliage-confirm-rays`: every foliage row's PVS is also measured against a fuller
+    /// visible set (`validate --confirm-rays`) with this many more rays per cell, if any.
+    pub foliage_confirm_rays: Option<u64>,
     /// Receives the progress lines; none are reported when `None`.
     pub progress: Option<ProgressLog>,
     /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
@@ -142,6 +148,8 @@ impl Default for BenchOptions {
             foliage_sampling_tuck: false,
             foliage_sampling_eps: None,
             foliage_sampling_levels: None,
+            foliage_hunt_rays: None,
+            foliage_confirm_rays: None,
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             rsf_on_gpu: false,
             tests_on_cpu: false,
