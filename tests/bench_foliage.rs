@@ -177,8 +177,8 @@ fn harder_checks_hunt_and_confirm_every_row() {
         let culled = (r.row.objects_culled_percent / 100.0 * r.row.objects as f64).round();
         assert_eq!(h.hunted_objects as f64, culled, "{}", r.variant);
         culled_any |= h.hunted_objects > 0;
-        if h.hunted_objects > 0 {
-            assert_eq!(h.rays_per_culled_object, 30_000 / h.hunted_objects);
+        if let Some(each) = 30_000u64.checked_div(h.hunted_objects) {
+            assert_eq!(h.rays_per_culled_object, each);
         }
         assert_eq!(
             (h.rays_per_cell, h.false_culls),
