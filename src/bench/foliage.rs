@@ -1214,13 +1214,14 @@ const CHECK_COLUMNS: [&str; 6] = [
     "hunted",
     "rays/obj",
     "hunt false culls",
-    "|VS+|",
+    "VS+",
     "PVS/VS+",
 ];
 
 impl FoliageBench {
     /// The harder checks of `study`'s rows, if any was asked for: hunted culled objects, the
-    /// fewest rays any got, the false culls the hunt found, |VS+| and PVS/VS+ (means per cell).
+    /// fewest rays any got, the false culls the hunt found, |VS+| (the `VS+` column) and PVS/VS+
+    /// (means per cell).
     fn check_table(&self, out: &mut String, study: &str) {
         let rows: Vec<Vec<String>> = self
             .rows

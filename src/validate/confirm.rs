@@ -12,9 +12,10 @@
 //!
 //! The budget is spent in [`CONFIRM_ROUNDS`] equal rounds; each round splits its share evenly
 //! between the objects still unconfirmed, so rays go where the doubt is (on the coarse
-//! forest's 1×1×1 cell, 20 M rays at 137 objects in doubt confirmed 64, the next 20 M at the
-//! other 73 confirmed 2). Rounds draw their own random streams from the seed: the result does
-//! not depend on the thread count.
+//! forest's 1×1×1 cell, hunts of 20 M rays with fresh pairs only at 137 objects in doubt saw
+//! 64 of them, the next 20 M at the other 73 only 5 more). Rounds draw their own random
+//! streams from the seed: the result does not depend on the thread count. On that cell
+//! (PVS 409, 94.5 % culled) 80 M rays confirm 160 objects: |VS| 188, |VS+| 348.
 
 use super::hunt::{HuntCell, hunt_cells};
 use super::trace::SceneRays;

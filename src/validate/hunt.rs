@@ -20,6 +20,17 @@
 //! ray aimed at one culled object that meets another culled object of the cell first on its
 //! way (rays are shared the way the plain sampling's uniform rays are).
 //!
+//! **Near misses.** Objects seen only through a row of gaps (a trunk's foot under a canopy)
+//! are reached by few such pairs, but a pair whose ray passes some of the gaps gets farther
+//! along its line before a triangle stops it. So each chunk keeps its best near miss (the
+//! pair whose first hit lies farthest along the line to its target, as a share of it) and,
+//! after its first [`FRESH_FIRST`] rays, aims three rays in four at pairs near it
+//! ([`near_pair`]: the origin moved by up to a tenth of the cell, the target by up to a tenth
+//! of the object, log-uniform down to 10⁻⁴ of those). A ray is a ray: what any of them
+//! reaches proves a false cull as before. On the coarse forest's 1×1×1 cell, 20 M rays aimed
+//! at a PVS that culls at least 159 visible objects found 119 of them, against 85 with fresh
+//! pairs only (5 M rays: 85 against 59).
+//!
 //! Each object's budget is cut into chunks of [`CHUNK`] rays with their own random stream,
 //! seeded from `(seed, cell, object, chunk)`. The chunks are traced in waves (chunk 0 of
 //! every pair, then chunks 1–2, 3–6, … doubling), all cells and objects of a wave in parallel;
@@ -242,10 +253,39 @@ fn hunt_chunk(
     let object = cell.culled[own as usize];
     let mut out = Vec::new();
     s.noted.clear();
+    let start = range.start;
+    // The pair whose ray got farthest towards its target so far, for the local search.
+    let mut best: Option<NearMiss> = None;
     for ray in range {
-        let (origin, direction, tmax) = hunt_ray(&mut rng, &cell.cell, index, object);
+        let k = ray - start;
+        let pair = match &best {
+            Some(b) if k >= FRESH_FIRST && !k.is_multiple_of(4) => {
+                near_pair(&mut rng, b, cell, index, object)
+            }
+            _ => (
+                hunt_origin(&mut rng, &cell.cell),
+                hunt_target(&mut rng, index, object),
+            ),
+        };
+        let (origin, direction, tmax) = hunt_ray(&mut rng, pair, index, object);
         let Some(tmax) = tmax else { continue };
         index.trace_raw_until(origin, direction, tmax, alpha_blocks, &mut s.hits);
+        // How far along the line to its target the ray got before anything stopped it
+        // (1: nothing did).
+        let reach = pair.1.distance(origin.as_dvec3());
+        let first = s.hits.iter().map(|h| h.t).fold(f32::INFINITY, f32::min);
+        let score = if reach > 0.0 {
+            (f64::from(first) / reach).min(1.0)
+        } else {
+            0.0
+        };
+        if best.as_ref().is_none_or(|b| score > b.score) {
+            best = Some(NearMiss {
+                origin: origin.as_dvec3(),
+                target: pair.1,
+                score,
+            });
+        }
         s.culled_hits.clear();
         for h in &s.hits {
             let m = index.meta(h.slot);
@@ -279,17 +319,47 @@ fn hunt_chunk(
     out
 }
 
-/// One hunting ray at `object`: origin strictly inside `cell`, unit direction, and how far to
-/// trace it (`None` when the object's bounds lie wholly behind the origin).
+/// A chunk's best near miss: the (origin, target) pair whose ray got farthest along the line
+/// to its target before a triangle stopped it, as a share of that line (`score`).
+struct NearMiss {
+    origin: DVec3,
+    target: DVec3,
+    score: f64,
+}
+
+/// Rays at the start of every chunk that are all fresh pairs; after them every other ray is
+/// a [`near_pair`].
+const FRESH_FIRST: u64 = CHUNK / 8;
+
+/// A pair near the best near miss `b`: its origin moved by up to a tenth of the cell's size
+/// and its target by up to a tenth of the object's (log-uniform down to 10⁻⁴ of them, in a
+/// random direction), the origin kept strictly inside the cell.
+fn near_pair(
+    rng: &mut Pcg64Mcg,
+    b: &NearMiss,
+    cell: &HuntCell,
+    index: &SceneRays,
+    object: u32,
+) -> (Vec3, DVec3) {
+    let cell_size = cell.cell.size().as_dvec3().max_element();
+    let object_size = index.object_bounds(object).size().as_dvec3().max_element();
+    let mut step = |size: f64| sphere_direction(rng) * size * 10f64.powf(-1.0 - 3.0 * unit(rng));
+    let origin = clamp_inside(b.origin + step(cell_size), &cell.cell);
+    let target = b.target + step(object_size);
+    (origin, target)
+}
+
+/// One hunting ray of the pair (origin strictly inside the cell, target point): the origin,
+/// the unit direction, and how far to trace it (`None` when the object's bounds lie wholly
+/// behind the origin). A degenerate pair gets a random direction.
 fn hunt_ray(
     rng: &mut Pcg64Mcg,
-    cell: &Aabb,
+    (origin, target): (Vec3, DVec3),
     index: &SceneRays,
     object: u32,
 ) -> (Vec3, Vec3, Option<f32>) {
-    let origin = hunt_origin(rng, cell);
     let o = origin.as_dvec3();
-    let dir = hunt_target(rng, index, object) - o;
+    let dir = target - o;
     let len = dir.length();
     let mut d = if len > 1e-12 * (1.0 + o.abs().max_element()) && len.is_finite() {
         (dir / len).as_vec3()
@@ -452,6 +522,44 @@ mod tests {
         for c in corners {
             assert!((450..800).contains(&c), "{corners:?}");
         }
+    }
+
+    #[test]
+    fn near_pairs_stay_inside_and_near_the_best() {
+        let tri = [
+            vec3(0.0, 0.0, 5.0),
+            vec3(4.0, 0.0, 5.0),
+            vec3(0.0, 2.0, 5.0),
+        ];
+        let scene = Scene::from_objects(Path::new("mem"), vec![("t".into(), vec![tri], true)]);
+        let index = SceneRays::new(&scene);
+        // A flat cell, and a best near miss at its corner.
+        let cell = HuntCell {
+            cell: Aabb::new(vec3(1.0, 2.0, 3.0), vec3(1.5, 2.001, 4.0)),
+            cell_index: 0,
+            culled: vec![0],
+        };
+        let best = NearMiss {
+            origin: glam::dvec3(1.5, 2.001, 4.0),
+            target: glam::dvec3(1.0, 1.0, 5.0),
+            score: 0.5,
+        };
+        let mut rng = chunk_rng(5, 0, HUNT_STREAM, 0);
+        let (mut close_o, mut close_t) = (0, 0);
+        for _ in 0..4000 {
+            let (o, t) = near_pair(&mut rng, &best, &cell, &index, 0);
+            let c = &cell.cell;
+            assert!(o.cmpgt(c.min).all() && o.cmplt(c.max).all(), "{o:?}");
+            // Steps of at most a tenth of the cell's and the object's sizes (1 and 4).
+            assert!(o.as_dvec3().distance(best.origin) <= 0.1 + 1e-6, "{o:?}");
+            let dt = t.distance(best.target);
+            assert!(dt <= 0.4 + 1e-9, "{t:?}");
+            close_o += usize::from(o.as_dvec3().distance(best.origin) < 1e-3);
+            close_t += usize::from(dt < 4e-3);
+        }
+        // Log-uniform steps: about a third of them under a hundredth of the largest.
+        assert!((1000..1700).contains(&close_t), "{close_t}");
+        assert!(close_o > 1000, "{close_o}");
     }
 
     #[test]
