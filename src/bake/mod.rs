@@ -20,7 +20,8 @@ pub use journal::{
     JOURNAL_MAGIC, JOURNAL_VERSION, Journal, JournalError, inputs_hash, journal_path,
 };
 pub use pipeline::{
-    CULLER_NAMES, CullState, Culler, CullerStats, CullerWork, NoPlanes, PlaneSink, cullers,
+    CULLER_NAMES, CullState, Culler, CullerStats, CullerWork, EXTENDED_PROJECTIONS, NoPlanes,
+    OCCLUSION_SWEEP, PlaneSink, RAY_SPACE_FACTORIZATION, SHRUNK_SAMPLING, cullers,
 };
 pub use planes::{PlaneCuller, SWEEP_TEST_REACH};
 pub use prepare::{

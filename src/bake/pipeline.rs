@@ -85,13 +85,22 @@ pub struct CullerStats {
     pub work: CullerWork,
 }
 
+/// [`Culler::name`] of extended projections on separate planes.
+pub const EXTENDED_PROJECTIONS: &str = "extended_projections";
+/// [`Culler::name`] of the occlusion sweep.
+pub const OCCLUSION_SWEEP: &str = "occlusion_sweep";
+/// [`Culler::name`] of shrunk-occluder sampling.
+pub const SHRUNK_SAMPLING: &str = "shrunk_sampling";
+/// [`Culler::name`] of ray space factorization.
+pub const RAY_SPACE_FACTORIZATION: &str = "ray_space_factorization";
+
 /// Every name a culler of the pipeline may have ([`Culler::name`]); files that record the
 /// cullers (shards) are read back against this list.
 pub const CULLER_NAMES: [&str; 4] = [
-    "extended_projections",
-    "occlusion_sweep",
-    "shrunk_sampling",
-    "ray_space_factorization",
+    EXTENDED_PROJECTIONS,
+    OCCLUSION_SWEEP,
+    SHRUNK_SAMPLING,
+    RAY_SPACE_FACTORIZATION,
 ];
 
 /// Deserialises culler names as the [`CULLER_NAMES`] they are, refusing unknown ones.

@@ -53,9 +53,9 @@ pub struct PlaneCuller {
 impl Culler for PlaneCuller {
     fn name(&self) -> &'static str {
         if self.sweep {
-            "occlusion_sweep"
+            super::OCCLUSION_SWEEP
         } else {
-            "extended_projections"
+            super::EXTENDED_PROJECTIONS
         }
     }
 

@@ -47,7 +47,7 @@ pub const UPRIGHT_SLOPE: f64 = 0.2;
 
 impl Culler for RsfCuller {
     fn name(&self) -> &'static str {
-        "ray_space_factorization"
+        super::RAY_SPACE_FACTORIZATION
     }
 
     fn cull(

@@ -229,7 +229,7 @@ impl<T> Drop for Pool<'_, T> {
 
 impl SamplingCuller {
     /// The culler's name ([`Culler::name`]; in [`crate::bake::CULLER_NAMES`]).
-    pub const NAME: &'static str = "shrunk_sampling";
+    pub const NAME: &'static str = super::SHRUNK_SAMPLING;
 
     /// The occluder polygons on `gpu`'s device (uploaded once per bake).
     fn gpu_scene(
