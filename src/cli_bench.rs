@@ -36,7 +36,8 @@ impl From<BenchBackend> for bench::BenchBackend {
   umbrasweep bench --quick --scenes city,boxfield --cells 2 --rays 10000
   umbrasweep bench --foliage --json foliage.json
   umbrasweep bench --foliage --foliage-studies coarse,params --cells 1 --rays 2000
-  umbrasweep bench --foliage --foliage-studies coarse --cells 1 --foliage-hunt-rays 20000000 --foliage-confirm-rays 80000000")]
+  umbrasweep bench --scenes city --cells 10 --hunt-rays 1000000 --confirm-rays 20000000
+  umbrasweep bench --foliage --foliage-studies coarse --cells 1 --hunt-rays 20000000 --confirm-rays 80000000")]
 pub struct BenchArgs {
     /// A small version that runs in a few minutes: 10 cells per scene, 3 on the GPU, a forest
     /// of 300 trees and 6 model trees.
@@ -158,16 +159,15 @@ pub struct BenchArgs {
     /// is 2^N × the finest.
     #[arg(long, value_name = "N", requires = "foliage")]
     pub foliage_sampling_levels: Option<u32>,
-    /// Also hunt every foliage row's PVS as `validate --hunt --rays N` does (N rays per cell at
-    /// its culled objects); the rows' hunted objects, rays per object and false culls follow
-    /// each study's table.
-    #[arg(long, value_name = "N", requires = "foliage")]
-    pub foliage_hunt_rays: Option<u64>,
-    /// Also measure every foliage row's PVS as `validate --confirm-rays N` does (N more rays
-    /// per cell at the PVS objects the sample missed): |VS+| and PVS/VS+ follow each study's
-    /// table.
-    #[arg(long, value_name = "N", requires = "foliage")]
-    pub foliage_confirm_rays: Option<u64>,
+    /// Also hunt every row's PVS as `validate --hunt --rays N` does (N rays per cell at its
+    /// culled objects); hunted objects, rays per object and false culls follow the table (each
+    /// study's with --foliage), and a false cull found counts in the exit code.
+    #[arg(long, value_name = "N")]
+    pub hunt_rays: Option<u64>,
+    /// Also measure every row's PVS as `validate --confirm-rays N` does (N more rays per cell
+    /// at the PVS objects the validation's sample missed): |VS+| and PVS/VS+ follow the table.
+    #[arg(long, value_name = "N")]
+    pub confirm_rays: Option<u64>,
 }
 
 /// Prints a progress line on stderr.
@@ -207,8 +207,8 @@ impl From<&BenchArgs> for BenchOptions {
             foliage_sampling_tuck: a.foliage_sampling_tuck,
             foliage_sampling_eps: a.foliage_sampling_eps,
             foliage_sampling_levels: a.foliage_sampling_levels,
-            foliage_hunt_rays: a.foliage_hunt_rays,
-            foliage_confirm_rays: a.foliage_confirm_rays,
+            hunt_rays: a.hunt_rays,
+            confirm_rays: a.confirm_rays,
             progress: Some(progress),
         }
     }
@@ -227,12 +227,16 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         let false_culls = bench
             .rows
             .iter()
-            .map(|r| r.row.false_culls + r.hunt.as_ref().map_or(0, |h| h.false_culls))
+            .map(|r| r.row.false_culls + r.row.hunt.as_ref().map_or(0, |h| h.false_culls))
             .sum();
         return report(&bench.tables(), false_culls, &bench, args.json.as_deref());
     }
     let bench = bench::collect(&opts)?;
-    let false_culls = bench.rows.iter().map(|r| r.false_culls).sum();
+    let false_culls = bench
+        .rows
+        .iter()
+        .map(|r| r.false_culls + r.hunt.as_ref().map_or(0, |h| h.false_culls))
+        .sum();
     report(&bench.table(), false_culls, &bench, args.json.as_deref())
 }
 

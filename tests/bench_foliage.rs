@@ -161,8 +161,8 @@ fn harder_checks_hunt_and_confirm_every_row() {
         foliage_trees: Some(60),
         cells: Some(1),
         rays: Some(2000),
-        foliage_hunt_rays: Some(30_000),
-        foliage_confirm_rays: Some(40_000),
+        hunt_rays: Some(30_000),
+        confirm_rays: Some(40_000),
         backend: BenchBackend::Cpu,
         ..BenchOptions::default()
     })
@@ -170,8 +170,8 @@ fn harder_checks_hunt_and_confirm_every_row() {
     assert_eq!(bench.rows.len(), 4);
     let mut culled_any = false;
     for r in &bench.rows {
-        let h = r.hunt.as_ref().expect("hunted");
-        let c = r.confirm.as_ref().expect("confirmed");
+        let h = r.row.hunt.as_ref().expect("hunted");
+        let c = r.row.confirm.as_ref().expect("confirmed");
         // The hunt's culled objects are the row's: those with area outside its PVS (every
         // object of the forest has area), each with the whole budget split between them.
         let culled = (r.row.objects_culled_percent / 100.0 * r.row.objects as f64).round();

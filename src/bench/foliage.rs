@@ -454,41 +454,6 @@ pub struct FoliageRow {
     /// what a budget that ran out right after that level gives, mean per cell.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub sampling_curve: Vec<CurvePoint>,
-    /// `--foliage-hunt-rays` only: the row's PVS hunted as `validate --hunt` does.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub hunt: Option<RowHunt>,
-    /// `--foliage-confirm-rays` only: the row's PVS against a fuller visible set, as
-    /// `validate --confirm-rays` measures it.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub confirm: Option<RowConfirm>,
-}
-
-/// A row's PVS hunted (`--foliage-hunt-rays`; [`crate::validate::CheckOptions::hunt`]).
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct RowHunt {
-    /// Rays per cell.
-    pub rays_per_cell: u64,
-    /// (cell, culled object) pairs hunted.
-    pub hunted_objects: u64,
-    /// The fewest rays any culled object of any cell got.
-    pub rays_per_culled_object: u64,
-    /// Culled objects a hunting ray saw (or that overlap their cell), over the row's cells.
-    pub false_culls: usize,
-}
-
-/// A row's PVS against the sampled visible set plus the PVS objects confirming rays saw
-/// (`--foliage-confirm-rays`; [`crate::validate::CheckOptions::confirm_rays`]).
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct RowConfirm {
-    /// Confirming rays per cell (beyond the validation rays).
-    pub confirm_rays: u64,
-    /// Objects confirmed visible, over the row's cells.
-    pub confirmed_objects: u64,
-    /// Mean over the cells of |VS| + confirmed (the validation's own sample: `validate`'s
-    /// streams, cell by cell of the row, as `validate --confirm-rays` on its PVS gives).
-    pub vs_plus: f64,
-    /// Mean over the cells of |PVS| / (|VS| + confirmed).
-    pub pvs_over_confirmed_vs: Option<f64>,
 }
 
 /// One point of a sampler row's cost curve: the state at the end of one level (all levels
@@ -544,10 +509,9 @@ fn cost_curve(
         .collect()
 }
 
-/// `--foliage-hunt-rays` and `--foliage-confirm-rays`: checks the PVS documents `docs` of a
-/// study's rows as `validate --hunt` and `validate --confirm-rays` would (one ray index,
-/// built after the study's bakes so that it does not add to their peak memory), logs every
-/// false cull the hunt finds, and fills in the rows' `hunt` and `confirm`.
+/// `--hunt-rays` and `--confirm-rays`: checks the PVS documents `docs` of a study's rows
+/// ([`super::harder_checks`]; one ray index, built after the study's bakes so that it does not
+/// add to their peak memory) and fills in the rows' `hunt` and `confirm`.
 fn check_rows(
     plan: &Plan,
     args: &BenchOptions,
@@ -556,88 +520,12 @@ fn check_rows(
     rows: &mut [FoliageRow],
     docs: &[(usize, crate::pvs::PvsDocument)],
 ) {
-    use crate::validate::{CheckOptions, check_with};
-    let t = Instant::now();
     let index = SceneRays::new(scene);
     for (k, doc) in docs {
         let row = &mut rows[*k];
-        if let Some(rays) = plan.hunt_rays {
-            let opts = CheckOptions {
-                rays,
-                seed: args.seed,
-                hunt: true,
-                ..CheckOptions::default()
-            };
-            // The document was made from this scene: check_input cannot fail.
-            if let Ok(r) = check_with(&index, scene, doc, &opts) {
-                for (i, c) in r.cells.iter().enumerate() {
-                    for f in &c.false_culls {
-                        say!(
-                            args.progress,
-                            "bench: FALSE CULL (hunt) {study} [{}] cell {i} {:?}–{:?}: object \
-                             {} {:?}, ray origin {:?} direction {:?}",
-                            row.variant,
-                            c.min,
-                            c.max,
-                            f.object,
-                            f.name,
-                            f.origin,
-                            f.direction
-                        );
-                    }
-                }
-                row.hunt = Some(RowHunt {
-                    rays_per_cell: rays,
-                    hunted_objects: r.hunted_objects.unwrap_or(0),
-                    rays_per_culled_object: r.rays_per_culled_object.unwrap_or(0),
-                    false_culls: r.false_culls,
-                });
-            }
-        }
-        if let Some(confirm_rays) = plan.confirm_rays {
-            let opts = CheckOptions {
-                rays: plan.rays,
-                seed: args.seed,
-                confirm_rays,
-                ..CheckOptions::default()
-            };
-            if let Ok(r) = check_with(&index, scene, doc, &opts) {
-                let n = r.cells.len().max(1) as f64;
-                let ratios: Vec<f64> = r
-                    .cells
-                    .iter()
-                    .filter_map(|c| c.pvs_over_confirmed_vs)
-                    .collect();
-                row.confirm = Some(RowConfirm {
-                    confirm_rays,
-                    confirmed_objects: r.confirmed_objects.unwrap_or(0),
-                    vs_plus: r
-                        .cells
-                        .iter()
-                        .map(|c| (c.vs + c.confirmed.as_ref().map_or(0, Vec::len)) as f64)
-                        .sum::<f64>()
-                        / n,
-                    pvs_over_confirmed_vs: (!ratios.is_empty())
-                        .then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
-                });
-            }
-        }
-        say!(
-            args.progress,
-            "bench: foliage {study} [{}]: checked{}{} ({:.1} s so far)",
-            row.variant,
-            row.hunt.as_ref().map_or(String::new(), |h| format!(
-                ", hunt {} culled objects at >= {} rays: {} false culls",
-                h.hunted_objects, h.rays_per_culled_object, h.false_culls
-            )),
-            row.confirm.as_ref().map_or(String::new(), |c| format!(
-                ", |VS+| {:.1}, PVS/VS+ {}",
-                c.vs_plus,
-                c.pvs_over_confirmed_vs
-                    .map_or("–".into(), |v| format!("{v:.2}"))
-            )),
-            t.elapsed().as_secs_f64()
-        );
+        let label = format!("foliage {study} [{}]", row.variant);
+        (row.row.hunt, row.row.confirm) =
+            super::harder_checks(&index, scene, doc, plan.rays, args, &label);
     }
 }
 
@@ -681,10 +569,10 @@ pub struct FoliageBench {
     pub sampling_eps: Option<f64>,
     /// The sampler rows' refinement levels, if given (`--foliage-sampling-levels`).
     pub sampling_levels: Option<u32>,
-    /// Hunting rays per cell of every row, if given (`--foliage-hunt-rays`).
+    /// Hunting rays per cell of every row, if given (`--hunt-rays`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hunt_rays: Option<u64>,
-    /// Confirming rays per cell of every row, if given (`--foliage-confirm-rays`).
+    /// Confirming rays per cell of every row, if given (`--confirm-rays`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub confirm_rays: Option<u64>,
     /// The test-only tree count of the procedural forests, if given.
@@ -744,8 +632,8 @@ impl Plan {
                 eps: args.foliage_sampling_eps,
                 levels: args.foliage_sampling_levels,
             },
-            hunt_rays: args.foliage_hunt_rays,
-            confirm_rays: args.foliage_confirm_rays,
+            hunt_rays: args.hunt_rays,
+            confirm_rays: args.confirm_rays,
         };
         let counts = [
             ("--cells", plan.cells as u64),
@@ -755,8 +643,8 @@ impl Plan {
             ("--foliage-model-trees", plan.model_trees as u64),
             ("--foliage-trees", args.foliage_trees.unwrap_or(1) as u64),
             ("--foliage-sampling-budget", plan.sampler.budget),
-            ("--foliage-hunt-rays", plan.hunt_rays.unwrap_or(1)),
-            ("--foliage-confirm-rays", plan.confirm_rays.unwrap_or(1)),
+            ("--hunt-rays", plan.hunt_rays.unwrap_or(1)),
+            ("--confirm-rays", plan.confirm_rays.unwrap_or(1)),
         ];
         if let Some((flag, _)) = counts.iter().find(|c| c.1 == 0) {
             return Err(BenchError::Zero(flag));
@@ -1134,8 +1022,6 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                 row,
                 peak_mib: peak,
                 sampling_curve,
-                hunt: None,
-                confirm: None,
             });
             if let Some(doc) = doc {
                 docs.push((rows.len() - 1, doc));
@@ -1208,53 +1094,16 @@ pub const COLUMNS: [&str; 12] = [
     "settings",
 ];
 
-/// The columns of a study's harder checks (`--foliage-hunt-rays`, `--foliage-confirm-rays`).
-const CHECK_COLUMNS: [&str; 6] = [
-    "variant",
-    "hunted",
-    "rays/obj",
-    "hunt false culls",
-    "VS+",
-    "PVS/VS+",
-];
-
 impl FoliageBench {
-    /// The harder checks of `study`'s rows, if any was asked for: hunted culled objects, the
-    /// fewest rays any got, the false culls the hunt found, |VS+| (the `VS+` column) and PVS/VS+
-    /// (means per cell).
+    /// The harder checks of `study`'s rows, if any was asked for ([`super::checks_table`]).
     fn check_table(&self, out: &mut String, study: &str) {
-        let rows: Vec<Vec<String>> = self
+        let rows: Vec<(String, &BenchRow)> = self
             .rows
             .iter()
-            .filter(|r| r.study == study && (r.hunt.is_some() || r.confirm.is_some()))
-            .map(|r| {
-                let dash = || "–".to_string();
-                let (h, c) = (r.hunt.as_ref(), r.confirm.as_ref());
-                vec![
-                    r.variant.clone(),
-                    h.map_or_else(dash, |h| h.hunted_objects.to_string()),
-                    h.map_or_else(dash, |h| h.rays_per_culled_object.to_string()),
-                    h.map_or_else(dash, |h| h.false_culls.to_string()),
-                    c.map_or_else(dash, |c| format!("{:.1}", c.vs_plus)),
-                    c.and_then(|c| c.pvs_over_confirmed_vs)
-                        .map_or_else(dash, |v| format!("{v:.2}")),
-                ]
-            })
+            .filter(|r| r.study == study)
+            .map(|r| (r.variant.clone(), &r.row))
             .collect();
-        if rows.is_empty() {
-            return;
-        }
-        let _ = writeln!(
-            out,
-            "\nharder checks{}{}:\n",
-            self.hunt_rays
-                .map_or(String::new(), |n| format!(", hunt {n} rays per cell")),
-            self.confirm_rays
-                .map_or(String::new(), |n| format!(", confirm {n} rays per cell"))
-        );
-        let mut left = [false; CHECK_COLUMNS.len()];
-        left[0] = true;
-        markdown_table(out, &CHECK_COLUMNS, &rows, &left);
+        super::checks_table(out, &rows, self.hunt_rays, self.confirm_rays);
     }
 
     /// A header line, then per study a `### study` heading, its forest in words and a

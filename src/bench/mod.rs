@@ -104,12 +104,12 @@ pub struct BenchOptions {
     pub foliage_sampling_eps: Option<f64>,
     /// The sampler rows' refinement levels (`--sampling-levels`), if any.
     pub foliage_sampling_levels: Option<u32>,
-    /// `--foliage-hunt-rays`: every foliage row's PVS is also hunted (`validate --hunt`) with
-    /// this many rays per cell, if any.
-    pub foliage_hunt_rays: Option<u64>,
-    /// `--foliage-confirm-rays`: every foliage row's PVS is also measured against a fuller
-    /// visible set (`validate --confirm-rays`) with this many more rays per cell, if any.
-    pub foliage_confirm_rays: Option<u64>,
+    /// `--hunt-rays`: every row's PVS is also hunted (`validate --hunt`) with this many rays
+    /// per cell, if any.
+    pub hunt_rays: Option<u64>,
+    /// `--confirm-rays`: every row's PVS is also measured against a fuller visible set
+    /// (`validate --confirm-rays`) with this many more rays per cell, if any.
+    pub confirm_rays: Option<u64>,
     /// Receives the progress lines; none are reported when `None`.
     pub progress: Option<ProgressLog>,
     /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
@@ -148,8 +148,8 @@ impl Default for BenchOptions {
             foliage_sampling_tuck: false,
             foliage_sampling_eps: None,
             foliage_sampling_levels: None,
-            foliage_hunt_rays: None,
-            foliage_confirm_rays: None,
+            hunt_rays: None,
+            confirm_rays: None,
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             rsf_on_gpu: false,
             tests_on_cpu: false,
@@ -280,6 +280,132 @@ pub struct BenchRow {
     /// Per culler of the pipeline, in its order: its name and the median over the cells of
     /// the milliseconds it ran.
     pub culler_ms_per_cell: Vec<CullerMs>,
+    /// `--hunt-rays` only: the row's PVS hunted as `validate --hunt` does.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hunt: Option<RowHunt>,
+    /// `--confirm-rays` only: the row's PVS against a fuller visible set, as
+    /// `validate --confirm-rays` measures it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub confirm: Option<RowConfirm>,
+}
+
+/// A row's PVS hunted (`--hunt-rays`; [`crate::validate::CheckOptions::hunt`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RowHunt {
+    /// Rays per cell.
+    pub rays_per_cell: u64,
+    /// (cell, culled object) pairs hunted.
+    pub hunted_objects: u64,
+    /// The fewest rays any culled object of any cell got.
+    pub rays_per_culled_object: u64,
+    /// Culled objects a hunting ray saw (or that overlap their cell), over the row's cells.
+    pub false_culls: usize,
+}
+
+/// A row's PVS against the sampled visible set plus the PVS objects confirming rays saw
+/// (`--confirm-rays`; [`crate::validate::CheckOptions::confirm_rays`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RowConfirm {
+    /// Confirming rays per cell (beyond the validation rays).
+    pub confirm_rays: u64,
+    /// Objects confirmed visible, over the row's cells.
+    pub confirmed_objects: u64,
+    /// Mean over the cells of |VS| + confirmed (the validation's own sample: `validate`'s
+    /// streams, cell by cell of the row, as `validate --confirm-rays` on its PVS gives).
+    pub vs_plus: f64,
+    /// Mean over the cells of |PVS| / (|VS| + confirmed).
+    pub pvs_over_confirmed_vs: Option<f64>,
+}
+
+/// `--hunt-rays` and `--confirm-rays`: checks a row's PVS document as `validate --hunt` and
+/// `validate --confirm-rays` would (`rays`: the validation rays per cell the confirmation's
+/// sample casts), logging every false cull the hunt finds under `label`.
+pub(crate) fn harder_checks(
+    index: &SceneRays,
+    scene: &Scene,
+    doc: &crate::pvs::PvsDocument,
+    rays: u64,
+    args: &BenchOptions,
+    label: &str,
+) -> (Option<RowHunt>, Option<RowConfirm>) {
+    use crate::validate::{CheckOptions, check_with};
+    let t = Instant::now();
+    // The document was made from this scene, so `check_input` cannot refuse it.
+    let hunt = args.hunt_rays.and_then(|hunt_rays| {
+        let opts = CheckOptions {
+            rays: hunt_rays,
+            seed: args.seed,
+            hunt: true,
+            ..CheckOptions::default()
+        };
+        let r = check_with(index, scene, doc, &opts).ok()?;
+        for (i, c) in r.cells.iter().enumerate() {
+            for f in &c.false_culls {
+                say!(
+                    args.progress,
+                    "bench: FALSE CULL (hunt) {label} cell {i} {:?}–{:?}: object {} {:?}, ray \
+                     origin {:?} direction {:?}",
+                    c.min,
+                    c.max,
+                    f.object,
+                    f.name,
+                    f.origin,
+                    f.direction
+                );
+            }
+        }
+        Some(RowHunt {
+            rays_per_cell: hunt_rays,
+            hunted_objects: r.hunted_objects.unwrap_or(0),
+            rays_per_culled_object: r.rays_per_culled_object.unwrap_or(0),
+            false_culls: r.false_culls,
+        })
+    });
+    let confirm = args.confirm_rays.and_then(|confirm_rays| {
+        let opts = CheckOptions {
+            rays,
+            seed: args.seed,
+            confirm_rays,
+            ..CheckOptions::default()
+        };
+        let r = check_with(index, scene, doc, &opts).ok()?;
+        let n = r.cells.len().max(1) as f64;
+        let ratios: Vec<f64> = r
+            .cells
+            .iter()
+            .filter_map(|c| c.pvs_over_confirmed_vs)
+            .collect();
+        Some(RowConfirm {
+            confirm_rays,
+            confirmed_objects: r.confirmed_objects.unwrap_or(0),
+            vs_plus: r
+                .cells
+                .iter()
+                .map(|c| (c.vs + c.confirmed.as_ref().map_or(0, Vec::len)) as f64)
+                .sum::<f64>()
+                / n,
+            pvs_over_confirmed_vs: (!ratios.is_empty())
+                .then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
+        })
+    });
+    if hunt.is_some() || confirm.is_some() {
+        say!(
+            args.progress,
+            "bench: {label}: checked{}{} in {:.1} s",
+            hunt.as_ref().map_or(String::new(), |h| format!(
+                ", hunt {} culled objects at >= {} rays: {} false culls",
+                h.hunted_objects, h.rays_per_culled_object, h.false_culls
+            )),
+            confirm.as_ref().map_or(String::new(), |c| format!(
+                ", |VS+| {:.1}, PVS/VS+ {}",
+                c.vs_plus,
+                c.pvs_over_confirmed_vs
+                    .map_or("–".into(), |v| format!("{v:.2}"))
+            )),
+            t.elapsed().as_secs_f64()
+        );
+    }
+    (hunt, confirm)
 }
 
 /// One culler's median time per cell in a [`BenchRow`].
@@ -347,6 +473,12 @@ pub struct Bench {
     pub skipped: Vec<String>,
     /// Wall-clock time of the whole run, seconds.
     pub seconds: f64,
+    /// Hunting rays per cell of every row, if given (`--hunt-rays`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hunt_rays: Option<u64>,
+    /// Confirming rays per cell of every row, if given (`--confirm-rays`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub confirm_rays: Option<u64>,
 }
 
 /// The scenes of the benchmark, in table order.
@@ -384,6 +516,9 @@ impl Plan {
         let rays = args.rays.unwrap_or(1_000_000);
         if cells == 0 || rays == 0 {
             return Err(BenchError::Zero("--cells and --rays"));
+        }
+        if args.hunt_rays == Some(0) || args.confirm_rays == Some(0) {
+            return Err(BenchError::Zero("--hunt-rays and --confirm-rays"));
         }
         let shared = shared_folder(args)?;
         if let Some(list) = &args.scenes
@@ -663,6 +798,8 @@ pub fn collect(args: &BenchOptions) -> Result<Bench, BenchError> {
         rows,
         skipped,
         seconds: start.elapsed().as_secs_f64(),
+        hunt_rays: args.hunt_rays,
+        confirm_rays: args.confirm_rays,
     })
 }
 
@@ -739,6 +876,11 @@ fn bench_scene(
         row.device = device;
         if row.backend == "gpu" {
             row.gpu_projection = Some(args.gpu_projection.to_string());
+        }
+        if args.hunt_rays.is_some() || args.confirm_rays.is_some() {
+            let doc = crate::bake::to_document(scene, cells, &result, settings);
+            let label = format!("{} [{}]", bs.name, backend.name());
+            (row.hunt, row.confirm) = harder_checks(&index, scene, &doc, plan.rays, args, &label);
         }
         out.push(row);
     }
@@ -877,7 +1019,59 @@ pub(crate) fn score(
                 ),
             })
             .collect(),
+        hunt: None,
+        confirm: None,
     }
+}
+
+/// The columns of the harder checks (`--hunt-rays`, `--confirm-rays`).
+pub const CHECK_COLUMNS: [&str; 6] = [
+    "row",
+    "hunted",
+    "rays/obj",
+    "hunt false culls",
+    "VS+",
+    "PVS/VS+",
+];
+
+/// Appends the harder checks of `rows` (each with its label), if any row has them: culled
+/// objects hunted, the fewest rays any got, the false culls the hunt found, |VS+| (the `VS+`
+/// column) and PVS/VS+ (means per cell).
+pub(crate) fn checks_table(
+    out: &mut String,
+    rows: &[(String, &BenchRow)],
+    hunt_rays: Option<u64>,
+    confirm_rays: Option<u64>,
+) {
+    let rows: Vec<Vec<String>> = rows
+        .iter()
+        .filter(|(_, r)| r.hunt.is_some() || r.confirm.is_some())
+        .map(|(label, r)| {
+            let dash = || "–".to_string();
+            let (h, c) = (r.hunt.as_ref(), r.confirm.as_ref());
+            vec![
+                label.clone(),
+                h.map_or_else(dash, |h| h.hunted_objects.to_string()),
+                h.map_or_else(dash, |h| h.rays_per_culled_object.to_string()),
+                h.map_or_else(dash, |h| h.false_culls.to_string()),
+                c.map_or_else(dash, |c| format!("{:.1}", c.vs_plus)),
+                c.and_then(|c| c.pvs_over_confirmed_vs)
+                    .map_or_else(dash, |v| format!("{v:.2}")),
+            ]
+        })
+        .collect();
+    if rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        out,
+        "\nharder checks{}{}:\n",
+        hunt_rays.map_or(String::new(), |n| format!(", hunt {n} rays per cell")),
+        confirm_rays.map_or(String::new(), |n| format!(", confirm {n} rays per cell"))
+    );
+    let mut left = [false; CHECK_COLUMNS.len()];
+    left[0] = true;
+    markdown_table(out, &CHECK_COLUMNS, &rows, &left);
 }
 
 /// Appends a Markdown table: the header, the alignment row (`left[k]`: column `k` is
@@ -1002,6 +1196,12 @@ impl Bench {
             .collect();
         let left: Vec<bool> = (0..COLUMNS.len()).map(|k| k == 0 || k == 4).collect();
         markdown_table(&mut out, &COLUMNS, &cells, &left);
+        let labelled: Vec<(String, &BenchRow)> = self
+            .rows
+            .iter()
+            .map(|r| (format!("{} [{}]", r.scene, r.backend), r))
+            .collect();
+        checks_table(&mut out, &labelled, self.hunt_rays, self.confirm_rays);
         let mut adapters: Vec<&str> = self
             .rows
             .iter()
@@ -1123,6 +1323,54 @@ mod tests {
             city.culler_ms_per_cell[0].culler, "ray_space_factorization",
             "the city runs ray space factorization first"
         );
+    }
+
+    #[test]
+    fn harder_checks_hunt_and_confirm_the_scene_rows() {
+        let opts = BenchOptions {
+            quick: true,
+            scenes: Some(vec!["city".into()]),
+            cells: Some(2),
+            rays: Some(2000),
+            backend: BenchBackend::Cpu,
+            hunt_rays: Some(20_000),
+            confirm_rays: Some(20_000),
+            ..BenchOptions::default()
+        };
+        let bench = collect(&opts).unwrap();
+        let r = &bench.rows[0];
+        let h = r.hunt.as_ref().expect("hunted");
+        let c = r.confirm.as_ref().expect("confirmed");
+        // The hunt's culled objects are the row's (every object of the city has area).
+        let culled = r.objects_culled_percent / 100.0 * (r.objects * r.cells) as f64;
+        assert!(
+            (h.hunted_objects as f64 - culled).abs() < 1e-6,
+            "{h:?} {culled}"
+        );
+        assert!(h.hunted_objects > 0 && h.false_culls == 0, "{h:?}");
+        assert!(h.rays_per_culled_object >= 1 && h.rays_per_cell == 20_000);
+        // Confirmation only adds visible objects: PVS/VS+ is at least 1 and at most the PVS
+        // over the confirmation's own sample (which sees at least one object per cell).
+        let pvs = r.objects as f64 * (1.0 - r.objects_culled_percent / 100.0);
+        let ratio = c.pvs_over_confirmed_vs.unwrap();
+        assert!(ratio >= 1.0 && ratio <= pvs, "{c:?}");
+        assert!(c.vs_plus >= 1.0 && c.confirm_rays == 20_000, "{c:?}");
+        let table = bench.table();
+        assert!(
+            table.contains("harder checks, hunt 20000 rays per cell, confirm 20000 rays per cell"),
+            "{table}"
+        );
+        assert!(table.contains("| city [cpu]"), "{table}");
+        let json = serde_json::to_value(&bench).unwrap();
+        assert_eq!(json["hunt_rays"], 20_000);
+        assert!(json["rows"][0]["confirm"]["vs_plus"].is_number());
+        // Zero is refused.
+        let err = collect(&BenchOptions {
+            hunt_rays: Some(0),
+            ..opts
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("--hunt-rays"), "{err}");
     }
 
     #[test]
