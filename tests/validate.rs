@@ -756,6 +756,19 @@ fn hunt_honours_see_through_triangles_and_overlap() {
     assert_eq!(r.cells[0].false_culls[0].object, 2);
 }
 
+/// Three cells with the same PVS `visible`: the test cell, one behind it and one at its
+/// corner.
+fn three_cells(visible: Vec<u32>) -> Vec<(Aabb, Vec<u32>)> {
+    vec![
+        (cell(), visible.clone()),
+        (
+            Aabb::new(vec3(-1.0, -1.0, -3.0), vec3(1.0, 1.0, -1.5)),
+            visible.clone(),
+        ),
+        (Aabb::new(vec3(1.0, 1.0, 0.0), vec3(2.0, 2.0, 1.0)), visible),
+    ]
+}
+
 #[test]
 fn hunt_gives_the_same_report_on_one_and_two_threads() {
     // Three cells of the slit scene; each PVS culls the target and a few hidden boxes, so the
@@ -773,15 +786,7 @@ fn hunt_gives_the_same_report_on_one_and_two_threads() {
     let keep: Vec<u32> = (0..s.objects.len() as u32)
         .filter(|o| !culled.contains(o))
         .collect();
-    let cells = vec![
-        (cell(), keep.clone()),
-        (
-            Aabb::new(vec3(-1.0, -1.0, -3.0), vec3(1.0, 1.0, -1.5)),
-            keep.clone(),
-        ),
-        (Aabb::new(vec3(1.0, 1.0, 0.0), vec3(2.0, 2.0, 1.0)), keep),
-    ];
-    let d = doc_cells(&s, cells, false);
+    let d = doc_cells(&s, three_cells(keep), false);
     same_report_on_one_and_two_threads(&s, &d, &hunt_opts(30_001), |r| {
         assert_eq!(r.rays_per_culled_object, Some(5_000));
         assert!(r.false_culls >= 1, "{}", r.table());
@@ -967,15 +972,7 @@ fn confirmation_gives_the_same_report_on_one_and_two_threads() {
     // between every object the sample missed, in several chunks each.
     let s = corner_slit_scene();
     let all: Vec<u32> = (0..s.objects.len() as u32).collect();
-    let cells = vec![
-        (cell(), all.clone()),
-        (
-            Aabb::new(vec3(-1.0, -1.0, -3.0), vec3(1.0, 1.0, -1.5)),
-            all.clone(),
-        ),
-        (Aabb::new(vec3(1.0, 1.0, 0.0), vec3(2.0, 2.0, 1.0)), all),
-    ];
-    let d = doc_cells(&s, cells, false);
+    let d = doc_cells(&s, three_cells(all), false);
     same_report_on_one_and_two_threads(&s, &d, &confirm_opts(3_000, 200_003), |r| {
         assert_eq!(r.confirm_rays, Some(200_003));
         assert!(r.cells.iter().all(|c| c.confirmed.is_some()));

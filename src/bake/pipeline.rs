@@ -85,14 +85,11 @@ pub struct CullerStats {
     pub work: CullerWork,
 }
 
-/// [`Culler::name`] of extended projections on separate planes.
-pub const EXTENDED_PROJECTIONS: &str = "extended_projections";
-/// [`Culler::name`] of the occlusion sweep.
-pub const OCCLUSION_SWEEP: &str = "occlusion_sweep";
-/// [`Culler::name`] of shrunk-occluder sampling.
-pub const SHRUNK_SAMPLING: &str = "shrunk_sampling";
-/// [`Culler::name`] of ray space factorization.
-pub const RAY_SPACE_FACTORIZATION: &str = "ray_space_factorization";
+// The cullers' names ([`Culler::name`]) live with the PVS document, which records them and
+// which the run-time library reads without the bake.
+pub use crate::pvs::{
+    EXTENDED_PROJECTIONS, OCCLUSION_SWEEP, RAY_SPACE_FACTORIZATION, SHRUNK_SAMPLING,
+};
 
 /// Every name a culler of the pipeline may have ([`Culler::name`]); files that record the
 /// cullers (shards) are read back against this list.

@@ -668,8 +668,8 @@ impl PvsDatabase {
                 SweepChoice::Off
             }
         };
-        settings.bake.sampling = ran(crate::bake::SHRUNK_SAMPLING);
-        settings.bake.rsf = ran(crate::bake::RAY_SPACE_FACTORIZATION);
+        settings.bake.sampling = ran(super::SHRUNK_SAMPLING);
+        settings.bake.rsf = ran(super::RAY_SPACE_FACTORIZATION);
         // Check sizes before allocating from counts.
         let left = payload.len() - r.pos;
         if (objects as usize).saturating_mul(OBJECT_RECORD_LEN + 4) > left {

@@ -220,10 +220,19 @@ pub struct PvsCardSummary {
     pub opaque_share: f64,
 }
 
+/// The culler name ([`PvsCullerSummary::name`]) of extended projections on separate planes.
+pub const EXTENDED_PROJECTIONS: &str = "extended_projections";
+/// The culler name of the occlusion sweep.
+pub const OCCLUSION_SWEEP: &str = "occlusion_sweep";
+/// The culler name of shrunk-occluder sampling.
+pub const SHRUNK_SAMPLING: &str = "shrunk_sampling";
+/// The culler name of ray space factorization.
+pub const RAY_SPACE_FACTORIZATION: &str = "ray_space_factorization";
+
 /// One culler's account in a PVS document's summary: means per cell.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PvsCullerSummary {
-    /// The culler (`"extended_projections"`, `"occlusion_sweep"`, …).
+    /// The culler ([`EXTENDED_PROJECTIONS`], [`OCCLUSION_SWEEP`], …).
     pub name: String,
     /// Objects culled from a cell that this culler proved hidden, mean per cell.
     pub hidden: f64,

@@ -558,7 +558,7 @@ pub fn check_with(
     let start = std::time::Instant::now();
     let mut cells = Vec::with_capacity(doc.cells.len());
     for (i, c) in doc.cells.iter().enumerate() {
-        let cell = Aabb::new(Vec3::from(c.min), Vec3::from(c.max));
+        let cell = cell_box(c);
         let sample = sample_cell_progress(
             index, scene, cell, opts.rays, opts.seed, i as u64, alpha, progress,
         );
@@ -610,14 +610,11 @@ fn confirm(
         .map(|(i, (c, r))| {
             let in_pvs = pvs_mask(scene, c);
             ConfirmCell {
-                cell: Aabb::new(Vec3::from(c.min), Vec3::from(c.max)),
+                cell: cell_box(c),
                 cell_index: i as u64,
-                doubt: index
-                    .targetable_objects()
-                    .iter()
-                    .copied()
-                    .filter(|&o| in_pvs[o as usize] && r.visible.binary_search(&o).is_err())
-                    .collect(),
+                doubt: targetable_where(index, |o| {
+                    in_pvs[o as usize] && r.visible.binary_search(&o).is_err()
+                }),
             }
         })
         .collect();
@@ -641,6 +638,21 @@ fn confirm(
     cast
 }
 
+/// A PVS cell's box.
+fn cell_box(c: &crate::pvs::PvsCell) -> Aabb {
+    Aabb::new(Vec3::from(c.min), Vec3::from(c.max))
+}
+
+/// The objects with area (the ones rays can aim at) that `keep` keeps, ascending.
+fn targetable_where(index: &SceneRays, keep: impl Fn(u32) -> bool) -> Vec<u32> {
+    index
+        .targetable_objects()
+        .iter()
+        .copied()
+        .filter(|&o| keep(o))
+        .collect()
+}
+
 /// The PVS of `cell` as a mask over the scene's objects.
 fn pvs_mask(scene: &Scene, cell: &crate::pvs::PvsCell) -> Vec<bool> {
     let mut in_pvs = vec![false; scene.objects.len()];
@@ -662,14 +674,9 @@ fn hunt_with(index: &SceneRays, scene: &Scene, doc: &PvsDocument, opts: &CheckOp
         .map(|(i, c)| {
             let in_pvs = pvs_mask(scene, c);
             HuntCell {
-                cell: Aabb::new(Vec3::from(c.min), Vec3::from(c.max)),
+                cell: cell_box(c),
                 cell_index: i as u64,
-                culled: index
-                    .targetable_objects()
-                    .iter()
-                    .copied()
-                    .filter(|&o| !in_pvs[o as usize])
-                    .collect(),
+                culled: targetable_where(index, |o| !in_pvs[o as usize]),
             }
         })
         .collect();

@@ -524,15 +524,22 @@ mod tests {
         }
     }
 
-    #[test]
-    fn near_pairs_stay_inside_and_near_the_best() {
+    /// The ray index of a scene of one object: the triangle (0, 0, 5), (4, 0, 5), (0, 2, 5).
+    fn one_triangle() -> SceneRays {
         let tri = [
             vec3(0.0, 0.0, 5.0),
             vec3(4.0, 0.0, 5.0),
             vec3(0.0, 2.0, 5.0),
         ];
-        let scene = Scene::from_objects(Path::new("mem"), vec![("t".into(), vec![tri], true)]);
-        let index = SceneRays::new(&scene);
+        SceneRays::new(&Scene::from_objects(
+            Path::new("mem"),
+            vec![("t".into(), vec![tri], true)],
+        ))
+    }
+
+    #[test]
+    fn near_pairs_stay_inside_and_near_the_best() {
+        let index = one_triangle();
         // A flat cell, and a best near miss at its corner.
         let cell = HuntCell {
             cell: Aabb::new(vec3(1.0, 2.0, 3.0), vec3(1.5, 2.001, 4.0)),
@@ -564,13 +571,7 @@ mod tests {
 
     #[test]
     fn targets_near_edges_lie_on_the_triangles() {
-        let tri = [
-            vec3(0.0, 0.0, 5.0),
-            vec3(4.0, 0.0, 5.0),
-            vec3(0.0, 2.0, 5.0),
-        ];
-        let scene = Scene::from_objects(Path::new("mem"), vec![("t".into(), vec![tri], true)]);
-        let index = SceneRays::new(&scene);
+        let index = one_triangle();
         let mut rng = chunk_rng(3, 0, HUNT_STREAM, 0);
         let (mut near_edge, mut outside) = (0, 0);
         for _ in 0..4000 {
