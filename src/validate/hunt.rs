@@ -8,7 +8,7 @@
 //! `rays / culled`, at least 1. Culled object number `k` (ascending by id) of a cell gets the
 //! cell's global ray indices `[k·m, (k+1)·m)`, `m` being that count.
 //!
-//! Every hunting ray starts strictly inside the cell (3/8 uniform, 2/8 on a face, 1/8 near an
+//! Every fresh hunting ray starts strictly inside the cell (3/8 uniform, 2/8 on a face, 1/8 near an
 //! edge, 2/8 near a corner) and is aimed at a point of the culled object: 3/8 on its surface
 //! (area-weighted), 1/8 uniform inside its bounds, 3/8 near an edge and 1/8 near a vertex of
 //! one of its triangles (picked by count, so that small triangles' edges count: a thin gap
@@ -327,8 +327,8 @@ struct NearMiss {
     score: f64,
 }
 
-/// Rays at the start of every chunk that are all fresh pairs; after them every other ray is
-/// a [`near_pair`].
+/// Rays at the start of every chunk that are all fresh pairs; after them three rays in four
+/// are [`near_pair`]s (ray numbers within the chunk not a multiple of 4).
 const FRESH_FIRST: u64 = CHUNK / 8;
 
 /// A pair near the best near miss `b`: its origin moved by up to a tenth of the cell's size
