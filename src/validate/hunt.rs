@@ -256,11 +256,12 @@ fn hunt_chunk(
     let start = range.start;
     // The pair whose ray got farthest towards its target so far, for the local search.
     let mut best: Option<NearMiss> = None;
+    let sizes = step_sizes(&cell.cell, index, object);
     for ray in range {
         let k = ray - start;
         let pair = match &best {
             Some(b) if k >= FRESH_FIRST && !k.is_multiple_of(4) => {
-                near_pair(&mut rng, b, cell, index, object)
+                near_pair(&mut rng, b, &cell.cell, sizes)
             }
             _ => (
                 hunt_origin(&mut rng, &cell.cell),
@@ -331,20 +332,25 @@ struct NearMiss {
 /// are [`near_pair`]s (ray numbers within the chunk not a multiple of 4).
 const FRESH_FIRST: u64 = CHUNK / 8;
 
+/// The sizes [`near_pair`] steps by: the largest sides of the cell and of `object`'s bounds.
+fn step_sizes(cell: &Aabb, index: &SceneRays, object: u32) -> (f64, f64) {
+    (
+        cell.size().as_dvec3().max_element(),
+        index.object_bounds(object).size().as_dvec3().max_element(),
+    )
+}
+
 /// A pair near the best near miss `b`: its origin moved by up to a tenth of the cell's size
-/// and its target by up to a tenth of the object's (log-uniform down to 10⁻⁴ of them, in a
-/// random direction), the origin kept strictly inside the cell.
+/// and its target by up to a tenth of the object's (`sizes`, [`step_sizes`]; log-uniform down
+/// to 10⁻⁴ of them, in a random direction), the origin kept strictly inside `cell`.
 fn near_pair(
     rng: &mut Pcg64Mcg,
     b: &NearMiss,
-    cell: &HuntCell,
-    index: &SceneRays,
-    object: u32,
+    cell: &Aabb,
+    (cell_size, object_size): (f64, f64),
 ) -> (Vec3, DVec3) {
-    let cell_size = cell.cell.size().as_dvec3().max_element();
-    let object_size = index.object_bounds(object).size().as_dvec3().max_element();
     let mut step = |size: f64| sphere_direction(rng) * size * 10f64.powf(-1.0 - 3.0 * unit(rng));
-    let origin = clamp_inside(b.origin + step(cell_size), &cell.cell);
+    let origin = clamp_inside(b.origin + step(cell_size), cell);
     let target = b.target + step(object_size);
     (origin, target)
 }
@@ -541,11 +547,7 @@ mod tests {
     fn near_pairs_stay_inside_and_near_the_best() {
         let index = one_triangle();
         // A flat cell, and a best near miss at its corner.
-        let cell = HuntCell {
-            cell: Aabb::new(vec3(1.0, 2.0, 3.0), vec3(1.5, 2.001, 4.0)),
-            cell_index: 0,
-            culled: vec![0],
-        };
+        let cell = Aabb::new(vec3(1.0, 2.0, 3.0), vec3(1.5, 2.001, 4.0));
         let best = NearMiss {
             origin: glam::dvec3(1.5, 2.001, 4.0),
             target: glam::dvec3(1.0, 1.0, 5.0),
@@ -554,9 +556,8 @@ mod tests {
         let mut rng = chunk_rng(5, 0, HUNT_STREAM, 0);
         let (mut close_o, mut close_t) = (0, 0);
         for _ in 0..4000 {
-            let (o, t) = near_pair(&mut rng, &best, &cell, &index, 0);
-            let c = &cell.cell;
-            assert!(o.cmpgt(c.min).all() && o.cmplt(c.max).all(), "{o:?}");
+            let (o, t) = near_pair(&mut rng, &best, &cell, step_sizes(&cell, &index, 0));
+            assert!(o.cmpgt(cell.min).all() && o.cmplt(cell.max).all(), "{o:?}");
             // Steps of at most a tenth of the cell's and the object's sizes (1 and 4).
             assert!(o.as_dvec3().distance(best.origin) <= 0.1 + 1e-6, "{o:?}");
             let dt = t.distance(best.target);
