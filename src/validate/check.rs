@@ -570,20 +570,15 @@ pub fn check_with(
     finish_progress(progress);
     let mut report = summarize(scene, opts, alpha, cells, seconds);
     if let Some(cast) = confirm_cast {
-        let sum_pvs: usize = report.cells.iter().map(|c| c.pvs).sum();
-        let sum_vs: usize = report
+        let confirmed: usize = report
             .cells
             .iter()
-            .map(|c| c.vs + c.confirmed.as_ref().map_or(0, Vec::len))
+            .map(|c| c.confirmed.as_ref().map_or(0, Vec::len))
             .sum();
+        let sum_pvs: usize = report.cells.iter().map(|c| c.pvs).sum();
+        let sum_vs = report.cells.iter().map(|c| c.vs).sum::<usize>() + confirmed;
         report.confirm_rays = Some(opts.confirm_rays);
-        report.confirmed_objects = Some(
-            report
-                .cells
-                .iter()
-                .map(|c| c.confirmed.as_ref().map_or(0, Vec::len) as u64)
-                .sum(),
-        );
+        report.confirmed_objects = Some(confirmed as u64);
         report.pvs_over_confirmed_vs = (sum_vs > 0).then(|| sum_pvs as f64 / sum_vs as f64);
         report.rays_cast = report.rays_cast.saturating_add(cast);
     }
