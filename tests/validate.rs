@@ -438,16 +438,42 @@ fn obj_scene(dir: &Path, scene: &Scene) -> Option<PathBuf> {
     }
 }
 
+/// The files of a CLI test: the folder (bind it, as `_dir`, for as long as the files are
+/// used: dropping it deletes them), the scene as OBJ, the PVS `d` written as JSON, and where
+/// `--json` goes; `None` as [`obj_scene`].
+struct CliFiles {
+    _dir: tempfile::TempDir,
+    obj: PathBuf,
+    pvs: PathBuf,
+    json: PathBuf,
+}
+
+fn cli_files(s: &Scene, d: &PvsDocument) -> Option<CliFiles> {
+    let dir = tmpdir();
+    let obj = obj_scene(dir.path(), s)?;
+    let pvs = dir.path().join("pvs.json");
+    let json = dir.path().join("out.json");
+    write_doc(d, &pvs);
+    Some(CliFiles {
+        _dir: dir,
+        obj,
+        pvs,
+        json,
+    })
+}
+
 #[test]
 fn cli_false_cull_exits_1_and_writes_json() {
     let s = three_box_scene();
-    let dir = tmpdir();
-    let Some(obj) = obj_scene(dir.path(), &s) else {
+    let Some(CliFiles {
+        _dir,
+        obj,
+        pvs,
+        json,
+    }) = cli_files(&s, &doc(&s, vec![0, 1], false))
+    else {
         return;
     };
-    let pvs = dir.path().join("pvs.json");
-    let json = dir.path().join("out.json");
-    write_doc(&doc(&s, vec![0, 1], false), &pvs);
     let out = validate(&[
         obj.as_os_str(),
         pvs.as_os_str(),
@@ -812,13 +838,15 @@ fn cli_hunt_exits_1_on_a_false_cull_and_0_on_a_good_pvs() {
     );
 
     let s = corner_slit_scene();
-    let dir = tmpdir();
-    let Some(obj) = obj_scene(dir.path(), &s) else {
+    let Some(CliFiles {
+        _dir,
+        obj,
+        pvs,
+        json,
+    }) = cli_files(&s, &slit_doc_without_target(&s))
+    else {
         return;
     };
-    let pvs = dir.path().join("pvs.json");
-    let json = dir.path().join("out.json");
-    write_doc(&slit_doc_without_target(&s), &pvs);
     let args = |hunt: bool| {
         let mut a: Vec<&std::ffi::OsStr> = vec![
             obj.as_os_str(),
@@ -982,14 +1010,16 @@ fn confirmation_gives_the_same_report_on_one_and_two_threads() {
 #[test]
 fn cli_confirm_rays_adds_columns_and_refuses_hunt() {
     let s = corner_slit_scene();
-    let dir = tmpdir();
-    let Some(obj) = obj_scene(dir.path(), &s) else {
+    let all: Vec<u32> = (0..s.objects.len() as u32).collect();
+    let Some(CliFiles {
+        _dir,
+        obj,
+        pvs,
+        json,
+    }) = cli_files(&s, &doc(&s, all, false))
+    else {
         return;
     };
-    let pvs = dir.path().join("pvs.json");
-    let json = dir.path().join("out.json");
-    let all: Vec<u32> = (0..s.objects.len() as u32).collect();
-    write_doc(&doc(&s, all, false), &pvs);
     let base: Vec<&std::ffi::OsStr> = vec![
         obj.as_os_str(),
         pvs.as_os_str(),
