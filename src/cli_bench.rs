@@ -227,7 +227,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         let false_culls = bench
             .rows
             .iter()
-            .map(|r| r.row.false_culls + r.row.hunt.as_ref().map_or(0, |h| h.false_culls))
+            .map(|r| r.row.false_culls + harder_false_culls(&r.row))
             .sum();
         return report(&bench.tables(), false_culls, &bench, args.json.as_deref());
     }
@@ -235,9 +235,14 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let false_culls = bench
         .rows
         .iter()
-        .map(|r| r.false_culls + r.hunt.as_ref().map_or(0, |h| h.false_culls))
+        .map(|r| r.false_culls + harder_false_culls(r))
         .sum();
     report(&bench.table(), false_culls, &bench, args.json.as_deref())
+}
+
+/// The false culls a row's harder checks found (`--hunt-rays`, `--confirm-rays`).
+fn harder_false_culls(r: &bench::BenchRow) -> usize {
+    r.hunt.as_ref().map_or(0, |h| h.false_culls) + r.confirm.as_ref().map_or(0, |c| c.false_culls)
 }
 
 /// Prints a bench's tables, warns about false culls, and writes `--json` if asked.

@@ -26,7 +26,8 @@ and late columns give way to the culled objects hunted and the rays per object).
 
 --confirm-rays N follows the sampling with up to N more rays per cell, aimed the hunt's way at
 the PVS objects the sample did not see, in 4 rounds that each split their share between the
-objects still unconfirmed. Those reached are visible too: |VS+| and PVS/VS+ measure the PVS
+objects still unconfirmed. Those reached are visible too (and a culled object such a ray
+meets on its way is a false cull): |VS+| and PVS/VS+ measure the PVS
 against that fuller visible set (objects seen only through slits escape a uniform sample, so
 PVS/VS over-states how loose a tight PVS is).")]
 pub struct ValidateArgs {

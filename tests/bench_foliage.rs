@@ -188,6 +188,7 @@ fn harder_checks_hunt_and_confirm_every_row() {
         );
         // With no false cull, the confirmed visible set lies inside the PVS.
         assert_eq!(c.confirm_rays, 40_000);
+        assert_eq!(c.false_culls, 0, "{c:?}");
         let pvs = r.row.objects as f64 - culled;
         assert!(c.vs_plus >= 1.0 && c.vs_plus <= pvs, "{}: {c:?}", r.variant);
         let ratio = c.pvs_over_confirmed_vs.expect("something is seen");

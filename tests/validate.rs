@@ -594,6 +594,11 @@ const SLIT_HIDDEN_COUNT: u32 = 1000;
 /// objects a conservative PVS keeps without the sampling ever finding them: the plain
 /// sampling's aimed and targeted rays are spread over them.
 fn corner_slit_scene() -> Scene {
+    scene(corner_slit_objects())
+}
+
+/// The objects of [`corner_slit_scene`].
+fn corner_slit_objects() -> Vec<Obj> {
     let xs = [-50.0, -0.01, 0.01, 50.0];
     let ys = [-50.0, -0.1, 0.1, 50.0];
     let mut objects: Vec<Obj> = vec![
@@ -620,7 +625,7 @@ fn corner_slit_scene() -> Scene {
             true,
         ));
     }
-    scene(objects)
+    objects
 }
 
 /// A PVS of [`corner_slit_scene`] that keeps everything but the target: over-conservative
@@ -992,6 +997,46 @@ fn confirmation_finds_the_slit_object_the_sample_misses_and_never_a_hidden_one()
     let v = serde_json::to_value(&r).unwrap();
     assert_eq!(v["cells"][0]["confirmed"], serde_json::json!([SLIT_TARGET]));
     assert_eq!(v["confirmed_objects"], 1);
+}
+
+#[test]
+fn a_confirming_ray_that_meets_a_culled_object_proves_a_false_cull() {
+    // The slit scene with a blocker 0.6 wide at z = 8 on the line from the cell's corner
+    // through the slit to the target: every line through the slit to the target crosses it,
+    // so the blocker is visible (through the slit) and the target is not. A PVS that culls
+    // the blocker alone is wrong; the plain sampling of 2,000 rays sees only the wall, and no
+    // confirming ray is aimed at the blocker (it is culled), but those aimed at the target
+    // through the slit meet it first.
+    let mut objects = corner_slit_objects();
+    let blocker = objects.len() as u32;
+    objects.push((
+        "blocker".into(),
+        cuboid(vec3(-2.8, -2.8, 7.9), vec3(-2.2, -2.2, 8.1)),
+        true,
+    ));
+    let s = scene(objects);
+    let kept: Vec<u32> = (0..s.objects.len() as u32)
+        .filter(|&o| o != blocker)
+        .collect();
+    let d = doc(&s, kept, false);
+    let plain = check(&s, &d, &opts(2_000)).unwrap();
+    assert_eq!(plain.cells[0].visible, vec![SLIT_WALL]);
+    assert_eq!(plain.false_culls, 0);
+
+    let r = check(&s, &d, &confirm_opts(2_000, 400_000)).unwrap();
+    assert_eq!(r.false_culls, 1, "{}", r.table());
+    assert_eq!(r.cells_with_false_culls, 1);
+    let f = &r.cells[0].false_culls[0];
+    assert_eq!(
+        (f.object, f.name.as_str(), f.reason.as_str()),
+        (blocker, "blocker", "ray")
+    );
+    let (origin, hit) = (f.origin.unwrap(), f.hit.unwrap());
+    assert!(strictly_inside(origin, &cell()), "origin {origin:?}");
+    assert!(on_object(&s, blocker, hit), "hit {hit:?}");
+    // The target stays unconfirmed: the blocker hides it.
+    assert_eq!(r.cells[0].confirmed.as_deref(), Some(&[][..]));
+    assert!(r.table().contains("blocker"), "{}", r.table());
 }
 
 #[test]

@@ -315,6 +315,9 @@ pub struct RowConfirm {
     pub vs_plus: f64,
     /// Mean over the cells of |PVS| / (|VS| + confirmed).
     pub pvs_over_confirmed_vs: Option<f64>,
+    /// Culled objects the confirmation's sample or a confirming ray saw, over the row's
+    /// cells: false culls, as `validate --confirm-rays` reports them.
+    pub false_culls: usize,
 }
 
 /// `--hunt-rays` and `--confirm-rays`: checks a row's PVS document as `validate --hunt` and
@@ -330,21 +333,13 @@ pub(crate) fn harder_checks(
 ) -> (Option<RowHunt>, Option<RowConfirm>) {
     use crate::validate::{CheckOptions, check_with};
     let t = Instant::now();
-    // The document was made from this scene, so `check_input` cannot refuse it.
-    let hunt = args.hunt_rays.and_then(|hunt_rays| {
-        let opts = CheckOptions {
-            rays: hunt_rays,
-            seed: args.seed,
-            hunt: true,
-            ..CheckOptions::default()
-        };
-        let r = check_with(index, scene, doc, &opts).ok()?;
+    let log_false_culls = |r: &crate::validate::Report, check: &str| {
         for (i, c) in r.cells.iter().enumerate() {
             for f in &c.false_culls {
                 say!(
                     args.progress,
-                    "bench: FALSE CULL (hunt) {label} cell {i} {:?}–{:?}: object {} {:?}, ray \
-                     origin {:?} direction {:?}",
+                    "bench: FALSE CULL ({check}) {label} cell {i} {:?}–{:?}: object {} {:?}, \
+                     ray origin {:?} direction {:?}",
                     c.min,
                     c.max,
                     f.object,
@@ -354,6 +349,17 @@ pub(crate) fn harder_checks(
                 );
             }
         }
+    };
+    // The document was made from this scene, so `check_input` cannot refuse it.
+    let hunt = args.hunt_rays.and_then(|hunt_rays| {
+        let opts = CheckOptions {
+            rays: hunt_rays,
+            seed: args.seed,
+            hunt: true,
+            ..CheckOptions::default()
+        };
+        let r = check_with(index, scene, doc, &opts).ok()?;
+        log_false_culls(&r, "hunt");
         Some(RowHunt {
             rays_per_cell: hunt_rays,
             hunted_objects: r.hunted_objects.unwrap_or(0),
@@ -369,6 +375,7 @@ pub(crate) fn harder_checks(
             ..CheckOptions::default()
         };
         let r = check_with(index, scene, doc, &opts).ok()?;
+        log_false_culls(&r, "confirm");
         let n = r.cells.len().max(1) as f64;
         let ratios: Vec<f64> = r
             .cells
@@ -386,6 +393,7 @@ pub(crate) fn harder_checks(
                 / n,
             pvs_over_confirmed_vs: (!ratios.is_empty())
                 .then(|| ratios.iter().sum::<f64>() / ratios.len() as f64),
+            false_culls: r.false_culls,
         })
     });
     if hunt.is_some() || confirm.is_some() {
@@ -397,10 +405,11 @@ pub(crate) fn harder_checks(
                 h.hunted_objects, h.rays_per_culled_object, h.false_culls
             )),
             confirm.as_ref().map_or(String::new(), |c| format!(
-                ", |VS+| {:.1}, PVS/VS+ {}",
+                ", |VS+| {:.1}, PVS/VS+ {}, {} false culls",
                 c.vs_plus,
                 c.pvs_over_confirmed_vs
-                    .map_or("–".into(), |v| format!("{v:.2}"))
+                    .map_or("–".into(), |v| format!("{v:.2}")),
+                c.false_culls
             )),
             t.elapsed().as_secs_f64()
         );
@@ -1025,13 +1034,14 @@ pub(crate) fn score(
 }
 
 /// The columns of the harder checks (`--hunt-rays`, `--confirm-rays`).
-pub const CHECK_COLUMNS: [&str; 6] = [
+pub const CHECK_COLUMNS: [&str; 7] = [
     "row",
     "hunted",
     "rays/obj",
     "hunt false culls",
     "VS+",
     "PVS/VS+",
+    "confirm false culls",
 ];
 
 /// Appends the harder checks of `rows` (each with its label), if any row has them: culled
@@ -1057,6 +1067,7 @@ pub(crate) fn checks_table(
                 c.map_or_else(dash, |c| format!("{:.1}", c.vs_plus)),
                 c.and_then(|c| c.pvs_over_confirmed_vs)
                     .map_or_else(dash, |v| format!("{v:.2}")),
+                c.map_or_else(dash, |c| c.false_culls.to_string()),
             ]
         })
         .collect();
@@ -1355,6 +1366,7 @@ mod tests {
         let ratio = c.pvs_over_confirmed_vs.unwrap();
         assert!(ratio >= 1.0 && ratio <= pvs, "{c:?}");
         assert!(c.vs_plus >= 1.0 && c.confirm_rays == 20_000, "{c:?}");
+        assert_eq!(c.false_culls, 0, "{c:?}");
         let table = bench.table();
         assert!(
             table.contains("harder checks, hunt 20000 rays per cell, confirm 20000 rays per cell"),
@@ -1364,6 +1376,7 @@ mod tests {
         let json = serde_json::to_value(&bench).unwrap();
         assert_eq!(json["hunt_rays"], 20_000);
         assert!(json["rows"][0]["confirm"]["vs_plus"].is_number());
+        assert_eq!(json["rows"][0]["confirm"]["false_culls"], 0);
         // Zero is refused.
         let err = collect(&BenchOptions {
             hunt_rays: Some(0),

@@ -587,8 +587,9 @@ pub fn check_with(
 
 /// `--confirm-rays` (`super::confirm`): spends the confirmation budget of every cell on the
 /// objects of its PVS with area that its sample did not see (objects overlapping the cell are
-/// visible by definition, and in the sample), and fills in the cells' `confirmed` and
-/// `pvs_over_confirmed_vs`. Returns the rays cast.
+/// visible by definition, and in the sample), fills in the cells' `confirmed` and
+/// `pvs_over_confirmed_vs`, and adds the culled objects a confirming ray met to their false
+/// culls. Returns the rays cast.
 fn confirm(
     index: &SceneRays,
     scene: &Scene,
@@ -610,6 +611,7 @@ fn confirm(
                 doubt: targetable_where(index, |o| {
                     in_pvs[o as usize] && r.visible.binary_search(&o).is_err()
                 }),
+                culled: targetable_where(index, |o| !in_pvs[o as usize]),
             }
         })
         .collect();
@@ -629,6 +631,14 @@ fn confirm(
         let seen = r.vs + f.objects.len();
         r.pvs_over_confirmed_vs = (seen > 0).then(|| r.pvs as f64 / seen as f64);
         r.confirmed = Some(f.objects);
+        // Culled objects a confirming ray met are false culls like the sample's (those the
+        // sample found already keep the sample's witness).
+        for (o, w) in &f.false_culls {
+            if !r.false_culls.iter().any(|x| x.object == *o) {
+                r.false_culls.push(false_cull(scene, *o, Some(w)));
+            }
+        }
+        r.false_culls.sort_by_key(|x| x.object);
     }
     cast
 }
@@ -672,6 +682,7 @@ fn hunt_with(index: &SceneRays, scene: &Scene, doc: &PvsDocument, opts: &CheckOp
                 cell: cell_box(c),
                 cell_index: i as u64,
                 culled: targetable_where(index, |o| !in_pvs[o as usize]),
+                bystanders: Vec::new(),
             }
         })
         .collect();

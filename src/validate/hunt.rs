@@ -74,6 +74,32 @@ pub(crate) struct HuntCell {
     pub cell_index: u64,
     /// The culled objects with area, ascending.
     pub culled: Vec<u32>,
+    /// Objects, ascending and none of them in `culled`, whose sighting by any ray is
+    /// recorded (with its witness) but which get no rays of their own (position
+    /// `culled.len() + k` for the `k`-th). `--confirm-rays` aims at the PVS objects in doubt
+    /// and lists the culled objects here, so that a confirming ray that meets a culled object
+    /// first proves a false cull. Empty for `--hunt`.
+    pub bystanders: Vec<u32>,
+}
+
+impl HuntCell {
+    /// The position of `object` in [`Self::culled`] followed by [`Self::bystanders`].
+    fn position(&self, object: u32) -> Option<u32> {
+        if let Ok(pos) = self.culled.binary_search(&object) {
+            return Some(pos as u32);
+        }
+        let k = self.bystanders.binary_search(&object).ok()?;
+        Some((self.culled.len() + k) as u32)
+    }
+
+    /// The object at `pos` ([`Self::position`]).
+    fn object_at(&self, pos: u32) -> u32 {
+        let pos = pos as usize;
+        match self.culled.get(pos) {
+            Some(&o) => o,
+            None => self.bystanders[pos - self.culled.len()],
+        }
+    }
 }
 
 /// What the hunt found in one cell.
@@ -81,7 +107,7 @@ pub(crate) struct HuntCell {
 pub(crate) struct HuntResult {
     /// [`rays_per_culled_object`] of the cell.
     pub rays_per_object: u64,
-    /// Culled objects some ray saw, ascending, each with its first ray.
+    /// Culled objects (and bystanders) some ray saw, ascending, each with its first ray.
     pub seen: Vec<(u32, Witness)>,
     /// Rays actually cast (chunks stop at their first ray that sees the object, and seen
     /// objects get no further waves).
@@ -231,9 +257,10 @@ pub(crate) fn hunt_cells(
                     phase: HUNT_PHASE,
                     ray: global,
                 };
-                (c.culled[pos as usize], witness)
+                (c.object_at(pos), witness)
             })
             .collect();
+        r.seen.sort_unstable_by_key(|e| e.0);
     }
     results
 }
@@ -290,8 +317,8 @@ fn hunt_chunk(
         s.culled_hits.clear();
         for h in &s.hits {
             let m = index.meta(h.slot);
-            if let Ok(pos) = cell.culled.binary_search(&m.object) {
-                s.culled_hits.push((pos as u32, h.t, m.triangle));
+            if let Some(pos) = cell.position(m.object) {
+                s.culled_hits.push((pos, h.t, m.triangle));
             }
         }
         // The nearest hit of each object (ties: the lower triangle), whatever the
