@@ -253,3 +253,109 @@ fn journals_of_other_bakes_are_refused_and_bad_outputs_fail_before_the_bake() {
     let e = failed(&bake(3, 2, &out, &["--shard", "2/2"], 1).output().unwrap());
     assert!(e.contains("expected I/N"), "{e}");
 }
+
+/// `bake --resume` inside a cell: the sampler saves its progress to
+/// OUTPUT.sampler-<cell> (`--sampling-checkpoint 0`: after every chunk of rectangles); a bake
+/// killed with SIGKILL while that file exists resumes from it to the bytes of an uninterrupted
+/// bake, says how many rectangles it replayed, and removes the file. A bad value is refused.
+#[test]
+fn a_sampler_cell_killed_by_kill_9_resumes_from_its_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, cells) = (dir.path().join("forest.obj"), dir.path().join("cells.json"));
+    let made = bin()
+        .args([
+            "gen", "forest", "--preset", "coarse", "--trees", "120", "--leaves", "150",
+        ])
+        .args(["--seed", "5", "--cells", "1", "--cell-size", "1", "-o"])
+        .arg(&scene)
+        .arg("--cells-out")
+        .arg(&cells)
+        .output()
+        .unwrap();
+    ok(&made);
+    let bake = |out: &Path, extra: &[&str]| {
+        let mut c = bin();
+        c.arg("bake")
+            .arg(&scene)
+            .arg("--cells")
+            .arg(&cells)
+            .args([
+                "--sampling",
+                "--sampling-eps",
+                "0.06",
+                "--sampling-levels",
+                "1",
+            ])
+            .args([
+                "--sampling-resolution",
+                "128",
+                "--backend",
+                "cpu",
+                "--reproducible",
+            ])
+            .arg("-o")
+            .arg(out)
+            .args(extra)
+            .env("RAYON_NUM_THREADS", "2");
+        c
+    };
+    let whole = dir.path().join("whole.json");
+    ok(&bake(&whole, &["--sampling-checkpoint", "off"])
+        .output()
+        .unwrap());
+
+    let out = dir.path().join("pvs.json");
+    let checkpoint = || {
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.to_string_lossy().contains("pvs.json.sampler-"))
+    };
+    let mut child = bake(&out, &["--sampling-checkpoint", "0"]).spawn().unwrap();
+    let start = Instant::now();
+    while checkpoint().is_none() {
+        assert!(
+            start.elapsed() < Duration::from_secs(300),
+            "the sampler wrote no checkpoint"
+        );
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the bake finished ({status}) before its checkpoint could be seen");
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!out.exists() && checkpoint().is_some());
+
+    let stderr = ok(&bake(&out, &["--sampling-checkpoint", "0", "--resume"])
+        .output()
+        .unwrap());
+    let line = stderr
+        .lines()
+        .find(|l| l.contains("sampler rectangles from checkpoints"))
+        .unwrap_or_else(|| panic!("no checkpoint line in:\n{stderr}"));
+    let n: u64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+    assert!(n > 0, "{line}");
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        std::fs::read(&whole).unwrap(),
+        "the resumed bake differs from the uninterrupted one"
+    );
+    assert!(
+        checkpoint().is_none(),
+        "the finished cell's checkpoint is removed"
+    );
+
+    let e = failed(
+        &bake(
+            &dir.path().join("x.json"),
+            &["--sampling-checkpoint", "soon"],
+        )
+        .output()
+        .unwrap(),
+    );
+    assert!(
+        e.contains("--sampling-checkpoint") && e.contains("`off`"),
+        "{e}"
+    );
+}

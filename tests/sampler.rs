@@ -596,3 +596,103 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
         );
     }
 }
+
+/// `bake --resume` inside a cell: a cell whose sampler stops right after its n-th checkpoint
+/// resumes from the file to the same PVS, points and cost curve as an uninterrupted bake
+/// (cuts in the first level and in a later one), replaying the recorded rectangles instead of
+/// rendering them; the file is gone once the cell is finished. A file made for other inputs
+/// is not resumed.
+#[test]
+fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
+    let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
+        trees: 120,
+        leaves: 150,
+        ..umbrasweep::generate::ForestOptions::coarse()
+    })
+    .unwrap();
+    let scene = generated.to_scene("forest.obj");
+    let cells = [generated.cells[generated.cells.len() / 2]];
+    let mut settings = settings();
+    settings.sampling_settings = SamplingSettings {
+        eps: Some(0.12),
+        levels: 2,
+        resolution: Some(96),
+        rays: 3_000,
+        ..SamplingSettings::default()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("forest.pvs");
+    let files = || -> Vec<std::path::PathBuf> {
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.to_string_lossy().contains(".sampler-"))
+            .collect()
+    };
+    let run = |spec: Option<&bake::SamplerCheckpoints>| {
+        bake::bake_cells(
+            &scene,
+            &cells,
+            &[0],
+            &settings,
+            &CpuBackend::new(),
+            bake::BakeHooks {
+                sampler_checkpoints: spec,
+                ..bake::BakeHooks::default()
+            },
+        )
+    };
+    // What a comparison keeps of a bake: the PVS and the sampler's work but its seconds.
+    let key = |r: &bake::BakeResult| {
+        let k = r
+            .cullers
+            .iter()
+            .position(|&c| c == "shrunk_sampling")
+            .unwrap();
+        let c = &r.cells[0];
+        let w = &c.cullers[k].work;
+        let curve: Vec<_> = w
+            .levels
+            .iter()
+            .map(|l| (l.eps, l.points, l.hidden, l.probe_only))
+            .collect();
+        (
+            c.visible.clone(),
+            c.cullers[k].hidden,
+            w.points,
+            w.polygons,
+            w.finest_eps,
+            curve,
+        )
+    };
+    let whole = key(&run(None).unwrap());
+    assert!(
+        whole.2 > 64 && whole.5.len() >= 2 && whole.1 > 0,
+        "the test needs many rectangles, two levels and something hidden: {whole:?}"
+    );
+    let stop = |inputs: &str, writes: u32| {
+        let mut spec = bake::SamplerCheckpoints::new(&out, inputs, false, 0.0);
+        spec.stop_after_writes = Some(writes);
+        let e = run(Some(&spec)).expect_err("stopped");
+        assert!(matches!(e, bake::BakeError::Interrupted), "{e}");
+        assert_eq!(files().len(), 1, "one checkpoint for the one cell");
+    };
+    for writes in [1, 5] {
+        stop("inputs A", writes);
+        let spec = bake::SamplerCheckpoints::new(&out, "inputs A", true, 0.0);
+        let resumed = key(&run(Some(&spec)).unwrap());
+        assert_eq!(resumed, whole, "resumed after {writes} checkpoints");
+        let replayed = spec.replayed.load(std::sync::atomic::Ordering::Relaxed);
+        assert!(replayed > 0, "nothing replayed after {writes} checkpoints");
+        assert!(
+            files().is_empty(),
+            "the finished cell's checkpoint is removed"
+        );
+    }
+    // Another bake's checkpoint is not resumed (and is replaced, then removed).
+    stop("inputs A", 2);
+    let spec = bake::SamplerCheckpoints::new(&out, "inputs B", true, 0.0);
+    assert_eq!(key(&run(Some(&spec)).unwrap()), whole);
+    assert_eq!(spec.replayed.load(std::sync::atomic::Ordering::Relaxed), 0);
+    assert!(files().is_empty());
+}

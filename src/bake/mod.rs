@@ -8,6 +8,7 @@
 //! (rayon); [`bake_cells`] bakes a subset of them (a shard, the rest of a resumed bake) and
 //! reports each finished cell (to the journal, `journal.rs`); shards are merged in `shard.rs`.
 
+mod checkpoint;
 mod journal;
 mod pipeline;
 mod planes;
@@ -16,6 +17,7 @@ mod rsf;
 mod sampling;
 mod shard;
 
+pub use checkpoint::{CHECKPOINT_FORMAT, CHECKPOINT_VERSION, SamplerCheckpoints};
 pub use journal::{
     JOURNAL_MAGIC, JOURNAL_VERSION, Journal, JournalError, inputs_hash, journal_path,
 };
@@ -58,6 +60,13 @@ pub enum BakeError {
     /// A finished cell could not be written to the journal.
     #[error(transparent)]
     Journal(#[from] JournalError),
+    /// The sampler's checkpoint inside a cell could not be written (`--sampling-checkpoint`).
+    #[error("the sampler's checkpoint: {0}")]
+    Checkpoint(crate::util::WriteError),
+    /// The sampler stopped right after a checkpoint, as a test asked
+    /// ([`SamplerCheckpoints::stop_after_writes`]).
+    #[error("the sampler stopped after its checkpoint, as asked")]
+    Interrupted,
 }
 
 /// One cell's outcome.
@@ -249,6 +258,7 @@ pub fn bake_observed(
             observe,
             on_cell: None,
             sample_points: None,
+            sampler_checkpoints: None,
         },
     )
 }
@@ -269,6 +279,9 @@ pub struct BakeHooks<'a> {
     /// The shrunk-occluder sampler adds each sample point it renders here, so that a caller
     /// can show progress inside cells that take minutes.
     pub sample_points: Option<&'a std::sync::atomic::AtomicU64>,
+    /// Where the sampler saves its progress inside each cell (`bake --resume` continues a
+    /// cell from it); `None`: nowhere.
+    pub sampler_checkpoints: Option<&'a SamplerCheckpoints>,
 }
 
 /// Bakes the cells `which` (indices into `cells`) of a bake of all `cells`: the per-scene
@@ -297,6 +310,7 @@ pub fn bake_cells(
     }
     let mut prepared = Prepared::new(scene, settings, cells)?;
     prepared.sample_points = hooks.sample_points;
+    prepared.checkpoints = hooks.sampler_checkpoints;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cells_out: Result<Vec<CellResult>, BakeError> = which
         .par_iter()

@@ -49,10 +49,18 @@
 //! cost curve do not depend on the threads, unless the point or time budget runs out
 //! mid-level.
 //!
+//! **Checkpoints** (`super::checkpoint`, `bake --resume`). Chunk boundaries are where a cell's
+//! progress is saved: a resumed cell replays the recorded chunks (their rectangles' outcomes
+//! and counts, the probe decisions and cost-curve entries made) and starts the next chunk from
+//! the known-visible set saved at the cut, which is what the interrupted run started it from.
+//! So it hides exactly what an uninterrupted run hides: nothing is decided that the same code
+//! did not decide from the same state.
+//!
 //! Occluders are every exactly planar convex polygon of the scene's occluder objects, including
 //! objects earlier cullers hid (they are real geometry: blocking rays with them is sound).
 
 use super::BakeError;
+use super::checkpoint::{CellCheckpoint, RectRecord};
 use super::pipeline::{CullState, Culler, CullerWork, PlaneSink};
 use super::prepare::Prepared;
 use crate::backend::gpu::GpuBackend;
@@ -267,6 +275,10 @@ fn falls_back(e: &BackendError) -> bool {
 
 /// Certifying rays per undecided object and sample point at most.
 const CERTIFY_PER_OBJECT: usize = 2;
+/// A sampled rectangle's outcome: the objects it leaves undecided for its quadrants (none:
+/// nothing to refine) and what it counted, for the checkpoint.
+type Outcome = (Option<Arc<Vec<u32>>>, RectRecord);
+
 /// Certifying rays per sample point at most.
 const CERTIFY_PER_POINT: usize = 64;
 
@@ -282,6 +294,17 @@ impl Patch {
     /// Half its diagonal: the radius of the ball around its centre that holds it.
     fn half_diagonal(&self) -> f64 {
         0.5 * (self.b[1] - self.b[0]).hypot(self.c[1] - self.c[0])
+    }
+
+    /// Its half sides along the face's two axes.
+    fn half_sides(&self) -> (f64, f64) {
+        (0.5 * (self.b[1] - self.b[0]), 0.5 * (self.c[1] - self.c[0]))
+    }
+
+    /// The ε its sample point is rendered with: its half diagonal, rounded up.
+    fn ball_eps(&self) -> f64 {
+        let (hb, hc) = self.half_sides();
+        (hb * hb + hc * hc).sqrt() * (1.0 + 1e-9)
     }
 
     /// The four rectangles that split this one at its midpoints (they cover it exactly).
@@ -382,6 +405,23 @@ impl Culler for SamplingCuller {
             }
             candidates.retain(|&o| !done[o as usize].load(Ordering::Relaxed));
         }
+        // A checkpoint of this cell (`--resume`): what was known visible at its cut; its
+        // rectangles are replayed below.
+        let (ckpt, resumed) = match prepared.checkpoints {
+            Some(spec) => {
+                let (c, r) = CellCheckpoint::open(spec, cell, cell_seed(cell), n);
+                (Some(c), r)
+            }
+            None => (None, None),
+        };
+        if let Some(r) = &resumed {
+            for (d, &k) in done.iter().zip(&r.known) {
+                if k {
+                    d.store(true, Ordering::Relaxed);
+                }
+            }
+        }
+        let ckpt_failed: Mutex<Option<BakeError>> = Mutex::new(None);
         // Faces in the order −x, +x, −y, +y, −z, +z.
         let faces: [Face; 6] = std::array::from_fn(|k| {
             let (axis, sign) = (k / 2, if k % 2 == 0 { -1.0 } else { 1.0 });
@@ -428,7 +468,12 @@ impl Culler for SamplingCuller {
             finest: AtomicU64::new(f64::INFINITY.to_bits()),
             tested: AtomicU64::new(0),
             hid: AtomicU64::new(0),
-            start: Instant::now(),
+            start: resumed
+                .as_ref()
+                .and_then(|r| {
+                    Instant::now().checked_sub(std::time::Duration::from_secs_f64(r.seconds))
+                })
+                .unwrap_or_else(Instant::now),
             failed: Mutex::new(None),
             fallback: Mutex::new(
                 backend
@@ -484,7 +529,10 @@ impl Culler for SamplingCuller {
         let mut level = top;
         let mut curve: Vec<SamplingLevel> = Vec::new();
         let mut undecided = vec![false; n];
+        let mut level_no = 0usize;
         while !level.is_empty() {
+            let this_level = level_no;
+            level_no += 1;
             let level_eps = level
                 .iter()
                 .map(|(p, _)| p.half_diagonal())
@@ -548,8 +596,26 @@ impl Culler for SamplingCuller {
                 let mut out = Vec::with_capacity(indices.len());
                 let (chunk_len, lane_len) = lanes(indices.len());
                 for chunk in indices.chunks(chunk_len) {
+                    if ckpt_failed
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .is_some()
+                    {
+                        // Stopped (a checkpoint failed, or a test's interruption): the cell
+                        // fails below, whatever these rectangles would have found.
+                        out.extend(chunk.iter().map(|_| None));
+                        continue;
+                    }
+                    // A chunk the checkpoint recorded is replayed, not rendered.
+                    if let Some(recs) = ckpt.as_ref().and_then(|c| c.replay(this_level, chunk)) {
+                        for (&i, r) in chunk.iter().zip(recs) {
+                            shared.replay(level[i].0, &r);
+                            out.push(r.open.map(Arc::new));
+                        }
+                        continue;
+                    }
                     let known = shared.known_now();
-                    let lanes: Vec<Vec<Option<Arc<Vec<u32>>>>> = chunk
+                    let lanes: Vec<Vec<Outcome>> = chunk
                         .par_chunks(lane_len)
                         .map(|lane| {
                             let mut known = known.clone();
@@ -559,17 +625,52 @@ impl Culler for SamplingCuller {
                                 for &i in lane {
                                     shared.give_up(&level[i].1, &mut known);
                                 }
-                                return vec![None; lane.len()];
+                                return vec![(None, RectRecord::default()); lane.len()];
                             };
                             let open = lane
                                 .iter()
-                                .map(|&i| shared.patch(&mut r, level[i].0, &level[i].1, &mut known))
+                                .map(|&i| {
+                                    let mut rec = RectRecord::default();
+                                    let o = shared.patch(
+                                        &mut r,
+                                        level[i].0,
+                                        &level[i].1,
+                                        &mut known,
+                                        &mut rec,
+                                    );
+                                    (o, rec)
+                                })
                                 .collect();
                             pool.give(r);
                             open
                         })
                         .collect();
-                    out.extend(lanes.into_iter().flatten());
+                    let results: Vec<_> = lanes.into_iter().flatten().collect();
+                    if let Some(c) = &ckpt
+                        && shared
+                            .failed
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .is_none()
+                    {
+                        let recs = chunk.iter().zip(&results).map(|(&i, (o, rec))| {
+                            let mut rec = rec.clone();
+                            rec.open = o.as_ref().map(|l| l.to_vec());
+                            (i, rec)
+                        });
+                        let seconds = shared.start.elapsed().as_secs_f64();
+                        match c.record(this_level, recs, || shared.known_now(), seconds) {
+                            Ok(false) => {}
+                            Ok(true) => {
+                                *ckpt_failed.lock().unwrap_or_else(|e| e.into_inner()) =
+                                    Some(BakeError::Interrupted);
+                            }
+                            Err(e) => {
+                                *ckpt_failed.lock().unwrap_or_else(|e| e.into_inner()) = Some(e);
+                            }
+                        }
+                    }
+                    out.extend(results.into_iter().map(|(o, _)| o));
                 }
                 out
             };
@@ -613,7 +714,17 @@ impl Culler for SamplingCuller {
                     .enumerate()
                     .any(|(o, &f)| f == 1 && !shared.done[o].load(Ordering::Relaxed));
                 let rest: Vec<usize> = (0..level.len()).filter(|i| i % stride != 0).collect();
-                if ((hid as f64) < s.probe * tested as f64 || !may_cull) && !shared.spent() {
+                // A resumed level keeps the decision its interrupted run made.
+                let skip = ckpt
+                    .as_ref()
+                    .and_then(|c| c.with_level(this_level, |l| l.probe_only))
+                    .unwrap_or(
+                        ((hid as f64) < s.probe * tested as f64 || !may_cull) && !shared.spent(),
+                    );
+                if let Some(c) = &ckpt {
+                    c.with_level(this_level, |l| l.probe_only = Some(skip));
+                }
+                if skip {
                     probe_only = true;
                     // Their quadrants drop what was decided meanwhile (`patch` filters).
                     for i in rest {
@@ -641,7 +752,7 @@ impl Culler for SamplingCuller {
             for &o in open.iter().flatten().flat_map(|l| l.iter()) {
                 undecided[o as usize] = true;
             }
-            curve.push(SamplingLevel {
+            let entry = SamplingLevel {
                 eps: level_eps,
                 resolution,
                 points: shared.points.load(Ordering::Relaxed),
@@ -653,7 +764,13 @@ impl Culler for SamplingCuller {
                     })
                     .count() as u32,
                 probe_only,
-            });
+            };
+            // A level its interrupted run finished keeps the entry it made then.
+            let entry = match &ckpt {
+                Some(c) => c.with_level(this_level, |l| *l.curve.get_or_insert(entry)),
+                None => entry,
+            };
+            curve.push(entry);
             if shared.spent() {
                 // The next level would sample nothing: what it would test stays visible.
                 for l in open.iter().flatten() {
@@ -675,6 +792,12 @@ impl Culler for SamplingCuller {
             .take()
         {
             return Err(e.into());
+        }
+        if let Some(e) = ckpt_failed.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            return Err(e);
+        }
+        if let Some(c) = &ckpt {
+            c.finish();
         }
         for &o in &candidates {
             if !shared.done[o as usize].load(Ordering::Relaxed) {
@@ -847,6 +970,22 @@ impl Shared<'_> {
         true
     }
 
+    /// Adds what a recorded rectangle counted (a replayed checkpoint) to the totals, as
+    /// [`Shared::patch`] did when it sampled it.
+    fn replay(&self, patch: Patch, r: &RectRecord) {
+        self.tested.fetch_add(r.tested, Ordering::Relaxed);
+        self.hid.fetch_add(r.hid, Ordering::Relaxed);
+        self.polygons.fetch_add(r.polygons, Ordering::Relaxed);
+        if r.point {
+            self.points.fetch_add(1, Ordering::Relaxed);
+            if let Some(c) = self.prepared.sample_points {
+                c.fetch_add(1, Ordering::Relaxed);
+            }
+            let eps = patch.ball_eps();
+            self.finest.fetch_min(eps.to_bits(), Ordering::Relaxed);
+        }
+    }
+
     /// A snapshot of the objects known visible now.
     fn known_now(&self) -> Vec<bool> {
         self.done
@@ -901,6 +1040,7 @@ impl Shared<'_> {
         patch: Patch,
         list: &[u32],
         known: &mut [bool],
+        rec: &mut RectRecord,
     ) -> Option<Arc<Vec<u32>>> {
         let list: Vec<u32> = list
             .iter()
@@ -914,15 +1054,15 @@ impl Shared<'_> {
             self.give_up(&list, known);
             return None;
         }
+        rec.point = true;
         let f = self.faces[patch.face];
         let (b, c) = ((f.axis + 1) % 3, (f.axis + 2) % 3);
         let mut eye = DVec3::ZERO;
         eye[f.axis] = f.plane;
         eye[b] = 0.5 * (patch.b[0] + patch.b[1]);
         eye[c] = 0.5 * (patch.c[0] + patch.c[1]);
-        let hb = 0.5 * (patch.b[1] - patch.b[0]);
-        let hcx = 0.5 * (patch.c[1] - patch.c[0]);
-        let eps = (hb * hb + hcx * hcx).sqrt() * (1.0 + 1e-9);
+        let (hb, hcx) = patch.half_sides();
+        let eps = patch.ball_eps();
         self.finest.fetch_min(eps.to_bits(), Ordering::Relaxed);
         let scene = self.prepared.scene;
         let boxes: Vec<DAabb> = list
@@ -941,6 +1081,7 @@ impl Shared<'_> {
                     hc.begin_patch(eye, f.axis, f.sign, half, &band_boxes);
                     let st = hc.draw(&self.data.occluders);
                     self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
+                    rec.polygons += st.polygons;
                     None
                 }
                 Renderer::Gpu(gs) => {
@@ -953,6 +1094,7 @@ impl Shared<'_> {
                     match self.test_on_gpu(gs, eye, &objects) {
                         Ok(r) => {
                             self.polygons.fetch_add(gs.last_draws(), Ordering::Relaxed);
+                            rec.polygons += gs.last_draws();
                             Some(objects.iter().map(|p| p.0).zip(r).collect::<Vec<_>>())
                         }
                         Err(e) => {
@@ -977,6 +1119,7 @@ impl Shared<'_> {
                     continue;
                 }
                 self.tested.fetch_add(1, Ordering::Relaxed);
+                rec.tested += 1;
                 let test = match (renderer as &Renderer, from_gpu) {
                     (_, Some(r)) => r,
                     (Renderer::Cpu(hc), None) => self.test_object(hc, o, bx),
@@ -984,6 +1127,7 @@ impl Shared<'_> {
                 };
                 let Some(direction) = test else {
                     self.hid.fetch_add(1, Ordering::Relaxed);
+                    rec.hid += 1;
                     continue;
                 };
                 // Undecided here: try to certify it with real rays from the eye.
