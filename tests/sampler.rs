@@ -548,13 +548,9 @@ fn the_memory_estimate_holds_a_hemicube_per_thread() {
     assert!(off + 4 * SamplingSettings::hemicube_bytes(hi) < auto);
 }
 
-/// The sampler's results do not depend on the threads: a small forest's middle cell, with
-/// certifying rays, levels with probes, a level sampled whole (scouts first) and distance
-/// bands, sampled on 1, 3 and 4 threads, hides the same objects with the same points and the
-/// same cost curve. (Rectangles running side by side once decided with what the others had
-/// just found visible, which changed their candidate lists, hence their bands and shrinks.)
-#[test]
-fn the_sampler_hides_the_same_on_any_thread_count() {
+/// A 120-tree forest's middle cell and sampler settings that give it many rectangles, two
+/// levels with probes, certifying rays and distance bands.
+fn small_forest() -> (umbrasweep::Scene, Aabb, BakeSettings) {
     let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
         trees: 120,
         leaves: 150,
@@ -571,6 +567,17 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
         rays: 3_000,
         ..SamplingSettings::default()
     };
+    (scene, cell, settings)
+}
+
+/// The sampler's results do not depend on the threads: a small forest's middle cell, with
+/// certifying rays, levels with probes, a level sampled whole (scouts first) and distance
+/// bands, sampled on 1, 3 and 4 threads, hides the same objects with the same points and the
+/// same cost curve. (Rectangles running side by side once decided with what the others had
+/// just found visible, which changed their candidate lists, hence their bands and shrinks.)
+#[test]
+fn the_sampler_hides_the_same_on_any_thread_count() {
+    let (scene, cell, settings) = small_forest();
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -604,22 +611,8 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
 /// is not resumed.
 #[test]
 fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
-    let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
-        trees: 120,
-        leaves: 150,
-        ..umbrasweep::generate::ForestOptions::coarse()
-    })
-    .unwrap();
-    let scene = generated.to_scene("forest.obj");
-    let cells = [generated.cells[generated.cells.len() / 2]];
-    let mut settings = settings();
-    settings.sampling_settings = SamplingSettings {
-        eps: Some(0.12),
-        levels: 2,
-        resolution: Some(96),
-        rays: 3_000,
-        ..SamplingSettings::default()
-    };
+    let (scene, cell, settings) = small_forest();
+    let cells = [cell];
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("forest.pvs");
     let files = || -> Vec<std::path::PathBuf> {
