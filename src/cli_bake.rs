@@ -1029,14 +1029,18 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 eprintln!("            some renders ran on the CPU's hemicube: {why}");
             }
             for (k, l) in c.levels.iter().enumerate() {
-                let probe = if l.probe_only > 0.0 {
+                let mut probe = l.probe_hidden.map_or(String::new(), |h| {
                     format!(
+                        "; its probe hid {:.1} % of the objects it tested",
+                        100.0 * h
+                    )
+                });
+                if l.probe_only > 0.0 {
+                    probe += &format!(
                         "; in {:.0} % of the cells only its probe was sampled (--sampling-probe)",
                         100.0 * l.probe_only
-                    )
-                } else {
-                    String::new()
-                };
+                    );
+                }
                 eprintln!(
                     "  level {k}   ε ≤ {:.4}, {} px: {:.0} points, {:.1} s, {:.1} objects hidden (mean per cell, all levels so far){probe}",
                     l.eps, l.resolution, l.points, l.seconds, l.hidden

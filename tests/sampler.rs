@@ -465,6 +465,14 @@ fn a_level_whose_probe_proves_nothing_is_split_unsampled() {
         probed.levels,
         whole.levels
     );
+    // The probe's share of tests that hid the object is recorded (less than the 1 % asked
+    // for: the level was cut short); without probes there is none.
+    assert!(
+        p0.probe_hidden.is_some_and(|h| (0.0..0.01).contains(&h)),
+        "{:?}",
+        probed.levels
+    );
+    assert!(whole.levels.iter().all(|l| l.probe_hidden.is_none()));
     // The finest level is sampled whole, never cut short by its probe.
     assert!(!probed.levels.last().unwrap().probe_only);
     // The same objects culled: the fused leaves hide the target, nothing else.

@@ -326,6 +326,7 @@ mod tests {
                         seconds: 0.25,
                         hidden: k,
                         probe_only: k.is_multiple_of(2),
+                        probe_hidden: k.is_multiple_of(2).then_some(0.25),
                     }],
                     cpu_fallback: k
                         .is_multiple_of(3)

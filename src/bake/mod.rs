@@ -670,6 +670,13 @@ fn level_summary(curves: &[&[crate::pvs::SamplingLevel]]) -> Vec<crate::pvs::Pvs
                 seconds: mean(&|l| l.seconds),
                 hidden: mean(&|l| f64::from(l.hidden)),
                 probe_only: mean(&|l| f64::from(u8::from(l.probe_only))),
+                probe_hidden: {
+                    let shares: Vec<f64> = curves
+                        .iter()
+                        .filter_map(|c| c.get(k).and_then(|l| l.probe_hidden))
+                        .collect();
+                    (!shares.is_empty()).then(|| shares.iter().sum::<f64>() / shares.len() as f64)
+                },
             }
         })
         .collect()

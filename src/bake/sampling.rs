@@ -683,6 +683,7 @@ impl Culler for SamplingCuller {
                 .max(1);
             let mut open: Vec<Option<Arc<Vec<u32>>>> = vec![None; level.len()];
             let mut probe_only = false;
+            let mut probe_hidden = None;
             if s.probe > 0.0 && !finest_level && stride > 1 {
                 let probe: Vec<usize> = (0..level.len()).step_by(stride).collect();
                 let (t0, h0) = (
@@ -694,6 +695,7 @@ impl Culler for SamplingCuller {
                 }
                 let tested = shared.tested.load(Ordering::Relaxed) - t0;
                 let hid = shared.hid.load(Ordering::Relaxed) - h0;
+                probe_hidden = (tested > 0).then(|| hid as f64 / tested as f64);
                 // Per-rectangle hides add up to a cull only for an object hidden at every
                 // rectangle that tests it: unless some object still undecided was hidden at
                 // every probed rectangle that tested it, the rest of the level will rarely cull
@@ -764,6 +766,7 @@ impl Culler for SamplingCuller {
                     })
                     .count() as u32,
                 probe_only,
+                probe_hidden,
             };
             // A level its interrupted run finished keeps the entry it made then.
             let entry = match &ckpt {

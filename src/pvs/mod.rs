@@ -167,6 +167,11 @@ pub struct SamplingLevel {
     /// rest of the level was split without sampling.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub probe_only: bool,
+    /// The level's probe (every 16th rectangle, for levels but the finest): the share of its
+    /// object tests that proved the object hidden at the rectangle. What `--sampling-probe`
+    /// compares; absent for a level without a probe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_hidden: Option<f64>,
 }
 
 fn is_zero(v: &u64) -> bool {
@@ -283,6 +288,9 @@ pub struct PvsLevelSummary {
     /// ([`SamplingLevel::probe_only`]; 0 in documents written before probes).
     #[serde(default)]
     pub probe_only: f64,
+    /// Mean over the cells whose level had a probe of [`SamplingLevel::probe_hidden`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_hidden: Option<f64>,
 }
 
 fn is_zero_f64(v: &f64) -> bool {
