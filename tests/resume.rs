@@ -43,23 +43,33 @@ fn failed(o: &Output) -> String {
     stderr
 }
 
-/// Starts `bake`, kills it with SIGKILL once its journal holds `n` records, and returns the
-/// records the journal holds after the kill.
-fn kill_after(mut bake: Command, journal: &Path, n: usize) -> usize {
+/// Starts `bake` and kills it with SIGKILL as soon as `ready()` holds (`what`: what it waits
+/// for, in the failure messages).
+fn kill_when(mut bake: Command, ready: impl Fn() -> bool, what: &str) {
     let mut child = bake.spawn().unwrap();
     let start = Instant::now();
-    while records(journal) < n {
+    while !ready() {
         assert!(
             start.elapsed() < Duration::from_secs(300),
-            "the bake wrote no journal records"
+            "the bake never wrote {what}"
         );
         if let Some(status) = child.try_wait().unwrap() {
-            panic!("the bake finished ({status}) before it could be killed: give it more cells");
+            panic!("the bake finished ({status}) before {what} could be seen: give it more work");
         }
-        std::thread::sleep(Duration::from_millis(5));
+        std::thread::sleep(Duration::from_millis(2));
     }
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
+}
+
+/// Starts `bake`, kills it with SIGKILL once its journal holds `n` records, and returns the
+/// records the journal holds after the kill.
+fn kill_after(bake: Command, journal: &Path, n: usize) -> usize {
+    kill_when(
+        bake,
+        || records(journal) >= n,
+        &format!("{n} journal records"),
+    );
     records(journal)
 }
 
@@ -311,20 +321,11 @@ fn a_sampler_cell_killed_by_kill_9_resumes_from_its_checkpoint() {
             .map(|e| e.unwrap().path())
             .find(|p| p.to_string_lossy().contains("pvs.json.sampler-"))
     };
-    let mut child = bake(&out, &["--sampling-checkpoint", "0"]).spawn().unwrap();
-    let start = Instant::now();
-    while checkpoint().is_none() {
-        assert!(
-            start.elapsed() < Duration::from_secs(300),
-            "the sampler wrote no checkpoint"
-        );
-        if let Some(status) = child.try_wait().unwrap() {
-            panic!("the bake finished ({status}) before its checkpoint could be seen");
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    child.kill().unwrap();
-    child.wait().unwrap();
+    kill_when(
+        bake(&out, &["--sampling-checkpoint", "0"]),
+        || checkpoint().is_some(),
+        "a sampler checkpoint",
+    );
     assert!(!out.exists() && checkpoint().is_some());
 
     let stderr = ok(&bake(&out, &["--sampling-checkpoint", "0", "--resume"])

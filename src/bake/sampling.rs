@@ -275,12 +275,12 @@ fn falls_back(e: &BackendError) -> bool {
 
 /// Certifying rays per undecided object and sample point at most.
 const CERTIFY_PER_OBJECT: usize = 2;
+/// Certifying rays per sample point at most.
+const CERTIFY_PER_POINT: usize = 64;
+
 /// A sampled rectangle's outcome: the objects it leaves undecided for its quadrants (none:
 /// nothing to refine) and what it counted, for the checkpoint.
 type Outcome = (Option<Arc<Vec<u32>>>, RectRecord);
-
-/// Certifying rays per sample point at most.
-const CERTIFY_PER_POINT: usize = 64;
 
 /// One rectangle of a face: `[b0, b1] × [c0, c1]` on the face's plane.
 #[derive(Clone, Copy, Debug)]
