@@ -138,7 +138,9 @@ pub struct FalseCull {
     /// Global index of the witness ray in the cell's budget. With `--hunt`, culled object
     /// number `k` of the cell (ascending by id) owns rays `[k·m, (k+1)·m)`, `m` being
     /// [`CellReport::rays_per_culled_object`]; the witness may be a ray aimed at another
-    /// culled object that met this one first.
+    /// culled object that met this one first. With `--confirm-rays`, a confirming ray met
+    /// it: the index is within its round's budget, object in doubt number `k` owning rays
+    /// `[k·m, (k+1)·m)` of that round.
     pub ray: Option<u64>,
     /// `"ray"` (a ray sees it) or `"overlap"` (its bounds overlap the cell).
     pub reason: String,
