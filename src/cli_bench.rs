@@ -168,6 +168,21 @@ pub struct BenchArgs {
     /// at the PVS objects the validation's sample missed): |VS+| and PVS/VS+ follow the table.
     #[arg(long, value_name = "N")]
     pub confirm_rays: Option<u64>,
+    /// Save the foliage study's sampler cells' progress in DIR (created if needed; files
+    /// STUDY-ROW.sampler-*, kept when a cell finishes). Running the same command again with
+    /// the same DIR replays what they recorded: a killed bench redoes no finished sampler cell
+    /// and resumes the one it was in, and each row's times include the earlier runs'. Files
+    /// whose options or scene differ are ignored; delete DIR to start afresh.
+    #[arg(long, value_name = "DIR", requires = "foliage")]
+    pub checkpoint_dir: Option<PathBuf>,
+    /// Seconds at least between two saves of a cell's checkpoint (with --checkpoint-dir).
+    #[arg(
+        long,
+        value_name = "SECS",
+        default_value_t = 60.0,
+        requires = "checkpoint_dir"
+    )]
+    pub checkpoint_every: f64,
 }
 
 /// Prints a progress line on stderr.
@@ -209,6 +224,8 @@ impl From<&BenchArgs> for BenchOptions {
             foliage_sampling_levels: a.foliage_sampling_levels,
             hunt_rays: a.hunt_rays,
             confirm_rays: a.confirm_rays,
+            checkpoint_dir: a.checkpoint_dir.clone(),
+            checkpoint_seconds: a.checkpoint_every,
             progress: Some(progress),
         }
     }

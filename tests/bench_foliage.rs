@@ -210,3 +210,81 @@ fn harder_checks_hunt_and_confirm_every_row() {
     assert_eq!(json["rows"][0]["hunt"]["false_culls"], 0);
     assert!(json["rows"][0]["confirm"]["pvs_over_confirmed_vs"].is_number());
 }
+
+/// The progress lines of the checkpoint test's bench runs.
+static LINES: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+/// `bench --foliage --checkpoint-dir DIR`: the sampler row keeps its cell's checkpoint, and
+/// the same bench run again replays it (no rectangle rendered again, the progress says how
+/// many were replayed) and reports the same row, its time including the first run's.
+#[test]
+fn a_bench_run_again_with_its_checkpoint_dir_replays_the_sampler_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("ckpt");
+    let opts = BenchOptions {
+        foliage_studies: Some(vec!["coarse".into()]),
+        foliage_trees: Some(3),
+        cells: Some(1),
+        rays: Some(2000),
+        backend: BenchBackend::Cpu,
+        checkpoint_dir: Some(ckpt.clone()),
+        progress: Some(|l: &str| LINES.lock().unwrap().push(l.to_string())),
+        ..BenchOptions::default()
+    };
+    let first = collect(&opts).unwrap();
+    let files: Vec<String> = std::fs::read_dir(&ckpt)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    // Only the sampler row (the fourth) has a sampler cell.
+    assert_eq!(files.len(), 1, "{files:?}");
+    assert!(files[0].starts_with("coarse-03.sampler-"), "{files:?}");
+    let row = |b: &FoliageBench| {
+        let r = b.rows.last().unwrap();
+        assert!(r.variant.contains("--sampling"), "{}", r.variant);
+        let curve: Vec<_> = r
+            .sampling_curve
+            .iter()
+            .map(|c| (c.eps, c.points, c.sampler_hidden))
+            .collect();
+        (
+            r.row.objects_culled_percent,
+            curve,
+            r.row.median_ms_per_cell,
+        )
+    };
+    let (culled, curve, ms) = row(&first);
+    assert!(
+        !curve.is_empty() && curve.last().unwrap().1 > 0.0,
+        "{curve:?}"
+    );
+    assert!(
+        !LINES.lock().unwrap().iter().any(|l| l.contains("replayed")),
+        "nothing to replay the first time"
+    );
+    let again = collect(&opts).unwrap();
+    let (culled2, curve2, ms2) = row(&again);
+    assert_eq!((culled2, &curve2), (culled, &curve));
+    let sampled = first
+        .rows
+        .last()
+        .unwrap()
+        .sampling_curve
+        .last()
+        .unwrap()
+        .seconds
+        * 1e3;
+    assert!(
+        ms2 >= sampled,
+        "{ms2} ms, the first run sampled {sampled} ms (of {ms} ms)"
+    );
+    let lines = LINES.lock().unwrap();
+    let replayed: Vec<_> = lines.iter().filter(|l| l.contains("replayed")).collect();
+    assert_eq!(replayed.len(), 1, "{lines:?}");
+    assert!(
+        replayed[0].contains("foliage coarse [--sweep --sampling")
+            && replayed[0].contains("sampler rectangles from"),
+        "{}",
+        replayed[0]
+    );
+}

@@ -697,3 +697,84 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
     assert_eq!(spec.replayed.load(std::sync::atomic::Ordering::Relaxed), 0);
     assert!(files().is_empty());
 }
+
+/// A kept checkpoint (`SamplerCheckpoints::kept`, what `bench --checkpoint-dir` uses) stays
+/// when its cell finishes, complete: a second bake resumed from it renders no sample point,
+/// replays every rectangle, comes out the same, and reports the sampler's time with the first
+/// run's included.
+#[test]
+fn a_kept_checkpoint_replays_the_whole_finished_cell() {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    let (scene, cell, settings) = small_forest();
+    let cells = [cell];
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("row");
+    let run = |spec: &bake::SamplerCheckpoints, points: &AtomicU64| {
+        let r = bake::bake_cells(
+            &scene,
+            &cells,
+            &[0],
+            &settings,
+            &CpuBackend::new(),
+            bake::BakeHooks {
+                sampler_checkpoints: Some(spec),
+                sample_points: Some(points),
+                ..bake::BakeHooks::default()
+            },
+        )
+        .unwrap();
+        let k = r
+            .cullers
+            .iter()
+            .position(|&c| c == "shrunk_sampling")
+            .unwrap();
+        let s = r.cells[0].cullers[k].clone();
+        (r.cells[0].visible.clone(), s, r.cells[0].ms)
+    };
+    let first_points = AtomicU64::new(0);
+    let first = bake::SamplerCheckpoints::new(&out, "inputs", true, 1e9).kept();
+    let (vis1, s1, _) = run(&first, &first_points);
+    assert!(s1.hidden > 0 && s1.work.points > 64, "{s1:?}");
+    assert_eq!(first_points.load(Ordering::Relaxed), s1.work.points);
+    let kept: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(kept.len(), 1, "the finished cell's file is kept: {kept:?}");
+    // Complete: every rectangle the cell sampled or split is in it.
+    let file: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&kept[0]).unwrap()).unwrap();
+    let rects: usize = file["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["rects"].as_object().unwrap().len())
+        .sum();
+    assert!(rects as u64 >= s1.work.points, "{rects} rectangles");
+    let again_points = AtomicU64::new(0);
+    let again = bake::SamplerCheckpoints::new(&out, "inputs", true, 1e9).kept();
+    let (vis2, s2, cell_ms) = run(&again, &again_points);
+    // Every rectangle replayed, none rendered (replayed points count as progress too).
+    assert_eq!(again.replayed.load(Ordering::Relaxed), rects as u64);
+    assert_eq!(again_points.load(Ordering::Relaxed), s1.work.points);
+    assert_eq!(
+        (&vis2, s2.hidden, s2.work.points),
+        (&vis1, s1.hidden, s1.work.points)
+    );
+    let curve = |s: &bake::CullerStats| -> Vec<_> {
+        s.work
+            .levels
+            .iter()
+            .map(|l| (l.eps, l.points, l.hidden, l.probe_only))
+            .collect()
+    };
+    assert_eq!(curve(&s2), curve(&s1));
+    // The time includes what the first run spent sampling (its curve's last entry).
+    let sampled = s1.work.levels.last().unwrap().seconds * 1e3;
+    assert!(
+        s2.ms >= sampled,
+        "{} ms, the first run sampled {sampled} ms",
+        s2.ms
+    );
+    assert!(cell_ms >= s2.ms, "the cell's {cell_ms} ms");
+}

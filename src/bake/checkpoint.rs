@@ -57,6 +57,11 @@ pub struct SamplerCheckpoints {
     pub stop_after_writes: Option<u32>,
     /// Rectangles replayed from files instead of rendered, over the bake.
     pub replayed: AtomicU64,
+    /// Keep each cell's file when the cell finishes, complete, instead of removing it
+    /// ([`Self::kept`]): a later run with `resume` replays the whole cell. `bench
+    /// --checkpoint-dir` keeps them, so that a rerun of a killed bench redoes no finished
+    /// sampler row.
+    pub keep: bool,
 }
 
 impl SamplerCheckpoints {
@@ -70,7 +75,15 @@ impl SamplerCheckpoints {
             every_seconds,
             stop_after_writes: None,
             replayed: AtomicU64::new(0),
+            keep: false,
         }
+    }
+
+    /// The same, keeping each finished cell's file ([`Self::keep`]).
+    #[must_use]
+    pub fn kept(mut self) -> Self {
+        self.keep = true;
+        self
     }
 
     /// The file of the cell whose sampler seed is `key`.
@@ -237,6 +250,14 @@ impl<'a> CellCheckpoint<'a> {
         if last.elapsed().as_secs_f64() < self.spec.every_seconds {
             return Ok(false);
         }
+        self.write(known, seconds)?;
+        *last = Instant::now();
+        let n = self.writes.fetch_add(1, Ordering::Relaxed) + 1;
+        Ok(self.spec.stop_after_writes.is_some_and(|s| n >= s))
+    }
+
+    /// Writes the file now (atomically: a temporary file, then a rename).
+    fn write(&self, known: impl FnOnce() -> Vec<bool>, seconds: f64) -> Result<(), BakeError> {
         let file = CheckpointFile {
             format: CHECKPOINT_FORMAT.into(),
             version: CHECKPOINT_VERSION,
@@ -251,15 +272,20 @@ impl<'a> CellCheckpoint<'a> {
                 .clone(),
         };
         let bytes = serde_json::to_vec(&file).expect("a checkpoint serialises");
-        crate::util::write_atomic(&self.path, &bytes).map_err(BakeError::Checkpoint)?;
-        *last = Instant::now();
-        let n = self.writes.fetch_add(1, Ordering::Relaxed) + 1;
-        Ok(self.spec.stop_after_writes.is_some_and(|s| n >= s))
+        crate::util::write_atomic(&self.path, &bytes).map_err(BakeError::Checkpoint)
     }
 
-    /// Removes the file (the cell is finished).
-    pub fn finish(&self) {
+    /// The cell is finished: its file is removed, or, when [`SamplerCheckpoints::keep`],
+    /// written complete (every rectangle, `known` the objects known visible at the end).
+    ///
+    /// # Errors
+    /// A kept file cannot be written.
+    pub fn finish(&self, known: impl FnOnce() -> Vec<bool>, seconds: f64) -> Result<(), BakeError> {
+        if self.spec.keep {
+            return self.write(known, seconds);
+        }
         let _ = std::fs::remove_file(&self.path);
+        Ok(())
     }
 }
 

@@ -331,6 +331,8 @@ mod tests {
                     cpu_fallback: k
                         .is_multiple_of(3)
                         .then(|| "512 px: GPU error: plane size 4096 × 4096".to_string()),
+                    // Not recorded: already in `ms`.
+                    resumed_ms: 0.0,
                 },
             }],
             // A subdivided cell's halves travel with it.

@@ -51,6 +51,11 @@ pub struct CullerWork {
     /// when none did. The answers are the same either way.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cpu_fallback: Option<String>,
+    /// Milliseconds earlier runs spent on this cell's work, as its checkpoint recorded (the
+    /// sampler resumed by `bake --resume`): the pipeline adds them to the culler's time and
+    /// the cell's, so that a resumed cell reports what it cost in all.
+    #[serde(skip)]
+    pub resumed_ms: f64,
 }
 
 impl CullerWork {
@@ -61,6 +66,7 @@ impl CullerWork {
         self.occluders_projected += o.occluders_projected;
         self.points += o.points;
         self.polygons += o.polygons;
+        self.resumed_ms += o.resumed_ms;
         self.finest_eps = match (self.finest_eps, o.finest_eps) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
@@ -79,7 +85,9 @@ pub struct CullerStats {
     /// Of those, the objects no other culler of the pipeline proved hidden. A culler does not
     /// test what an earlier one hid, so this counts what the others were not asked about too.
     pub only: u32,
-    /// Milliseconds this culler ran in the cell (all its sub-cells).
+    /// Milliseconds this culler ran in the cell (all its sub-cells), with what earlier runs
+    /// spent on it when the sampler resumed the cell from a checkpoint
+    /// ([`CullerWork::resumed_ms`]).
     pub ms: f64,
     /// Planes rasterised and occluder Projections sent.
     pub work: CullerWork,
@@ -269,7 +277,7 @@ pub(super) fn run(
         let start = std::time::Instant::now();
         let work = culler.cull(prepared, cell, backend, &mut state, observe)?;
         let s = &mut account.stats[k];
-        s.ms += start.elapsed().as_secs_f64() * 1e3;
+        s.ms += start.elapsed().as_secs_f64() * 1e3 + work.resumed_ms;
         s.work.add(&work);
         // Sub-cells' cost curves do not add up (an object is culled only when every sub-cell
         // hid it): a cell baked in sub-cells has none.

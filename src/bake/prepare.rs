@@ -490,7 +490,9 @@ impl<'a> Prepared<'a> {
         Ok((
             CellResult {
                 visible,
-                ms: start.elapsed().as_secs_f64() * 1e3,
+                // With what earlier runs spent (a cell resumed from a sampler checkpoint).
+                ms: start.elapsed().as_secs_f64() * 1e3
+                    + stats.iter().map(|s| s.work.resumed_ms).sum::<f64>(),
                 planes: stats.iter().map(|s| s.work.planes).sum(),
                 occluders_projected: stats.iter().map(|s| s.work.occluders_projected).sum(),
                 cullers: stats,

@@ -800,7 +800,7 @@ impl Culler for SamplingCuller {
             return Err(e);
         }
         if let Some(c) = &ckpt {
-            c.finish();
+            c.finish(|| shared.known_now(), shared.start.elapsed().as_secs_f64())?;
         }
         for &o in &candidates {
             if !shared.done[o as usize].load(Ordering::Relaxed) {
@@ -819,6 +819,7 @@ impl Culler for SamplingCuller {
             finest_eps: finest.is_finite().then_some(finest),
             levels: curve,
             cpu_fallback,
+            resumed_ms: resumed.as_ref().map_or(0.0, |r| r.seconds * 1e3),
             ..CullerWork::default()
         })
     }

@@ -52,7 +52,7 @@ use super::{
 };
 use crate::backend::RasterBackend;
 use crate::backend::cpu::CpuBackend;
-use crate::bake::{BakeSettings, SweepChoice, bake};
+use crate::bake::{BakeHooks, BakeSettings, SamplerCheckpoints, SweepChoice, bake_cells};
 use crate::generate::{CrownShape, ForestOptions, TreeModel, forest, forest_of_models};
 use crate::geom::Aabb;
 use crate::project::planes::{Placement, Spacing};
@@ -664,6 +664,13 @@ impl Plan {
                 });
             }
         }
+        if !(args.checkpoint_seconds >= 0.0 && args.checkpoint_seconds.is_finite()) {
+            return Err(BenchError::BadValue {
+                flag: "--checkpoint-every",
+                value: args.checkpoint_seconds.to_string(),
+                why: "must be a number of seconds, 0 or more (0: after every chunk)",
+            });
+        }
         if let Some(n) = plan.sampler.levels
             && n > crate::settings::SamplingSettings::MAX_LEVELS
         {
@@ -676,6 +683,40 @@ impl Plan {
         }
         Ok(plan)
     }
+}
+
+/// Runs `work` (a row's bake), reporting the sample points rendered so far every minute
+/// while it lasts (sampler rows take hours on the fine forest).
+fn with_ticker<T>(
+    args: &BenchOptions,
+    points: &std::sync::atomic::AtomicU64,
+    study: &str,
+    label: &str,
+    work: impl FnOnce() -> T,
+) -> T {
+    let Some(log) = args.progress else {
+        return work();
+    };
+    let t = Instant::now();
+    let (stop, wait) = std::sync::mpsc::channel::<()>();
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
+                wait.recv_timeout(std::time::Duration::from_secs(60))
+            {
+                let n = points.load(std::sync::atomic::Ordering::Relaxed);
+                if n > 0 {
+                    log(&format!(
+                        "bench: foliage {study} [{label}]: {n} sample points so far ({:.0} s)",
+                        t.elapsed().as_secs_f64()
+                    ));
+                }
+            }
+        });
+        let out = work();
+        drop(stop);
+        out
+    })
 }
 
 /// A forest ready to bake, with the sampled visible sets of its cells (filled on demand).
@@ -857,6 +898,12 @@ fn spread(len: usize, n: Option<usize>) -> Vec<usize> {
 pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
     let start = Instant::now();
     let plan = Plan::new(args)?;
+    if let Some(dir) = &args.checkpoint_dir {
+        std::fs::create_dir_all(dir).map_err(|source| BenchError::CheckpointDir {
+            path: dir.clone(),
+            source,
+        })?;
+    }
     let cpu;
     let gpu;
     let backend: &dyn RasterBackend = if args.backend == BenchBackend::Gpu {
@@ -949,17 +996,55 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                 t.elapsed().as_secs_f64()
             );
         }
-        for v in &list {
+        for (j, v) in list.iter().enumerate() {
             let t = Instant::now();
             let ids = spread(f.cells.len(), v.max_cells);
             let cells: Vec<Aabb> = ids.iter().map(|&i| f.cells[i]).collect();
+            // The row's sampler checkpoints (`--checkpoint-dir`), tied to its scene, cells,
+            // settings and backend.
+            let checkpoints = args.checkpoint_dir.as_ref().map(|dir| {
+                let inputs = crate::bake::inputs_hash(
+                    &f.scene,
+                    &cells,
+                    &v.settings,
+                    &format!("bench {study} {} backend {}", v.label, backend.name()),
+                );
+                SamplerCheckpoints::new(
+                    &dir.join(format!("{study}-{j:02}")),
+                    &inputs,
+                    true,
+                    args.checkpoint_seconds,
+                )
+                .kept()
+            });
             let truth: Vec<&Sampled> = ids
                 .iter()
                 .map(|&i| f.truth[i].as_ref().expect("sampled"))
                 .collect();
             peak_reset &= reset_peak();
             let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                let result = bake(&f.scene, &cells, &v.settings, backend, None);
+                let points = std::sync::atomic::AtomicU64::new(0);
+                let all: Vec<usize> = (0..cells.len()).collect();
+                let hooks = BakeHooks {
+                    sample_points: Some(&points),
+                    sampler_checkpoints: checkpoints.as_ref(),
+                    ..BakeHooks::default()
+                };
+                let result = with_ticker(args, &points, study, &v.label, || {
+                    bake_cells(&f.scene, &cells, &all, &v.settings, backend, hooks)
+                });
+                if let Some(c) = &checkpoints {
+                    let n = c.replayed.load(std::sync::atomic::Ordering::Relaxed);
+                    if n > 0 {
+                        say!(
+                            args.progress,
+                            "bench: foliage {study} [{}]: replayed {n} sampler rectangles from \
+                             {}.sampler-*",
+                            v.label,
+                            c.base.display()
+                        );
+                    }
+                }
                 let peak = peak_mib();
                 result.map(|r| {
                     let mut row = score(

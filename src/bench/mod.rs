@@ -110,6 +110,14 @@ pub struct BenchOptions {
     /// `--confirm-rays`: every row's PVS is also measured against a fuller visible set
     /// (`validate --confirm-rays`) with this many more rays per cell, if any.
     pub confirm_rays: Option<u64>,
+    /// The foliage study's sampler cells save their progress here
+    /// ([`crate::bake::SamplerCheckpoints`], files `STUDY-ROW.sampler-*`, kept when a cell
+    /// finishes), and a run with the same folder and options replays what they recorded: a
+    /// killed bench run again redoes no finished sampler cell and resumes the one it was in.
+    /// `None`: no checkpoints.
+    pub checkpoint_dir: Option<PathBuf>,
+    /// Seconds at least between two saves of one cell's checkpoint (with `checkpoint_dir`).
+    pub checkpoint_seconds: f64,
     /// Receives the progress lines; none are reported when `None`.
     pub progress: Option<ProgressLog>,
     /// Ray space factorization in the scene bench's bakes: chosen per scene (the default, as
@@ -153,6 +161,8 @@ impl Default for BenchOptions {
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             rsf_on_gpu: false,
             tests_on_cpu: false,
+            checkpoint_dir: None,
+            checkpoint_seconds: 60.0,
             progress: None,
             rsf: crate::settings::SweepChoice::Auto,
         }
@@ -199,6 +209,15 @@ pub enum BenchError {
     /// The [`BenchOptions::pvs_out`] folder cannot be created.
     #[error("--pvs-out {}: cannot create the folder", path.display())]
     PvsOut {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The [`BenchOptions::checkpoint_dir`] folder cannot be created.
+    #[error("--checkpoint-dir {}: cannot create the folder", path.display())]
+    CheckpointDir {
         /// The folder.
         path: PathBuf,
         /// Why.
