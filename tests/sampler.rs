@@ -384,11 +384,7 @@ fn the_sample_point_hook_counts_every_point() {
         },
     )
     .unwrap();
-    let k = r
-        .cullers
-        .iter()
-        .position(|&c| c == "shrunk_sampling")
-        .unwrap();
+    let k = sampler_index(&r);
     let points: u64 = r.cells.iter().map(|c| c.cullers[k].work.points).sum();
     assert!(points > 0);
     assert_eq!(counter.load(std::sync::atomic::Ordering::Relaxed), points);
@@ -556,6 +552,14 @@ fn the_memory_estimate_holds_a_hemicube_per_thread() {
     assert!(off + 4 * SamplingSettings::hemicube_bytes(hi) < auto);
 }
 
+/// The sampler's position among the cullers of a bake's result.
+fn sampler_index(r: &bake::BakeResult) -> usize {
+    r.cullers
+        .iter()
+        .position(|&c| c == "shrunk_sampling")
+        .expect("the sampler ran")
+}
+
 /// A 120-tree forest's middle cell and sampler settings that give it many rectangles, two
 /// levels with probes, certifying rays and distance bands.
 fn small_forest() -> (umbrasweep::Scene, Aabb, BakeSettings) {
@@ -645,11 +649,7 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
     };
     // What a comparison keeps of a bake: the PVS and the sampler's work but its seconds.
     let key = |r: &bake::BakeResult| {
-        let k = r
-            .cullers
-            .iter()
-            .position(|&c| c == "shrunk_sampling")
-            .unwrap();
+        let k = sampler_index(r);
         let c = &r.cells[0];
         let w = &c.cullers[k].work;
         let curve: Vec<_> = w
@@ -723,11 +723,7 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
             },
         )
         .unwrap();
-        let k = r
-            .cullers
-            .iter()
-            .position(|&c| c == "shrunk_sampling")
-            .unwrap();
+        let k = sampler_index(&r);
         let s = r.cells[0].cullers[k].clone();
         (r.cells[0].visible.clone(), s, r.cells[0].ms)
     };

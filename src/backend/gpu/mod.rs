@@ -382,6 +382,12 @@ pub struct GpuBackend {
     adapter_name: String,
     device: wgpu::Device,
     queue: wgpu::Queue,
+    /// Held around every submission and poll ([`GpuBackend::submit_commands`],
+    /// `poll_until`): wgpu-core 30 asserts in `Device::maintain` when another thread's
+    /// submission or poll retires a submission between this poll's reading of the fence and
+    /// its look at the queue ("If the queue is empty, the current submission index …"; fixed
+    /// upstream in gfx-rs/wgpu#9958). Cells baked on several threads hit it in CI.
+    maintain: Mutex<()>,
     pipelines: Pipelines,
     /// First device-lost or uncaptured error message; once set, every call fails. Only the
     /// backend's own device ([`GpuBackend::new`]) reports into it.
@@ -613,6 +619,7 @@ impl GpuBackend {
             adapter_name,
             device,
             queue,
+            maintain: Mutex::default(),
             pipelines,
             failure,
             limits,

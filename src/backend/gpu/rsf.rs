@@ -490,7 +490,7 @@ impl<'a> GpuRsfCharts<'a> {
         } else {
             read_bytes
         };
-        let submission = queue.submit([encoder.finish()]);
+        let submission = gpu.submit_commands(encoder.finish());
         scope.check()?;
         let (tx, rx) = std::sync::mpsc::channel();
         staging

@@ -1394,7 +1394,7 @@ impl<'a> GpuSampler<'a> {
             }
         }
         let read_bytes = read_bytes + 16 * phases.len() as u64;
-        let submission = gpu.queue.submit([encoder.finish()]);
+        let submission = gpu.submit_commands(encoder.finish());
         scope.check()?;
         let (tx, rx) = std::sync::mpsc::channel();
         staging

@@ -41,7 +41,9 @@ const DATA_BUDGET: u64 = 512 << 20;
 /// maps back instead.
 const TEST_BUDGET: u64 = 64 << 20;
 /// How long one poll blocks before the device-lost flag and the deadline are checked again.
-const POLL_SLICE: Duration = Duration::from_millis(250);
+/// Short, as the poll holds [`GpuBackend::maintain`](super::GpuBackend): other threads submit
+/// and poll between slices (a poll returns as soon as its submission is done).
+const POLL_SLICE: Duration = Duration::from_millis(2);
 /// A submission not finished after this long is reported as a device failure.
 const DEADLINE: Duration = Duration::from_secs(600);
 /// Bytes of one vertex.
@@ -1268,7 +1270,7 @@ impl GpuBackend {
         commands: wgpu::CommandBuffer,
         timestamps: Option<&Timestamps>,
     ) -> (wgpu::SubmissionIndex, Mapped) {
-        let submission = self.queue.submit([commands]);
+        let submission = self.submit_commands(commands);
         let (tx, rx) = mpsc::channel();
         // Each mapping reports its own index, 0 .. `layout.mappings(..)`.
         let mut w = 0;
@@ -1339,6 +1341,13 @@ impl GpuBackend {
         })
     }
 
+    /// Submits `commands` on the queue, one thread at a time with the polls
+    /// ([`GpuBackend::maintain`]).
+    pub(super) fn submit_commands(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
+        let _one = self.maintain.lock().unwrap_or_else(|e| e.into_inner());
+        self.queue.submit([commands])
+    }
+
     /// Polls the device in slices of [`POLL_SLICE`] until `done` says the work of
     /// `submission` (its read-backs mapped) is over, checking for a lost device between
     /// slices. `work` names the work in a timeout's message.
@@ -1357,10 +1366,14 @@ impl GpuBackend {
         let start = Instant::now();
         loop {
             self.check_failure()?;
-            match self.device.poll(wgpu::PollType::Wait {
-                submission_index: Some(submission.clone()),
-                timeout: Some(POLL_SLICE),
-            }) {
+            let polled = {
+                let _one = self.maintain.lock().unwrap_or_else(|e| e.into_inner());
+                self.device.poll(wgpu::PollType::Wait {
+                    submission_index: Some(submission.clone()),
+                    timeout: Some(POLL_SLICE),
+                })
+            };
+            match polled {
                 Ok(_) | Err(wgpu::PollError::Timeout) => {}
                 Err(e) => {
                     self.check_failure()?;
