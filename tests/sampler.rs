@@ -552,6 +552,16 @@ fn the_memory_estimate_holds_a_hemicube_per_thread() {
     assert!(off + 4 * SamplingSettings::hemicube_bytes(hi) < auto);
 }
 
+/// Bakes the one cell `cell` on the CPU with `hooks`.
+fn bake_with(
+    scene: &umbrasweep::Scene,
+    cell: Aabb,
+    settings: &BakeSettings,
+    hooks: bake::BakeHooks,
+) -> Result<bake::BakeResult, bake::BakeError> {
+    bake::bake_cells(scene, &[cell], &[0], settings, &CpuBackend::new(), hooks)
+}
+
 /// The sampler's position among the cullers of a bake's result.
 fn sampler_index(r: &bake::BakeResult) -> usize {
     r.cullers
@@ -624,7 +634,6 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
 #[test]
 fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
     let (scene, cell, settings) = small_forest();
-    let cells = [cell];
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("forest.pvs");
     let files = || -> Vec<std::path::PathBuf> {
@@ -635,12 +644,10 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
             .collect()
     };
     let run = |spec: Option<&bake::SamplerCheckpoints>| {
-        bake::bake_cells(
+        bake_with(
             &scene,
-            &cells,
-            &[0],
+            cell,
             &settings,
-            &CpuBackend::new(),
             bake::BakeHooks {
                 sampler_checkpoints: spec,
                 ..bake::BakeHooks::default()
@@ -706,16 +713,13 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
 fn a_kept_checkpoint_replays_the_whole_finished_cell() {
     use std::sync::atomic::{AtomicU64, Ordering};
     let (scene, cell, settings) = small_forest();
-    let cells = [cell];
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("row");
     let run = |spec: &bake::SamplerCheckpoints, points: &AtomicU64| {
-        let r = bake::bake_cells(
+        let r = bake_with(
             &scene,
-            &cells,
-            &[0],
+            cell,
             &settings,
-            &CpuBackend::new(),
             bake::BakeHooks {
                 sampler_checkpoints: Some(spec),
                 sample_points: Some(points),
