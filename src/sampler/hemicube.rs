@@ -125,6 +125,61 @@ fn pixel_mask(ev: &[[f32; 4]], u0: f64, v0: f64, ps: f64, lmax: f64) -> u64 {
     mask
 }
 
+/// Four edges' `f32` corner-test coefficients `[a, b, c, s]` (`a·u + b·v + c − s·√(u²+v²+1)
+/// ≥` [`CORNER_MARGIN`] inside), lane by lane so that one corner's four tests run side by
+/// side; a polygon's last lanes are padded with `[0, 0, 1, 0]`, which every corner passes.
+/// `bv` holds `b·v` for the row being scanned ([`EdgeLanes::row`]). Each test is the same
+/// `f32` expression, `((a·u + b·v) + c) − s·l`, as one edge at a time: the same bits.
+#[derive(Clone, Copy, Debug)]
+struct EdgeLanes {
+    a: [f32; 4],
+    b: [f32; 4],
+    c: [f32; 4],
+    s: [f32; 4],
+    bv: [f32; 4],
+}
+
+impl EdgeLanes {
+    /// `out` becomes the lanes of the edges `ev`.
+    fn fill(out: &mut Vec<EdgeLanes>, ev: &[[f32; 4]]) {
+        out.clear();
+        for chunk in ev.chunks(4) {
+            let mut l = EdgeLanes {
+                a: [0.0; 4],
+                b: [0.0; 4],
+                c: [1.0; 4],
+                s: [0.0; 4],
+                bv: [0.0; 4],
+            };
+            for (k, e) in chunk.iter().enumerate() {
+                l.a[k] = e[0];
+                l.b[k] = e[1];
+                l.c[k] = e[2];
+                l.s[k] = e[3];
+            }
+            out.push(l);
+        }
+    }
+
+    /// Sets `b·v` for the corners of row `v`.
+    fn row(&mut self, v: f32) {
+        for k in 0..4 {
+            self.bv[k] = self.b[k] * v;
+        }
+    }
+
+    /// Whether the corner at `u` (of the last [`EdgeLanes::row`]), with `l = √(u²+v²+1)`,
+    /// passes all four edges.
+    #[inline]
+    fn pass(&self, u: f32, l: f32) -> bool {
+        let mut ok = true;
+        for k in 0..4 {
+            ok &= self.a[k] * u + self.bv[k] + self.c[k] - self.s[k] * l >= CORNER_MARGIN;
+        }
+        ok
+    }
+}
+
 /// Whether the card `c` is surely opaque wherever a segment from the sampled region (within
 /// `reach` of the eye, whose distance to the card's plane is `h > reach`) to a point beyond
 /// the plane, in a direction of the pixel `[u0, u0 + ps] × [v0, v0 + ps]`, can cross the plane.
@@ -519,6 +574,8 @@ pub struct Hemicube {
     scratch_q: Vec<DVec3>,
     scratch_edges: Vec<(DVec3, f64)>,
     scratch_ev: Vec<[f32; 4]>,
+    /// The same coefficients four edges at a time, lane by lane ([`EdgeLanes`]).
+    scratch_lanes: Vec<EdgeLanes>,
     /// Whether partly covered pixels keep sub-pixel masks ([`Hemicube::set_subpixel`]).
     subpixel: bool,
     /// Whether edges are shrunk only as much as occludees no farther than `max_dist` need
@@ -566,6 +623,7 @@ impl Hemicube {
             scratch_q: Vec::new(),
             scratch_edges: Vec::new(),
             scratch_ev: Vec::new(),
+            scratch_lanes: Vec::new(),
             subpixel: true,
             depth_bounded: true,
             tuck: false,
@@ -1273,6 +1331,8 @@ impl Hemicube {
         } else {
             &self.norm_side
         };
+        let mut lanes = std::mem::take(&mut self.scratch_lanes);
+        EdgeLanes::fill(&mut lanes, ev);
         let mut pass = std::mem::take(&mut self.pass);
         let mut prev = std::mem::take(&mut self.prev);
         let view = &mut self.views[k];
@@ -1284,15 +1344,17 @@ impl Hemicube {
             let v = (view.vmin + cj as f64 * ps) as f32;
             let row = &norms[cj * (res + 1)..];
             let mut any_pass = false;
+            // Each edge's `b·v`, once per row.
+            for l in lanes.iter_mut() {
+                l.row(v);
+            }
             // The passing corners of a row are a run (a convex set meets a line in an
             // interval): stop at the first failure after it.
             let mut ci = pi0;
             while ci <= pi1 {
                 let u = (-1.0 + ci as f64 * ps) as f32;
                 let l = row[ci];
-                let ok = ev
-                    .iter()
-                    .all(|e| e[0] * u + e[1] * v + e[2] - e[3] * l >= CORNER_MARGIN);
+                let ok = lanes.iter().all(|e| e.pass(u, l));
                 pass[ci] = ok as u8;
                 if !ok && any_pass {
                     pass[ci + 1..=pi1].fill(0);
@@ -1403,6 +1465,7 @@ impl Hemicube {
         self.pass = pass;
         self.prev = prev;
         self.scratch_ev = ev_buf;
+        self.scratch_lanes = lanes;
         wrote
     }
 
@@ -1889,6 +1952,48 @@ mod tests {
         assert!(
             spilled > 100,
             "pixels with more than {LAYERS} layers: {spilled}"
+        );
+    }
+
+    /// The corner test four edges at a time decides every corner as the test one edge at a
+    /// time does, for any number of edges (the padded lanes pass every corner) and rows
+    /// (`b·v` per row), with corners near each edge's boundary.
+    #[test]
+    fn edge_lanes_decide_corners_as_one_edge_at_a_time() {
+        let mut rnd = uniform(0x5eed_1a9e);
+        let mut lanes = Vec::new();
+        let (mut passed, mut failed) = (0, 0);
+        for k in 0..20_000 {
+            let (u, v) = (rnd() as f32, rnd() as f32);
+            let l = (u * u + v * v + 1.0).sqrt();
+            let ev: Vec<[f32; 4]> = (0..1 + k % 9)
+                .map(|_| {
+                    let (a, b, s) = (rnd() as f32, rnd() as f32, (rnd().abs() * 0.01) as f32);
+                    // Mostly just inside the edge, now and then just outside.
+                    let c = -(a * u + b * v) + s * l + (rnd() * 1e-5 + 6e-6) as f32;
+                    [a, b, c, s]
+                })
+                .collect();
+            EdgeLanes::fill(&mut lanes, &ev);
+            // A row set before, then the row tested.
+            for e in lanes.iter_mut() {
+                e.row(rnd() as f32);
+                e.row(v);
+            }
+            let want = ev
+                .iter()
+                .all(|e| e[0] * u + e[1] * v + e[2] - e[3] * l >= CORNER_MARGIN);
+            let got = lanes.iter().all(|e| e.pass(u, l));
+            assert_eq!(got, want, "case {k}: {} edges", ev.len());
+            if want {
+                passed += 1;
+            } else {
+                failed += 1;
+            }
+        }
+        assert!(
+            passed > 1_000 && failed > 1_000,
+            "{passed} pass, {failed} fail"
         );
     }
 
