@@ -3,8 +3,9 @@
 //! split into the CPU's set-up and the submission that draws and tests), for each fill asked
 //! for (`compute`, `render` or `both`; default: the device's, `GpuSamplerScene::default_fill`),
 //! with the GPU's time per phase from its timestamps where the device has them, and with
-//! `both` the boxes on which the two fills disagree (they should not).
-//! `cargo run --release --example sampler_gpu -- SCENE CELLS CELL EPS RES N [FILL]`.
+//! `both` the boxes on which the two fills disagree (they should not). `cull` runs the compute
+//! fill in one round and in two (`GpuSampler::set_culling`), which should agree too.
+//! `cargo run --release --example sampler_gpu -- SCENE CELLS CELL EPS RES N [FILL|cull]`.
 
 mod common;
 
@@ -17,7 +18,7 @@ use umbrasweep::sampler::{BoxTest, Hemicube};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 7 {
-        eprintln!("usage: sampler_gpu SCENE CELLS CELL EPS RES N [compute|render|both]");
+        eprintln!("usage: sampler_gpu SCENE CELLS CELL EPS RES N [compute|render|both|cull]");
         std::process::exit(2);
     }
     let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
@@ -30,11 +31,23 @@ fn main() {
     let cell = cells[ci].to_f64();
     let gpu = GpuBackend::new().expect("GPU backend");
     println!("GPU: {}", gpu.adapter_info().name);
+    // `cull`: the compute fill in one round and in two (`GpuSampler::set_culling`).
+    let rounds = args.get(7).map(String::as_str) == Some("cull");
     let fills: Vec<SamplerFill> = match args.get(7).map(String::as_str) {
         None => vec![GpuSamplerScene::default_fill(&gpu)],
         Some("both") => vec![SamplerFill::Compute, SamplerFill::Render],
+        Some("cull") => vec![SamplerFill::Compute, SamplerFill::Compute],
         Some(f) => vec![f.parse().expect("FILL")],
     };
+    let labels: Vec<String> = fills
+        .iter()
+        .enumerate()
+        .map(|(f, fill)| match (rounds, f) {
+            (true, 0) => format!("{fill} (one round)"),
+            (true, _) => format!("{fill} (rounds)"),
+            _ => fill.to_string(),
+        })
+        .collect();
     let t = Instant::now();
     let scenes: Vec<GpuSamplerScene> = fills
         .iter()
@@ -44,6 +57,9 @@ fn main() {
         .iter()
         .map(|s| GpuSampler::new(&gpu, s, res).expect("GPU sampler"))
         .collect();
+    for (f, gs) in samplers.iter_mut().enumerate() {
+        gs.set_culling(!rounds || f == 1);
+    }
     println!(
         "{} polygons uploaded and pipelines made in {:.2} s",
         data.occluders.polys.len(),
@@ -66,6 +82,7 @@ fn main() {
     let (mut h_cpu, mut tested) = (0, 0);
     let (mut h_gpu, mut only_cpu, mut only_gpu) = (vec![0; nf], vec![0; nf], vec![0; nf]);
     let (mut draws, mut fills_differ) = (vec![0usize; nf], 0);
+    let mut first_draws = vec![0usize; nf];
     for k in 0..n {
         let face = common::Face::from_index(k % 6);
         let mut eye = DVec3::ZERO;
@@ -91,6 +108,7 @@ fn main() {
             let g = gs.test_boxes(boxes).expect("GPU render");
             t_dev[f] += t.elapsed();
             draws[f] += gs.last_draws() as usize;
+            first_draws[f] += gs.last_first_round_draws() as usize;
             for (c, g) in cpu.iter().zip(&g) {
                 h_gpu[f] += usize::from(*g);
                 only_cpu[f] += usize::from(*c && !*g);
@@ -111,27 +129,30 @@ fn main() {
         hc.resolution(),
         per(t_cpu)
     );
-    for (f, fill) in fills.iter().enumerate() {
+    for (f, fill) in labels.iter().enumerate() {
         println!(
-            "{fill} fill: hidden by the GPU {} (CPU only {}, GPU only {}); {:.0} draws per point; \
-             ms per point {:.1} (set-up on the CPU {:.1}, submission {:.1})",
+            "{fill} fill: hidden by the GPU {} (CPU only {}, GPU only {}); {:.0} draws per point \
+             ({:.0} in the first round); ms per point {:.1} (set-up on the CPU {:.1}, submission \
+             {:.1})",
             h_gpu[f],
             only_cpu[f],
             only_gpu[f],
             draws[f] as f64 / n.max(1) as f64,
+            first_draws[f] as f64 / n.max(1) as f64,
             per(t_rec[f] + t_dev[f]),
             per(t_rec[f]),
             per(t_dev[f])
         );
     }
-    for (fill, gs) in fills.iter().zip(&samplers) {
+    for (fill, gs) in labels.iter().zip(&samplers) {
         let t = gs.gpu_times();
         if t.passes > 0 {
             println!(
-                "{fill} fill, GPU ms per point (timestamps, {} passes): set-up {:.1}, fill {:.1}, \
-                 reduce {:.1}, tests {:.1}",
+                "{fill} fill, GPU ms per point (timestamps, {} passes): set-up {:.1}, cull {:.1}, \
+                 fill {:.1}, reduce {:.1}, tests {:.1}",
                 t.passes,
                 per(t.setup),
+                per(t.cull),
                 per(t.fill),
                 per(t.reduce),
                 per(t.tests)
@@ -139,6 +160,6 @@ fn main() {
         }
     }
     if nf == 2 {
-        println!("boxes on which the two fills disagree: {fills_differ}");
+        println!("boxes on which the two samplers disagree: {fills_differ}");
     }
 }

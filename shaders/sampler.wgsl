@@ -329,10 +329,21 @@ fn reduce(@builtin(global_invocation_id) g: vec3<u32>) {
     if j >= rows {
         return;
     }
-    var m = sub_depth(8u * i, 8u * j, k);
-    for (var b = 0u; b < 8u; b++) {
-        for (var a = 0u; a < 8u; a++) {
-            m = max(m, sub_depth(8u * i + a, 8u * j + b, k));
+    // Only needed pixels are ever read (the tests', the set-up's and the cull's are inside
+    // the views' needed rectangles).
+    let need = vec4<u32>(frame_u[NEED + 4u * k], frame_u[NEED + 4u * k + 1u], frame_u[NEED + 4u * k + 2u], frame_u[NEED + 4u * k + 3u]);
+    if i < need.x || i >= need.y || j < need.z || j >= need.w {
+        return;
+    }
+    // The largest of the sub-pixels' depths, none deeper than the pixel's own (`pixel_floor`):
+    // once one reaches it, so does the largest, and the rest need not be read (exactly the
+    // largest of all 64).
+    let w = pixel_floor(i, j, k);
+    var m = 0.0;
+    for (var s = 0u; s < 64u; s++) {
+        m = max(m, min(fine_depth(8u * i + s % 8u, 8u * j + s / 8u, k), w));
+        if m >= w {
+            break;
         }
     }
     pixmax[idx] = m;

@@ -8,3 +8,13 @@
 fn sub_depth(i: u32, j: u32, k: u32) -> f32 {
     return textureLoad(fine, vec2<i32>(i32(i), i32(j)), i32(k), 0).r;
 }
+
+// The render fill keeps no whole-pixel depth: infinity (`sub_depth` holds each sub-pixel's).
+fn pixel_floor(i: u32, j: u32, k: u32) -> f32 {
+    return bitcast<f32>(0x7f800000u);
+}
+
+// The depth drawn over sub-pixel (i, j) of view k.
+fn fine_depth(i: u32, j: u32, k: u32) -> f32 {
+    return sub_depth(i, j, k);
+}

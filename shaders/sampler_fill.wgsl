@@ -28,6 +28,9 @@
 @group(0) @binding(16) var full_a: texture_storage_2d_array<r32uint, atomic>;
 // Per view an indirect dispatch (x, y, z, unused).
 @group(0) @binding(17) var<storage, read_write> args: array<u32>;
+// The draw counts when this round began (`counts`' layout; zeros for the first round): a
+// round fills only the draws its set-up added.
+@group(0) @binding(18) var<storage, read> firsts: array<u32>;
 
 // The nearest depth drawn over sub-pixel (i, j) of view k (infinity where none).
 fn sub_depth(i: u32, j: u32, k: u32) -> f32 {
@@ -36,17 +39,42 @@ fn sub_depth(i: u32, j: u32, k: u32) -> f32 {
     return bitcast<f32>(min(s, w));
 }
 
-// Per view: workgroups for its draws (at most the capacity `P.n`), at most 65,535 (`fill`
-// strides over the rest).
+// The depth of pixel (i, j) of view k as a whole (`full`; infinity where no polygon covers
+// all of it): no sub-pixel's depth is deeper.
+fn pixel_floor(i: u32, j: u32, k: u32) -> f32 {
+    return bitcast<f32>(textureLoad(full, vec2<i32>(i32(i), i32(j)), i32(k), 0).r);
+}
+
+// The depth drawn over sub-pixel (i, j) of view k by partly covering polygons (`fine`).
+fn fine_depth(i: u32, j: u32, k: u32) -> f32 {
+    return bitcast<f32>(textureLoad(fine, vec2<i32>(i32(i), i32(j)), i32(k), 0).r);
+}
+
+// Per view: workgroups for this round's draws (up to the capacity `P.n`), at most 65,535
+// (`fill` strides over the rest).
 @compute @workgroup_size(8)
 fn fill_args(@builtin(local_invocation_index) k: u32) {
     if k < 5u {
         let n = min(counts[4u * k + 1u], P.n);
-        args[4u * k] = min(n, 65535u);
+        let first = min(firsts[4u * k + 1u], n);
+        args[4u * k] = min(n - first, 65535u);
         args[4u * k + 1u] = 1u;
         args[4u * k + 2u] = 1u;
         args[4u * k + 3u] = 0u;
     }
+}
+
+// A later round's set-up dispatch (`args[20 …]`, two clusters of 32 polygons per workgroup of
+// 64, in rows of at most 65,535 workgroups) from its list's length, `counts[P.n]`
+// (`sampler_setup.wgsl`'s `Round`).
+@compute @workgroup_size(1)
+fn setup_args() {
+    let groups = (counts[P.n] + 1u) / 2u;
+    let x = min(groups, 65535u);
+    args[20] = x;
+    args[21] = select((groups + x - 1u) / x, 1u, x == 0u);
+    args[22] = 1u;
+    args[23] = 0u;
 }
 
 // The sub-pixels of a pixel every edge passes (bit 8 · sb + sa of rows 0–3 in .x, of rows 4–7
@@ -88,7 +116,7 @@ fn fill(
     @builtin(local_invocation_index) li: u32,
 ) {
     let count = min(counts[4u * P.view + 1u], P.n);
-    for (var d = wg.x; d < count; d += nw.x) {
+    for (var d = firsts[4u * P.view + 1u] + wg.x; d < count; d += nw.x) {
         fill_draw(P.base + d, li);
     }
 }

@@ -1,7 +1,7 @@
 // umbrasweep — the sampler's per-polygon work on the GPU (`backend::gpu::sampler`): one
 // invocation per occluder polygon, in f64 with the CPU's expressions (`Hemicube::draw_poly_with`
 // and `draw_in_view` in `sampler/hemicube.rs`), writing each polygon's draws for
-// `sampler.wgsl`'s fill.
+// `sampler.wgsl`'s fill; and the rounds' choice of clusters (`cull`, at the end).
 //
 // Per polygon: its vertices relative to the eye; per edge the plane through the eye and the
 // edge (their sum is the Newell normal), the region's reach across the edge (the ball's ε, or
@@ -13,11 +13,12 @@
 // rectangle clipped by each edge's straight test); a draw appended to the view's list (an
 // atomic counter that is also the view's indirect draw's instance count).
 //
-// What differs from the CPU only leaves pixels uncovered: the GPU takes every polygon of the
-// scene that passes the per-polygon tests (the CPU's traversal also skips whole BVH nodes
-// behind the face, beyond the farthest box or behind pixels already covered, none of which can
-// cover a tested pixel nearer than a box), and it leaves out polygons of more than MAXP
-// vertices and textured cards (which it does not read).
+// What differs from the CPU only leaves pixels uncovered: the GPU takes the polygons that
+// pass the per-polygon tests (the CPU's traversal also skips whole BVH nodes behind the face,
+// beyond the farthest box or behind pixels already covered, none of which can cover a tested
+// pixel nearer than a box; with rounds, `cull` below skips whole clusters behind what earlier
+// rounds drew, and later rounds skip polygons behind it, which change no test either), and it
+// leaves out polygons of more than MAXP vertices and textured cards (which it does not read).
 //
 // `rounding.wgsl` (f32_up, next_down, …) and `sampler_views.wgsl` are prepended to this file.
 
@@ -33,16 +34,52 @@ const SQRT_2: f64 = 1.4142135623730951lf;
 @group(0) @binding(1) var<storage, read> frame_u: array<u32>;
 // Per polygon: (first point, end point, card (1) or 0, 0).
 @group(0) @binding(2) var<storage, read> polys: array<vec4<u32>>;
-// The polygons' points, 3 f64 each.
+// The polygons' points, 3 f64 each; then the clusters' boxes (`Round` below).
 @group(0) @binding(3) var<storage, read> points: array<f64>;
 // Draws, view k's at 2 · k · capacity (`sampler.wgsl`'s layout).
 @group(0) @binding(4) var<storage, read_write> draws: array<vec4<u32>>;
-// Per polygon point, the edge from it to the next (world frame): (m as f32, s as f32 · (1 + 1e-6)).
+// Per polygon point, the edge from it to the next (world frame): (m as f32, s as f32 · (1 + 1e-6));
+// then the pixels' largest sub-pixel depths (`Round` below).
 @group(0) @binding(5) var<storage, read_write> pedges: array<vec4<f32>>;
 // Per polygon: its unit normal and first vertex relative to the eye (6 f64), for deep draws.
 @group(0) @binding(6) var<storage, read_write> pplanes: array<f64>;
-// Per view the indirect draw (6, instances, 0, 0): instances counted here.
+// Per view the indirect draw (6, instances, 0, 0): instances counted here; then the clusters'
+// states (`Round` below).
 @group(0) @binding(7) var<storage, read_write> indirect: array<atomic<u32>>;
+// The round of a pass (`backend::gpu::sampler`'s `RoundParams`): its number (1, 2, …), the
+// farthest distance of the clusters it decides, where the pixels' largest sub-pixel depths
+// start in `pedges` (in vec4s; `sampler.wgsl`'s `reduce` writes them there, view k's at
+// k · res²), where the clusters' boxes start in `points` (min then max, 6 f64 each), and the
+// number of clusters. Per cluster of CLUSTER consecutive polygons, `indirect[STATE + c]` holds
+// the round that draws it, 0 while undecided, CULLED once no round needs it: the CPU marks
+// the first round's, `cull` the others'. Everything the rounds add shares the buffers of one
+// round's render, so the set-up stays within eight storage buffers.
+//
+// With rounds the set-up runs only over the round's list of clusters: `indirect[R.count]`
+// of them at `indirect[R.list …]` (the CPU writes the first round's, `cull` appends the
+// others'), 32 invocations each; without (`R.list` NO_LIST) over every polygon.
+struct Round {
+    round: u32,
+    limit: f32,
+    pix: u32,
+    boxes: u32,
+    clusters: u32,
+    list: u32,
+    count: u32,
+}
+@group(0) @binding(9) var<uniform> R: Round;
+
+const STATE: u32 = 20u;
+const NO_LIST: u32 = 0xffffffffu;
+
+// The largest sub-pixel depth of pixel `idx` after the rounds so far.
+fn pixmax(idx: u32) -> f32 {
+    return pedges[R.pix + idx / 4u][idx % 4u];
+}
+
+// Polygons per cluster (`backend::gpu::sampler::CLUSTER`).
+const CLUSTER: u32 = 32u;
+const CULLED: u32 = 0xffffffffu;
 
 const NEED: u32 = 8u;
 
@@ -143,8 +180,19 @@ fn shrunk_bound(ev: ptr<function, array<vec4<f32>, 8>>, ne: u32, px: vec4<u32>, 
 
 @compute @workgroup_size(64)
 fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) nw: vec3<u32>) {
-    let poly = g.x + g.y * nw.x * 64u;
+    let gid = g.x + g.y * nw.x * 64u;
+    var poly = gid;
+    if R.list != NO_LIST {
+        let slot = gid / CLUSTER;
+        if slot >= atomicLoad(&indirect[R.count]) {
+            return;
+        }
+        poly = atomicLoad(&indirect[R.list + slot]) * CLUSTER + gid % CLUSTER;
+    }
     if poly >= frame_u[6] {
+        return;
+    }
+    if atomicLoad(&indirect[STATE + poly / CLUSTER]) != R.round {
         return;
     }
     let pr = polys[poly];
@@ -314,6 +362,25 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
         if bound.x >= bound.y {
             continue;
         }
+        // After the first round: left out where every needed pixel its shrunk silhouette can touch already holds
+        // all its sub-pixels nearer than it could draw (`cull`'s argument, for one polygon;
+        // bounds of more than 256 pixels are drawn untested).
+        if R.round > 1u && (bound.y - bound.x) * (bound.w - bound.z) <= 256u {
+            let zcut = f32(f64(zs) * (1.0lf - 1e-6lf));
+            var open = false;
+            for (var j = bound.z; j < bound.w && !open; j++) {
+                for (var i = bound.x; i < bound.y; i++) {
+                    if pixmax(k * res * res + j * res + i) > zcut
+                        && bitcast<f32>(frame_u[tb + (j / TILE) * tw + i / TILE]) > zcut {
+                        open = true;
+                        break;
+                    }
+                }
+            }
+            if !open {
+                continue;
+            }
+        }
         let thin = subpixel && (bound.y - bound.x <= 4u || bound.w - bound.z <= 4u);
         if deep && !wrote_plane {
             for (var c = 0u; c < 3u; c++) {
@@ -333,5 +400,106 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
         }
         draws[d] = vec4<u32>(pr.x, n | (u32(thin) << 16u), bitcast<u32>(z), plane);
         draws[d + 1u] = vec4<u32>(bound.x | (bound.y << 16u), bound.z | (bound.w << 16u), 0u, 0u);
+    }
+}
+
+// A later round's choice, one invocation per cluster still undecided: a cluster farther than
+// the round's shell waits for a later round; one within it is drawn in this round (its state
+// set to the round) unless no polygon of it can lower a pixel a test reads, and then it is
+// culled for good (depths only come nearer). Its polygons' covered directions hit its box
+// inside the view's frustum, at view depths no nearer than the box's nearest there
+// (`Hemicube::rect`'s bound, Z ≥ dist/√3), and each is drawn no nearer than the points it
+// covers (its farthest depth, or a deep polygon's plane at the pixel's corners, the largest).
+// So where every needed pixel of the box's rectangle already holds all its sub-pixels nearer
+// than that (`pixmax`), or lies in a tile that no box needs beyond it, drawing the cluster
+// changes no test. Only the work differs from drawing every polygon; a margin of a millionth
+// of the depth, far above the rounding, keeps the choice on the side of drawing.
+@compute @workgroup_size(64)
+fn cull(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) nw: vec3<u32>) {
+    let c = g.x + g.y * nw.x * 64u;
+    if c >= R.clusters || atomicLoad(&indirect[STATE + c]) != 0u {
+        return;
+    }
+    let eye = vec3<f64>(frame[0], frame[1], frame[2]);
+    let b = R.boxes + 6u * c;
+    let lo = vec3<f64>(points[b], points[b + 1u], points[b + 2u]) - eye;
+    let hi = vec3<f64>(points[b + 3u], points[b + 4u], points[b + 5u]) - eye;
+    let gap = max(max(lo, -hi), vec3<f64>(0.0lf, 0.0lf, 0.0lf));
+    let dist = len3(gap);
+    if dist > f64(R.limit) {
+        return;
+    }
+    let res = frame_u[5];
+    let half = f64(res) / 2.0lf;
+    let tw = res / TILE;
+    var lowers = false;
+    for (var k = 0u; k < 5u && !lowers; k++) {
+        let need = vec4<u32>(frame_u[NEED + 4u * k], frame_u[NEED + 4u * k + 1u], frame_u[NEED + 4u * k + 2u], frame_u[NEED + 4u * k + 3u]);
+        if need.x >= need.y {
+            continue;
+        }
+        var vmin = 0.0lf;
+        var rows = res / 2u;
+        if k == 0u {
+            vmin = -1.0lf;
+            rows = res;
+        }
+        let va = to_view(k, lo);
+        let vb = to_view(k, hi);
+        let vlo = min(va, vb);
+        let vhi = max(va, vb);
+        let zl = max(vlo.z, dist / 1.7320508075688772lf * (1.0lf - 1e-12lf));
+        if vhi.z < zl || vhi.z <= 0.0lf {
+            continue;
+        }
+        var y0 = vlo.y;
+        if k != 0u {
+            y0 = max(y0, 0.0lf);
+            if vhi.y < y0 {
+                continue;
+            }
+        }
+        if zl <= 0.0lf {
+            lowers = true;
+            break;
+        }
+        var u0 = vlo.x / zl;
+        if vlo.x >= 0.0lf {
+            u0 = vlo.x / vhi.z;
+        }
+        var u1 = vhi.x / vhi.z;
+        if vhi.x >= 0.0lf {
+            u1 = vhi.x / zl;
+        }
+        var v0 = y0 / zl;
+        if y0 >= 0.0lf {
+            v0 = y0 / vhi.z;
+        }
+        var v1 = vhi.y / vhi.z;
+        if vhi.y >= 0.0lf {
+            v1 = vhi.y / zl;
+        }
+        let i0 = max(u32(clamp(floor((u0 - 1e-6lf + 1.0lf) * half), 0.0lf, f64(res))), need.x);
+        let i1 = min(u32(clamp(floor((u1 + 1e-6lf + 1.0lf) * half) + 1.0lf, 0.0lf, f64(res))), need.y);
+        let j0 = max(u32(clamp(floor((v0 - 1e-6lf - vmin) * half), 0.0lf, f64(rows))), need.z);
+        let j1 = min(u32(clamp(floor((v1 + 1e-6lf - vmin) * half) + 1.0lf, 0.0lf, f64(rows))), need.w);
+        let zcut = f32(zl * (1.0lf - 1e-6lf));
+        let tb = tile_base(k, res);
+        for (var j = j0; j < j1 && !lowers; j++) {
+            for (var i = i0; i < i1; i++) {
+                if pixmax(k * res * res + j * res + i) > zcut
+                    && bitcast<f32>(frame_u[tb + (j / TILE) * tw + i / TILE]) > zcut {
+                    lowers = true;
+                    break;
+                }
+            }
+        }
+    }
+    if lowers {
+        atomicStore(&indirect[STATE + c], R.round);
+        let slot = atomicAdd(&indirect[R.count], 1u);
+        atomicStore(&indirect[R.list + slot], c);
+    } else {
+        atomicStore(&indirect[STATE + c], CULLED);
     }
 }

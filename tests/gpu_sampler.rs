@@ -589,6 +589,78 @@ fn the_sampler_culls_the_same_on_the_gpu_backend() {
     );
 }
 
+/// Rendering in rounds (`GpuSampler::set_culling`, on by default) sets up only the clusters
+/// and polygons that can still lower a pixel a test reads: from points of the small forest's
+/// cell faces it hides exactly the boxes one round hides, with fewer draws, most of them after
+/// the first round.
+#[test]
+fn rendering_in_rounds_hides_the_same_boxes_with_fewer_draws() {
+    let Some(gpu) = backend() else {
+        return;
+    };
+    let (scene, cell) = small_forest();
+    let occ = umbrasweep::project::occluders::prepare_with(
+        &scene,
+        &vec![true; scene.objects.len()],
+        false,
+        None,
+    );
+    let occ = SampleOccluders::new(&scene, &occ, false);
+    assert!(
+        occ.polys.len() > 64 * 32,
+        "the test needs rounds: {}",
+        occ.polys.len()
+    );
+    let gscene = GpuSamplerScene::with_fill(gpu, &occ, SamplerFill::Compute).unwrap();
+    let mut one = GpuSampler::new(gpu, &gscene, 64).unwrap();
+    one.set_culling(false);
+    let mut rounds = GpuSampler::new(gpu, &gscene, 64).unwrap();
+    let cell = cell.to_f64();
+    let boxes: Vec<DAabb> = scene.objects.iter().map(|o| o.bounds.to_f64()).collect();
+    let mut rng = Rng(5);
+    let (mut draws_one, mut draws_rounds, mut first, mut hidden) = (0, 0, 0, 0);
+    for k in 0..6 {
+        let (axis, sign) = (k % 3, if k < 3 { 1.0 } else { -1.0 });
+        let mut eye = DVec3::ZERO;
+        for a in 0..3 {
+            eye[a] = rng.u(cell.min[a], cell.max[a]);
+        }
+        eye[axis] = if sign > 0.0 {
+            cell.max[axis]
+        } else {
+            cell.min[axis]
+        };
+        // The objects wholly beyond the face.
+        let beyond: Vec<DAabb> = boxes
+            .iter()
+            .filter(|b| {
+                sign * (if sign > 0.0 { b.min[axis] } else { b.max[axis] }) > sign * eye[axis]
+            })
+            .copied()
+            .collect();
+        let half = [0.05, 0.05];
+        one.begin_patch(eye, axis, sign, half, &beyond);
+        rounds.begin_patch(eye, axis, sign, half, &beyond);
+        let a = one.test_boxes(&beyond).unwrap();
+        let b = rounds.test_boxes(&beyond).unwrap();
+        assert_eq!(a, b, "face {k}: rounds changed which boxes are hidden");
+        hidden += a.iter().filter(|&&h| h).count();
+        draws_one += one.last_draws();
+        draws_rounds += rounds.last_draws();
+        first += rounds.last_first_round_draws();
+        assert_eq!(one.last_first_round_draws(), one.last_draws());
+    }
+    eprintln!(
+        "hidden {hidden}; draws: one round {draws_one}, rounds {draws_rounds} ({first} first)"
+    );
+    assert!(hidden > 20, "the test needs hidden boxes: {hidden}");
+    assert!(
+        draws_rounds < draws_one,
+        "rounds drew {draws_rounds}, one round {draws_one}"
+    );
+    assert!(first < draws_rounds, "no draws after the first round");
+}
+
 /// A device whose largest storage binding cannot hold the forest's polygon points: the GPU
 /// backend's sampler says why and samples on the CPU instead (the same objects hidden as the
 /// CPU backend's, from the same points), where it used to end the bake with `BufferTooLarge`.

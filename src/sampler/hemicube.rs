@@ -665,6 +665,11 @@ impl Hemicube {
         self.subpixel
     }
 
+    /// The sample point of the last `begin` (the rectangle's centre with `begin_patch`).
+    pub fn eye(&self) -> DVec3 {
+        self.eye
+    }
+
     /// Pixels across each view.
     pub fn resolution(&self) -> usize {
         self.res
