@@ -362,9 +362,9 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
         if bound.x >= bound.y {
             continue;
         }
-        // After the first round: left out where every needed pixel its shrunk silhouette can touch already holds
-        // all its sub-pixels nearer than it could draw (`cull`'s argument, for one polygon;
-        // bounds of more than 256 pixels are drawn untested).
+        // After the first round: left out where every needed pixel its shrunk silhouette can
+        // touch already holds all its sub-pixels nearer than it could draw (`cull`'s argument,
+        // for one polygon; bounds of more than 256 pixels are drawn untested).
         if R.round > 1u && (bound.y - bound.x) * (bound.w - bound.z) <= 256u {
             let zcut = f32(f64(zs) * (1.0lf - 1e-6lf));
             var open = false;

@@ -30,8 +30,8 @@
 //! point down to 95 k at 512 pixels (4.67 s to 1.91 s per point) and to 75 k at 1,024 (8.02
 //! to 4.16 s); the coarse forest's cell at ε 0.118 and 256 pixels: 462 k to 20 k (4.61 s to
 //! 0.58 s); a whole bake of a 300-tree coarse forest's 1-unit cell (54 points) 150 s to 52 s
-//! with the same PVS. The reduction reads a pixel's sub-pixels only until one reaches the pixel's
-//! whole-pixel depth, and only the needed pixels.
+//! with the same PVS. The reduction reads a pixel's sub-pixels only until one reaches the
+//! pixel's whole-pixel depth, and only the needed pixels.
 //!
 //! The fill is compute passes where the device has [`wgpu::Features::TEXTURE_ATOMIC`]
 //! ([`SamplerFill::Compute`]: one workgroup per draw, one invocation per pixel, which tests the
