@@ -77,6 +77,29 @@ fn pixmax(idx: u32) -> f32 {
     return pedges[R.pix + idx / 4u][idx % 4u];
 }
 
+// Whether a draw no nearer than `z` could change pixel (i, j) of view k for a test: the pixel
+// still has a sub-pixel beyond `z`, and some box reaching its tile needs a depth beyond `z`
+// (the CPU's `View::may_lower`, pixel by pixel).
+fn may_lower(k: u32, i: u32, j: u32, z: f32) -> bool {
+    let res = frame_u[5];
+    let tile = tile_base(k, res) + (j / TILE) * (res / TILE) + i / TILE;
+    return pixmax(k * res * res + j * res + i) > z && bitcast<f32>(frame_u[tile]) > z;
+}
+
+// View k's needed pixels (i0, i1, j0, j1).
+fn view_need(k: u32) -> vec4<u32> {
+    return vec4<u32>(frame_u[NEED + 4u * k], frame_u[NEED + 4u * k + 1u], frame_u[NEED + 4u * k + 2u], frame_u[NEED + 4u * k + 3u]);
+}
+
+// View k's lowest v (−1 for the front view, 0 for the sides' outer halves) and rows.
+fn view_vmin(k: u32) -> f64 {
+    return select(0.0lf, -1.0lf, k == 0u);
+}
+
+fn view_rows(k: u32, res: u32) -> u32 {
+    return select(res / 2u, res, k == 0u);
+}
+
 // Polygons per cluster (`backend::gpu::sampler::CLUSTER`).
 const CLUSTER: u32 = 32u;
 const CULLED: u32 = 0xffffffffu;
@@ -287,16 +310,12 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
     let subpixel = frame_u[4] == 1u;
     var wrote_plane = false;
     for (var k = 0u; k < 5u; k++) {
-        let need = vec4<u32>(frame_u[NEED + 4u * k], frame_u[NEED + 4u * k + 1u], frame_u[NEED + 4u * k + 2u], frame_u[NEED + 4u * k + 3u]);
+        let need = view_need(k);
         if need.x >= need.y {
             continue;
         }
-        var vmin = 0.0lf;
-        var rows = res / 2u;
-        if k == 0u {
-            vmin = -1.0lf;
-            rows = res;
-        }
+        let vmin = view_vmin(k);
+        let rows = view_rows(k, res);
         let zc = 0.5lf * near;
         var zmax = -1e308lf;
         var zmin = 1e308lf;
@@ -370,8 +389,7 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
             var open = false;
             for (var j = bound.z; j < bound.w && !open; j++) {
                 for (var i = bound.x; i < bound.y; i++) {
-                    if pixmax(k * res * res + j * res + i) > zcut
-                        && bitcast<f32>(frame_u[tb + (j / TILE) * tw + i / TILE]) > zcut {
+                    if may_lower(k, i, j, zcut) {
                         open = true;
                         break;
                     }
@@ -431,19 +449,14 @@ fn cull(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) nw
     }
     let res = frame_u[5];
     let half = f64(res) / 2.0lf;
-    let tw = res / TILE;
     var lowers = false;
     for (var k = 0u; k < 5u && !lowers; k++) {
-        let need = vec4<u32>(frame_u[NEED + 4u * k], frame_u[NEED + 4u * k + 1u], frame_u[NEED + 4u * k + 2u], frame_u[NEED + 4u * k + 3u]);
+        let need = view_need(k);
         if need.x >= need.y {
             continue;
         }
-        var vmin = 0.0lf;
-        var rows = res / 2u;
-        if k == 0u {
-            vmin = -1.0lf;
-            rows = res;
-        }
+        let vmin = view_vmin(k);
+        let rows = view_rows(k, res);
         let va = to_view(k, lo);
         let vb = to_view(k, hi);
         let vlo = min(va, vb);
@@ -484,11 +497,9 @@ fn cull(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) nw
         let j0 = max(u32(clamp(floor((v0 - 1e-6lf - vmin) * half), 0.0lf, f64(rows))), need.z);
         let j1 = min(u32(clamp(floor((v1 + 1e-6lf - vmin) * half) + 1.0lf, 0.0lf, f64(rows))), need.w);
         let zcut = f32(zl * (1.0lf - 1e-6lf));
-        let tb = tile_base(k, res);
         for (var j = j0; j < j1 && !lowers; j++) {
             for (var i = i0; i < i1; i++) {
-                if pixmax(k * res * res + j * res + i) > zcut
-                    && bitcast<f32>(frame_u[tb + (j / TILE) * tw + i / TILE]) > zcut {
+                if may_lower(k, i, j, zcut) {
                     lowers = true;
                     break;
                 }
