@@ -245,7 +245,7 @@ const STAMP_STRIDE: u64 = wgpu::QUERY_RESOLVE_BUFFER_ALIGNMENT;
 /// its submissions since it was made (all zero without [`wgpu::Features::TIMESTAMP_QUERY`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SamplerTimes {
-    /// The set-up pass (every polygon's edges, shrinks, depth and draws).
+    /// The set-up passes (the polygons' edges, shrinks, depth and draws).
     pub setup: std::time::Duration,
     /// The fill (its compute passes or render passes; not the compute fill's clears).
     pub fill: std::time::Duration,
