@@ -891,7 +891,8 @@ impl<'a> GpuSampler<'a> {
     /// # Errors
     /// * [`BackendError::PlaneSize`] when `8 × res` exceeds the device's largest texture side;
     /// * [`BackendError::BufferTooLarge`] when a render's buffers exceed the device's largest
-    ///   storage binding (about 160 bytes per polygon and 16 per point);
+    ///   storage binding (about 160 bytes per polygon; the edges' buffer, 16 bytes per point,
+    ///   also holds the pixels' depths, 20 bytes per pixel of `res` square);
     /// * [`BackendError::Validation`] or [`BackendError::OutOfMemory`] when the device reports
     ///   one while the maps and buffers are created (five 32-bit layers of `8·res` square:
     ///   1.3 GB at 1,024 pixels; [`GpuSampler::device_bytes`] gives the whole).
