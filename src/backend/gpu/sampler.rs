@@ -4,7 +4,7 @@
 //!
 //! # Design
 //! The occluder polygons are uploaded once ([`GpuSamplerScene::new`]), in Morton order of
-//! their centres and cut into clusters of [`CLUSTER`] with their boxes, with the pipelines;
+//! their centres and cut into clusters of 32 (`CLUSTER`) with their boxes, with the pipelines;
 //! each thread renders with its own [`GpuSampler`] (its maps and per-render buffers). Per
 //! sample point the CPU only sets up the render ([`Hemicube::begin`]: which pixels and tiles
 //! the boxes need) and cuts the boxes into per-view parts ([`Hemicube::box_rects`]); one
@@ -17,8 +17,8 @@
 //!
 //! **Rounds** ([`GpuSampler::set_culling`], on by default with the compute fill): the CPU's
 //! traversal draws front to back and skips whole BVH nodes behind what it has drawn; the
-//! device does the same in [`ROUNDS`] rounds. The first sets up the nearest clusters
-//! ([`ROUND_SHARES`]); after each round's fill and reduction, a compute pass (`cull` in
+//! device does the same in eight rounds (`ROUNDS`). The first sets up the nearest clusters
+//! (`ROUND_SHARES`); after each round's fill and reduction, a compute pass (`cull` in
 //! `shaders/sampler_setup.wgsl`) takes the next shell of clusters by distance, keeps those
 //! whose box can still lower a needed pixel and culls the rest for good, appending the kept
 //! ones to the round's list; the round's set-up runs over that list alone (an indirect
@@ -1153,8 +1153,8 @@ impl<'a> GpuSampler<'a> {
 
     /// Turns rendering in rounds on (the default) or off. With it, where the fill is
     /// [`SamplerFill::Compute`], a render first draws the polygons of the nearest clusters (of
-    /// [`CLUSTER`] polygons in Morton order; [`ROUND_SHARES`] gives each round's shell of
-    /// them by distance), then, round by round, takes the largest sub-pixel depth of each
+    /// 32 polygons in Morton order; the nearest 1/64 of them, then shells out to 1/32, 1/16,
+    /// 1/8, 1/4, 40 %, 60 % and all by distance), then, round by round, takes the largest sub-pixel depth of each
     /// pixel and draws only the clusters of the next shell whose box can still lower a pixel
     /// some test reads (`cull` in `shaders/sampler_setup.wgsl`): far leaves behind near ones
     /// are not set up at all, as the CPU's traversal skips them. It changes no test's answer,
