@@ -4,7 +4,7 @@
 //! for (`compute`, `render` or `both`; default: the device's, `GpuSamplerScene::default_fill`),
 //! with the GPU's time per phase from its timestamps where the device has them, and with
 //! `both` the boxes on which the two fills disagree (they should not). `cull` runs the compute
-//! fill in one round and in two (`GpuSampler::set_culling`), which should agree too.
+//! fill in one round and in rounds (`GpuSampler::set_culling`), which should agree too.
 //! `cargo run --release --example sampler_gpu -- SCENE CELLS CELL EPS RES N [FILL|cull]`.
 
 mod common;
@@ -31,7 +31,7 @@ fn main() {
     let cell = cells[ci].to_f64();
     let gpu = GpuBackend::new().expect("GPU backend");
     println!("GPU: {}", gpu.adapter_info().name);
-    // `cull`: the compute fill in one round and in two (`GpuSampler::set_culling`).
+    // `cull`: the compute fill in one round and in rounds (`GpuSampler::set_culling`).
     let rounds = args.get(7).map(String::as_str) == Some("cull");
     let fills: Vec<SamplerFill> = match args.get(7).map(String::as_str) {
         None => vec![GpuSamplerScene::default_fill(&gpu)],

@@ -591,7 +591,7 @@ fn the_sampler_culls_the_same_on_the_gpu_backend() {
 
 /// Rendering in rounds (`GpuSampler::set_culling`, on by default) sets up only the clusters
 /// and polygons that can still lower a pixel a test reads: from points of the small forest's
-/// cell faces it hides exactly the boxes one round hides, with fewer draws, most of them after
+/// cell faces it hides exactly the boxes one round hides, with fewer draws, some of them after
 /// the first round.
 #[test]
 fn rendering_in_rounds_hides_the_same_boxes_with_fewer_draws() {
