@@ -122,6 +122,11 @@ impl DAabb {
         self.min.cmpgt(self.max).any()
     }
 
+    /// The distance from `p` to the box (0 when it holds `p`).
+    pub fn distance_to(&self, p: DVec3) -> f64 {
+        (self.min - p).max(p - self.max).max(DVec3::ZERO).length()
+    }
+
     /// The center point (meaningless for an empty box).
     pub fn center(&self) -> DVec3 {
         (self.min + self.max) * 0.5

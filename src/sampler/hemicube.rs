@@ -802,10 +802,7 @@ impl Hemicube {
 
     /// The distance from the eye to the box (0 when it holds the eye).
     fn dist(&self, bx: &DAabb) -> f64 {
-        (bx.min - self.eye)
-            .max(self.eye - bx.max)
-            .max(DVec3::ZERO)
-            .length()
+        bx.distance_to(self.eye)
     }
 
     /// The pixels the box's directions can reach in view `k` (outward rounding), with the

@@ -91,7 +91,7 @@ const WORKGROUP: u32 = 64;
 const MAX_GROUPS: u32 = 65535;
 /// Sub-pixels per pixel side.
 const SUB: u32 = 8;
-/// Polygons per cluster of the second round's culling (`CLUSTER` in
+/// Polygons per cluster of the rounds' culling (`CLUSTER` in
 /// `shaders/sampler_setup.wgsl`).
 const CLUSTER: u32 = 32;
 /// A round's parameters (`Round` in `shaders/sampler_setup.wgsl`): its number, its farthest
@@ -178,15 +178,11 @@ fn f32_up(x: f64) -> f32 {
 /// and 0 for the rest; without, 1 for all), and each round's farthest cluster distance
 /// (rounded up to `f32`; the last infinite).
 fn round_states(clusters: &[DAabb], eye: DVec3, rounds: bool) -> (Vec<u32>, [f32; ROUNDS]) {
-    // (The first round's list is the clusters whose state is 1.)
     let mut limits = [f32::INFINITY; ROUNDS];
     if !rounds {
         return (vec![1; clusters.len().max(1)], limits);
     }
-    let dist: Vec<f64> = clusters
-        .iter()
-        .map(|b| (b.min - eye).max(eye - b.max).max(DVec3::ZERO).length())
-        .collect();
+    let dist: Vec<f64> = clusters.iter().map(|b| b.distance_to(eye)).collect();
     let mut sorted = dist.clone();
     sorted.sort_unstable_by(f64::total_cmp);
     for (limit, share) in limits.iter_mut().zip(ROUND_SHARES).take(ROUNDS - 1) {
@@ -204,11 +200,12 @@ fn round_states(clusters: &[DAabb], eye: DVec3, rounds: bool) -> (Vec<u32>, [f32
 /// extent, 21 bits per axis: consecutive polygons lie close together, so clusters of them
 /// have small boxes.
 fn morton_order(bounds: &[DAabb]) -> Vec<usize> {
-    let (lo, hi) = bounds
-        .iter()
-        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), b| {
-            (lo.min(b.min), hi.max(b.max))
-        });
+    let mut all = DAabb::EMPTY;
+    for b in bounds {
+        all.grow(b.min);
+        all.grow(b.max);
+    }
+    let (lo, hi) = (all.min, all.max);
     let scale = ((1u64 << 21) - 1) as f64 / (hi - lo).max_element().max(f64::MIN_POSITIVE);
     let spread = |x: u64| {
         let mut x = x & 0x1f_ffff;
@@ -253,7 +250,7 @@ pub struct SamplerTimes {
     pub reduce: std::time::Duration,
     /// The tests of box parts and triangles.
     pub tests: std::time::Duration,
-    /// The second round's choice of clusters ([`GpuSampler::set_culling`]).
+    /// The later rounds' choice of clusters ([`GpuSampler::set_culling`]).
     pub cull: std::time::Duration,
     /// Passes timed.
     pub passes: usize,
@@ -449,7 +446,7 @@ pub struct GpuSamplerScene {
     reduce: wgpu::ComputePipeline,
     test: wgpu::ComputePipeline,
     test_tri: wgpu::ComputePipeline,
-    /// The second round's choice of clusters (`cull` in `shaders/sampler_setup.wgsl`).
+    /// The later rounds' choice of clusters (`cull` in `shaders/sampler_setup.wgsl`).
     cull: wgpu::ComputePipeline,
     /// The polygons (first point, end, card) in Morton order and their points (`f64`, then
     /// the clusters' boxes), uploaded once.
@@ -603,7 +600,7 @@ impl GpuSamplerScene {
         }
         let n = occ.polys.len();
         // The polygons in Morton order of their boxes' centres, cut into clusters of
-        // `CLUSTER` (the second round's unit of culling).
+        // `CLUSTER` (the rounds' unit of culling).
         let order = morton_order(&occ.bounds);
         let mut poly_words: Vec<[u32; 4]> = Vec::with_capacity(n);
         for &k in &order {
@@ -613,16 +610,12 @@ impl GpuSamplerScene {
         let clusters: Vec<DAabb> = order
             .chunks(CLUSTER as usize)
             .map(|ks| {
-                ks.iter().fold(
-                    DAabb {
-                        min: DVec3::INFINITY,
-                        max: DVec3::NEG_INFINITY,
-                    },
-                    |b, &k| DAabb {
-                        min: b.min.min(occ.bounds[k].min),
-                        max: b.max.max(occ.bounds[k].max),
-                    },
-                )
+                let mut b = DAabb::EMPTY;
+                for &k in ks {
+                    b.grow(occ.bounds[k].min);
+                    b.grow(occ.bounds[k].max);
+                }
+                b
             })
             .collect();
         // The points, then the clusters' boxes (min, max).
@@ -1154,9 +1147,9 @@ impl<'a> GpuSampler<'a> {
     /// Turns rendering in rounds on (the default) or off. With it, where the fill is
     /// [`SamplerFill::Compute`], a render first draws the polygons of the nearest clusters (of
     /// 32 polygons in Morton order; the nearest 1/64 of them, then shells out to 1/32, 1/16,
-    /// 1/8, 1/4, 40 %, 60 % and all by distance), then, round by round, takes the largest sub-pixel depth of each
-    /// pixel and draws only the clusters of the next shell whose box can still lower a pixel
-    /// some test reads (`cull` in `shaders/sampler_setup.wgsl`): far leaves behind near ones
+    /// 1/8, 1/4, 40 %, 60 % and all by distance), then, round by round, takes the largest
+    /// sub-pixel depth of each pixel and draws only the clusters of the next shell whose box
+    /// can still lower a pixel some test reads (`cull` in `shaders/sampler_setup.wgsl`): far leaves behind near ones
     /// are not set up at all, as the CPU's traversal skips them. It changes no test's answer,
     /// only the work ([`GpuSampler::last_draws`]). Off, or with the render fill, every polygon
     /// is set up in one round.
@@ -1810,7 +1803,7 @@ impl<'a> GpuSampler<'a> {
         encoder.copy_buffer_to_buffer(flags_b, 0, staging, 0, flag_bytes);
         encoder.copy_buffer_to_buffer(tflags_b, 0, staging, flag_bytes, tflag_bytes);
         encoder.copy_buffer_to_buffer(&self.indirect, 0, staging, flag_bytes + tflag_bytes, 80);
-        // The second round's starts: the first round's draw counts.
+        // The second round's starts (the first round's draw counts): the first round's draws.
         encoder.copy_buffer_to_buffer(
             &self.firsts[1],
             0,
