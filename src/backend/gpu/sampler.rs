@@ -183,11 +183,15 @@ fn round_states(clusters: &[DAabb], eye: DVec3, rounds: bool) -> (Vec<u32>, [f32
         return (vec![1; clusters.len().max(1)], limits);
     }
     let dist: Vec<f64> = clusters.iter().map(|b| b.distance_to(eye)).collect();
-    let mut sorted = dist.clone();
-    sorted.sort_unstable_by(f64::total_cmp);
-    for (limit, share) in limits.iter_mut().zip(ROUND_SHARES).take(ROUNDS - 1) {
-        let n = ((clusters.len() as f64 * share) as usize).clamp(1, clusters.len());
-        *limit = f32_up(sorted[n - 1]);
+    // Each share's quantile, largest first: after a selection the smaller ones lie before it
+    // (no full sort per render).
+    let mut order = dist.clone();
+    let mut end = order.len();
+    for r in (0..ROUNDS - 1).rev() {
+        let n = ((clusters.len() as f64 * ROUND_SHARES[r]) as usize).clamp(1, end);
+        let (_, &mut nth, _) = order[..end].select_nth_unstable_by(n - 1, f64::total_cmp);
+        limits[r] = f32_up(nth);
+        end = n;
     }
     let states = dist
         .iter()
