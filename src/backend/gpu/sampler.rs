@@ -763,22 +763,19 @@ impl GpuSamplerScene {
         };
         let setup_pl = layout("sampler set-up pipeline layout", &setup_layout);
         let test_pl = layout("sampler test pipeline layout", &test_layout);
-        let setup = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("sampler set-up pipeline"),
-            layout: Some(&setup_pl),
-            module: &setup_module,
-            entry_point: Some("setup"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let cull = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("sampler cluster cull pipeline"),
-            layout: Some(&setup_pl),
-            module: &setup_module,
-            entry_point: Some("cull"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        // The set-up module's entry points share its layout.
+        let from_setup = |entry: &'static str, label: &'static str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&setup_pl),
+                module: &setup_module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let setup = from_setup("setup", "sampler set-up pipeline");
+        let cull = from_setup("cull", "sampler cluster cull pipeline");
         let compute_with = |entry: &'static str, label: &'static str, pl: &wgpu::PipelineLayout| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
