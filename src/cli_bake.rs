@@ -271,6 +271,13 @@ pub struct BakeArgs {
     /// occludees need: more culled for more renders. 0: one render per point.
     #[arg(long, value_name = "RATIO", default_value_t = BakeSettings::default_settings().sampling_settings.band_ratio)]
     pub sampling_band_ratio: f64,
+    /// Render each point only by band. By default a point with several bands is first
+    /// rendered once for all its candidates (leaves shrunk for the farthest), and only what
+    /// that leaves open is rendered for again, band by band, the bands formed over those
+    /// objects alone (tighter shrinks): on the fine forest's 4×2×4 cell about 1.5–1.8× the
+    /// objects hidden for about the same time.
+    #[arg(long)]
+    pub sampling_bands_only: bool,
     /// The sampler's tuck pass: as each leaf is drawn (nearest first), its edges whose whole
     /// image already lies beyond what nearer leaves drew are drawn unshrunk, so that leaves
     /// fuse across edges other leaves cover (on the fine forest's 1-unit cell about 1.5× the
@@ -555,6 +562,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         },
         rays: a.sampling_rays,
         band_ratio: a.sampling_band_ratio,
+        whole_first: !a.sampling_bands_only,
         tuck: a.sampling_tuck,
         ..BakeSettings::default_settings().sampling_settings
     };

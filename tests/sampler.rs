@@ -778,3 +778,57 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
     );
     assert!(cell_ms >= s2.ms, "the cell's {cell_ms} ms");
 }
+
+/// With several distance bands, a point first renders once for all its candidates, and what
+/// that render hides is not rendered for again: behind a wall in front of the cell's +x face,
+/// boxes 4 and 20 units out (two bands) are hidden from every point either way, but with the
+/// first render each point draws the wall once instead of once per band. (The wall's faces
+/// are triangle pairs whose shrunk diagonals leave a gap: it lies off the boxes' directions.)
+#[test]
+fn what_the_first_render_hides_is_not_rendered_for_again() {
+    let mut obj = String::new();
+    let mut nv = 0;
+    cube(
+        &mut obj,
+        &mut nv,
+        "wall",
+        DVec3::new(2.0, -40.0, -10.0),
+        DVec3::new(2.05, 40.0, 70.0),
+    );
+    cube(
+        &mut obj,
+        &mut nv,
+        "near",
+        DVec3::new(4.0, -0.3, -0.3),
+        DVec3::new(5.0, 0.3, 0.3),
+    );
+    cube(
+        &mut obj,
+        &mut nv,
+        "far",
+        DVec3::new(20.0, -0.3, -0.3),
+        DVec3::new(21.0, 0.3, 0.3),
+    );
+    let scene = load_obj("wall-bands", &obj);
+    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let mut s = settings();
+    // The cell's rays see the wall: only the boxes are sampled.
+    s.sampling_settings.rays = 2_000;
+    let run = |whole_first: bool| {
+        let mut s = s.clone();
+        s.sampling_settings.whole_first = whole_first;
+        run_sampler(&scene, &cell, &s)
+    };
+    let (first, w_first) = run(true);
+    let (bands, w_bands) = run(false);
+    assert_eq!(first, [false, true, true], "with the first render");
+    assert_eq!(bands, [false, true, true], "by bands only");
+    assert_eq!(w_first.points, w_bands.points);
+    assert!(w_first.points > 0);
+    assert!(
+        2 * w_first.polygons <= w_bands.polygons,
+        "one render per point instead of two, each drawing the wall: {} against {} polygons",
+        w_first.polygons,
+        w_bands.polygons
+    );
+}

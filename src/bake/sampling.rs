@@ -23,7 +23,12 @@
 //!    union holds all its triangles), and a piece's triangles instead of the piece.
 //!    A rectangle may take several renders, one per band of the objects' farthest distance
 //!    from its centre (`sampling_band_ratio`), each testing only its band's objects with edges
-//!    shrunk for them (depth-bounded shrinks): every object is tested in exactly one of them.
+//!    shrunk for them (depth-bounded shrinks). With several bands, a first render for all the
+//!    rectangle's objects, shrunk for the farthest of them, comes before (`sampling_whole_first`):
+//!    a render's shrinks hold for every occludee no farther than its farthest box, so what it
+//!    hides is hidden, and the bands then render only for the objects it leaves open. Every
+//!    object is decided by one render that holds for it: hidden in one of them, or open in the
+//!    last that tests it.
 //! 4. **Refinement only decides more.** An object still undecided at a ball is re-tested in
 //!    the ball's four children; an object undecided at the finest ε, or when the budget runs
 //!    out, stays visible. An object is culled only when every leaf rectangle of every face
@@ -825,6 +830,16 @@ impl Culler for SamplingCuller {
     }
 }
 
+/// One candidate's result in a render for its group ([`Shared::render_group`]).
+enum GroupTest {
+    /// Known visible before the test (certified by a ray of the rectangle's): not tested.
+    Known,
+    /// Hidden from every point of the rectangle.
+    Hidden,
+    /// Open: a direction in which it may show.
+    Open(DVec3),
+}
+
 /// The candidates' indices grouped by their boxes' farthest distance from `eye`: each group's
 /// farthest distance is at most `ratio` times the nearest of them (bands `(f·ratio^k,
 /// f·ratio^(k+1)]` above the nearest, `f`), nearest group first. With `ratio` 0, one group.
@@ -1076,62 +1091,38 @@ impl Shared<'_> {
         let half = [hb * (1.0 + 1e-9), hcx * (1.0 + 1e-9)];
         let mut open: Vec<u32> = Vec::new();
         let mut rays = 0usize;
-        for band in distance_bands(eye, &boxes, self.data.settings.band_ratio) {
-            let band_boxes: Vec<DAabb> = band.iter().map(|&i| boxes[i]).collect();
-            // On the GPU the band's objects are tested together (boxes, then the open ones'
-            // pieces, then the open pieces' triangles); on the CPU one by one as they come.
-            let batch = match renderer {
-                Renderer::Cpu(hc) => {
-                    hc.begin_patch(eye, f.axis, f.sign, half, &band_boxes);
-                    let st = hc.draw(&self.data.occluders);
-                    self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
-                    rec.polygons += st.polygons;
-                    None
-                }
-                Renderer::Gpu(gs) => {
-                    gs.begin_patch(eye, f.axis, f.sign, half, &band_boxes);
-                    let objects: Vec<(u32, DAabb)> = band
-                        .iter()
-                        .filter(|&&i| !known[list[i] as usize])
-                        .map(|&i| (list[i], boxes[i]))
-                        .collect();
-                    match self.test_on_gpu(gs, eye, &objects) {
-                        Ok(r) => {
-                            self.polygons.fetch_add(gs.last_draws(), Ordering::Relaxed);
-                            rec.polygons += gs.last_draws();
-                            Some(objects.iter().map(|p| p.0).zip(r).collect::<Vec<_>>())
-                        }
-                        Err(e) => {
-                            // The device failed: this rectangle decides nothing.
-                            self.fail(e);
-                            self.give_up(&list, known);
-                            return None;
-                        }
-                    }
-                }
-            };
-            let mut batch = batch.map(|b| b.into_iter().peekable());
-            for &i in &band {
-                let (o, bx) = (list[i], &boxes[i]);
-                // The GPU's answer for `o` (its batch holds the band's objects not known
-                // visible when it ran, in the band's order).
-                let from_gpu = batch
-                    .as_mut()
-                    .and_then(|b| b.next_if(|&(p, _)| p == o).map(|(_, r)| r));
-                if known[o as usize] {
-                    // Certified visible by a ray of this rectangle's.
-                    continue;
-                }
-                self.tested.fetch_add(1, Ordering::Relaxed);
-                rec.tested += 1;
-                let test = match (renderer as &Renderer, from_gpu) {
-                    (_, Some(r)) => r,
-                    (Renderer::Cpu(hc), None) => self.test_object(hc, o, bx),
-                    (Renderer::Gpu(_), None) => unreachable!("the batch holds every object"),
-                };
-                let Some(direction) = test else {
-                    self.hid.fetch_add(1, Ordering::Relaxed);
-                    rec.hid += 1;
+        let ratio = self.data.settings.band_ratio;
+        let mut bands = distance_bands(eye, &boxes, ratio);
+        let mut counted = false;
+        if bands.len() > 1 && self.data.settings.whole_first {
+            // One render for the whole list first, its edges shrunk for the farthest box
+            // (a render's shrinks hold for every occludee no farther): what it hides is
+            // decided, and only what it leaves open goes to the bands (which it does not
+            // count as tested again).
+            let all: Vec<usize> = (0..list.len()).collect();
+            let tests = self.render_group(
+                renderer, eye, &f, half, &list, &boxes, &all, known, rec, true,
+            )?;
+            counted = true;
+            let left: Vec<usize> = all
+                .into_iter()
+                .zip(tests)
+                .filter(|(_, t)| matches!(t, GroupTest::Open(_)))
+                .map(|(i, _)| i)
+                .collect();
+            let left_boxes: Vec<DAabb> = left.iter().map(|&i| boxes[i]).collect();
+            bands = distance_bands(eye, &left_boxes, ratio)
+                .into_iter()
+                .map(|b| b.into_iter().map(|k| left[k]).collect())
+                .collect();
+        }
+        for band in bands {
+            let tests = self.render_group(
+                renderer, eye, &f, half, &list, &boxes, &band, known, rec, !counted,
+            )?;
+            for (&i, test) in band.iter().zip(tests) {
+                let o = list[i];
+                let GroupTest::Open(direction) = test else {
                     continue;
                 };
                 // Undecided here: try to certify it with real rays from the eye.
@@ -1153,6 +1144,97 @@ impl Shared<'_> {
             return None;
         }
         Some(Arc::new(open))
+    }
+
+    /// Renders for one group of a rectangle's candidates (`group`: indices into `list` and
+    /// `boxes`, the render's edges shrunk for the farthest of them) and tests them, each
+    /// object's result in the group's order (a hidden one counted as hidden at this
+    /// rectangle). `count`: the objects tested also count as tested here (once per
+    /// rectangle). `None` when the device failed: the rectangle then decides nothing (its
+    /// list is given up).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a group's render needs the rectangle (eye, face, half sides), its lists and the lane's state; a struct would only move the list"
+    )]
+    fn render_group(
+        &self,
+        renderer: &mut Renderer,
+        eye: DVec3,
+        f: &Face,
+        half: [f64; 2],
+        list: &[u32],
+        boxes: &[DAabb],
+        group: &[usize],
+        known: &mut [bool],
+        rec: &mut RectRecord,
+        count: bool,
+    ) -> Option<Vec<GroupTest>> {
+        let group_boxes: Vec<DAabb> = group.iter().map(|&i| boxes[i]).collect();
+        // On the GPU the group's objects are tested together (boxes, then the open ones'
+        // pieces, then the open pieces' triangles); on the CPU one by one as they come.
+        let batch = match renderer {
+            Renderer::Cpu(hc) => {
+                hc.begin_patch(eye, f.axis, f.sign, half, &group_boxes);
+                let st = hc.draw(&self.data.occluders);
+                self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
+                rec.polygons += st.polygons;
+                None
+            }
+            Renderer::Gpu(gs) => {
+                gs.begin_patch(eye, f.axis, f.sign, half, &group_boxes);
+                let objects: Vec<(u32, DAabb)> = group
+                    .iter()
+                    .filter(|&&i| !known[list[i] as usize])
+                    .map(|&i| (list[i], boxes[i]))
+                    .collect();
+                match self.test_on_gpu(gs, eye, &objects) {
+                    Ok(r) => {
+                        self.polygons.fetch_add(gs.last_draws(), Ordering::Relaxed);
+                        rec.polygons += gs.last_draws();
+                        Some(objects.iter().map(|p| p.0).zip(r).collect::<Vec<_>>())
+                    }
+                    Err(e) => {
+                        // The device failed: this rectangle decides nothing.
+                        self.fail(e);
+                        self.give_up(list, known);
+                        return None;
+                    }
+                }
+            }
+        };
+        let mut batch = batch.map(|b| b.into_iter().peekable());
+        let mut out = Vec::with_capacity(group.len());
+        for &i in group {
+            let (o, bx) = (list[i], &boxes[i]);
+            // The GPU's answer for `o` (its batch holds the group's objects not known
+            // visible when it ran, in the group's order).
+            let from_gpu = batch
+                .as_mut()
+                .and_then(|b| b.next_if(|&(p, _)| p == o).map(|(_, r)| r));
+            if known[o as usize] {
+                // Certified visible by a ray of this rectangle's.
+                out.push(GroupTest::Known);
+                continue;
+            }
+            if count {
+                self.tested.fetch_add(1, Ordering::Relaxed);
+                rec.tested += 1;
+            }
+            let test = match (renderer as &Renderer, from_gpu) {
+                (_, Some(r)) => r,
+                (Renderer::Cpu(hc), None) => self.test_object(hc, o, bx),
+                (Renderer::Gpu(_), None) => unreachable!("the batch holds every object"),
+            };
+            out.push(match test {
+                None => {
+                    self.hid.fetch_add(1, Ordering::Relaxed);
+                    rec.hid += 1;
+                    GroupTest::Hidden
+                }
+                Some(direction) => GroupTest::Open(direction),
+            });
+        }
+        Some(out)
     }
 
     /// Tests object `o` (box `bx`) on the CPU: its box, and when that is open, its pieces

@@ -57,7 +57,8 @@
 //! `θ > π/2`, `φ_D ≤ π − θ < π/2`, so `sin φ_D ≥ sin φ_x` and nothing more is needed. Each edge
 //! is therefore shrunk by the smaller of `ε/r_e` and that bound (with `D` rounded up), and the
 //! claim holds for every point within `D`. Leaves near the occludees (`r_e` near `D`) shrink
-//! little; `bake::sampling` renders each sample point once per band of occludee distance, so
+//! little; `bake::sampling` renders each sample point once for all its occludees (`D` their
+//! farthest) and then once per band of occludee distance for those that render leaves open, so
 //! that each band's `D` is tight (`tests/sampler_proof.rs`, family `depth_bounded`, checks
 //! occludees just behind and among leaves).
 //!
