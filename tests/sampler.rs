@@ -788,27 +788,13 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
 fn what_the_first_render_hides_is_not_rendered_for_again() {
     let mut obj = String::new();
     let mut nv = 0;
-    cube(
-        &mut obj,
-        &mut nv,
-        "wall",
-        DVec3::new(2.0, -40.0, -10.0),
-        DVec3::new(2.05, 40.0, 70.0),
-    );
-    cube(
-        &mut obj,
-        &mut nv,
-        "near",
-        DVec3::new(4.0, -0.3, -0.3),
-        DVec3::new(5.0, 0.3, 0.3),
-    );
-    cube(
-        &mut obj,
-        &mut nv,
-        "far",
-        DVec3::new(20.0, -0.3, -0.3),
-        DVec3::new(21.0, 0.3, 0.3),
-    );
+    for (name, min, max) in [
+        ("wall", [2.0, -40.0, -10.0], [2.05, 40.0, 70.0]),
+        ("near", [4.0, -0.3, -0.3], [5.0, 0.3, 0.3]),
+        ("far", [20.0, -0.3, -0.3], [21.0, 0.3, 0.3]),
+    ] {
+        cube(&mut obj, &mut nv, name, DVec3::from(min), DVec3::from(max));
+    }
     let scene = load_obj("wall-bands", &obj);
     let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
     let mut s = settings();
