@@ -1097,8 +1097,8 @@ impl Shared<'_> {
         if bands.len() > 1 && self.data.settings.whole_first {
             // One render for the whole list first, its edges shrunk for the farthest box
             // (a render's shrinks hold for every occludee no farther): what it hides is
-            // decided, and only what it leaves open goes to the bands (which it does not
-            // count as tested again).
+            // decided, and only what it leaves open goes to the bands, formed over those
+            // alone (the bands do not count them as tested again).
             let all: Vec<usize> = (0..list.len()).collect();
             let tests = self.render_group(
                 renderer, eye, &f, half, &list, &boxes, &all, known, rec, true,
