@@ -1092,18 +1092,17 @@ impl Shared<'_> {
         let mut open: Vec<u32> = Vec::new();
         let mut rays = 0usize;
         let ratio = self.data.settings.band_ratio;
-        let mut bands = distance_bands(eye, &boxes, ratio);
-        let mut counted = false;
-        if bands.len() > 1 && self.data.settings.whole_first {
-            // One render for the whole list first, its edges shrunk for the farthest box
-            // (a render's shrinks hold for every occludee no farther): what it hides is
-            // decided, and only what it leaves open goes to the bands, formed over those
-            // alone (the bands do not count them as tested again).
+        let bands = distance_bands(eye, &boxes, ratio);
+        // One render for the whole list first, its edges shrunk for the farthest box (a
+        // render's shrinks hold for every occludee no farther): what it hides is decided, and
+        // only what it leaves open goes to the bands, formed over those alone (the bands do
+        // not count them as tested again).
+        let first = bands.len() > 1 && self.data.settings.whole_first;
+        let bands = if first {
             let all: Vec<usize> = (0..list.len()).collect();
             let tests = self.render_group(
                 renderer, eye, &f, half, &list, &boxes, &all, known, rec, true,
             )?;
-            counted = true;
             let left: Vec<usize> = all
                 .into_iter()
                 .zip(tests)
@@ -1111,14 +1110,16 @@ impl Shared<'_> {
                 .map(|(i, _)| i)
                 .collect();
             let left_boxes: Vec<DAabb> = left.iter().map(|&i| boxes[i]).collect();
-            bands = distance_bands(eye, &left_boxes, ratio)
+            distance_bands(eye, &left_boxes, ratio)
                 .into_iter()
                 .map(|b| b.into_iter().map(|k| left[k]).collect())
-                .collect();
-        }
+                .collect()
+        } else {
+            bands
+        };
         for band in bands {
             let tests = self.render_group(
-                renderer, eye, &f, half, &list, &boxes, &band, known, rec, !counted,
+                renderer, eye, &f, half, &list, &boxes, &band, known, rec, !first,
             )?;
             for (&i, test) in band.iter().zip(tests) {
                 let o = list[i];

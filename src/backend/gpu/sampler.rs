@@ -1150,10 +1150,10 @@ impl<'a> GpuSampler<'a> {
     /// 32 polygons in Morton order; the nearest 1/64 of them, then shells out to 1/32, 1/16,
     /// 1/8, 1/4, 40 %, 60 % and all by distance), then, round by round, takes the largest
     /// sub-pixel depth of each pixel and draws only the clusters of the next shell whose box
-    /// can still lower a pixel some test reads (`cull` in `shaders/sampler_setup.wgsl`): far leaves behind near ones
-    /// are not set up at all, as the CPU's traversal skips them. It changes no test's answer,
-    /// only the work ([`GpuSampler::last_draws`]). Off, or with the render fill, every polygon
-    /// is set up in one round.
+    /// can still lower a pixel some test reads (`cull` in `shaders/sampler_setup.wgsl`): far
+    /// leaves behind near ones are not set up at all, as the CPU's traversal skips them. It
+    /// changes no test's answer, only the work ([`GpuSampler::last_draws`]). Off, or with the
+    /// render fill, every polygon is set up in one round.
     pub fn set_culling(&mut self, on: bool) {
         self.culling = on;
     }
