@@ -4,6 +4,7 @@
 use anyhow::{Context, bail};
 use clap::ValueEnum;
 use glam::DVec3;
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use umbrasweep::backend::RasterBackend;
 use umbrasweep::backend::cpu::CpuBackend;
@@ -348,7 +349,18 @@ pub struct BakeArgs {
     /// before it starts. Default: this machine's memory (MemTotal).
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub max_memory: Option<u64>,
-    /// No progress bar or summary.
+    /// Seconds between two plain progress lines (`bake: 3/10 cells, 1,234 sample points,
+    /// 5m 02s elapsed, about 11m 45s left`) when stderr is not a terminal (a batch job's
+    /// log, `nohup`, CI), where the progress bar draws nothing; the last cell's line is always
+    /// printed. 0: a line whenever a cell finishes or the sampler's points move; `off`: none.
+    #[arg(
+        long,
+        value_name = "SECS|off",
+        default_value = "60",
+        value_parser = crate::cli_progress::parse_progress_every
+    )]
+    pub progress_every: crate::cli_progress::ProgressEvery,
+    /// No progress bar, progress lines or summary.
     #[arg(short, long)]
     pub quiet: bool,
 }
@@ -745,7 +757,21 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         b.set_position(resumed as u64);
         b
     };
-    let progress = |k: usize| bar.set_position((resumed + k) as u64);
+    // Where the bar draws nothing (stderr not a terminal), plain lines now and then.
+    let plain = match a.progress_every.0 {
+        Some(every) if !a.quiet && !std::io::stderr().is_terminal() => Some(
+            crate::cli_progress::PlainProgress::new(which.len(), resumed, every),
+        ),
+        _ => None,
+    };
+    // The sampler takes minutes per cell: the bar counts its sample points meanwhile.
+    let sample_points = std::sync::atomic::AtomicU64::new(0);
+    let progress = |k: usize| {
+        bar.set_position((resumed + k) as u64);
+        if let Some(p) = &plain {
+            p.cell_done(k, sample_points.load(std::sync::atomic::Ordering::Relaxed));
+        }
+    };
     let dump = umbrasweep::inspect::DumpOptions {
         exr: a.dump_exr.clone(),
         png: a.dump_png.clone(),
@@ -764,8 +790,6 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     let journal = std::sync::Mutex::new(journal);
     let on_cell =
         |ci: usize, r: &bake::CellResult| journal.lock().expect("not poisoned").append(ci, r);
-    // The sampler takes minutes per cell: the bar counts its sample points meanwhile.
-    let sample_points = std::sync::atomic::AtomicU64::new(0);
     let baking = std::sync::atomic::AtomicBool::new(true);
     let mut result = std::thread::scope(|s| {
         let ticker = (!a.quiet).then(|| {
@@ -775,6 +799,9 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                     let n = sample_points.load(Relaxed);
                     if n > 0 {
                         bar.set_message(format!(", {n} sample points"));
+                    }
+                    if let Some(p) = &plain {
+                        p.tick(n);
                     }
                     bar.tick();
                     std::thread::park_timeout(std::time::Duration::from_millis(500));

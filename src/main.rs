@@ -9,6 +9,7 @@ mod cli_cells;
 mod cli_gen;
 mod cli_inspect;
 mod cli_merge;
+mod cli_progress;
 mod cli_report;
 mod cli_validate;
 

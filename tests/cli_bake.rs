@@ -352,7 +352,15 @@ fn backend_auto_prints_no_driver_noise() {
     let stderr = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{stderr}");
     assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
-    assert!(stderr.starts_with("scene "), "{stderr}");
+    // Nothing but the progress lines (stderr is a pipe here) comes before the summary.
+    let rest: Vec<&str> = stderr
+        .lines()
+        .skip_while(|l| l.starts_with("bake: "))
+        .collect();
+    assert!(
+        rest.first().is_some_and(|l| l.starts_with("scene ")),
+        "{stderr}"
+    );
 }
 
 /// The private folder that quiets the adapter probe is removed however the process ends: after
@@ -411,4 +419,62 @@ fn max_memory_refuses_a_bake_that_cannot_fit() {
     let r = run("1.5GiB");
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     assert!(out.exists());
+}
+
+/// The `bake: N/M cells` progress lines of `stderr`, as `(done, total)`.
+fn progress_lines(stderr: &str) -> Vec<(usize, usize)> {
+    stderr
+        .lines()
+        .filter_map(|l| {
+            let rest = l.strip_prefix("bake: ")?;
+            let (count, _) = rest.split_once(" cells")?;
+            let (d, t) = count.split_once('/')?;
+            Some((d.parse().ok()?, t.parse().ok()?))
+        })
+        .collect()
+}
+
+/// With stderr not a terminal (a pipe here, as in a batch job's log) the bar draws nothing,
+/// so `bake` prints plain progress lines: every cell's with `--progress-every 0`, the last
+/// cell's always (also with the default interval), none with `off` or `--quiet`.
+#[test]
+fn a_bake_logs_plain_progress_when_stderr_is_not_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str]| {
+        let (mut c, _) = wall_bake(dir.path());
+        // One worker, so that the cells finish (and report) one after the other.
+        c.env("RAYON_NUM_THREADS", "1");
+        let r = c.args(["--backend", "cpu"]).args(extra).output().unwrap();
+        let stderr = String::from_utf8_lossy(&r.stderr).into_owned();
+        assert!(r.status.success(), "{extra:?}: {stderr}");
+        stderr
+    };
+    let every = progress_lines(&run(&["--progress-every", "0"]));
+    assert!(every.iter().all(|&(_, t)| t == 2), "{every:?}");
+    assert_eq!(every.last(), Some(&(2, 2)), "{every:?}");
+    assert!(
+        every.windows(2).all(|w| w[0].0 <= w[1].0),
+        "the counts go up: {every:?}"
+    );
+    assert!(
+        every.iter().any(|&(d, _)| d == 1),
+        "a line per cell: {every:?}"
+    );
+    let default = progress_lines(&run(&[]));
+    assert_eq!(default.last(), Some(&(2, 2)), "{default:?}");
+    assert!(progress_lines(&run(&["--progress-every", "off"])).is_empty());
+    let quiet = run(&["--quiet", "--progress-every", "0"]);
+    assert!(progress_lines(&quiet).is_empty(), "{quiet}");
+    let scene = dir.path().join("s.obj");
+    let cells = dir.path().join("c.json");
+    refuses(
+        &scene,
+        &[
+            "--cells",
+            cells.to_str().unwrap(),
+            "--progress-every",
+            "soon",
+        ],
+        "--progress-every",
+    );
 }

@@ -1,0 +1,177 @@
+//! Plain progress lines on stderr for a bake whose stderr is not a terminal (the log of a
+//! batch job, `nohup`, CI), where the progress bar draws nothing: cells done, the sampler's
+//! points so far, time elapsed and an estimate of what is left, at most one line per interval
+//! (`bake --progress-every`).
+
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// `bake --progress-every`: seconds between two plain progress lines, or none.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProgressEvery(pub Option<f64>);
+
+/// Parses `--progress-every`: seconds (0: a line whenever something moves) or `off`.
+///
+/// # Errors
+/// Anything but `off` or a finite number of seconds ≥ 0, with what was expected.
+pub fn parse_progress_every(v: &str) -> Result<ProgressEvery, String> {
+    if v == "off" {
+        return Ok(ProgressEvery(None));
+    }
+    match v.parse::<f64>() {
+        Ok(s) if s >= 0.0 && s.is_finite() => Ok(ProgressEvery(Some(s))),
+        _ => Err(format!(
+            "expected seconds between two progress lines (e.g. 60, 0 for every cell) or `off`, \
+             got {v:?}"
+        )),
+    }
+}
+
+/// What the last line said, and when.
+#[derive(Default)]
+struct State {
+    /// This run's cells done (the largest count reported: workers report out of order).
+    done: usize,
+    /// When the last line was printed.
+    last: Option<Instant>,
+    /// The cells and sample points the last line reported.
+    printed: Option<(usize, u64)>,
+}
+
+/// A bake's plain progress log (see the module docs). Shared by the workers, which report
+/// finished cells, and a ticker thread, which reports sample points inside long cells.
+pub struct PlainProgress {
+    start: Instant,
+    every: Duration,
+    /// Cells of the whole bake, and those a resumed bake found already done.
+    total: usize,
+    resumed: usize,
+    state: Mutex<State>,
+}
+
+impl PlainProgress {
+    /// A log for a bake of `total` cells of which `resumed` are done already, printing at most
+    /// one line per `every` seconds (0: a line whenever the count of cells or points moves).
+    pub fn new(total: usize, resumed: usize, every: f64) -> Self {
+        PlainProgress {
+            start: Instant::now(),
+            every: Duration::from_secs_f64(every),
+            total,
+            resumed,
+            // Nothing done and no points: nothing to say yet.
+            state: Mutex::new(State {
+                printed: Some((0, 0)),
+                ..State::default()
+            }),
+        }
+    }
+
+    /// `done` of this run's cells are finished (`points` sample points so far). The last
+    /// cell's line is always printed.
+    pub fn cell_done(&self, done: usize, points: u64) {
+        let mut s = self.state.lock().expect("not poisoned");
+        s.done = s.done.max(done);
+        let last_cell = self.resumed + s.done >= self.total;
+        self.maybe_print(&mut s, points, last_cell);
+    }
+
+    /// Called now and then while cells run: a line when the interval has passed and the
+    /// sample points moved.
+    pub fn tick(&self, points: u64) {
+        let mut s = self.state.lock().expect("not poisoned");
+        self.maybe_print(&mut s, points, false);
+    }
+
+    fn maybe_print(&self, s: &mut State, points: u64, force: bool) {
+        let now = Instant::now();
+        let now_state = (s.done, points);
+        if s.printed == Some(now_state) {
+            return;
+        }
+        let since = now - s.last.unwrap_or(self.start);
+        if !force && since < self.every {
+            return;
+        }
+        eprintln!("{}", self.line(s.done, points, now - self.start));
+        s.last = Some(now);
+        s.printed = Some(now_state);
+    }
+
+    /// `bake: 3/10 cells, 1,234 sample points, 5m 02s elapsed, about 11m 45s left`.
+    fn line(&self, done: usize, points: u64, elapsed: Duration) -> String {
+        let mut line = format!("bake: {}/{} cells", self.resumed + done, self.total);
+        if points > 0 {
+            line += &format!(", {} sample points", thousands(points));
+        }
+        line += &format!(", {} elapsed", clock(elapsed));
+        let left = self.total.saturating_sub(self.resumed + done);
+        if done > 0 && left > 0 {
+            let eta = elapsed.mul_f64(left as f64 / done as f64);
+            line += &format!(", about {} left", clock(eta));
+        }
+        line
+    }
+}
+
+/// `1h 02m 03s`, `5m 02s` or `12.3 s`.
+fn clock(d: Duration) -> String {
+    let s = d.as_secs_f64();
+    if s < 60.0 {
+        return format!("{s:.1} s");
+    }
+    let t = s.round() as u64;
+    let (h, m, sec) = (t / 3600, t / 60 % 60, t % 60);
+    if h > 0 {
+        format!("{h}h {m:02}m {sec:02}s")
+    } else {
+        format!("{m}m {sec:02}s")
+    }
+}
+
+/// `1234567` as `1,234,567`.
+fn thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_and_counts_read_as_a_person_writes_them() {
+        assert_eq!(clock(Duration::from_millis(12_345)), "12.3 s");
+        assert_eq!(clock(Duration::from_secs(302)), "5m 02s");
+        assert_eq!(clock(Duration::from_secs(3723)), "1h 02m 03s");
+        assert_eq!(thousands(7), "7");
+        assert_eq!(thousands(1_234), "1,234");
+        assert_eq!(thousands(1_234_567), "1,234,567");
+    }
+
+    #[test]
+    fn the_estimate_scales_the_time_so_far_by_the_cells_left() {
+        let p = PlainProgress::new(10, 2, 60.0);
+        let line = p.line(2, 0, Duration::from_secs(120));
+        assert_eq!(line, "bake: 4/10 cells, 2m 00s elapsed, about 6m 00s left");
+        let line = p.line(0, 1_500, Duration::from_secs(30));
+        assert_eq!(
+            line,
+            "bake: 2/10 cells, 1,500 sample points, 30.0 s elapsed"
+        );
+    }
+
+    #[test]
+    fn progress_every_takes_seconds_or_off() {
+        assert_eq!(parse_progress_every("off"), Ok(ProgressEvery(None)));
+        assert_eq!(parse_progress_every("2.5"), Ok(ProgressEvery(Some(2.5))));
+        assert!(parse_progress_every("-1").unwrap_err().contains("`off`"));
+        assert!(parse_progress_every("soon").is_err());
+    }
+}
