@@ -1,12 +1,13 @@
-//! Plain progress lines on stderr for a bake whose stderr is not a terminal (the log of a
-//! batch job, `nohup`, CI), where the progress bar draws nothing: cells done, the sampler's
-//! points so far, time elapsed and an estimate of what is left, at most one line per interval
-//! (`bake --progress-every`).
+//! Plain progress lines on stderr for a bake or a validation whose stderr is not a terminal
+//! (the log of a batch job, `nohup`, CI), where the progress bars draw nothing: cells done
+//! and the sampler's points so far ([`PlainProgress`]), or rays cast ([`plain_rays`]), with
+//! the time elapsed and an estimate of what is left, at most one line per interval
+//! (`--progress-every`).
 
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-/// `bake --progress-every`: seconds between two plain progress lines, or none.
+/// `--progress-every` (`bake`, `validate`): seconds between two plain progress lines, or none.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProgressEvery(pub Option<f64>);
 
@@ -111,6 +112,61 @@ impl PlainProgress {
         }
         line
     }
+}
+
+/// `validate`'s progress as plain lines: `validate: 8,000,000/20,000,000 rays (40 %), 1m 02s
+/// elapsed, about 1m 33s left`, at most one per `every` seconds (0: at every report of the
+/// workers), and always when the rays are done.
+pub fn plain_rays(every: f64) -> umbrasweep::validate::ProgressFn {
+    use umbrasweep::validate::Progress;
+    struct Rays {
+        start: Instant,
+        last: Instant,
+        total: u64,
+        done: u64,
+    }
+    let every = Duration::from_secs_f64(every);
+    let state = Mutex::new(None::<Rays>);
+    std::sync::Arc::new(move |p: Progress| {
+        let mut s = state.lock().expect("not poisoned");
+        let now = Instant::now();
+        let force = match p {
+            Progress::Start { total } => {
+                *s = Some(Rays {
+                    start: now,
+                    last: now,
+                    total,
+                    done: 0,
+                });
+                return;
+            }
+            Progress::Advance(n) => {
+                if let Some(r) = s.as_mut() {
+                    r.done += n;
+                }
+                false
+            }
+            Progress::Finish => true,
+        };
+        let Some(r) = s.as_mut() else { return };
+        if !force && now - r.last < every {
+            return;
+        }
+        r.last = now;
+        let elapsed = now - r.start;
+        let mut line = format!(
+            "validate: {}/{} rays ({:.0} %), {} elapsed",
+            thousands(r.done),
+            thousands(r.total),
+            100.0 * r.done as f64 / r.total.max(1) as f64,
+            clock(elapsed)
+        );
+        if r.done > 0 && r.done < r.total {
+            let eta = elapsed.mul_f64((r.total - r.done) as f64 / r.done as f64);
+            line += &format!(", about {} left", clock(eta));
+        }
+        eprintln!("{line}");
+    })
 }
 
 /// `1h 02m 03s`, `5m 02s` or `12.3 s`.

@@ -525,6 +525,43 @@ fn cli_false_cull_exits_1_and_writes_json() {
     );
 }
 
+/// With stderr a pipe (as in a batch job's log) the bar draws nothing, so `validate` prints
+/// plain `validate: done/total rays` lines: at every report with `--progress-every 0`, always
+/// a last one with every ray counted, none with `off`.
+#[test]
+fn cli_logs_plain_progress_when_stderr_is_not_a_terminal() {
+    let s = three_box_scene();
+    let Some(CliFiles { _dir, obj, pvs, .. }) = cli_files(&s, &doc(&s, vec![0, 1, 2, 3], false))
+    else {
+        return;
+    };
+    let run = |every: &str| {
+        let out = validate(&[
+            obj.as_os_str(),
+            pvs.as_os_str(),
+            "--rays".as_ref(),
+            "20000".as_ref(),
+            "--progress-every".as_ref(),
+            every.as_ref(),
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert_eq!(out.status.code(), Some(0), "{stderr}");
+        stderr
+            .lines()
+            .filter(|l| l.starts_with("validate: "))
+            .map(str::to_owned)
+            .collect::<Vec<_>>()
+    };
+    let lines = run("0");
+    assert!(
+        lines
+            .last()
+            .is_some_and(|l| l.starts_with("validate: 20,000/20,000 rays (100 %), ")),
+        "{lines:?}"
+    );
+    assert!(run("off").is_empty());
+}
+
 #[test]
 fn cli_bad_input_exits_2() {
     let s = three_box_scene();
