@@ -349,17 +349,8 @@ pub struct BakeArgs {
     /// before it starts. Default: this machine's memory (MemTotal).
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub max_memory: Option<u64>,
-    /// Seconds between two plain progress lines (`bake: 3/10 cells, 1,234 sample points,
-    /// 5m 02s elapsed, about 11m 45s left`) when stderr is not a terminal (a batch job's
-    /// log, `nohup`, CI), where the progress bar draws nothing; the last cell's line is always
-    /// printed. 0: a line whenever a cell finishes or the sampler's points move; `off`: none.
-    #[arg(
-        long,
-        value_name = "SECS|off",
-        default_value = "60",
-        value_parser = crate::cli_progress::parse_progress_every
-    )]
-    pub progress_every: crate::cli_progress::ProgressEvery,
+    #[command(flatten)]
+    pub progress: crate::cli_progress::ProgressArgs,
     /// No progress bar, progress lines or summary.
     #[arg(short, long)]
     pub quiet: bool,
@@ -758,7 +749,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         b
     };
     // Where the bar draws nothing (stderr not a terminal), plain lines now and then.
-    let plain = match a.progress_every.0 {
+    let plain = match a.progress.progress_every.0 {
         Some(every) if !a.quiet && !std::io::stderr().is_terminal() => Some(
             crate::cli_progress::PlainProgress::new(which.len(), resumed, every),
         ),

@@ -11,6 +11,23 @@ use std::time::{Duration, Instant};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProgressEvery(pub Option<f64>);
 
+/// `--progress-every`, shared by `bake` and `validate`.
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct ProgressArgs {
+    /// Seconds between two plain progress lines on stderr when it is not a terminal (a batch
+    /// job's log, `nohup`, CI), where the progress bar draws nothing: `bake: 3/10 cells, 1,234
+    /// sample points, 5m 02s elapsed, about 11m 45s left`, `validate: 8,000,000/20,000,000
+    /// rays (40 %), 1m 02s elapsed, about 1m 33s left`. A last line (the last cell's, all the
+    /// rays) is always printed. 0: a line at every report; `off`: none.
+    #[arg(
+        long,
+        value_name = "SECS|off",
+        default_value = "60",
+        value_parser = parse_progress_every
+    )]
+    pub progress_every: ProgressEvery,
+}
+
 /// Parses `--progress-every`: seconds (0: a line whenever something moves) or `off`.
 ///
 /// # Errors

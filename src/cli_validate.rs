@@ -52,17 +52,8 @@ pub struct ValidateArgs {
     /// not see; those reached count as visible in |VS+| and PVS/VS+ (0: none).
     #[arg(long, value_name = "N", default_value_t = 0, conflicts_with = "hunt")]
     pub confirm_rays: u64,
-    /// Seconds between two plain progress lines (`validate: 8,000,000/20,000,000 rays (40 %),
-    /// 1m 02s elapsed, about 1m 33s left`) when stderr is not a terminal (a batch job's log,
-    /// `nohup`, CI), where the progress bar draws nothing; a last line when the rays are done.
-    /// 0: at every report of the workers; `off`: none.
-    #[arg(
-        long,
-        value_name = "SECS|off",
-        default_value = "60",
-        value_parser = crate::cli_progress::parse_progress_every
-    )]
-    pub progress_every: crate::cli_progress::ProgressEvery,
+    #[command(flatten)]
+    pub progress: crate::cli_progress::ProgressArgs,
 }
 
 /// Runs `umbrasweep validate`: prints the table on stdout, writes `--json` if asked, and
@@ -98,7 +89,10 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
         progress: if std::io::stderr().is_terminal() {
             Some(progress_bar())
         } else {
-            args.progress_every.0.map(crate::cli_progress::plain_rays)
+            args.progress
+                .progress_every
+                .0
+                .map(crate::cli_progress::plain_rays)
         },
         hunt: args.hunt,
         confirm_rays: args.confirm_rays,
