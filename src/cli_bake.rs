@@ -757,10 +757,12 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
     };
     // The sampler takes minutes per cell: the bar counts its sample points meanwhile.
     let sample_points = std::sync::atomic::AtomicU64::new(0);
+    let sampler_rects = bake::SamplerRects::default();
+    let work = || crate::cli_progress::SamplerWork::now(&sample_points, &sampler_rects);
     let progress = |k: usize| {
         bar.set_position((resumed + k) as u64);
         if let Some(p) = &plain {
-            p.cell_done(k, sample_points.load(std::sync::atomic::Ordering::Relaxed));
+            p.cell_done(k, work());
         }
     };
     let dump = umbrasweep::inspect::DumpOptions {
@@ -787,12 +789,16 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             s.spawn(|| {
                 use std::sync::atomic::Ordering::Relaxed;
                 while baking.load(Relaxed) {
-                    let n = sample_points.load(Relaxed);
-                    if n > 0 {
-                        bar.set_message(format!(", {n} sample points"));
+                    let w = work();
+                    if w.points > 0 {
+                        let (d, b) = w.rects;
+                        bar.set_message(format!(
+                            ", {} sample points ({d} of {b} rectangles)",
+                            w.points
+                        ));
                     }
                     if let Some(p) = &plain {
-                        p.tick(n);
+                        p.tick(w);
                     }
                     bar.tick();
                     std::thread::park_timeout(std::time::Duration::from_millis(500));
@@ -810,6 +816,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 observe: dumping.then_some(&observe as bake::PlaneObserver),
                 on_cell: Some(&on_cell),
                 sample_points: Some(&sample_points),
+                sampler_rects: Some(&sampler_rects),
                 sampler_checkpoints: checkpoints.as_ref(),
             },
         );

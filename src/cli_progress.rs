@@ -1,10 +1,11 @@
 //! Plain progress lines on stderr for a bake or a validation whose stderr is not a terminal
 //! (the log of a batch job, `nohup`, CI), where the progress bars draw nothing: cells done
-//! and the sampler's points so far ([`PlainProgress`]), or rays cast ([`plain_rays`]), with
-//! the time elapsed and an estimate of what is left, at most one line per interval
-//! (`--progress-every`).
+//! and the sampler's points and face rectangles so far ([`PlainProgress`]), or rays cast
+//! ([`plain_rays`]), with the time elapsed and an estimate of what is left, at most one line
+//! per interval (`--progress-every`).
 
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// `--progress-every` (`bake`, `validate`): seconds between two plain progress lines, or none.
@@ -16,9 +17,10 @@ pub struct ProgressEvery(pub Option<f64>);
 pub struct ProgressArgs {
     /// Seconds between two plain progress lines on stderr when it is not a terminal (a batch
     /// job's log, `nohup`, CI), where the progress bar draws nothing: `bake: 3/10 cells, 1,234
-    /// sample points, 5m 02s elapsed, about 11m 45s left`, `validate: 8,000,000/20,000,000
-    /// rays (40 %), 1m 02s elapsed, about 1m 33s left`. A last line (the last cell's, all the
-    /// rays) is always printed. 0: a line at every report; `off`: none.
+    /// sample points (1,100 of 2,048 rectangles), 5m 02s elapsed, about 11m 45s left`,
+    /// `validate: 8,000,000/20,000,000 rays (40 %), 1m 02s elapsed, about 1m 33s left`. A last
+    /// line (the last cell's, all the rays) is always printed. 0: a line at every report;
+    /// `off`: none.
     #[arg(
         long,
         value_name = "SECS|off",
@@ -45,6 +47,29 @@ pub fn parse_progress_every(v: &str) -> Result<ProgressEvery, String> {
     }
 }
 
+/// The sampler's work so far, for lines inside long cells.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SamplerWork {
+    /// Sample points rendered.
+    pub points: u64,
+    /// Face rectangles finished, and those of the levels begun
+    /// ([`umbrasweep::bake::SamplerRects`]).
+    pub rects: (u64, u64),
+}
+
+impl SamplerWork {
+    /// What the bake's counters hold now.
+    pub fn now(points: &AtomicU64, rects: &umbrasweep::bake::SamplerRects) -> Self {
+        SamplerWork {
+            points: points.load(Ordering::Relaxed),
+            rects: (
+                rects.done.load(Ordering::Relaxed),
+                rects.begun.load(Ordering::Relaxed),
+            ),
+        }
+    }
+}
+
 /// What the last line said, and when.
 #[derive(Default)]
 struct State {
@@ -52,8 +77,8 @@ struct State {
     done: usize,
     /// When the last line was printed.
     last: Option<Instant>,
-    /// The cells and sample points the last line reported.
-    printed: Option<(usize, u64)>,
+    /// The cells and sampler work the last line reported.
+    printed: Option<(usize, SamplerWork)>,
 }
 
 /// A bake's plain progress log (see the module docs). Shared by the workers, which report
@@ -78,31 +103,31 @@ impl PlainProgress {
             resumed,
             // Nothing done and no points: nothing to say yet.
             state: Mutex::new(State {
-                printed: Some((0, 0)),
+                printed: Some((0, SamplerWork::default())),
                 ..State::default()
             }),
         }
     }
 
-    /// `done` of this run's cells are finished (`points` sample points so far). The last
+    /// `done` of this run's cells are finished (`work`: the sampler's so far). The last
     /// cell's line is always printed.
-    pub fn cell_done(&self, done: usize, points: u64) {
+    pub fn cell_done(&self, done: usize, work: SamplerWork) {
         let mut s = self.state.lock().expect("not poisoned");
         s.done = s.done.max(done);
         let last_cell = self.resumed + s.done >= self.total;
-        self.maybe_print(&mut s, points, last_cell);
+        self.maybe_print(&mut s, work, last_cell);
     }
 
     /// Called now and then while cells run: a line when the interval has passed and the
-    /// sample points moved.
-    pub fn tick(&self, points: u64) {
+    /// sampler's work moved.
+    pub fn tick(&self, work: SamplerWork) {
         let mut s = self.state.lock().expect("not poisoned");
-        self.maybe_print(&mut s, points, false);
+        self.maybe_print(&mut s, work, false);
     }
 
-    fn maybe_print(&self, s: &mut State, points: u64, force: bool) {
+    fn maybe_print(&self, s: &mut State, work: SamplerWork, force: bool) {
         let now = Instant::now();
-        let now_state = (s.done, points);
+        let now_state = (s.done, work);
         if s.printed == Some(now_state) {
             return;
         }
@@ -110,16 +135,21 @@ impl PlainProgress {
         if !force && since < self.every {
             return;
         }
-        eprintln!("{}", self.line(s.done, points, now - self.start));
+        eprintln!("{}", self.line(s.done, work, now - self.start));
         s.last = Some(now);
         s.printed = Some(now_state);
     }
 
-    /// `bake: 3/10 cells, 1,234 sample points, 5m 02s elapsed, about 11m 45s left`.
-    fn line(&self, done: usize, points: u64, elapsed: Duration) -> String {
+    /// `bake: 3/10 cells, 1,234 sample points (1,100 of 2,048 rectangles), 5m 02s elapsed,
+    /// about 11m 45s left`.
+    fn line(&self, done: usize, work: SamplerWork, elapsed: Duration) -> String {
         let mut line = format!("bake: {}/{} cells", self.resumed + done, self.total);
-        if points > 0 {
-            line += &format!(", {} sample points", thousands(points));
+        if work.points > 0 {
+            line += &format!(", {} sample points", thousands(work.points));
+        }
+        let (rd, rb) = work.rects;
+        if rb > 0 && rd < rb {
+            line += &format!(" ({} of {} rectangles)", thousands(rd), thousands(rb));
         }
         line += &format!(", {} elapsed", clock(elapsed));
         let left = self.total.saturating_sub(self.resumed + done);
@@ -231,12 +261,16 @@ mod tests {
     #[test]
     fn the_estimate_scales_the_time_so_far_by_the_cells_left() {
         let p = PlainProgress::new(10, 2, 60.0);
-        let line = p.line(2, 0, Duration::from_secs(120));
+        let line = p.line(2, SamplerWork::default(), Duration::from_secs(120));
         assert_eq!(line, "bake: 4/10 cells, 2m 00s elapsed, about 6m 00s left");
-        let line = p.line(0, 1_500, Duration::from_secs(30));
+        let work = SamplerWork {
+            points: 1_500,
+            rects: (1_600, 65_536),
+        };
+        let line = p.line(0, work, Duration::from_secs(30));
         assert_eq!(
             line,
-            "bake: 2/10 cells, 1,500 sample points, 30.0 s elapsed"
+            "bake: 2/10 cells, 1,500 sample points (1,600 of 65,536 rectangles), 30.0 s elapsed"
         );
     }
 

@@ -363,7 +363,9 @@ fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
 }
 
 /// `BakeHooks::sample_points` counts the sampler's points as it renders them (the bake's
-/// progress bar shows it inside long cells): at the end it holds every cell's points.
+/// progress bar shows it inside long cells): at the end it holds every cell's points; and
+/// `BakeHooks::sampler_rects` counts the face rectangles, every one begun also finished, at
+/// least one per point.
 #[test]
 fn the_sample_point_hook_counts_every_point() {
     let (scene, cell) = scene(None);
@@ -372,6 +374,7 @@ fn the_sample_point_hook_counts_every_point() {
         Aabb::new(Vec3::new(0.5, -0.5, -0.5), Vec3::new(1.5, 0.5, 0.5)),
     ];
     let counter = std::sync::atomic::AtomicU64::new(0);
+    let rects = bake::SamplerRects::default();
     let r = bake::bake_cells(
         &scene,
         &cells,
@@ -380,6 +383,7 @@ fn the_sample_point_hook_counts_every_point() {
         &CpuBackend::new(),
         bake::BakeHooks {
             sample_points: Some(&counter),
+            sampler_rects: Some(&rects),
             ..bake::BakeHooks::default()
         },
     )
@@ -387,7 +391,11 @@ fn the_sample_point_hook_counts_every_point() {
     let k = sampler_index(&r);
     let points: u64 = r.cells.iter().map(|c| c.cullers[k].work.points).sum();
     assert!(points > 0);
-    assert_eq!(counter.load(std::sync::atomic::Ordering::Relaxed), points);
+    use std::sync::atomic::Ordering::Relaxed;
+    assert_eq!(counter.load(Relaxed), points);
+    let (done, begun) = (rects.done.load(Relaxed), rects.begun.load(Relaxed));
+    assert_eq!(done, begun, "every rectangle begun is finished");
+    assert!(begun >= points, "{begun} rectangles, {points} points");
 }
 
 /// `--sampling-max-eps`: levels whose balls are coarser are split without being rendered, so
@@ -715,7 +723,7 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
     let (scene, cell, settings) = small_forest();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("row");
-    let run = |spec: &bake::SamplerCheckpoints, points: &AtomicU64| {
+    let run = |spec: &bake::SamplerCheckpoints, points: &AtomicU64, rects: &bake::SamplerRects| {
         let r = bake_with(
             &scene,
             cell,
@@ -723,6 +731,7 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
             bake::BakeHooks {
                 sampler_checkpoints: Some(spec),
                 sample_points: Some(points),
+                sampler_rects: Some(rects),
                 ..bake::BakeHooks::default()
             },
         )
@@ -732,8 +741,9 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
         (r.cells[0].visible.clone(), s, r.cells[0].ms)
     };
     let first_points = AtomicU64::new(0);
+    let first_rects = bake::SamplerRects::default();
     let first = bake::SamplerCheckpoints::new(&out, "inputs", true, 1e9).kept();
-    let (vis1, s1, _) = run(&first, &first_points);
+    let (vis1, s1, _) = run(&first, &first_points, &first_rects);
     assert!(s1.hidden > 0 && s1.work.points > 64, "{s1:?}");
     assert_eq!(first_points.load(Ordering::Relaxed), s1.work.points);
     let kept: Vec<_> = std::fs::read_dir(dir.path())
@@ -752,11 +762,25 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
         .sum();
     assert!(rects as u64 >= s1.work.points, "{rects} rectangles");
     let again_points = AtomicU64::new(0);
+    let again_rects = bake::SamplerRects::default();
     let again = bake::SamplerCheckpoints::new(&out, "inputs", true, 1e9).kept();
-    let (vis2, s2, cell_ms) = run(&again, &again_points);
-    // Every rectangle replayed, none rendered (replayed points count as progress too).
+    let (vis2, s2, cell_ms) = run(&again, &again_points, &again_rects);
+    // Every rectangle replayed, none rendered (replayed points and rectangles count as
+    // progress too).
     assert_eq!(again.replayed.load(Ordering::Relaxed), rects as u64);
     assert_eq!(again_points.load(Ordering::Relaxed), s1.work.points);
+    let counts = |r: &bake::SamplerRects| {
+        (
+            r.done.load(Ordering::Relaxed),
+            r.begun.load(Ordering::Relaxed),
+        )
+    };
+    let (done, begun) = counts(&first_rects);
+    assert!(
+        done == begun && begun >= rects as u64,
+        "{done}, {begun}, {rects}"
+    );
+    assert_eq!(counts(&again_rects), counts(&first_rects));
     assert_eq!(
         (&vis2, s2.hidden, s2.work.points),
         (&vis1, s1.hidden, s1.work.points)

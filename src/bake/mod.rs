@@ -258,6 +258,7 @@ pub fn bake_observed(
             observe,
             on_cell: None,
             sample_points: None,
+            sampler_rects: None,
             sampler_checkpoints: None,
         },
     )
@@ -265,6 +266,18 @@ pub fn bake_observed(
 
 /// Observer of every finished cell: `(cell index, result)`; an error stops the bake.
 pub type CellObserver<'a> = &'a (dyn Fn(usize, &CellResult) -> Result<(), JournalError> + Sync);
+
+/// The shrunk-occluder sampler's face rectangles, for progress inside cells that take
+/// minutes or hours ([`BakeHooks::sampler_rects`]), summed over the cells in flight.
+#[derive(Debug, Default)]
+pub struct SamplerRects {
+    /// Rectangles of the levels begun so far (a level's are added when it starts: with
+    /// `--sampling-levels 0` the cell's whole count at once).
+    pub begun: std::sync::atomic::AtomicU64,
+    /// Rectangles finished: sampled, replayed from a checkpoint, left unsampled after a
+    /// level's probe, or given up.
+    pub done: std::sync::atomic::AtomicU64,
+}
 
 /// What [`bake_cells`] reports while it works.
 #[derive(Clone, Copy, Default)]
@@ -279,6 +292,9 @@ pub struct BakeHooks<'a> {
     /// The shrunk-occluder sampler adds each sample point it renders here, so that a caller
     /// can show progress inside cells that take minutes.
     pub sample_points: Option<&'a std::sync::atomic::AtomicU64>,
+    /// The sampler counts its face rectangles here (how far it is through the levels it has
+    /// begun), so that a caller can show how much of a long cell is done.
+    pub sampler_rects: Option<&'a SamplerRects>,
     /// Where the sampler saves its progress inside each cell (`bake --resume` continues a
     /// cell from it); `None`: nowhere.
     pub sampler_checkpoints: Option<&'a SamplerCheckpoints>,
@@ -310,6 +326,7 @@ pub fn bake_cells(
     }
     let mut prepared = Prepared::new(scene, settings, cells)?;
     prepared.sample_points = hooks.sample_points;
+    prepared.sample_rects = hooks.sampler_rects;
     prepared.checkpoints = hooks.sampler_checkpoints;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cells_out: Result<Vec<CellResult>, BakeError> = which

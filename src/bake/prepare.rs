@@ -56,6 +56,8 @@ pub struct Prepared<'a> {
     pub(super) bounds: DAabb,
     /// Where the sampler counts its sample points for progress ([`super::BakeHooks`]).
     pub(super) sample_points: Option<&'a std::sync::atomic::AtomicU64>,
+    /// Where the sampler counts its rectangles for progress ([`super::BakeHooks`]).
+    pub(super) sample_rects: Option<&'a super::SamplerRects>,
     /// Where the sampler saves its progress inside cells ([`super::BakeHooks`]).
     pub(super) checkpoints: Option<&'a super::SamplerCheckpoints>,
 }
@@ -336,6 +338,7 @@ impl<'a> Prepared<'a> {
         };
         Ok(Prepared {
             sample_points: None,
+            sample_rects: None,
             checkpoints: None,
             cullers: pipeline::cullers(settings, rsf, sweep, sampling),
             rsf_edges,

@@ -554,6 +554,14 @@ impl Culler for SamplingCuller {
             let resolution = s
                 .resolution
                 .unwrap_or_else(|| SamplingSettings::auto_resolution(hit_distance, level_eps));
+            let rects_done = |k: usize| {
+                if let Some(r) = prepared.sample_rects {
+                    r.done.fetch_add(k as u64, Ordering::Relaxed);
+                }
+            };
+            if let Some(r) = prepared.sample_rects {
+                r.begun.fetch_add(level.len() as u64, Ordering::Relaxed);
+            }
             // Rectangles run in lanes of consecutive ones, each lane in order, the lanes of a
             // chunk in parallel. A rectangle decides with what was known visible when its
             // chunk began and what its lane found since, never with what another lane finds
@@ -609,6 +617,7 @@ impl Culler for SamplingCuller {
                         // Stopped (a checkpoint failed, or a test's interruption): the cell
                         // fails below, whatever these rectangles would have found.
                         out.extend(chunk.iter().map(|_| None));
+                        rects_done(chunk.len());
                         continue;
                     }
                     // A chunk the checkpoint recorded is replayed, not rendered.
@@ -617,6 +626,7 @@ impl Culler for SamplingCuller {
                             shared.replay(level[i].0, &r);
                             out.push(r.open.map(Arc::new));
                         }
+                        rects_done(chunk.len());
                         continue;
                     }
                     let known = shared.known_now();
@@ -676,6 +686,7 @@ impl Culler for SamplingCuller {
                         }
                     }
                     out.extend(results.into_iter().map(|(o, _)| o));
+                    rects_done(chunk.len());
                 }
                 out
             };
@@ -734,6 +745,7 @@ impl Culler for SamplingCuller {
                 if skip {
                     probe_only = true;
                     // Their quadrants drop what was decided meanwhile (`patch` filters).
+                    rects_done(rest.len());
                     for i in rest {
                         open[i] = Some(level[i].1.clone());
                     }

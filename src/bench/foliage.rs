@@ -685,11 +685,12 @@ impl Plan {
     }
 }
 
-/// Runs `work` (a row's bake), reporting the sample points rendered so far every minute
-/// while it lasts (sampler rows take hours on the fine forest).
+/// Runs `work` (a row's bake), reporting the sample points rendered and the face rectangles
+/// done so far every minute while it lasts (sampler rows take hours on the fine forest).
 fn with_ticker<T>(
     args: &BenchOptions,
     points: &std::sync::atomic::AtomicU64,
+    rects: &crate::bake::SamplerRects,
     study: &str,
     label: &str,
     work: impl FnOnce() -> T,
@@ -704,10 +705,14 @@ fn with_ticker<T>(
             while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
                 wait.recv_timeout(std::time::Duration::from_secs(60))
             {
-                let n = points.load(std::sync::atomic::Ordering::Relaxed);
+                use std::sync::atomic::Ordering::Relaxed;
+                let n = points.load(Relaxed);
                 if n > 0 {
                     log(&format!(
-                        "bench: foliage {study} [{label}]: {n} sample points so far ({:.0} s)",
+                        "bench: foliage {study} [{label}]: {n} sample points so far, {} of {} \
+                         rectangles ({:.0} s)",
+                        rects.done.load(Relaxed),
+                        rects.begun.load(Relaxed),
                         t.elapsed().as_secs_f64()
                     ));
                 }
@@ -1024,13 +1029,15 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
             peak_reset &= reset_peak();
             let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                 let points = std::sync::atomic::AtomicU64::new(0);
+                let rects = crate::bake::SamplerRects::default();
                 let all: Vec<usize> = (0..cells.len()).collect();
                 let hooks = BakeHooks {
                     sample_points: Some(&points),
+                    sampler_rects: Some(&rects),
                     sampler_checkpoints: checkpoints.as_ref(),
                     ..BakeHooks::default()
                 };
-                let result = with_ticker(args, &points, study, &v.label, || {
+                let result = with_ticker(args, &points, &rects, study, &v.label, || {
                     bake_cells(&f.scene, &cells, &all, &v.settings, backend, hooks)
                 });
                 if let Some(c) = &checkpoints {
