@@ -17,8 +17,8 @@ pub struct ProgressEvery(pub Option<f64>);
 pub struct ProgressArgs {
     /// Seconds between two plain progress lines on stderr when it is not a terminal (a batch
     /// job's log, `nohup`, CI), where the progress bar draws nothing: `bake: 3/10 cells, 1,234
-    /// sample points (1,100 of 2,048 rectangles), 5m 02s elapsed, about 11m 45s left`,
-    /// `validate: 8,000,000/20,000,000 rays (40 %), 1m 02s elapsed, about 1m 33s left`. A last
+    /// sample points (1,100 of 2,048 rectangles), 00:05:02 elapsed, about 00:11:45 left`,
+    /// `validate: 8,000,000/20,000,000 rays (40 %), 00:01:02 elapsed, about 00:01:33 left`. A last
     /// line (the last cell's, all the rays) is always printed. 0: a line at every report;
     /// `off`: none.
     #[arg(
@@ -140,8 +140,8 @@ impl PlainProgress {
         s.printed = Some(now_state);
     }
 
-    /// `bake: 3/10 cells, 1,234 sample points (1,100 of 2,048 rectangles), 5m 02s elapsed,
-    /// about 11m 45s left`.
+    /// `bake: 3/10 cells, 1,234 sample points (1,100 of 2,048 rectangles), 00:05:02 elapsed,
+    /// about 00:11:45 left`.
     fn line(&self, done: usize, work: SamplerWork, elapsed: Duration) -> String {
         let mut line = format!("bake: {}/{} cells", self.resumed + done, self.total);
         if work.points > 0 {
@@ -161,8 +161,8 @@ impl PlainProgress {
     }
 }
 
-/// `validate`'s progress as plain lines: `validate: 8,000,000/20,000,000 rays (40 %), 1m 02s
-/// elapsed, about 1m 33s left`, at most one per `every` seconds (0: at every report of the
+/// `validate`'s progress as plain lines: `validate: 8,000,000/20,000,000 rays (40 %), 00:01:02
+/// elapsed, about 00:01:33 left`, at most one per `every` seconds (0: at every report of the
 /// workers), and always when the rays are done.
 pub fn plain_rays(every: f64) -> umbrasweep::validate::ProgressFn {
     use umbrasweep::validate::Progress;
@@ -216,32 +216,14 @@ pub fn plain_rays(every: f64) -> umbrasweep::validate::ProgressFn {
     })
 }
 
-/// `1h 02m 03s`, `5m 02s` or `12.3 s`.
+/// `01:02:03` (hours, minutes, seconds; days before them when there are any).
 fn clock(d: Duration) -> String {
-    let s = d.as_secs_f64();
-    if s < 60.0 {
-        return format!("{s:.1} s");
-    }
-    let t = s.round() as u64;
-    let (h, m, sec) = (t / 3600, t / 60 % 60, t % 60);
-    if h > 0 {
-        format!("{h}h {m:02}m {sec:02}s")
-    } else {
-        format!("{m}m {sec:02}s")
-    }
+    indicatif::FormattedDuration(d).to_string()
 }
 
 /// `1234567` as `1,234,567`.
 fn thousands(n: u64) -> String {
-    let digits = n.to_string();
-    let mut out = String::new();
-    for (i, c) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i).is_multiple_of(3) {
-            out.push(',');
-        }
-        out.push(c);
-    }
-    out
+    indicatif::HumanCount(n).to_string()
 }
 
 #[cfg(test)]
@@ -250,9 +232,9 @@ mod tests {
 
     #[test]
     fn durations_and_counts_read_as_a_person_writes_them() {
-        assert_eq!(clock(Duration::from_millis(12_345)), "12.3 s");
-        assert_eq!(clock(Duration::from_secs(302)), "5m 02s");
-        assert_eq!(clock(Duration::from_secs(3723)), "1h 02m 03s");
+        assert_eq!(clock(Duration::from_millis(12_345)), "00:00:12");
+        assert_eq!(clock(Duration::from_secs(302)), "00:05:02");
+        assert_eq!(clock(Duration::from_secs(3723)), "01:02:03");
         assert_eq!(thousands(7), "7");
         assert_eq!(thousands(1_234), "1,234");
         assert_eq!(thousands(1_234_567), "1,234,567");
@@ -262,7 +244,10 @@ mod tests {
     fn the_estimate_scales_the_time_so_far_by_the_cells_left() {
         let p = PlainProgress::new(10, 2, 60.0);
         let line = p.line(2, SamplerWork::default(), Duration::from_secs(120));
-        assert_eq!(line, "bake: 4/10 cells, 2m 00s elapsed, about 6m 00s left");
+        assert_eq!(
+            line,
+            "bake: 4/10 cells, 00:02:00 elapsed, about 00:06:00 left"
+        );
         let work = SamplerWork {
             points: 1_500,
             rects: (1_600, 65_536),
@@ -270,7 +255,7 @@ mod tests {
         let line = p.line(0, work, Duration::from_secs(30));
         assert_eq!(
             line,
-            "bake: 2/10 cells, 1,500 sample points (1,600 of 65,536 rectangles), 30.0 s elapsed"
+            "bake: 2/10 cells, 1,500 sample points (1,600 of 65,536 rectangles), 00:00:30 elapsed"
         );
     }
 
