@@ -756,9 +756,8 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         _ => None,
     };
     // The sampler takes minutes per cell: the bar counts its sample points meanwhile.
-    let sample_points = std::sync::atomic::AtomicU64::new(0);
-    let sampler_rects = bake::SamplerRects::default();
-    let work = || crate::cli_progress::SamplerWork::now(&sample_points, &sampler_rects);
+    let sampler_progress = bake::SamplerProgress::default();
+    let work = || crate::cli_progress::SamplerWork::now(&sampler_progress);
     let progress = |k: usize| {
         bar.set_position((resumed + k) as u64);
         if let Some(p) = &plain {
@@ -815,8 +814,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 progress: Some(&progress),
                 observe: dumping.then_some(&observe as bake::PlaneObserver),
                 on_cell: Some(&on_cell),
-                sample_points: Some(&sample_points),
-                sampler_rects: Some(&sampler_rects),
+                sampler_progress: Some(&sampler_progress),
                 sampler_checkpoints: checkpoints.as_ref(),
             },
         );

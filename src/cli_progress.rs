@@ -5,8 +5,9 @@
 //! per interval (`--progress-every`).
 
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
+use umbrasweep::bake::SamplerProgress;
 
 /// `--progress-every` (`bake`, `validate`): seconds between two plain progress lines, or none.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,33 +53,32 @@ pub fn parse_progress_every(v: &str) -> Result<ProgressEvery, String> {
 pub struct SamplerWork {
     /// Sample points rendered.
     pub points: u64,
-    /// Face rectangles finished, and those of the levels begun
-    /// ([`umbrasweep::bake::SamplerRects`]).
+    /// Face rectangles finished, and those of the levels begun.
     pub rects: (u64, u64),
 }
 
 impl SamplerWork {
     /// What the bake's counters hold now.
-    pub fn now(points: &AtomicU64, rects: &umbrasweep::bake::SamplerRects) -> Self {
+    pub fn now(p: &SamplerProgress) -> Self {
         SamplerWork {
-            points: points.load(Ordering::Relaxed),
+            points: p.points.load(Ordering::Relaxed),
             rects: (
-                rects.done.load(Ordering::Relaxed),
-                rects.begun.load(Ordering::Relaxed),
+                p.rects_done.load(Ordering::Relaxed),
+                p.rects_begun.load(Ordering::Relaxed),
             ),
         }
     }
 }
 
 /// What the last line said, and when.
-#[derive(Default)]
 struct State {
     /// This run's cells done (the largest count reported: workers report out of order).
     done: usize,
-    /// When the last line was printed.
-    last: Option<Instant>,
-    /// The cells and sampler work the last line reported.
-    printed: Option<(usize, SamplerWork)>,
+    /// When the last line was printed (at first, the start).
+    last: Instant,
+    /// The cells and sampler work the last line reported (at first, nothing done: nothing
+    /// to say yet).
+    printed: (usize, SamplerWork),
 }
 
 /// A bake's plain progress log (see the module docs). Shared by the workers, which report
@@ -96,15 +96,16 @@ impl PlainProgress {
     /// A log for a bake of `total` cells of which `resumed` are done already, printing at most
     /// one line per `every` seconds (0: a line whenever the count of cells or points moves).
     pub fn new(total: usize, resumed: usize, every: f64) -> Self {
+        let start = Instant::now();
         PlainProgress {
-            start: Instant::now(),
+            start,
             every: Duration::from_secs_f64(every),
             total,
             resumed,
-            // Nothing done and no points: nothing to say yet.
             state: Mutex::new(State {
-                printed: Some((0, SamplerWork::default())),
-                ..State::default()
+                done: 0,
+                last: start,
+                printed: (0, SamplerWork::default()),
             }),
         }
     }
@@ -128,16 +129,12 @@ impl PlainProgress {
     fn maybe_print(&self, s: &mut State, work: SamplerWork, force: bool) {
         let now = Instant::now();
         let now_state = (s.done, work);
-        if s.printed == Some(now_state) {
-            return;
-        }
-        let since = now - s.last.unwrap_or(self.start);
-        if !force && since < self.every {
+        if s.printed == now_state || (!force && now - s.last < self.every) {
             return;
         }
         eprintln!("{}", self.line(s.done, work, now - self.start));
-        s.last = Some(now);
-        s.printed = Some(now_state);
+        s.last = now;
+        s.printed = now_state;
     }
 
     /// `bake: 3/10 cells, 1,234 sample points (1,100 of 2,048 rectangles), 00:05:02 elapsed,

@@ -362,10 +362,9 @@ fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
     brute_force_hidden(&scene, &cell, id("target") as u32);
 }
 
-/// `BakeHooks::sample_points` counts the sampler's points as it renders them (the bake's
-/// progress bar shows it inside long cells): at the end it holds every cell's points; and
-/// `BakeHooks::sampler_rects` counts the face rectangles, every one begun also finished, at
-/// least one per point.
+/// `BakeHooks::sampler_progress` counts the sampler's points as it renders them (the bake's
+/// progress bar shows them inside long cells): at the end it holds every cell's points; and
+/// it counts the face rectangles, every one begun also finished, at least one per point.
 #[test]
 fn the_sample_point_hook_counts_every_point() {
     let (scene, cell) = scene(None);
@@ -373,8 +372,7 @@ fn the_sample_point_hook_counts_every_point() {
         cell,
         Aabb::new(Vec3::new(0.5, -0.5, -0.5), Vec3::new(1.5, 0.5, 0.5)),
     ];
-    let counter = std::sync::atomic::AtomicU64::new(0);
-    let rects = bake::SamplerRects::default();
+    let progress = bake::SamplerProgress::default();
     let r = bake::bake_cells(
         &scene,
         &cells,
@@ -382,8 +380,7 @@ fn the_sample_point_hook_counts_every_point() {
         &settings(),
         &CpuBackend::new(),
         bake::BakeHooks {
-            sample_points: Some(&counter),
-            sampler_rects: Some(&rects),
+            sampler_progress: Some(&progress),
             ..bake::BakeHooks::default()
         },
     )
@@ -392,8 +389,11 @@ fn the_sample_point_hook_counts_every_point() {
     let points: u64 = r.cells.iter().map(|c| c.cullers[k].work.points).sum();
     assert!(points > 0);
     use std::sync::atomic::Ordering::Relaxed;
-    assert_eq!(counter.load(Relaxed), points);
-    let (done, begun) = (rects.done.load(Relaxed), rects.begun.load(Relaxed));
+    assert_eq!(progress.points.load(Relaxed), points);
+    let (done, begun) = (
+        progress.rects_done.load(Relaxed),
+        progress.rects_begun.load(Relaxed),
+    );
     assert_eq!(done, begun, "every rectangle begun is finished");
     assert!(begun >= points, "{begun} rectangles, {points} points");
 }
@@ -719,19 +719,18 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
 /// run's included.
 #[test]
 fn a_kept_checkpoint_replays_the_whole_finished_cell() {
-    use std::sync::atomic::{AtomicU64, Ordering};
+    use std::sync::atomic::Ordering;
     let (scene, cell, settings) = small_forest();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("row");
-    let run = |spec: &bake::SamplerCheckpoints, points: &AtomicU64, rects: &bake::SamplerRects| {
+    let run = |spec: &bake::SamplerCheckpoints, progress: &bake::SamplerProgress| {
         let r = bake_with(
             &scene,
             cell,
             &settings,
             bake::BakeHooks {
                 sampler_checkpoints: Some(spec),
-                sample_points: Some(points),
-                sampler_rects: Some(rects),
+                sampler_progress: Some(progress),
                 ..bake::BakeHooks::default()
             },
         )
@@ -740,12 +739,14 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
         let s = r.cells[0].cullers[k].clone();
         (r.cells[0].visible.clone(), s, r.cells[0].ms)
     };
-    let first_points = AtomicU64::new(0);
-    let first_rects = bake::SamplerRects::default();
+    let first_progress = bake::SamplerProgress::default();
     let first = bake::SamplerCheckpoints::new(&out, "inputs", true, 1e9).kept();
-    let (vis1, s1, _) = run(&first, &first_points, &first_rects);
+    let (vis1, s1, _) = run(&first, &first_progress);
     assert!(s1.hidden > 0 && s1.work.points > 64, "{s1:?}");
-    assert_eq!(first_points.load(Ordering::Relaxed), s1.work.points);
+    assert_eq!(
+        first_progress.points.load(Ordering::Relaxed),
+        s1.work.points
+    );
     let kept: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -761,26 +762,28 @@ fn a_kept_checkpoint_replays_the_whole_finished_cell() {
         .map(|l| l["rects"].as_object().unwrap().len())
         .sum();
     assert!(rects as u64 >= s1.work.points, "{rects} rectangles");
-    let again_points = AtomicU64::new(0);
-    let again_rects = bake::SamplerRects::default();
+    let again_progress = bake::SamplerProgress::default();
     let again = bake::SamplerCheckpoints::new(&out, "inputs", true, 1e9).kept();
-    let (vis2, s2, cell_ms) = run(&again, &again_points, &again_rects);
+    let (vis2, s2, cell_ms) = run(&again, &again_progress);
     // Every rectangle replayed, none rendered (replayed points and rectangles count as
     // progress too).
     assert_eq!(again.replayed.load(Ordering::Relaxed), rects as u64);
-    assert_eq!(again_points.load(Ordering::Relaxed), s1.work.points);
-    let counts = |r: &bake::SamplerRects| {
+    assert_eq!(
+        again_progress.points.load(Ordering::Relaxed),
+        s1.work.points
+    );
+    let counts = |p: &bake::SamplerProgress| {
         (
-            r.done.load(Ordering::Relaxed),
-            r.begun.load(Ordering::Relaxed),
+            p.rects_done.load(Ordering::Relaxed),
+            p.rects_begun.load(Ordering::Relaxed),
         )
     };
-    let (done, begun) = counts(&first_rects);
+    let (done, begun) = counts(&first_progress);
     assert!(
         done == begun && begun >= rects as u64,
         "{done}, {begun}, {rects}"
     );
-    assert_eq!(counts(&again_rects), counts(&first_rects));
+    assert_eq!(counts(&again_progress), counts(&first_progress));
     assert_eq!(
         (&vis2, s2.hidden, s2.work.points),
         (&vis1, s1.hidden, s1.work.points)

@@ -257,8 +257,7 @@ pub fn bake_observed(
             progress,
             observe,
             on_cell: None,
-            sample_points: None,
-            sampler_rects: None,
+            sampler_progress: None,
             sampler_checkpoints: None,
         },
     )
@@ -267,16 +266,18 @@ pub fn bake_observed(
 /// Observer of every finished cell: `(cell index, result)`; an error stops the bake.
 pub type CellObserver<'a> = &'a (dyn Fn(usize, &CellResult) -> Result<(), JournalError> + Sync);
 
-/// The shrunk-occluder sampler's face rectangles, for progress inside cells that take
-/// minutes or hours ([`BakeHooks::sampler_rects`]), summed over the cells in flight.
+/// The shrunk-occluder sampler's work so far, for progress inside cells that take minutes
+/// or hours ([`BakeHooks::sampler_progress`]), summed over the cells in flight.
 #[derive(Debug, Default)]
-pub struct SamplerRects {
-    /// Rectangles of the levels begun so far (a level's are added when it starts: with
+pub struct SamplerProgress {
+    /// Sample points rendered (or replayed from a checkpoint).
+    pub points: std::sync::atomic::AtomicU64,
+    /// Face rectangles of the levels begun so far (a level's are added when it starts: with
     /// `--sampling-levels 0` the cell's whole count at once).
-    pub begun: std::sync::atomic::AtomicU64,
-    /// Rectangles finished: sampled, replayed from a checkpoint, left unsampled after a
+    pub rects_begun: std::sync::atomic::AtomicU64,
+    /// Face rectangles finished: sampled, replayed from a checkpoint, left unsampled after a
     /// level's probe, or given up.
-    pub done: std::sync::atomic::AtomicU64,
+    pub rects_done: std::sync::atomic::AtomicU64,
 }
 
 /// What [`bake_cells`] reports while it works.
@@ -289,12 +290,9 @@ pub struct BakeHooks<'a> {
     /// Every finished cell, by its index in `cells`, from the worker that baked it (the
     /// journal); an error stops the bake.
     pub on_cell: Option<CellObserver<'a>>,
-    /// The shrunk-occluder sampler adds each sample point it renders here, so that a caller
-    /// can show progress inside cells that take minutes.
-    pub sample_points: Option<&'a std::sync::atomic::AtomicU64>,
-    /// The sampler counts its face rectangles here (how far it is through the levels it has
-    /// begun), so that a caller can show how much of a long cell is done.
-    pub sampler_rects: Option<&'a SamplerRects>,
+    /// The shrunk-occluder sampler counts its sample points and face rectangles here as it
+    /// goes, so that a caller can show how far cells that take minutes or hours are.
+    pub sampler_progress: Option<&'a SamplerProgress>,
     /// Where the sampler saves its progress inside each cell (`bake --resume` continues a
     /// cell from it); `None`: nowhere.
     pub sampler_checkpoints: Option<&'a SamplerCheckpoints>,
@@ -325,8 +323,7 @@ pub fn bake_cells(
         }));
     }
     let mut prepared = Prepared::new(scene, settings, cells)?;
-    prepared.sample_points = hooks.sample_points;
-    prepared.sample_rects = hooks.sampler_rects;
+    prepared.sampler_progress = hooks.sampler_progress;
     prepared.checkpoints = hooks.sampler_checkpoints;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let cells_out: Result<Vec<CellResult>, BakeError> = which

@@ -54,10 +54,9 @@ pub struct Prepared<'a> {
     /// A box holding every object: planes' rectangles stop where no ray toward it passes
     /// ([`crate::project::planes::DirectionPlan::relevant_rect`]).
     pub(super) bounds: DAabb,
-    /// Where the sampler counts its sample points for progress ([`super::BakeHooks`]).
-    pub(super) sample_points: Option<&'a std::sync::atomic::AtomicU64>,
-    /// Where the sampler counts its rectangles for progress ([`super::BakeHooks`]).
-    pub(super) sample_rects: Option<&'a super::SamplerRects>,
+    /// Where the sampler counts its points and rectangles for progress
+    /// ([`super::BakeHooks`]).
+    pub(super) sampler_progress: Option<&'a super::SamplerProgress>,
     /// Where the sampler saves its progress inside cells ([`super::BakeHooks`]).
     pub(super) checkpoints: Option<&'a super::SamplerCheckpoints>,
 }
@@ -337,8 +336,7 @@ impl<'a> Prepared<'a> {
             Vec::new()
         };
         Ok(Prepared {
-            sample_points: None,
-            sample_rects: None,
+            sampler_progress: None,
             checkpoints: None,
             cullers: pipeline::cullers(settings, rsf, sweep, sampling),
             rsf_edges,

@@ -555,12 +555,13 @@ impl Culler for SamplingCuller {
                 .resolution
                 .unwrap_or_else(|| SamplingSettings::auto_resolution(hit_distance, level_eps));
             let rects_done = |k: usize| {
-                if let Some(r) = prepared.sample_rects {
-                    r.done.fetch_add(k as u64, Ordering::Relaxed);
+                if let Some(p) = prepared.sampler_progress {
+                    p.rects_done.fetch_add(k as u64, Ordering::Relaxed);
                 }
             };
-            if let Some(r) = prepared.sample_rects {
-                r.begun.fetch_add(level.len() as u64, Ordering::Relaxed);
+            if let Some(p) = prepared.sampler_progress {
+                p.rects_begun
+                    .fetch_add(level.len() as u64, Ordering::Relaxed);
             }
             // Rectangles run in lanes of consecutive ones, each lane in order, the lanes of a
             // chunk in parallel. A rectangle decides with what was known visible when its
@@ -995,8 +996,8 @@ impl Shared<'_> {
             self.points.fetch_sub(1, Ordering::Relaxed);
             return false;
         }
-        if let Some(c) = self.prepared.sample_points {
-            c.fetch_add(1, Ordering::Relaxed);
+        if let Some(p) = self.prepared.sampler_progress {
+            p.points.fetch_add(1, Ordering::Relaxed);
         }
         true
     }
@@ -1009,8 +1010,8 @@ impl Shared<'_> {
         self.polygons.fetch_add(r.polygons, Ordering::Relaxed);
         if r.point {
             self.points.fetch_add(1, Ordering::Relaxed);
-            if let Some(c) = self.prepared.sample_points {
-                c.fetch_add(1, Ordering::Relaxed);
+            if let Some(p) = self.prepared.sampler_progress {
+                p.points.fetch_add(1, Ordering::Relaxed);
             }
             let eps = patch.ball_eps();
             self.finest.fetch_min(eps.to_bits(), Ordering::Relaxed);

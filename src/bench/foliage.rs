@@ -689,8 +689,7 @@ impl Plan {
 /// done so far every minute while it lasts (sampler rows take hours on the fine forest).
 fn with_ticker<T>(
     args: &BenchOptions,
-    points: &std::sync::atomic::AtomicU64,
-    rects: &crate::bake::SamplerRects,
+    progress: &crate::bake::SamplerProgress,
     study: &str,
     label: &str,
     work: impl FnOnce() -> T,
@@ -706,13 +705,13 @@ fn with_ticker<T>(
                 wait.recv_timeout(std::time::Duration::from_secs(60))
             {
                 use std::sync::atomic::Ordering::Relaxed;
-                let n = points.load(Relaxed);
+                let n = progress.points.load(Relaxed);
                 if n > 0 {
                     log(&format!(
                         "bench: foliage {study} [{label}]: {n} sample points so far, {} of {} \
                          rectangles ({:.0} s)",
-                        rects.done.load(Relaxed),
-                        rects.begun.load(Relaxed),
+                        progress.rects_done.load(Relaxed),
+                        progress.rects_begun.load(Relaxed),
                         t.elapsed().as_secs_f64()
                     ));
                 }
@@ -1028,16 +1027,14 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                 .collect();
             peak_reset &= reset_peak();
             let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                let points = std::sync::atomic::AtomicU64::new(0);
-                let rects = crate::bake::SamplerRects::default();
+                let progress = crate::bake::SamplerProgress::default();
                 let all: Vec<usize> = (0..cells.len()).collect();
                 let hooks = BakeHooks {
-                    sample_points: Some(&points),
-                    sampler_rects: Some(&rects),
+                    sampler_progress: Some(&progress),
                     sampler_checkpoints: checkpoints.as_ref(),
                     ..BakeHooks::default()
                 };
-                let result = with_ticker(args, &points, &rects, study, &v.label, || {
+                let result = with_ticker(args, &progress, study, &v.label, || {
                     bake_cells(&f.scene, &cells, &all, &v.settings, backend, hooks)
                 });
                 if let Some(c) = &checkpoints {
