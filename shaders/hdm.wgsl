@@ -196,3 +196,81 @@ fn answer(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     answers[n] = HIDDEN;
 }
+
+// ---- Sweep planes kept on the device (`hdm::KeptPlane`) ----
+//
+// A kept plane's summed-area table of the pixels outside its umbra (entry (x, y) counts the
+// pixels of [0, x] × [0, y] whose Depth is not `<= 0`; NaN is outside), the twin of
+// `prepare::umbra_table`, built from level 0 of its pyramid (the map, slice mask merged):
+// `sat_rows` runs along each row (and gathers the umbra's bounding box and the count outside
+// it into the plane's summary), then `sat_cols` down each column. Counts are integers: the
+// table is the CPU's exactly.
+
+// A kept plane: its map's first f32 in the pyramid, its size, its table's first word in
+// `tables` and the table's row stride (words, a multiple of 64 for the copy into a texture).
+struct Kept {
+    base: u32,
+    width: u32,
+    height: u32,
+    table: u32,
+    stride: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+// Words per plane of the summary: i0 (min), i1 (max), j0 (min), j1 (max) of the umbra's
+// pixels, then the count outside the umbra; i0 and j0 start at 0xffffffff, the rest at 0.
+const SUMMARY: u32 = 8u;
+
+@group(0) @binding(10) var<storage, read> kpyr: array<f32>;
+@group(0) @binding(11) var<storage, read> kept: array<Kept>;
+@group(0) @binding(12) var<storage, read_write> tables: array<u32>;
+@group(0) @binding(13) var<storage, read_write> summary: array<atomic<u32>>;
+
+// Row `id.x` of kept plane `id.z`.
+@compute @workgroup_size(64)
+fn sat_rows(@builtin(global_invocation_id) id: vec3<u32>) {
+    let k = kept[id.z];
+    let y = id.x;
+    if y >= k.height {
+        return;
+    }
+    var run = 0u;
+    var first = 0xffffffffu;
+    var last = 0u;
+    for (var x = 0u; x < k.width; x++) {
+        let d = kpyr[k.base + y * k.width + x];
+        if d <= 0.0 {
+            first = min(first, x);
+            last = x;
+        } else {
+            run += 1u;
+        }
+        tables[k.table + y * k.stride + x] = run;
+    }
+    let s = id.z * SUMMARY;
+    if first != 0xffffffffu {
+        atomicMin(&summary[s], first);
+        atomicMax(&summary[s + 1u], last);
+        atomicMin(&summary[s + 2u], y);
+        atomicMax(&summary[s + 3u], y);
+    }
+    atomicAdd(&summary[s + 4u], run);
+}
+
+// Column `id.x` of kept plane `id.z`: each entry plus the rows above.
+@compute @workgroup_size(64)
+fn sat_cols(@builtin(global_invocation_id) id: vec3<u32>) {
+    let k = kept[id.z];
+    let x = id.x;
+    if x >= k.width {
+        return;
+    }
+    var acc = 0u;
+    for (var y = 0u; y < k.height; y++) {
+        let t = k.table + y * k.stride + x;
+        acc += tables[t];
+        tables[t] = acc;
+    }
+}

@@ -117,12 +117,18 @@ pub struct BakeArgs {
     /// an NVIDIA H200 328 ms per city cell against 84 on its CPU). Ignored on the CPU backend.
     #[arg(long)]
     pub rsf_on_gpu: bool,
-    /// Read the GPU backend's Depth Maps of separate planes back and test occludees against
-    /// them on the CPU, instead of building their pyramids and answering the tests on the
-    /// device (the default: only the answers come back). The same PVS; for comparisons.
+    /// Read the GPU backend's Depth Maps back (separate planes' and the occlusion sweep's)
+    /// and test occludees against them on the CPU, instead of building their pyramids and
+    /// answering the tests on the device (the default: only the answers come back, and a
+    /// sweep's maps stay there for its later planes). The same PVS; for comparisons.
     /// Ignored on the CPU backend.
     #[arg(long)]
     pub tests_on_cpu: bool,
+    /// Read only the occlusion sweep's Depth Maps back (each plane's umbra reprojected from
+    /// the CPU's copy), testing separate planes on the device. The same PVS; for
+    /// comparisons. Ignored on the CPU backend.
+    #[arg(long)]
+    pub sweep_maps_on_cpu: bool,
     /// Depth Map resolution per side (a power of two).
     #[arg(long, default_value_t = BakeSettings::default_settings().resolution)]
     pub resolution: u32,
@@ -497,7 +503,7 @@ pub fn make_backend(
     choice: BackendChoice,
     projection: GpuProjection,
     rsf_on_gpu: bool,
-    tests_on_cpu: bool,
+    (tests_on_cpu, sweep_maps_on_cpu): (bool, bool),
 ) -> anyhow::Result<Box<dyn RasterBackend>> {
     use umbrasweep::backend::gpu::{GpuBackend, hardware_adapter_available};
     match choice {
@@ -515,6 +521,7 @@ pub fn make_backend(
                     bail!("--rsf-on-gpu: {e} (leave it out: the CPU's charts are the same)");
                 }
                 b.set_tests_on_device(!tests_on_cpu);
+                b.set_keep_sweep_maps(!sweep_maps_on_cpu);
                 Ok(Box::new(b))
             }
             Err(e) => bail!("--backend gpu: {e} (use --backend cpu)"),
@@ -678,7 +685,12 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             );
         }
     }
-    let backend = make_backend(a.backend, a.gpu_projection, a.rsf_on_gpu, a.tests_on_cpu)?;
+    let backend = make_backend(
+        a.backend,
+        a.gpu_projection,
+        a.rsf_on_gpu,
+        (a.tests_on_cpu, a.sweep_maps_on_cpu),
+    )?;
     let backend = backend.as_ref();
     let which: Vec<usize> = match a.shard {
         Some(s) => s.cells(cells.len()),

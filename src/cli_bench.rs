@@ -68,10 +68,15 @@ pub struct BenchArgs {
     /// instead of the CPU: the same charts, slower on every device measured so far.
     #[arg(long)]
     pub rsf_on_gpu: bool,
-    /// Read the GPU backend's Depth Maps of separate planes back and test occludees on the
-    /// CPU instead of on the device (the default): the same PVS, to compare the two.
+    /// Read the GPU backend's Depth Maps back (separate planes' and the occlusion sweep's)
+    /// and test occludees on the CPU instead of on the device (the default): the same PVS,
+    /// to compare the two.
     #[arg(long)]
     pub tests_on_cpu: bool,
+    /// Read only the occlusion sweep's Depth Maps back instead of keeping them on the device
+    /// (the default): the same PVS, to compare the two.
+    #[arg(long)]
+    pub sweep_maps_on_cpu: bool,
     /// The shared scene folder (default: ../shared/scenes when it exists).
     #[arg(long, value_name = "DIR")]
     pub shared: Option<PathBuf>,
@@ -202,6 +207,7 @@ impl From<&BenchArgs> for BenchOptions {
             gpu_projection: a.gpu_projection,
             rsf_on_gpu: a.rsf_on_gpu,
             tests_on_cpu: a.tests_on_cpu,
+            sweep_maps_on_cpu: a.sweep_maps_on_cpu,
             shared: a.shared.clone(),
             scenes: a.scenes.clone(),
             pvs_out: a.pvs_out.clone(),

@@ -464,6 +464,7 @@ fn queries_beyond_a_storage_binding_bring_the_map_back() {
                 answered += 1;
             }
             PlaneResult::Map(m) => assert_eq!(m, map, "job {k}"),
+            PlaneResult::Kept(_) => panic!("job {k}: kept, though not asked to"),
         }
     }
     assert!(answered >= 2, "{answered} jobs answered on the device");
@@ -972,6 +973,7 @@ fn occludee_tests_on_the_device_match_the_pyramid() {
                 match r {
                     PlaneResult::Map(_) => "a map",
                     PlaneResult::Answers(_) => "answers",
+                    PlaneResult::Kept(_) => "a kept map",
                 },
                 q.as_ref().map_or(0, Vec::len)
             ),
@@ -1305,6 +1307,155 @@ fn reprojection_matches_the_cpu_exactly() {
     assert!(stats.reprojections * 10 >= reprojections * 9, "{stats:?}");
     // Applying only the first reprojection would fail the comparison above.
     assert!(beyond_first > 1000, "{beyond_first}");
+}
+
+/// A sweep plane kept on the device (`render_kept`): its umbra's box and the count outside
+/// it are those of the map the device renders for the same job, its answers the pyramid's,
+/// and a later job reprojecting from its stand-in renders bit for bit the map that
+/// reprojecting from the map itself renders — on the GPU, and on the CPU for jobs without
+/// occluders (exact). Chains of three planes of a sweep on every axis and side: a random
+/// source (umbra, holes, NaNs), a plane reprojecting it (with occluders, slices or neither,
+/// maps stretched at random) that is kept, and a plane reprojecting from that one. Without
+/// umbra the stand-in sets nothing.
+#[test]
+fn kept_maps_reproject_as_the_maps_they_stand_for() {
+    if backend().is_none() {
+        return;
+    }
+    // A backend of its own, so that its counters are this test's.
+    let b = GpuBackend::new().expect("a second device");
+    let mut rng = Pcg64::seed_from_u64(41);
+    let (mut chains, mut with_umbra, mut exact, mut skipped) = (0usize, 0usize, 0usize, 0usize);
+    for res in [16u32, 64, 256] {
+        for axis in 0..3 {
+            for positive in [true, false] {
+                for variant in 0..3 {
+                    let d0 = rng.random_range(0.2..2.0);
+                    let d1 = d0 + rng.random_range(0.05..1.5);
+                    let d2 = d1 + rng.random_range(0.05..1.5);
+                    let mut planes = sweep_planes(&mut rng, res, axis, positive, &[d0, d1, d2]);
+                    stretch_at_random(&mut rng, &mut planes);
+                    let (f0, f1, f2) = (&planes[0], &planes[1], &planes[2]);
+                    // The third variant has no umbra to carry (its source is all holes), only
+                    // its occluders. The
+                    // others' sources are umbra but for random_source's holes (its blobs alone
+                    // are often too small for a window from a near plane).
+                    let source = if variant == 2 {
+                        DepthMap::for_frame(f0)
+                    } else {
+                        let mut m = random_source(&mut rng, f0);
+                        for d in &mut m.depth {
+                            if *d == f32::INFINITY {
+                                *d = -0.25;
+                            }
+                        }
+                        m
+                    };
+                    let mut occluders = OccluderSet::default();
+                    if variant >= 1 {
+                        for _ in 0..20 {
+                            occluders.push(random_occluder(&mut rng, f1, Shape::Quad));
+                        }
+                    }
+                    let slices = if variant == 0 && axis == 1 {
+                        let c = 0.5 * (f1.rect_min + f1.rect_max);
+                        square(c.x, c.y, 0.2 * (f1.rect_max.x - f1.rect_min.x), 0.4)
+                    } else {
+                        vec![]
+                    };
+                    let kept_job = PlaneJob {
+                        frame: f1.clone(),
+                        occluders,
+                        slices,
+                        reproject: vec![Reprojection::new(f0, f1, Arc::new(source))],
+                    };
+                    let map = b.render(std::slice::from_ref(&kept_job)).unwrap().remove(0);
+                    let (w, h) = (f1.width, f1.height);
+                    let queries = vec![
+                        RectQuery {
+                            rect: [0, 0, w - 1, h - 1],
+                            depth: 0.5,
+                        },
+                        RectQuery {
+                            rect: [w / 4, h / 4, w / 2, h / 2],
+                            depth: f32::INFINITY,
+                        },
+                    ];
+                    let result = b
+                        .render_kept(
+                            std::slice::from_ref(&kept_job),
+                            &[Some(queries.clone())],
+                            &[true],
+                        )
+                        .unwrap()
+                        .remove(0);
+                    let what =
+                        format!("res {res}, axis {axis}, positive {positive}, variant {variant}");
+                    let kept = match result {
+                        PlaneResult::Kept(kept) => kept,
+                        // A plane nothing can cover skips the device: its map, made on the CPU.
+                        PlaneResult::Map(m) => {
+                            assert_eq!(m, map, "{what}");
+                            assert_eq!(m.covered(), 0, "{what}: only an empty map is not kept");
+                            skipped += 1;
+                            continue;
+                        }
+                        PlaneResult::Answers(_) => panic!("{what}: answers without the map"),
+                    };
+                    assert!(kept.source.is_on_device(), "{what}");
+                    assert_eq!(
+                        kept.umbra,
+                        umbrasweep::sweep::umbra_pixels(&map),
+                        "{what}: umbra box"
+                    );
+                    let outside = map.depth.iter().filter(|&&d| d.is_nan() || d > 0.0).count();
+                    assert_eq!(kept.outside_umbra, outside as u64, "{what}: outside");
+                    let hdm = Hdm::build(&map);
+                    let answers: Vec<_> = queries
+                        .iter()
+                        .map(|q| {
+                            let [i0, j0, i1, j1] = q.rect;
+                            hdm.test(i0, j0, i1, j1, q.depth)
+                        })
+                        .collect();
+                    assert_eq!(kept.answers, answers, "{what}: answers");
+                    // The next plane, from the stand-in and from the map.
+                    let next = |source: Arc<DepthMap>| PlaneJob {
+                        frame: f2.clone(),
+                        occluders: OccluderSet::default(),
+                        slices: vec![],
+                        reproject: vec![Reprojection::new(f1, f2, source)],
+                    };
+                    let from_kept = b.render(&[next(kept.source.clone())]).unwrap().remove(0);
+                    let from_map_job = next(Arc::new(map.clone()));
+                    let from_map = b.render(std::slice::from_ref(&from_map_job)).unwrap();
+                    assert_bits_equal(&from_kept, &from_map[0], &what);
+                    if kept_job.occluders.is_empty() {
+                        // Reprojections and slices are exact: the CPU's whole chain agrees.
+                        let cpu_map = cpu::render_job(&kept_job);
+                        assert_bits_equal(&map, &cpu_map, &what);
+                        assert_bits_equal(&from_kept, &cpu::render_job(&from_map_job), &what);
+                        exact += 1;
+                    }
+                    match kept.umbra {
+                        Some(_) => with_umbra += 1,
+                        None => assert_eq!(from_kept.covered(), 0, "{what}: nothing to carry"),
+                    }
+                    chains += 1;
+                }
+            }
+        }
+    }
+    let stats = b.total_stats();
+    eprintln!(
+        "kept maps: {chains} chains, {with_umbra} with umbra, {exact} exact, {skipped} not \
+         drawn; {stats:?}"
+    );
+    assert_eq!(stats.kept_maps, chains);
+    assert!(skipped < chains / 4, "{skipped} not drawn, {chains} kept");
+    assert!(exact >= chains / 3, "{exact} exact of {chains}");
+    assert!(with_umbra >= chains / 2, "{with_umbra} of {chains}");
+    assert!(with_umbra < chains, "some without umbra");
 }
 
 /// A job with a reprojection and no occluders is rendered on the GPU (one pass, one draw); one
@@ -1711,6 +1862,28 @@ fn bake_pvs_is_identical_with_the_sweep() {
     let (scene, c, g) = sweep_forest_bakes(&b);
     let stats = b.total_stats();
     eprintln!("sweep bake of a forest: {stats:?}");
+    // The sweep's maps stay on the device (`render_kept`): no map comes back.
+    assert!(stats.kept_maps > 0, "{stats:?}");
+    assert!(
+        stats.maps_read_back * 10 < stats.kept_maps,
+        "few maps come back: {stats:?}"
+    );
+    // Read back instead, the same PVS.
+    let mut back = GpuBackend::new().expect("a third device");
+    back.set_keep_sweep_maps(false);
+    let (_, _, g_back) = sweep_forest_bakes(&back);
+    let back_stats = back.total_stats();
+    assert_eq!(back_stats.kept_maps, 0, "{back_stats:?}");
+    assert!(back_stats.maps_read_back > 0, "{back_stats:?}");
+    assert!(
+        back_stats.bytes_read_back > 4 * stats.bytes_read_back,
+        "kept: {} bytes read back, read back: {}",
+        stats.bytes_read_back,
+        back_stats.bytes_read_back
+    );
+    for (k, (a, b)) in g.cells.iter().zip(&g_back.cells).enumerate() {
+        assert_eq!(a.visible, b.visible, "cell {k}, kept against read back");
+    }
     assert!(
         2 * stats.reprojections > 3 * stats.gpu_planes,
         "several reprojections per plane: {stats:?}"
@@ -1733,6 +1906,36 @@ fn bake_pvs_is_identical_with_the_sweep() {
         assert_eq!(cc.visible, gc.visible, "cell {k}");
         assert_eq!(cc.planes, gc.planes, "cell {k}");
     }
+}
+
+/// A sweep plane whose umbra covers its whole frame ends its direction and tests every box
+/// behind it, not only those within its usual reach (16 times its distance): with its map
+/// kept on the device it is rendered again for those tests. A wide wall in front of the cell
+/// (the first plane behind it is all umbra) and a row of boxes behind it out to 200 units,
+/// beyond that reach: the GPU bake hides them all as the CPU's does.
+#[test]
+fn a_sweep_plane_ending_its_direction_tests_what_lies_far_behind() {
+    let mut objects = vec![cube("wall", [-400.0, -400.0, 2.0], [400.0, 400.0, 2.5])];
+    for (k, d) in [100.0f32, 190.0].into_iter().enumerate() {
+        objects.push(cube(
+            &format!("far{k}"),
+            [-1.0, -1.0, d],
+            [1.0, 1.0, d + 1.0],
+        ));
+    }
+    let far = objects.len() - 1;
+    let scene = Scene::from_objects(Path::new("wall"), objects);
+    let cells = [Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))];
+    // The sweep alone (ray space factorization would hide the boxes first).
+    let settings = BakeSettings {
+        sweep: umbrasweep::bake::SweepChoice::On,
+        rsf: umbrasweep::bake::SweepChoice::Off,
+        ..BakeSettings::default()
+    };
+    let Some(hidden) = same_pvs(&scene, &cells, &settings) else {
+        return;
+    };
+    assert_eq!(hidden, far, "every box behind the wall is hidden");
 }
 
 #[test]

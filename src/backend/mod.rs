@@ -388,6 +388,29 @@ pub trait RasterBackend: Send + Sync {
     fn tests_on_device(&self) -> bool {
         false
     }
+    /// [`Self::render_tested`], where `keep[k]` asks to keep job `k`'s map on the device for
+    /// later reprojections (an occlusion sweep's plane): the backend then gives back
+    /// [`plane::PlaneResult::Kept`] — the answers to its queries (which must be given), the
+    /// umbra's bounding box and size, and a stand-in for the map that a later job's
+    /// [`plane::Reprojection`] names as its source — or, where it cannot keep it, the map as
+    /// [`Self::render_tested`] would. Kept maps are given only to the backend that kept them.
+    /// The default keeps nothing.
+    ///
+    /// # Errors
+    /// As [`Self::render`].
+    fn render_kept(
+        &self,
+        jobs: &[plane::PlaneJob],
+        queries: &[Option<Vec<plane::RectQuery>>],
+        keep: &[bool],
+    ) -> Result<Vec<plane::PlaneResult>, BackendError> {
+        debug_assert_eq!(jobs.len(), keep.len());
+        self.render_tested(jobs, queries)
+    }
+    /// True when [`Self::render_kept`] may keep maps on the device.
+    fn keeps_maps(&self) -> bool {
+        false
+    }
     /// True when [`Self::rsf_charts`] gives charts on the device rather than the CPU's.
     fn rsf_on_device(&self) -> bool {
         false

@@ -24,6 +24,22 @@
 //! answers. The real walk asks only recorded tests (it skips more as it marks, never less),
 //! and each answer is the one [`Hdm::test`] gives on that map, so the result is the walk's
 //! on the CPU; a test it did not record would stay open (a debug assertion catches it).
+//!
+//! # Sweep planes kept on the device
+//! On a backend that also keeps maps ([`RasterBackend::keeps_maps`]) a sweep plane's map stays
+//! there too ([`RasterBackend::render_kept`]): what the sweep needs of it comes back without
+//! its pixels. Its walk is recorded as above (with the plane's usual reach), and so is every
+//! test the next plane's planning may ask of it: leaving out occluders this plane proves
+//! hidden walks the object hierarchy over the next slab (`Prepared::gather_slab`), and that
+//! walk is run once in advance with every box answered "not hidden", recording each test
+//! (`Prepared::record_leave_out`) — the real walk later asks a subset. The umbra's bounding
+//! box and whether the umbra covers the whole plane come back as numbers, and later planes
+//! reproject from the map where it lies. A plane that turns out to end its direction tests
+//! every box behind it, not only those within reach: it is rendered again with those tests
+//! (`Prepared::retest_ending`). Past [`MAX_RECORDED_QUERIES`] or [`MAX_RECORDED_BOXES`] the
+//! map comes back as before. So
+//! every answer is the one the map's pyramid gives on the CPU, and the PVS is the CPU
+//! backend's.
 
 use super::BakeError;
 use super::pipeline::{CullState, Culler, CullerWork, PlaneSink};
@@ -71,9 +87,12 @@ impl Culler for PlaneCuller {
     }
 }
 
-/// Separate planes' occludee tests go to the device only while at most this many boxes (nodes,
-/// objects, pieces) are undecided: every one is recorded, where the walk on the CPU prunes,
-/// so past this the map comes back instead (at most 3 queries of 16 bytes per box).
+/// A plane's occludee tests go to the device only while its recorded walk asks at most this
+/// many tests (16 bytes each up, 4 down): every box not yet decided within the plane's reach
+/// is recorded, where the walk on the CPU prunes, so past this the map comes back instead.
+pub const MAX_RECORDED_QUERIES: usize = 49_152;
+/// The most boxes a sweep plane's recorded leave-out walk may test
+/// (`Prepared::record_leave_out`) before its map comes back instead.
 pub const MAX_RECORDED_BOXES: usize = 16_384;
 
 /// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
@@ -131,31 +150,50 @@ impl Prepared<'_> {
             if planned.is_empty() {
                 continue;
             }
-            // Separate planes' tests can be answered on the device when no map is wanted
-            // here: every test the traversal may ask, from what is known now.
-            let queries: Vec<Option<Vec<RectQuery>>> =
-                if backend.tests_on_device() && !observe.wants_maps() {
-                    planned
-                        .par_iter()
-                        .map(|p| {
-                            if plans[p.dir].is_sweep() {
-                                return None;
-                            }
-                            self.record_queries(
-                                &p.job,
-                                &cell64,
-                                round.range(p.dir, false),
-                                &hidden,
-                                &node_done,
-                                &piece_hidden,
-                                &skip_test,
-                            )
-                        })
-                        .collect()
-                } else {
-                    vec![None; planned.len()]
-                };
-            let rendered = render_round(&round, backend, planned, queries)?;
+            // Tests can be answered on the device when no map is wanted here: every test the
+            // traversal may ask, from what is known now; and a sweep plane's map can stay
+            // there with every test the next plane's planning may ask of it.
+            let on_device = backend.tests_on_device() && !observe.wants_maps();
+            let keep_maps = on_device && backend.keeps_maps();
+            let queries: Vec<Option<Vec<RectQuery>>> = if on_device {
+                planned
+                    .par_iter()
+                    .map(|p| {
+                        let sweep = plans[p.dir].is_sweep();
+                        if sweep && !keep_maps {
+                            return None;
+                        }
+                        let q = self.record_queries(
+                            &p.job,
+                            &cell64,
+                            round.range(p.dir, false),
+                            &hidden,
+                            &node_done,
+                            &piece_hidden,
+                            &skip_test,
+                        )?;
+                        let q = if sweep {
+                            self.record_leave_out(&round, p, &hidden, &node_done, q)?
+                        } else {
+                            q
+                        };
+                        Some(q.list)
+                    })
+                    .collect()
+            } else {
+                vec![None; planned.len()]
+            };
+            let keep: Vec<bool> = (planned.iter().zip(&queries))
+                .map(|(p, q)| q.is_some() && plans[p.dir].is_sweep())
+                .collect();
+            let mut rendered = render_round(&round, backend, planned, queries, &keep)?;
+            self.retest_ending(
+                &round,
+                backend,
+                &mut rendered,
+                (&hidden, &node_done, &piece_hidden),
+                &skip_test,
+            )?;
             for r in &rendered {
                 if let Tested::Map { map, hdm } = &r.tested {
                     observe.plane(&r.job, map, hdm);
@@ -211,11 +249,18 @@ impl Prepared<'_> {
                 });
                 let leave_out = LeaveOut {
                     object: &|o| hidden[o as usize],
-                    // Occluders the previous plane already proves hidden add nothing.
+                    // Occluders the previous plane already proves hidden add nothing (only the
+                    // plane just in front: what a kept map answers was recorded for it).
                     hidden: &|b| {
-                        dir.prev.as_ref().is_some_and(|(f, h)| {
-                            self.test_box(f, &Tests::Hdm(h), b, round.cell, (0.0, f64::INFINITY))
-                                == Coverage::Hidden
+                        dir.prev.as_ref().is_some_and(|prev| {
+                            prev.index + 1 == k
+                                && self.test_box(
+                                    &prev.frame,
+                                    &prev.tested.tests(),
+                                    b,
+                                    round.cell,
+                                    (0.0, f64::INFINITY),
+                                ) == Coverage::Hidden
                         })
                     },
                 };
@@ -397,8 +442,8 @@ impl Prepared<'_> {
     /// on: those of every node not done, every object of theirs still to test and every piece
     /// of those not yet hidden — what the traversal reaches is a subset, as it only skips more
     /// while it marks. For a backend to answer on its device ([`RasterBackend::render_tested`]).
-    /// `None` when more than [`MAX_RECORDED_BOXES`] boxes are undecided: recording them all
-    /// would cost more than the walk, which prunes, and the map comes back instead.
+    /// `None` when it records more than [`MAX_RECORDED_QUERIES`] tests: answering them would
+    /// cost more than sending the map, and the map comes back instead.
     #[expect(
         clippy::too_many_arguments,
         reason = "the traversal's own inputs, read-only here"
@@ -412,31 +457,12 @@ impl Prepared<'_> {
         node_done: &[bool],
         piece_hidden: &[bool],
         skip_test: &(dyn Fn(usize, &[bool]) -> bool + Sync),
-    ) -> Option<Vec<RectQuery>> {
+    ) -> Option<Queries> {
         let queries = RefCell::new(Queries::default());
         let tests = Tests::Record(&queries);
         let Some(bvh) = &self.bvh else {
-            return Some(Vec::new());
+            return Some(Queries::default());
         };
-        let undecided = (bvh.nodes.iter().enumerate())
-            .filter(|&(ni, _)| !node_done[ni])
-            .map(|(_, node)| {
-                let objects = (0..node.prim_count)
-                    .map(|k| bvh.primitive_indices[(node.first_index + k) as usize] as usize)
-                    .filter(|&o| !skip_test(o, hidden));
-                1 + objects
-                    .map(|o| {
-                        1 + self.pieces[o]
-                            .clone()
-                            .filter(|&p| !piece_hidden[p as usize])
-                            .count()
-                    })
-                    .sum::<usize>()
-            })
-            .sum::<usize>();
-        if undecided > MAX_RECORDED_BOXES {
-            return None;
-        }
         for (ni, node) in bvh.nodes.iter().enumerate() {
             if node_done[ni] {
                 continue;
@@ -463,8 +489,107 @@ impl Prepared<'_> {
                     }
                 }
             }
+            if queries.borrow().list.len() > MAX_RECORDED_QUERIES {
+                return None;
+            }
         }
-        Some(queries.into_inner().list)
+        Some(queries.into_inner())
+    }
+
+    /// Adds to `queries` every test that planning sweep plane `k + 1` of `planned`'s direction
+    /// may ask of plane `k` (`planned`) to leave out occluders it proves hidden: the walk of
+    /// [`Self::gather_slab`] over that slab, run now with every box answered "not hidden"
+    /// (so it descends everywhere the real walk may) and every test recorded. The real walk
+    /// starts from a state with at least as many objects hidden and nodes done, so it asks a
+    /// subset. `None` when it would record more than [`MAX_RECORDED_BOXES`] boxes (the map
+    /// then comes back).
+    fn record_leave_out(
+        &self,
+        round: &Round,
+        planned: &PlannedPlane,
+        hidden: &[bool],
+        node_done: &[bool],
+        queries: Queries,
+    ) -> Option<Queries> {
+        let plan = &round.plans[planned.dir];
+        let next = round.k + 1;
+        if next >= plan.distances.len() {
+            return Some(queries);
+        }
+        let recorded = RefCell::new(queries);
+        let boxes = std::cell::Cell::new(0usize);
+        let tests = Tests::Record(&recorded);
+        let leave_out = LeaveOut {
+            object: &|o| hidden[o as usize],
+            hidden: &|b| {
+                boxes.set(boxes.get() + 1);
+                if boxes.get() <= MAX_RECORDED_BOXES {
+                    self.test_box(
+                        &planned.job.frame,
+                        &tests,
+                        b,
+                        round.cell,
+                        (0.0, f64::INFINITY),
+                    );
+                }
+                false
+            },
+        };
+        self.gather_slab(plan, next, &leave_out, hidden, node_done);
+        (boxes.get() <= MAX_RECORDED_BOXES).then(|| recorded.into_inner())
+    }
+
+    /// A kept sweep plane that turns out to end its direction ([`ends_sweep`]) tests every box
+    /// behind it, not only those within its usual reach ([`Round::range`]), which is all its
+    /// recorded tests cover: such planes are rendered again (one call for all), with their
+    /// tests recorded for the whole range, or for their maps where too many boxes are
+    /// undecided. They end their directions, so their kept maps are not needed any more.
+    ///
+    /// # Errors
+    /// The backend's failure.
+    fn retest_ending(
+        &self,
+        round: &Round,
+        backend: &dyn RasterBackend,
+        rendered: &mut [RenderedPlane],
+        (hidden, node_done, piece_hidden): (&[bool], &[bool], &[bool]),
+        skip_test: &(dyn Fn(usize, &[bool]) -> bool + Sync),
+    ) -> Result<(), BakeError> {
+        let again: Vec<usize> = (0..rendered.len())
+            .filter(|&i| {
+                let r = &rendered[i];
+                matches!(r.tested, Tested::Kept { .. })
+                    && r.ends
+                    && round.range(r.dir, false) != round.range(r.dir, true)
+            })
+            .collect();
+        if again.is_empty() {
+            return Ok(());
+        }
+        let queries: Vec<Option<Vec<RectQuery>>> = again
+            .par_iter()
+            .map(|&i| {
+                let r = &rendered[i];
+                let cell = round.cell;
+                let range = round.range(r.dir, true);
+                self.record_queries(
+                    &r.job,
+                    cell,
+                    range,
+                    hidden,
+                    node_done,
+                    piece_hidden,
+                    skip_test,
+                )
+                .map(|q| q.list)
+            })
+            .collect();
+        let jobs: Vec<PlaneJob> = again.iter().map(|&i| rendered[i].job.clone()).collect();
+        let results = backend.render_tested(&jobs, &queries)?;
+        for ((&i, result), q) in again.iter().zip(results).zip(queries) {
+            rendered[i].tested = Tested::of(result, q);
+        }
+        Ok(())
     }
 
     /// The occlusion test of one box on one plane: `Hidden`; `Empty` when nothing inside the
@@ -540,20 +665,19 @@ impl Prepared<'_> {
     }
 }
 
-/// True when sweep plane `k`'s umbra covers its whole frame: what lies behind it in the
+/// True when sweep plane `k`, whose umbra covers every pixel of its map, ends its sweep: its
+/// rectangle is its whole frame (cut to the relevant region), so what lies behind it in the
 /// frame is hidden on it, and the direction needs no further plane.
 fn ends_sweep(
     plan: &crate::project::planes::DirectionPlan,
     k: usize,
     job: &PlaneJob,
-    map: &DepthMap,
     relevant: Rect,
 ) -> bool {
     // The frame cut to the relevant region, computed as `plane_job` cuts the rectangle.
     plan.is_sweep()
         && job.frame.rect_min == plan.frame_min(k).max(relevant.0)
         && job.frame.rect_max == plan.frame_max(k).min(relevant.1)
-        && map.depth.iter().all(|&x| x <= 0.0)
 }
 
 /// A rectangle on a plane, world `(u, v)`: lower and upper corners.
@@ -597,9 +721,16 @@ struct DirectionState {
     finished: bool,
     /// In a sweep: the planes kept for reprojection ([`push_history`]).
     history: Vec<SweepPlane>,
-    /// In a sweep: the last plane's frame and Hierarchical Depth Map (occluders it proves
-    /// hidden are left out of the next plane).
-    prev: Option<(PlaneFrame, Hdm)>,
+    /// In a sweep: the last plane rendered (occluders it proves hidden are left out of the
+    /// next plane).
+    prev: Option<PrevPlane>,
+}
+
+/// A sweep's last rendered plane: its index, its frame and what its tests are answered by.
+struct PrevPlane {
+    index: usize,
+    frame: PlaneFrame,
+    tested: Tested,
 }
 
 /// A plane planned for rendering: its direction, its job and the relevant region of its plane.
@@ -622,16 +753,50 @@ struct RenderedPlane {
 /// What a rendered plane's occludees are tested against.
 enum Tested {
     /// Its Depth Map and Hierarchical Depth Map, on the CPU.
-    Map { map: DepthMap, hdm: Hdm },
+    Map { map: Arc<DepthMap>, hdm: Hdm },
     /// The device's answers to its queries ([`Prepared::record_queries`]), by query.
     Answers(HashMap<QueryKey, Coverage>),
+    /// The device's answers, and its map kept there ([`RasterBackend::render_kept`]): the
+    /// map's stand-in (a later reprojection's source), its umbra's pixel box and whether
+    /// the umbra covers every pixel.
+    Kept {
+        answers: HashMap<QueryKey, Coverage>,
+        source: Arc<DepthMap>,
+        umbra: Option<[u32; 4]>,
+        all_umbra: bool,
+    },
 }
 
 impl Tested {
     fn tests(&self) -> Tests<'_> {
         match self {
             Tested::Map { hdm, .. } => Tests::Hdm(hdm),
-            Tested::Answers(a) => Tests::Answers(a),
+            Tested::Answers(a) | Tested::Kept { answers: a, .. } => Tests::Answers(a),
+        }
+    }
+
+    /// A backend's result for a plane asked `queries` (`None`: none asked), with the
+    /// pyramid of a map that came back built here.
+    fn of(result: PlaneResult, queries: Option<Vec<RectQuery>>) -> Tested {
+        let keyed = |answers: Vec<Coverage>| -> HashMap<QueryKey, Coverage> {
+            let q = queries.as_ref().expect("answers come only for queries");
+            debug_assert_eq!(answers.len(), q.len());
+            (q.iter().map(|q| (q.rect, q.depth.to_bits())))
+                .zip(answers)
+                .collect()
+        };
+        match result {
+            PlaneResult::Map(map) => Tested::Map {
+                hdm: Hdm::build(&map),
+                map: Arc::new(map),
+            },
+            PlaneResult::Answers(a) => Tested::Answers(keyed(a)),
+            PlaneResult::Kept(k) => Tested::Kept {
+                answers: keyed(k.answers),
+                source: k.source,
+                umbra: k.umbra,
+                all_umbra: k.outside_umbra == 0,
+            },
         }
     }
 }
@@ -696,8 +861,9 @@ struct SweepPlane {
 }
 
 /// Renders a round's planes on the backend (one call for all), with `queries` (per plane,
-/// or `None`) for the backend to answer on its device where it can, and builds the
-/// Hierarchical Depth Maps of the planes whose maps came back, in parallel.
+/// or `None`) for the backend to answer on its device where it can and `keep` (per plane)
+/// asking it to keep a sweep plane's map there, and builds the Hierarchical Depth Maps of the
+/// planes whose maps came back, in parallel.
 ///
 /// # Errors
 /// The backend's failure.
@@ -706,40 +872,30 @@ fn render_round(
     backend: &dyn RasterBackend,
     planned: Vec<PlannedPlane>,
     queries: Vec<Option<Vec<RectQuery>>>,
+    keep: &[bool],
 ) -> Result<Vec<RenderedPlane>, BakeError> {
     let (jobs, meta): (Vec<PlaneJob>, Vec<(usize, Rect)>) = planned
         .into_iter()
         .map(|p| (p.job, (p.dir, p.relevant)))
         .unzip();
-    let results = backend.render_tested(&jobs, &queries)?;
+    let results = if keep.contains(&true) {
+        backend.render_kept(&jobs, &queries, keep)?
+    } else {
+        backend.render_tested(&jobs, &queries)?
+    };
     let tested: Vec<Tested> = results
         .into_par_iter()
         .zip(queries)
-        .map(|(r, q)| match r {
-            PlaneResult::Map(map) => {
-                let hdm = Hdm::build(&map);
-                Tested::Map { map, hdm }
-            }
-            PlaneResult::Answers(a) => {
-                let q = q.expect("answers come only for queries");
-                debug_assert_eq!(a.len(), q.len());
-                Tested::Answers(
-                    q.iter()
-                        .map(|q| (q.rect, q.depth.to_bits()))
-                        .zip(a)
-                        .collect(),
-                )
-            }
-        })
+        .map(|(r, q)| Tested::of(r, q))
         .collect();
     Ok((jobs.into_iter().zip(meta).zip(tested))
         .map(|((job, (dir, relevant)), tested)| {
-            let ends = match &tested {
-                Tested::Map { map, .. } => {
-                    ends_sweep(&round.plans[dir], round.k, &job, map, relevant)
-                }
+            let all_umbra = match &tested {
+                Tested::Map { map, .. } => map.depth.iter().all(|&x| x <= 0.0),
+                Tested::Kept { all_umbra, .. } => *all_umbra,
                 Tested::Answers(_) => false,
             };
+            let ends = all_umbra && ends_sweep(&round.plans[dir], round.k, &job, relevant);
             RenderedPlane {
                 dir,
                 job,
@@ -758,15 +914,28 @@ fn carry_round(round: &Round, dirs: &mut [DirectionState], rendered: Vec<Rendere
         if !round.plans[r.dir].is_sweep() {
             continue;
         }
-        let Tested::Map { map, hdm } = r.tested else {
-            unreachable!("sweep planes come back as maps");
-        };
         let dir = &mut dirs[r.dir];
         dir.finished = r.ends;
-        let map = Arc::new(map);
-        let umbra = crate::sweep::umbra_bounds(&r.job.frame, &map);
+        let (map, umbra) = match &r.tested {
+            Tested::Map { map, .. } => (map.clone(), crate::sweep::umbra_bounds(&r.job.frame, map)),
+            Tested::Kept { source, umbra, .. } => (
+                source.clone(),
+                umbra.map(|b| crate::sweep::umbra_rect(&r.job.frame, b)),
+            ),
+            Tested::Answers(_) => {
+                // Only a kept plane that ended its direction is tested again for answers
+                // alone (`Prepared::retest_ending`): nothing comes after it.
+                debug_assert!(r.ends, "sweep planes come back as maps or kept");
+                dir.finished = true;
+                continue;
+            }
+        };
         let open = crate::sweep::open_sides(&r.job.frame, r.relevant);
-        dir.prev = Some((r.job.frame.clone(), hdm));
+        dir.prev = Some(PrevPlane {
+            index: round.k,
+            frame: r.job.frame.clone(),
+            tested: r.tested,
+        });
         push_history(
             &mut dir.history,
             SweepPlane {

@@ -129,9 +129,12 @@ pub struct BenchOptions {
     /// Ray space factorization's charts on the GPU backend's device rather than the CPU
     /// ([`GpuBackend::set_rsf_on_gpu`](crate::backend::gpu::GpuBackend::set_rsf_on_gpu)).
     pub rsf_on_gpu: bool,
-    /// Separate planes' maps read back and occludees tested on the CPU rather than on the
-    /// device ([`GpuBackend::set_tests_on_device`](crate::backend::gpu::GpuBackend::set_tests_on_device)).
+    /// Maps read back and occludees tested on the CPU rather than on the device
+    /// ([`GpuBackend::set_tests_on_device`](crate::backend::gpu::GpuBackend::set_tests_on_device)).
     pub tests_on_cpu: bool,
+    /// Only the occlusion sweep's maps read back rather than kept on the device
+    /// ([`GpuBackend::set_keep_sweep_maps`](crate::backend::gpu::GpuBackend::set_keep_sweep_maps)).
+    pub sweep_maps_on_cpu: bool,
 }
 
 impl Default for BenchOptions {
@@ -161,6 +164,7 @@ impl Default for BenchOptions {
             gpu_projection: crate::backend::gpu::GpuProjection::default(),
             rsf_on_gpu: false,
             tests_on_cpu: false,
+            sweep_maps_on_cpu: false,
             checkpoint_dir: None,
             checkpoint_seconds: 60.0,
             progress: None,
@@ -721,6 +725,7 @@ pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError>
         .map_err(BenchError::Gpu)?;
     g.set_rsf_on_gpu(args.rsf_on_gpu).map_err(BenchError::Gpu)?;
     g.set_tests_on_device(!args.tests_on_cpu);
+    g.set_keep_sweep_maps(!args.sweep_maps_on_cpu);
     Ok(g)
 }
 

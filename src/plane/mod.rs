@@ -234,6 +234,21 @@ impl DepthMap {
     pub fn covered(&self) -> usize {
         self.depth.iter().filter(|d| d.is_finite()).count()
     }
+
+    /// A stand-in for a map a backend keeps on its device ([`KeptMap`]): its size and no
+    /// pixels. Only that backend can use it, as the source of a later [`Reprojection`].
+    pub fn on_device(width: u32, height: u32) -> Self {
+        DepthMap {
+            width,
+            height,
+            depth: Vec::new(),
+        }
+    }
+
+    /// True for a stand-in of a map kept on a device ([`DepthMap::on_device`]).
+    pub fn is_on_device(&self) -> bool {
+        self.depth.is_empty() && self.width as usize * self.height as usize > 0
+    }
 }
 
 /// What a Depth Map says about a rectangle of pixels for an occludee Depth (the answer of
@@ -263,13 +278,35 @@ pub struct RectQuery {
 
 /// A rendered plane as a backend gives it back from
 /// [`RasterBackend::render_tested`](crate::backend::RasterBackend::render_tested): its Depth
-/// Map, or only the answers to its queries (in their order) when the device answered them.
+/// Map, or only the answers to its queries (in their order) when the device answered them,
+/// or ([`RasterBackend::render_kept`](crate::backend::RasterBackend::render_kept)) the
+/// answers and a map kept on the device for later reprojections.
 #[derive(Clone, Debug, PartialEq)]
 pub enum PlaneResult {
     /// The Depth Map (the caller answers the queries itself).
     Map(DepthMap),
     /// The answers to the plane's queries, in order.
     Answers(Vec<Coverage>),
+    /// The answers, and the map kept on the device.
+    Kept(KeptMap),
+}
+
+/// A sweep plane's map kept on the device
+/// ([`RasterBackend::render_kept`](crate::backend::RasterBackend::render_kept)): what the
+/// sweep needs of it without its pixels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KeptMap {
+    /// The answers to the plane's queries, in order.
+    pub answers: Vec<Coverage>,
+    /// The map's stand-in ([`DepthMap::on_device`]): a [`Reprojection`] from it, given to the
+    /// same backend, reads the map on the device. The backend keeps the map while this `Arc`
+    /// (or a clone) lives.
+    pub source: std::sync::Arc<DepthMap>,
+    /// The umbra's bounding box `[i0, i1, j0, j1]` (inclusive pixels; `None` without umbra):
+    /// the box of the pixels whose Depth is `≤ 0`, as [`crate::sweep::umbra_pixels`].
+    pub umbra: Option<[u32; 4]>,
+    /// How many pixels lie outside the umbra (Depth not `≤ 0`, NaN included).
+    pub outside_umbra: u64,
 }
 
 /// Rounds an `f64` Depth up to the nearest `f32` at or above it (conservative for occluders).

@@ -90,6 +90,10 @@ impl Reprojection {
     /// target row be emitted as soon as the source reaches its window's end; should they not
     /// (a future window rule), the rows are sorted by window end first.
     fn for_each_row(&self, mut emit: impl FnMut(usize, &[bool])) {
+        assert!(
+            !self.source.is_on_device(),
+            "a map kept on a device is reprojected by that device's backend only"
+        );
         let (sw, sh) = (self.source.width as usize, self.source.height as usize);
         let tw = self.cols.len();
         let src = &self.source.depth;

@@ -102,6 +102,13 @@ impl Reprojection {
 /// The world `(u, v)` bounding box of a plane's umbra pixels (Depth `≤ 0`), or `None` when it
 /// has none.
 pub fn umbra_bounds(src: &PlaneFrame, map: &DepthMap) -> Option<(glam::DVec2, glam::DVec2)> {
+    umbra_pixels(map).map(|b| umbra_rect(src, b))
+}
+
+/// The bounding box `[i0, i1, j0, j1]` (inclusive pixels) of `map`'s umbra, the pixels whose
+/// Depth is `≤ 0`; `None` without any. (A backend that keeps the map on its device computes
+/// the same box there: [`crate::plane::KeptMap::umbra`].)
+pub fn umbra_pixels(map: &DepthMap) -> Option<[u32; 4]> {
     let (mut i0, mut j0, mut i1, mut j1) = (usize::MAX, usize::MAX, 0, 0);
     for (j, row) in map.depth.chunks_exact(map.width as usize).enumerate() {
         let Some(first) = row.iter().position(|&d| d <= 0.0) else {
@@ -113,14 +120,16 @@ pub fn umbra_bounds(src: &PlaneFrame, map: &DepthMap) -> Option<(glam::DVec2, gl
         j0 = j0.min(j);
         j1 = j1.max(j);
     }
-    if i0 == usize::MAX {
-        return None;
-    }
+    (i0 != usize::MAX).then_some([i0 as u32, i1 as u32, j0 as u32, j1 as u32])
+}
+
+/// The world rectangle of plane `src` covered by the pixels `[i0, i1, j0, j1]` (inclusive).
+pub fn umbra_rect(src: &PlaneFrame, [i0, i1, j0, j1]: [u32; 4]) -> (glam::DVec2, glam::DVec2) {
     let px = src.pixel_size();
-    Some((
-        src.rect_min + glam::DVec2::new(i0 as f64, j0 as f64) * px,
-        src.rect_min + glam::DVec2::new((i1 + 1) as f64, (j1 + 1) as f64) * px,
-    ))
+    (
+        src.rect_min + glam::DVec2::new(f64::from(i0), f64::from(j0)) * px,
+        src.rect_min + glam::DVec2::new(f64::from(i1 + 1), f64::from(j1 + 1)) * px,
+    )
 }
 
 /// The region of a plane at distance `target` beyond the face (world `(u, v)`) that a

@@ -13,7 +13,17 @@
 //! per level (64 for up to 20 levels); were it ever full the answer would be `Partial`, which
 //! culls nothing.
 //!
+//! # Kept sweep planes
+//! A plane whose map the caller asks to keep ([`RasterBackend::render_kept`]: an occlusion
+//! sweep's) is also a reprojection source for later planes. The same pass builds its
+//! summed-area table of the pixels outside the umbra from its pyramid's level 0 (`sat_rows`,
+//! `sat_cols`; the twin of `prepare::umbra_table`, integer counts, so the CPU's table exactly),
+//! which is copied into a reprojection table texture and cached for the map's stand-in
+//! ([`super::tables::TableCache`]); the umbra's bounding box and the count of pixels outside
+//! it come back, 32 bytes a plane ([`KeptPlane`]).
+//!
 //! [`RasterBackend::render_tested`]: crate::backend::RasterBackend::render_tested
+//! [`RasterBackend::render_kept`]: crate::backend::RasterBackend::render_kept
 
 use super::UNIFORM_STRIDE;
 use std::num::NonZeroU64;
@@ -35,6 +45,52 @@ pub(super) const MAX_LEVELS: usize = 16;
 pub(super) const MAX_SIDE: u32 = 1 << 14;
 /// Bytes of one level's parameters.
 pub(super) const LEVEL_BYTES: u64 = std::mem::size_of::<LevelParams>() as u64;
+/// Bytes of one kept plane's parameters (`Kept` in `shaders/hdm.wgsl`).
+pub(super) const KEPT_BYTES: u64 = 32;
+/// Words of one kept plane's summary (`SUMMARY` in `shaders/hdm.wgsl`).
+pub(super) const SUMMARY_WORDS: u64 = 8;
+/// Invocations per workgroup of the summed-area table passes.
+const SAT_WORKGROUP: u32 = 64;
+
+/// Where a kept plane ([`RasterBackend::render_kept`]) lies in a submission's buffers.
+///
+/// [`RasterBackend::render_kept`]: crate::backend::RasterBackend::render_kept
+#[derive(Clone, Debug)]
+pub(super) struct KeptPlane {
+    /// Its index among the submission's kept planes (its summary's and parameters' slot).
+    pub index: u32,
+    /// Its table's first word in the tables buffer.
+    pub table: u32,
+    /// The table's row stride in words ([`table_stride`]).
+    pub stride: u32,
+}
+
+/// The row stride in words of a kept plane's table `width` wide: a multiple of 64 words, as a
+/// copy into a texture needs rows of a multiple of 256 bytes.
+pub(super) fn table_stride(width: u32) -> u32 {
+    width.next_multiple_of(64)
+}
+
+/// A kept plane's parameters (`Kept` in `shaders/hdm.wgsl`).
+pub(super) fn kept_words(t: &TestedPlane, k: &KeptPlane) -> [u32; 8] {
+    let l0 = &t.levels[0];
+    [l0.dst, l0.dst_w, l0.dst_h, k.table, k.stride, 0, 0, 0]
+}
+
+/// A kept plane's summary before the passes: no umbra box yet, nothing counted.
+pub(super) const SUMMARY_START: [u32; 8] = [u32::MAX, 0, u32::MAX, 0, 0, 0, 0, 0];
+
+/// A kept plane's summary after the passes: the umbra's box `[i0, i1, j0, j1]` (`None`
+/// without umbra) and the pixels outside it.
+pub(super) fn read_summary(words: &[u32]) -> (Option<[u32; 4]>, u64) {
+    let umbra = (words[0] != u32::MAX).then(|| [words[0], words[1], words[2], words[3]]);
+    (umbra, u64::from(words[4]))
+}
+
+/// Workgroups of a summed-area table pass over `n` rows or columns.
+pub(super) fn sat_groups(n: u32) -> u32 {
+    n.div_ceil(SAT_WORKGROUP)
+}
 
 /// The sizes of the pyramid's levels over a `w × h` map, finest first, down to 1 × 1
 /// (`Hdm::build`'s levels).
@@ -131,6 +187,12 @@ pub(super) struct HdmPipelines {
     pub map_layout: wgpu::BindGroupLayout,
     /// Group 0 of `answer`: the pyramid, the planes, the queries, the answers, the count.
     pub answer_layout: wgpu::BindGroupLayout,
+    /// A kept plane's table along its rows (with its summary), then down its columns.
+    pub sat_rows: wgpu::ComputePipeline,
+    pub sat_cols: wgpu::ComputePipeline,
+    /// Group 0 of `sat_rows` and `sat_cols`: the pyramid, the kept planes, the tables, the
+    /// summaries.
+    pub sat_layout: wgpu::BindGroupLayout,
 }
 
 impl HdmPipelines {
@@ -194,6 +256,15 @@ impl HdmPipelines {
                 uniform(6, false, 16),
             ],
         });
+        let sat_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("hdm summed-area table bind group layout"),
+            entries: &[
+                storage(10, true, 4),
+                storage(11, true, KEPT_BYTES),
+                storage(12, false, 4),
+                storage(13, false, SUMMARY_WORDS * 4),
+            ],
+        });
         let pipeline = |name: &str, entry: &str, layouts: &[Option<&wgpu::BindGroupLayout>]| {
             let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some(&format!("hdm {name} pipeline layout")),
@@ -213,9 +284,12 @@ impl HdmPipelines {
             base: pipeline("base", "base", &[Some(&level_layout), Some(&map_layout)]),
             reduce: pipeline("reduce", "reduce", &[Some(&level_layout)]),
             answer: pipeline("answer", "answer", &[Some(&answer_layout)]),
+            sat_rows: pipeline("table rows", "sat_rows", &[Some(&sat_layout)]),
+            sat_cols: pipeline("table columns", "sat_cols", &[Some(&sat_layout)]),
             level_layout,
             map_layout,
             answer_layout,
+            sat_layout,
         }
     }
 }
@@ -232,6 +306,11 @@ pub(super) struct TestBuffers {
     pub masks: Option<wgpu::Buffer>,
     pub steps: Option<wgpu::Buffer>,
     pub staging: Option<wgpu::Buffer>,
+    /// Kept planes: their parameters, tables, summaries and the summaries' read-back.
+    pub kept: Option<wgpu::Buffer>,
+    pub tables: Option<wgpu::Buffer>,
+    pub summary: Option<wgpu::Buffer>,
+    pub summary_staging: Option<wgpu::Buffer>,
 }
 
 /// Where one tested plane lies in a submission's test buffers.

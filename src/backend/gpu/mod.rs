@@ -156,6 +156,15 @@
 //! from 249 ms to 228 ms, the GPU section from 1,263 ms to 1,223 ms and the cell from
 //! 1,772 ms to 1,629 ms.
 //!
+//! Keeping the maps ([`RasterBackend::render_kept`], on unless
+//! [`GpuBackend::set_keep_sweep_maps`]`(false)` or tests on the CPU): a sweep plane whose
+//! occludee tests the device answers (`hdm.rs`) is also kept as a reprojection source. The
+//! occludee test pass builds its table from the merged map in the pyramid buffer (one
+//! invocation per row, then per column; integer counts, so the CPU's table exactly), copies it
+//! into a table texture and reads back only the umbra's bounding box and the count outside it;
+//! the texture is cached for a stand-in of the map ([`DepthMap::on_device`]), which the bake
+//! names as the source of its later reprojections. No map and no table crosses the bus.
+//!
 //! # Per `render` call
 //!
 //! All jobs (a cell's 6–30 planes) are prepared in parallel, uploaded into shared, grown-only
@@ -414,6 +423,8 @@ pub struct GpuBackend {
     hdm_pipelines: hdm::HdmPipelines,
     /// Occludee tests answered on the device ([`GpuBackend::set_tests_on_device`]).
     tests_wanted: bool,
+    /// Keep sweeps' maps on the device ([`GpuBackend::set_keep_sweep_maps`]).
+    keep_wanted: bool,
     /// How occluders' Projections are made ([`GpuBackend::set_projection`]).
     projection: GpuProjection,
     /// Reprojection sources' summed-area tables kept on the device across calls.
@@ -457,6 +468,9 @@ pub struct RenderStats {
     pub tables_uploaded: usize,
     /// See `tables_uploaded`.
     pub tables_reused: usize,
+    /// Sweep planes whose maps stayed on the device ([`RasterBackend::render_kept`]), their
+    /// tables built there.
+    pub kept_maps: usize,
     /// Occluders whose views the GPU computed ([`GpuProjection::Counting`]); they are not in
     /// `occluders`, `triangles` or `edges` (those are known on the GPU only).
     pub counted: usize,
@@ -465,6 +479,9 @@ pub struct RenderStats {
     pub bytes_uploaded: u64,
     /// Bytes copied back from the GPU (padded rows included).
     pub bytes_read_back: u64,
+    /// Depth Maps copied back from the GPU (the rest of `bytes_read_back` is answers,
+    /// summaries and timestamps).
+    pub maps_read_back: usize,
     /// Wall time of the CPU setup (parallel), of the GPU section (upload to read-back), total.
     pub setup: Duration,
     /// Wall time of the GPU section, from the first upload to the last read-back.
@@ -496,6 +513,8 @@ impl RenderStats {
         self.counted += o.counted;
         self.tables_uploaded += o.tables_uploaded;
         self.tables_reused += o.tables_reused;
+        self.kept_maps += o.kept_maps;
+        self.maps_read_back += o.maps_read_back;
         self.bytes_uploaded += o.bytes_uploaded;
         self.bytes_read_back += o.bytes_read_back;
         self.setup += o.setup;
@@ -633,6 +652,7 @@ impl GpuBackend {
             view_pipelines,
             hdm_pipelines,
             tests_wanted: true,
+            keep_wanted: true,
             projection: GpuProjection::default(),
             tables: tables::TableCache::default(),
         })
@@ -678,6 +698,13 @@ impl GpuBackend {
     /// every map back for the CPU's pyramid (for comparisons). The same PVS either way.
     pub fn set_tests_on_device(&mut self, on: bool) {
         self.tests_wanted = on;
+    }
+
+    /// Keeps occlusion sweeps' maps on the device (`on`, the default, with the tests there
+    /// too: [`RasterBackend::render_kept`]) or reads them back for the CPU (for comparisons).
+    /// The same PVS either way.
+    pub fn set_keep_sweep_maps(&mut self, on: bool) {
+        self.keep_wanted = on;
     }
 
     /// How occluders' Projections are made ([`GpuBackend::set_projection`]).
@@ -766,8 +793,11 @@ impl GpuBackend {
             }
             for rp in &job.reproject {
                 let (sw, sh) = (rp.source.width, rp.source.height);
+                // A map kept on the device has a stand-in of no pixels (`DepthMap::on_device`):
+                // only this backend's table cache knows it.
+                let kept_here = rp.source.is_on_device() && self.tables.get(&rp.source).is_some();
                 if !fits(sw, sh)
-                    || rp.source.depth.len() != sw as usize * sh as usize
+                    || (rp.source.depth.len() != sw as usize * sh as usize && !kept_here)
                     || rp.cols.len() != w as usize
                     || rp.rows.len() != h as usize
                 {
@@ -819,7 +849,7 @@ impl RasterBackend for GpuBackend {
         let n = cells.max(1) as f64;
         Some(
             format!(
-                "per cell: {:.1} passes, {:.1} draws, {:.1} submissions, {:.0} occluders ({:.0} triangles) drawn, {:.0} KB uploaded, {:.0} KB read back; GPU section {:.1} ms, CPU setup {:.1} ms",
+                "per cell: {:.1} passes, {:.1} draws, {:.1} submissions, {:.0} occluders ({:.0} triangles) drawn, {:.0} KB uploaded, {:.0} KB read back ({:.1} maps; {:.1} sweep maps kept on the device); GPU section {:.1} ms, CPU setup {:.1} ms",
                 t.passes as f64 / n,
                 t.draws as f64 / n,
                 t.submissions as f64 / n,
@@ -827,6 +857,8 @@ impl RasterBackend for GpuBackend {
                 t.triangles as f64 / n,
                 t.bytes_uploaded as f64 / n / 1024.0,
                 t.bytes_read_back as f64 / n / 1024.0,
+                t.maps_read_back as f64 / n,
+                t.kept_maps as f64 / n,
                 t.gpu.as_secs_f64() * 1e3 / n,
                 t.setup.as_secs_f64() * 1e3 / n,
             ) + &if t.timed_passes > 0 {
@@ -910,7 +942,9 @@ impl RasterBackend for GpuBackend {
             .into_iter()
             .map(|r| match r {
                 PlaneResult::Map(m) => m,
-                PlaneResult::Answers(_) => unreachable!("no queries, no answers"),
+                PlaneResult::Answers(_) | PlaneResult::Kept(_) => {
+                    unreachable!("no queries, no answers")
+                }
             })
             .collect())
     }
@@ -924,11 +958,29 @@ impl RasterBackend for GpuBackend {
         jobs: &[PlaneJob],
         queries: &[Option<Vec<RectQuery>>],
     ) -> Result<Vec<PlaneResult>, BackendError> {
+        self.render_kept(jobs, queries, &vec![false; jobs.len()])
+    }
+
+    fn keeps_maps(&self) -> bool {
+        self.tests_wanted && self.keep_wanted
+    }
+
+    fn render_kept(
+        &self,
+        jobs: &[PlaneJob],
+        queries: &[Option<Vec<RectQuery>>],
+        keep: &[bool],
+    ) -> Result<Vec<PlaneResult>, BackendError> {
         assert_eq!(
             jobs.len(),
             queries.len(),
             "one query list (or None) per job"
         );
+        assert_eq!(jobs.len(), keep.len(), "one keep flag per job");
+        // A map kept without its queries could answer nothing: kept maps are tested ones.
+        let keep: Vec<bool> = (keep.iter().zip(queries))
+            .map(|(&k, q)| k && q.is_some() && self.keep_wanted)
+            .collect();
         self.check_failure()?;
         self.check_jobs(jobs)?;
         let t0 = Instant::now();
@@ -964,7 +1016,13 @@ impl RasterBackend for GpuBackend {
             let t1 = Instant::now();
             let done = waves.iter().try_for_each(|wave| {
                 self.render_wave(
-                    &mut pool, jobs, &prepared, queries, wave, &mut out, &mut stats,
+                    &mut pool,
+                    jobs,
+                    &prepared,
+                    (queries, &keep),
+                    wave,
+                    &mut out,
+                    &mut stats,
                 )
             });
             self.pools

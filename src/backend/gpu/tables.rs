@@ -82,6 +82,16 @@ impl TableCache {
         );
     }
 
+    /// Puts a texture no source uses on the free list of its size (at most
+    /// [`FREE_PER_SIZE`] per size).
+    pub fn give_back(&self, table: SweepTable) {
+        let mut inner = self.lock();
+        let list = inner.free.entry(table.size).or_default();
+        if list.len() < FREE_PER_SIZE {
+            list.push(table);
+        }
+    }
+
     /// A free texture of `size`, if one was evicted.
     pub fn take_free(&self, size: (u32, u32)) -> Option<SweepTable> {
         self.lock().free.get_mut(&size)?.pop()

@@ -14,18 +14,26 @@
 //!    their queries ([`super::hdm`]) — in one command buffer;
 //! 5. submit ([`GpuBackend::submit`]) and map every read-back buffer;
 //! 6. wait ([`GpuBackend::wait`]), polling with a timeout;
-//! 7. read back ([`read_back`]): the Depth Maps, with the slice masks merged, and the answers.
+//! 7. read back ([`read_back`]): the Depth Maps, with the slice masks merged, and the answers;
+//!    a kept plane's answers with its summary ([`read_kept`]).
+//!
+//! A plane whose map the caller asks to keep ([`RasterBackend::render_kept`]) is a tested
+//! plane whose map also becomes a reprojection table on the device ([`super::hdm`]'s kept
+//! planes): its table goes into a texture of the table cache, registered for a stand-in of
+//! the map, and only its summary comes back.
+//!
+//! [`RasterBackend::render_kept`]: crate::backend::RasterBackend::render_kept
 
 #[cfg(doc)]
 use super::GpuProjection;
 use super::device::{DeviceLimits, ErrorScopes};
-use super::hdm::{self, TestBuffers, TestedPlane};
+use super::hdm::{self, KeptPlane, TestBuffers, TestedPlane};
 use super::prepare::{Prepared, TableSource, merge_mask};
 use super::setup::Vertex;
 use super::tables::{Cached, SweepTable};
 use super::{GpuBackend, RenderStats, UNIFORM_STRIDE};
 use crate::backend::BackendError;
-use crate::plane::{Coverage, DepthMap, PlaneJob, PlaneResult, RectQuery};
+use crate::plane::{Coverage, DepthMap, KeptMap, PlaneJob, PlaneResult, RectQuery};
 use std::collections::HashMap;
 use std::num::NonZeroU64;
 use std::sync::Arc;
@@ -95,6 +103,10 @@ struct Target {
 /// A pooled resource: its size `(width, height)` and its index in the pool's list for that
 /// size.
 type Slot = ((u32, u32), usize);
+
+/// A wave's reprojection tables, per plane: those its reprojections read, and the one its
+/// kept map fills.
+type WaveTables = (Vec<Vec<Arc<SweepTable>>>, Vec<Option<SweepTable>>);
 
 /// Binding 0 of the occluder draws' bind groups: the plane's uniforms.
 fn uniforms_entry<'a>(buffers: &WaveBuffers<'a>, plane: &PlaneLayout) -> wgpu::BindGroupEntry<'a> {
@@ -237,6 +249,8 @@ struct PlaneLayout {
     counted: (u32, u32),
     /// Where its occludee tests lie, when the device answers them (its map stays there).
     tested: Option<TestedPlane>,
+    /// Where its table lies, when its map is kept (it is then tested too).
+    kept: Option<KeptPlane>,
 }
 
 /// A wave's layout: its planes, in order, and the bytes each shared buffer must hold.
@@ -258,6 +272,11 @@ struct WaveLayout {
     pyramid_floats: u64,
     mask_words: u32,
     reduce: Vec<(u32, u32)>,
+    /// Kept planes of the wave, the words of their tables, and their largest width and
+    /// height.
+    kept: u32,
+    table_words: u64,
+    kept_max: (u32, u32),
 }
 
 impl WaveLayout {
@@ -271,6 +290,7 @@ impl WaveLayout {
         jobs: &[PlaneJob],
         prepared: &[Prepared],
         queries: &[Option<Vec<RectQuery>>],
+        keep: &[bool],
         limits: &DeviceLimits,
     ) -> Self {
         let storage_align = limits.storage_align;
@@ -289,6 +309,7 @@ impl WaveLayout {
         // Per reduction level k ≥ 1, the largest level-k size over the tested planes.
         let mut reduce: Vec<(u32, u32)> = Vec::new();
         let mut mask_words = 0u32;
+        let (mut kept, mut table_words, mut kept_max) = (0u32, 0u64, (0u32, 0u32));
         for (w, &j) in todo.iter().enumerate() {
             let p = &prepared[j];
             let c = (counted as u32, p.counted.len() as u32);
@@ -309,7 +330,8 @@ impl WaveLayout {
             }
             let f = &jobs[j].frame;
             // The device answers a plane's queries when asked (its slices' mask goes up as
-            // bits and is merged there).
+            // bits and is merged there), and keeps its map when asked and its table fits.
+            let table = u64::from(hdm::table_stride(f.width)) * u64::from(f.height);
             let fits = |q: &[RectQuery]| {
                 let mask = p
                     .mask
@@ -319,6 +341,7 @@ impl WaveLayout {
                     && (pyramid_floats + hdm::pyramid_floats(f.width, f.height)) * 4 <= test_cap
                     && (u64::from(mask_words) + mask) * 4 <= test_cap
                     && f.width.max(f.height) <= hdm::MAX_SIDE
+                    && (!keep[j] || (table_words + table) * 4 <= test_cap)
             };
             let t = match &queries[j] {
                 Some(q) if fits(q) => {
@@ -348,6 +371,17 @@ impl WaveLayout {
                 }
                 _ => None,
             };
+            let k = (t.is_some() && keep[j]).then(|| {
+                let k = KeptPlane {
+                    index: kept,
+                    table: table_words as u32,
+                    stride: hdm::table_stride(f.width),
+                };
+                kept += 1;
+                table_words += table;
+                kept_max = (kept_max.0.max(f.width), kept_max.1.max(f.height));
+                k
+            });
             planes.push(PlaneLayout {
                 job: j,
                 first_vertex,
@@ -357,6 +391,7 @@ impl WaveLayout {
                 target: take(&mut targets_taken, (f.width, f.height)),
                 counted: c,
                 tested: t,
+                kept: k,
             });
         }
         WaveLayout {
@@ -373,6 +408,9 @@ impl WaveLayout {
             pyramid_floats,
             mask_words,
             reduce,
+            kept,
+            table_words,
+            kept_max,
         }
     }
 
@@ -382,12 +420,14 @@ impl WaveLayout {
         self.tested + self.reduce.len() as u32
     }
 
-    /// The read-back mappings: one per plane whose map comes back, one per timestamp set, and
-    /// one for the answers when the wave has tested planes.
+    /// The read-back mappings: one per plane whose map comes back, one per timestamp set, one
+    /// for the answers when the wave has tested planes and one for the summaries when it has
+    /// kept planes.
     fn mappings(&self, timestamp_sets: usize) -> usize {
         self.planes.iter().filter(|p| p.tested.is_none()).count()
             + timestamp_sets
             + usize::from(self.tested > 0)
+            + usize::from(self.kept > 0)
     }
 
     /// Passes timed with timestamps: every plane's render pass, then the views pass when the
@@ -433,6 +473,7 @@ impl WaveLayout {
             stats.bytes_uploaded += p.out.data.len() as u64 * 16;
             let f = &jobs[plane.job].frame;
             if plane.tested.is_none() {
+                stats.maps_read_back += 1;
                 stats.bytes_read_back +=
                     (f.width as u64 * 4).next_multiple_of(256) * f.height as u64;
             }
@@ -446,6 +487,10 @@ impl WaveLayout {
                 + 16;
             stats.bytes_read_back += u64::from(self.queries) * 4;
         }
+        let kept = u64::from(self.kept);
+        stats.bytes_uploaded += kept * (hdm::KEPT_BYTES + hdm::SUMMARY_WORDS * 4);
+        stats.bytes_read_back += kept * hdm::SUMMARY_WORDS * 4;
+        stats.kept_maps += self.kept as usize;
     }
 }
 
@@ -460,11 +505,13 @@ struct WaveBuffers<'a> {
     views: Option<&'a ViewBuffers>,
     /// Per plane of the wave, each reprojection's summed-area table.
     tables: Vec<Vec<Arc<SweepTable>>>,
+    /// Per plane of the wave, the table texture its kept map fills.
+    kept: Vec<Option<SweepTable>>,
 }
 
 impl<'a> WaveBuffers<'a> {
     /// The pool's buffers and the wave's tables, after [`GpuBackend::allocate`].
-    fn of(pool: &'a Pool, tables: Vec<Vec<Arc<SweepTable>>>) -> Self {
+    fn of(pool: &'a Pool, (tables, kept): WaveTables) -> Self {
         let (Some(vertices), Some(data), Some(uniforms)) =
             (&pool.vertices, &pool.data, &pool.uniforms)
         else {
@@ -477,6 +524,7 @@ impl<'a> WaveBuffers<'a> {
             windows: pool.windows.as_ref(),
             views: pool.views.as_ref(),
             tables,
+            kept,
         }
     }
 }
@@ -498,13 +546,13 @@ impl GpuBackend {
         pool: &mut Pool,
         jobs: &[PlaneJob],
         prepared: &[Prepared],
-        queries: &[Option<Vec<RectQuery>>],
+        (queries, keep): (&[Option<Vec<RectQuery>>], &[bool]),
         todo: &[usize],
         out: &mut [Option<PlaneResult>],
         stats: &mut RenderStats,
     ) -> Result<(), BackendError> {
         let scope = ErrorScopes::push(&self.device);
-        let layout = WaveLayout::new(todo, jobs, prepared, queries, &self.limits);
+        let layout = WaveLayout::new(todo, jobs, prepared, queries, keep, &self.limits);
         let tables = self.allocate(pool, &layout, prepared)?;
         let pool = &*pool;
         let buffers = WaveBuffers::of(pool, tables);
@@ -517,6 +565,7 @@ impl GpuBackend {
             period,
         });
         let commands = self.encode(pool, &buffers, &layout, prepared, timestamps.as_ref());
+        let kept_tables = buffers.kept;
         let (submission, mapped) = self.submit(pool, &layout, commands, timestamps.as_ref());
         scope.check()?;
         let waited = layout.mappings(timestamps.as_ref().map_or(0, |t| t.sets.len()));
@@ -531,7 +580,8 @@ impl GpuBackend {
             }
         }
         read_back(pool, &layout, prepared, out)?;
-        read_answers(pool, &layout, out)
+        read_answers(pool, &layout, out)?;
+        self.read_kept(pool, &layout, jobs, kept_tables, out)
     }
 
     /// Allocation step: grows the shared buffers to the layout's sizes and adds to the pools
@@ -544,7 +594,7 @@ impl GpuBackend {
         pool: &mut Pool,
         layout: &WaveLayout,
         prepared: &[Prepared],
-    ) -> Result<Vec<Vec<Arc<SweepTable>>>, BackendError> {
+    ) -> Result<WaveTables, BackendError> {
         if self.timestamp_period.is_some() {
             while pool.timestamps.len() < timestamp_sets(layout.timed_passes()) {
                 pool.timestamps.push(TimestampSet::new(&self.device));
@@ -643,6 +693,36 @@ impl GpuBackend {
                 "occludee answers read-back",
             )?;
         }
+        if layout.kept > 0 {
+            let t = pool.tests.get_or_insert_with(TestBuffers::default);
+            let n = u64::from(layout.kept);
+            self.ensure_buffer(
+                &mut t.kept,
+                n * hdm::KEPT_BYTES,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                "kept planes",
+            )?;
+            self.ensure_buffer(
+                &mut t.tables,
+                layout.table_words * 4,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                "kept planes' tables",
+            )?;
+            self.ensure_buffer(
+                &mut t.summary,
+                n * hdm::SUMMARY_WORDS * 4,
+                wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                "kept planes' summaries",
+            )?;
+            self.ensure_buffer(
+                &mut t.summary_staging,
+                n * hdm::SUMMARY_WORDS * 4,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                "kept planes' summaries read-back",
+            )?;
+        }
         if layout.window_bytes > 0 {
             self.ensure_buffer(
                 &mut pool.windows,
@@ -670,7 +750,14 @@ impl GpuBackend {
             "plane uniforms",
         )?;
         let mut tables = Vec::with_capacity(layout.planes.len());
+        let mut kept = Vec::with_capacity(layout.planes.len());
         for plane in &layout.planes {
+            kept.push(plane.kept.as_ref().map(|_| {
+                let size = plane.target.0;
+                self.tables
+                    .take_free(size)
+                    .unwrap_or_else(|| self.new_sweep_table(size))
+            }));
             let (size, k) = plane.target;
             let list = pool.targets.entry(size).or_default();
             if list.len() <= k {
@@ -691,7 +778,7 @@ impl GpuBackend {
                     .collect(),
             );
         }
-        Ok(tables)
+        Ok((tables, kept))
     }
 
     /// Upload step: every plane's vertices, chunks of records and edges and reprojection
@@ -846,12 +933,35 @@ impl GpuBackend {
         }
         self.queue
             .write_buffer(count, 0, bytemuck::cast_slice(&[layout.queries, 0, 0, 0]));
+        if layout.kept > 0 {
+            let (Some(kept), Some(summary)) = (&t.kept, &t.summary) else {
+                unreachable!("kept planes' buffers were just ensured");
+            };
+            let mut kept_words: Vec<u32> = Vec::with_capacity(layout.kept as usize * 8);
+            for plane in &layout.planes {
+                if let (Some(tp), Some(kp)) = (&plane.tested, &plane.kept) {
+                    debug_assert_eq!(kept_words.len(), kp.index as usize * 8);
+                    kept_words.extend_from_slice(&hdm::kept_words(tp, kp));
+                }
+            }
+            self.queue
+                .write_buffer(kept, 0, bytemuck::cast_slice(&kept_words));
+            let start: Vec<u32> = (0..layout.kept).flat_map(|_| hdm::SUMMARY_START).collect();
+            self.queue
+                .write_buffer(summary, 0, bytemuck::cast_slice(&start));
+        }
     }
 
     /// The occludee tests of the wave's tested planes, after their render passes: one compute
     /// pass copies each target into the pyramid buffer and reduces it level by level, then
     /// answers every query; the answers are copied into their read-back buffer.
-    fn encode_tests(&self, encoder: &mut wgpu::CommandEncoder, pool: &Pool, layout: &WaveLayout) {
+    fn encode_tests(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        pool: &Pool,
+        buffers: &WaveBuffers,
+        layout: &WaveLayout,
+    ) {
         let Some(t) = pool.tests.as_ref().filter(|_| layout.tested > 0) else {
             return;
         };
@@ -967,10 +1077,96 @@ impl GpuBackend {
                 pass.set_bind_group(0, &answer_group, &[]);
                 pass.dispatch_workgroups(hdm::answer_groups(layout.queries), 1, 1);
             }
+            if layout.kept > 0 {
+                let sat_group = self.sat_bind_group(t, layout);
+                pass.set_bind_group(0, &sat_group, &[]);
+                pass.set_pipeline(&p.sat_rows);
+                pass.dispatch_workgroups(hdm::sat_groups(layout.kept_max.1), 1, layout.kept);
+                pass.set_pipeline(&p.sat_cols);
+                pass.dispatch_workgroups(hdm::sat_groups(layout.kept_max.0), 1, layout.kept);
+            }
         }
         if layout.queries > 0 {
             encoder.copy_buffer_to_buffer(answers, 0, staging, 0, u64::from(layout.queries) * 4);
         }
+        if layout.kept > 0 {
+            self.encode_kept_copies(encoder, t, buffers, layout);
+        }
+    }
+
+    /// The bind group of the kept planes' table passes (`sat_rows`, `sat_cols`).
+    fn sat_bind_group(&self, t: &TestBuffers, layout: &WaveLayout) -> wgpu::BindGroup {
+        let (Some(pyramid), Some(kept), Some(tables), Some(summary)) =
+            (&t.pyramid, &t.kept, &t.tables, &t.summary)
+        else {
+            unreachable!("kept planes' buffers were just ensured");
+        };
+        fn part(binding: u32, buffer: &wgpu::Buffer, bytes: u64) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset: 0,
+                    size: NonZeroU64::new(bytes.max(16)),
+                }),
+            }
+        }
+        let n = u64::from(layout.kept);
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hdm summed-area table bind group"),
+            layout: &self.hdm_pipelines.sat_layout,
+            entries: &[
+                part(10, pyramid, layout.pyramid_floats * 4),
+                part(11, kept, n * hdm::KEPT_BYTES),
+                part(12, tables, layout.table_words * 4),
+                part(13, summary, n * hdm::SUMMARY_WORDS * 4),
+            ],
+        })
+    }
+
+    /// After the table passes: each kept plane's table into its texture, and the summaries
+    /// into their read-back buffer.
+    fn encode_kept_copies(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        t: &TestBuffers,
+        buffers: &WaveBuffers,
+        layout: &WaveLayout,
+    ) {
+        let (Some(tables), Some(summary), Some(staging)) =
+            (&t.tables, &t.summary, &t.summary_staging)
+        else {
+            unreachable!("kept planes' buffers were just ensured");
+        };
+        for (plane, texture) in layout.planes.iter().zip(&buffers.kept) {
+            let (Some(kp), Some(texture)) = (&plane.kept, texture) else {
+                continue;
+            };
+            let ((width, height), _) = plane.target;
+            encoder.copy_buffer_to_texture(
+                wgpu::TexelCopyBufferInfo {
+                    buffer: tables,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: u64::from(kp.table) * 4,
+                        bytes_per_row: Some(kp.stride * 4),
+                        rows_per_image: Some(height),
+                    },
+                },
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        let bytes = u64::from(layout.kept) * hdm::SUMMARY_WORDS * 4;
+        encoder.copy_buffer_to_buffer(summary, 0, staging, 0, bytes);
     }
 
     /// Encoding step: every plane of the wave ([`Self::encode_plane`]) in one command buffer.
@@ -1002,7 +1198,7 @@ impl GpuBackend {
                 writes,
             );
         }
-        self.encode_tests(&mut encoder, pool, layout);
+        self.encode_tests(&mut encoder, pool, buffers, layout);
         if let Some(t) = timestamps {
             t.resolve(&mut encoder);
         }
@@ -1306,6 +1502,19 @@ impl GpuBackend {
         {
             let w = next();
             let bytes = (u64::from(layout.queries) * 4).max(4);
+            let tx = tx.clone();
+            staging.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+                let _ = tx.send((w, r));
+            });
+        }
+        if let Some(staging) = pool
+            .tests
+            .as_ref()
+            .and_then(|t| t.summary_staging.as_ref())
+            .filter(|_| layout.kept > 0)
+        {
+            let w = next();
+            let bytes = u64::from(layout.kept) * hdm::SUMMARY_WORDS * 4;
             staging.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
                 let _ = tx.send((w, r));
             });
@@ -1725,6 +1934,70 @@ fn read_answers(
         out[plane.job] = Some(PlaneResult::Answers(answers));
     }
     Ok(())
+}
+
+impl GpuBackend {
+    /// Read-back step of the kept planes: each one's summary, its answers (already in `out`)
+    /// turned into [`PlaneResult::Kept`], its table texture cached for a new stand-in of its
+    /// map (or, without umbra, given back to the free list: nothing reprojects from it).
+    ///
+    /// # Errors
+    /// [`BackendError::ReadBack`] when the mapped range cannot be read.
+    fn read_kept(
+        &self,
+        pool: &Pool,
+        layout: &WaveLayout,
+        jobs: &[PlaneJob],
+        textures: Vec<Option<SweepTable>>,
+        out: &mut [Option<PlaneResult>],
+    ) -> Result<(), BackendError> {
+        let Some(staging) = pool
+            .tests
+            .as_ref()
+            .and_then(|t| t.summary_staging.as_ref())
+            .filter(|_| layout.kept > 0)
+        else {
+            return Ok(());
+        };
+        let bytes = u64::from(layout.kept) * hdm::SUMMARY_WORDS * 4;
+        let words: Vec<u32> = {
+            let view = staging
+                .get_mapped_range(..bytes)
+                .map_err(|e| BackendError::ReadBack {
+                    step: "kept planes' summaries mapping",
+                    message: e.to_string(),
+                })?;
+            bytemuck::cast_slice::<u8, u32>(&view).to_vec()
+        };
+        staging.unmap();
+        for (plane, texture) in layout.planes.iter().zip(textures) {
+            let (Some(kp), Some(texture)) = (&plane.kept, texture) else {
+                continue;
+            };
+            let w = kp.index as usize * hdm::SUMMARY_WORDS as usize;
+            let (umbra, outside_umbra) = hdm::read_summary(&words[w..w + 8]);
+            let f = &jobs[plane.job].frame;
+            let source = Arc::new(DepthMap::on_device(f.width, f.height));
+            let table = match umbra {
+                Some(_) => Some(Arc::new(texture)),
+                None => {
+                    self.tables.give_back(texture);
+                    None
+                }
+            };
+            self.tables.insert(&source, Cached { table, umbra });
+            let Some(PlaneResult::Answers(answers)) = out[plane.job].take() else {
+                unreachable!("a kept plane is a tested one");
+            };
+            out[plane.job] = Some(PlaneResult::Kept(KeptMap {
+                answers,
+                source,
+                umbra,
+                outside_umbra,
+            }));
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]
