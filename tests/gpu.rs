@@ -1862,12 +1862,10 @@ fn bake_pvs_is_identical_with_the_sweep() {
     let (scene, c, g) = sweep_forest_bakes(&b);
     let stats = b.total_stats();
     eprintln!("sweep bake of a forest: {stats:?}");
-    // The sweep's maps stay on the device (`render_kept`): no map comes back.
-    assert!(stats.kept_maps > 0, "{stats:?}");
-    assert!(
-        stats.maps_read_back * 10 < stats.kept_maps,
-        "few maps come back: {stats:?}"
-    );
+    // The sweep's maps stay on the device (`render_kept`) where their tests are few enough
+    // (`PIXELS_PER_RECORDED_TEST`); the others come back: both kinds in one sweep.
+    assert!(stats.kept_maps * 4 >= stats.gpu_planes, "{stats:?}");
+    assert!(stats.maps_read_back > 0, "{stats:?}");
     // Read back instead, the same PVS.
     let mut back = GpuBackend::new().expect("a third device");
     back.set_keep_sweep_maps(false);
@@ -1876,7 +1874,7 @@ fn bake_pvs_is_identical_with_the_sweep() {
     assert_eq!(back_stats.kept_maps, 0, "{back_stats:?}");
     assert!(back_stats.maps_read_back > 0, "{back_stats:?}");
     assert!(
-        back_stats.bytes_read_back > 4 * stats.bytes_read_back,
+        2 * back_stats.bytes_read_back > 3 * stats.bytes_read_back,
         "kept: {} bytes read back, read back: {}",
         stats.bytes_read_back,
         back_stats.bytes_read_back

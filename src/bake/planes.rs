@@ -36,8 +36,8 @@
 //! box and whether the umbra covers the whole plane come back as numbers, and later planes
 //! reproject from the map where it lies. A plane that turns out to end its direction tests
 //! every box behind it, not only those within reach: it is rendered again with those tests
-//! (`Prepared::retest_ending`). Past [`MAX_RECORDED_QUERIES`] or [`MAX_RECORDED_BOXES`] the
-//! map comes back as before. So
+//! (`Prepared::retest_ending`). Past a test per [`PIXELS_PER_RECORDED_TEST`] pixels the map
+//! comes back as before: recording costs the CPU more than the map then. So
 //! every answer is the one the map's pyramid gives on the CPU, and the PVS is the CPU
 //! backend's.
 
@@ -57,7 +57,6 @@ use crate::project::planes::{
 use obvhs::bvh2::Bvh2;
 use rayon::prelude::*;
 use std::cell::RefCell;
-use std::collections::HashMap;
 use std::sync::Arc;
 
 /// Extended projections on a cell's planes: separate planes, or the occlusion sweep.
@@ -87,13 +86,22 @@ impl Culler for PlaneCuller {
     }
 }
 
-/// A plane's occludee tests go to the device only while its recorded walk asks at most this
-/// many tests (16 bytes each up, 4 down): every box not yet decided within the plane's reach
-/// is recorded, where the walk on the CPU prunes, so past this the map comes back instead.
-pub const MAX_RECORDED_QUERIES: usize = 49_152;
-/// The most boxes a sweep plane's recorded leave-out walk may test
-/// (`Prepared::record_leave_out`) before its map comes back instead.
-pub const MAX_RECORDED_BOXES: usize = 16_384;
+/// A plane's occludee tests go to the device (and a sweep plane's map stays there) only while
+/// its recorded tests number at most one per this many pixels of its map; past that the map
+/// comes back instead. Recording is the CPU's cost of the device's tests: every box not yet
+/// decided within the plane's reach is tested in advance, where the walk on a pyramid prunes
+/// at hidden and empty nodes. Measured (CPU, release build): recording costs about 0.5 µs per
+/// test (the paper-size forest's middle cell: 1.46 M tests over its 129 sweep planes, 0.7 s),
+/// while reading a map back, building its pyramid and its umbra box costs 2–5 ns per pixel
+/// (`Hdm::build` of a 256 × 256 map 0.11 ms, of a 1,024 × 1,024 one 5.4 ms), so the two
+/// break even near one test per 100 pixels; at one per 64 the device's share (the bytes not
+/// copied, the tables not uploaded) tips it.
+pub const PIXELS_PER_RECORDED_TEST: usize = 64;
+
+/// The most tests a plane's recording may hold ([`PIXELS_PER_RECORDED_TEST`]).
+fn max_recorded(frame: &PlaneFrame) -> usize {
+    (frame.width as usize * frame.height as usize / PIXELS_PER_RECORDED_TEST).max(16)
+}
 
 /// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
 /// `SWEEP_TEST_REACH · t` (the last plane tests all). Measured on 5 path cells: reach 4, 8,
@@ -442,8 +450,9 @@ impl Prepared<'_> {
     /// on: those of every node not done, every object of theirs still to test and every piece
     /// of those not yet hidden — what the traversal reaches is a subset, as it only skips more
     /// while it marks. For a backend to answer on its device ([`RasterBackend::render_tested`]).
-    /// `None` when it records more than [`MAX_RECORDED_QUERIES`] tests: answering them would
-    /// cost more than sending the map, and the map comes back instead.
+    /// `None` as soon as it records more tests than the plane's share
+    /// ([`PIXELS_PER_RECORDED_TEST`]): they would cost the CPU more than the map, which then
+    /// comes back instead.
     #[expect(
         clippy::too_many_arguments,
         reason = "the traversal's own inputs, read-only here"
@@ -458,21 +467,36 @@ impl Prepared<'_> {
         piece_hidden: &[bool],
         skip_test: &(dyn Fn(usize, &[bool]) -> bool + Sync),
     ) -> Option<Queries> {
+        let max = max_recorded(&job.frame);
         let queries = RefCell::new(Queries::default());
         let tests = Tests::Record(&queries);
         let Some(bvh) = &self.bvh else {
             return Some(Queries::default());
         };
-        for (ni, node) in bvh.nodes.iter().enumerate() {
-            if node_done[ni] {
+        // The traversal's order does not matter here, but its pruning by reach does: a box
+        // out of reach is answered `Empty` without a test, so the walk asks nothing below it
+        // (a child's box lies inside its parent's, a piece's inside its object's).
+        let frame = &job.frame;
+        let mut stack = vec![0u32];
+        while let Some(ni) = stack.pop() {
+            let node = &bvh.nodes[ni as usize];
+            if node_done[ni as usize] {
                 continue;
             }
             let b = DAabb {
                 min: glam::Vec3::from(node.aabb.min).as_dvec3(),
                 max: glam::Vec3::from(node.aabb.max).as_dvec3(),
             };
-            self.test_box(&job.frame, &tests, &b, cell, after);
+            if !in_reach(frame, &b, after) {
+                continue;
+            }
+            self.test_box(frame, &tests, &b, cell, after);
+            if queries.borrow().list.len() > max {
+                return None;
+            }
             if !node.is_leaf() {
+                stack.push(node.first_index);
+                stack.push(node.first_index + 1);
                 continue;
             }
             for k in 0..node.prim_count {
@@ -481,15 +505,21 @@ impl Prepared<'_> {
                     continue;
                 }
                 let ob = self.scene.objects[o].bounds.to_f64();
-                self.test_box(&job.frame, &tests, &ob, cell, after);
+                if !in_reach(frame, &ob, after) {
+                    continue;
+                }
+                self.test_box(frame, &tests, &ob, cell, after);
                 for pi in self.pieces[o].clone() {
                     let pi = pi as usize;
                     if !piece_hidden[pi] {
-                        self.test_box(&job.frame, &tests, &self.piece_boxes[pi], cell, after);
+                        self.test_box(frame, &tests, &self.piece_boxes[pi], cell, after);
                     }
                 }
+                if queries.borrow().list.len() > max {
+                    return None;
+                }
             }
-            if queries.borrow().list.len() > MAX_RECORDED_QUERIES {
+            if queries.borrow().list.len() > max {
                 return None;
             }
         }
@@ -501,8 +531,8 @@ impl Prepared<'_> {
     /// [`Self::gather_slab`] over that slab, run now with every box answered "not hidden"
     /// (so it descends everywhere the real walk may) and every test recorded. The real walk
     /// starts from a state with at least as many objects hidden and nodes done, so it asks a
-    /// subset. `None` when it would record more than [`MAX_RECORDED_BOXES`] boxes (the map
-    /// then comes back).
+    /// subset. `None` when the tests, with `queries`, would be more than the plane's share
+    /// ([`PIXELS_PER_RECORDED_TEST`]; the map then comes back).
     fn record_leave_out(
         &self,
         round: &Round,
@@ -516,14 +546,14 @@ impl Prepared<'_> {
         if next >= plan.distances.len() {
             return Some(queries);
         }
+        let max = max_recorded(&planned.job.frame);
         let recorded = RefCell::new(queries);
-        let boxes = std::cell::Cell::new(0usize);
         let tests = Tests::Record(&recorded);
         let leave_out = LeaveOut {
             object: &|o| hidden[o as usize],
             hidden: &|b| {
-                boxes.set(boxes.get() + 1);
-                if boxes.get() <= MAX_RECORDED_BOXES {
+                // (Past the share the walk goes on, as planning will, recording nothing.)
+                if recorded.borrow().list.len() <= max {
                     self.test_box(
                         &planned.job.frame,
                         &tests,
@@ -536,7 +566,8 @@ impl Prepared<'_> {
             },
         };
         self.gather_slab(plan, next, &leave_out, hidden, node_done);
-        (boxes.get() <= MAX_RECORDED_BOXES).then(|| recorded.into_inner())
+        let recorded = recorded.into_inner();
+        (recorded.list.len() <= max).then_some(recorded)
     }
 
     /// A kept sweep plane that turns out to end its direction ([`ends_sweep`]) tests every box
@@ -609,17 +640,7 @@ impl Prepared<'_> {
         cell: &DAabb,
         range: (f64, f64),
     ) -> Coverage {
-        if b.is_empty() {
-            return Coverage::Empty;
-        }
-        let a = frame.axis;
-        let (near, far) = if frame.positive {
-            (b.min[a], b.max[a])
-        } else {
-            (b.max[a], b.min[a])
-        };
-        let sg = frame.sign();
-        if sg * (far - frame.face()) <= range.0 || sg * (near - frame.face()) > range.1 {
+        if !in_reach(frame, b, range) {
             return Coverage::Empty;
         }
         if b.overlaps(cell) {
@@ -663,6 +684,23 @@ impl Prepared<'_> {
             Coverage::Partial
         }
     }
+}
+
+/// False when [`Prepared::test_box`] answers `Empty` for `b` on `frame` without a test: an empty
+/// box, or one ending before `range.0` or starting beyond `range.1` (distances beyond the
+/// face). A box inside one out of reach is out of reach too.
+fn in_reach(frame: &PlaneFrame, b: &DAabb, range: (f64, f64)) -> bool {
+    if b.is_empty() {
+        return false;
+    }
+    let a = frame.axis;
+    let (near, far) = if frame.positive {
+        (b.min[a], b.max[a])
+    } else {
+        (b.max[a], b.min[a])
+    };
+    let sg = frame.sign();
+    !(sg * (far - frame.face()) <= range.0 || sg * (near - frame.face()) > range.1)
 }
 
 /// True when sweep plane `k`, whose umbra covers every pixel of its map, ends its sweep: its
@@ -755,12 +793,12 @@ enum Tested {
     /// Its Depth Map and Hierarchical Depth Map, on the CPU.
     Map { map: Arc<DepthMap>, hdm: Hdm },
     /// The device's answers to its queries ([`Prepared::record_queries`]), by query.
-    Answers(HashMap<QueryKey, Coverage>),
+    Answers(AnswerMap),
     /// The device's answers, and its map kept there ([`RasterBackend::render_kept`]): the
     /// map's stand-in (a later reprojection's source), its umbra's pixel box and whether
     /// the umbra covers every pixel.
     Kept {
-        answers: HashMap<QueryKey, Coverage>,
+        answers: AnswerMap,
         source: Arc<DepthMap>,
         umbra: Option<[u32; 4]>,
         all_umbra: bool,
@@ -778,7 +816,7 @@ impl Tested {
     /// A backend's result for a plane asked `queries` (`None`: none asked), with the
     /// pyramid of a map that came back built here.
     fn of(result: PlaneResult, queries: Option<Vec<RectQuery>>) -> Tested {
-        let keyed = |answers: Vec<Coverage>| -> HashMap<QueryKey, Coverage> {
+        let keyed = |answers: Vec<Coverage>| -> AnswerMap {
             let q = queries.as_ref().expect("answers come only for queries");
             debug_assert_eq!(answers.len(), q.len());
             (q.iter().map(|q| (q.rect, q.depth.to_bits())))
@@ -804,10 +842,14 @@ impl Tested {
 /// A rectangle query's key: its pixels and its Depth's bits.
 type QueryKey = ([u32; 4], u32);
 
+/// The device's answers to a plane's queries, by key (a fast hash: a large scene's plane asks
+/// thousands).
+type AnswerMap = foldhash::HashMap<QueryKey, Coverage>;
+
 /// The queries a plane's traversal may ask, each once, in the order first asked.
 #[derive(Default)]
 struct Queries {
-    index: HashMap<QueryKey, usize>,
+    index: foldhash::HashMap<QueryKey, usize>,
     list: Vec<RectQuery>,
 }
 
@@ -816,7 +858,7 @@ enum Tests<'a> {
     /// The plane's Hierarchical Depth Map.
     Hdm(&'a Hdm),
     /// The device's answers ([`RasterBackend::render_tested`]).
-    Answers(&'a HashMap<QueryKey, Coverage>),
+    Answers(&'a AnswerMap),
     /// Recording every query asked, each answered `Partial` so that a box's every later
     /// query is asked too ([`Prepared::record_queries`]).
     Record(&'a RefCell<Queries>),
