@@ -1470,54 +1470,34 @@ impl GpuBackend {
         let (tx, rx) = mpsc::channel();
         // Each mapping reports its own index, 0 .. `layout.mappings(..)`.
         let mut w = 0;
-        let mut next = || {
+        let mut map = |buffer: &wgpu::Buffer, bytes: u64| {
+            let tx = tx.clone();
+            let index = w;
             w += 1;
-            w - 1
+            buffer.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+                let _ = tx.send((index, r));
+            });
         };
         if let Some(t) = timestamps {
             for (k, set) in t.sets.iter().enumerate() {
-                let tx = tx.clone();
-                let w = next();
-                set.read_back
-                    .map_async(wgpu::MapMode::Read, ..t.bytes(k), move |r| {
-                        let _ = tx.send((w, r));
-                    });
+                map(&set.read_back, t.bytes(k));
             }
         }
         for plane in layout.planes.iter().filter(|p| p.tested.is_none()) {
-            let tx = tx.clone();
-            let w = next();
             let (size, k) = plane.target;
-            pool.targets[&size][k]
-                .staging
-                .map_async(wgpu::MapMode::Read, .., move |r| {
-                    let _ = tx.send((w, r));
-                });
+            let staging = &pool.targets[&size][k].staging;
+            map(staging, staging.size());
         }
-        if let Some(staging) = pool
-            .tests
-            .as_ref()
-            .and_then(|t| t.staging.as_ref())
-            .filter(|_| layout.tested > 0)
+        let tests = pool.tests.as_ref();
+        if let Some(staging) = tests.and_then(|t| t.staging.as_ref())
+            && layout.tested > 0
         {
-            let w = next();
-            let bytes = (u64::from(layout.queries) * 4).max(4);
-            let tx = tx.clone();
-            staging.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
-                let _ = tx.send((w, r));
-            });
+            map(staging, (u64::from(layout.queries) * 4).max(4));
         }
-        if let Some(staging) = pool
-            .tests
-            .as_ref()
-            .and_then(|t| t.summary_staging.as_ref())
-            .filter(|_| layout.kept > 0)
+        if let Some(staging) = tests.and_then(|t| t.summary_staging.as_ref())
+            && layout.kept > 0
         {
-            let w = next();
-            let bytes = u64::from(layout.kept) * hdm::SUMMARY_WORDS * 4;
-            staging.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
-                let _ = tx.send((w, r));
-            });
+            map(staging, u64::from(layout.kept) * hdm::SUMMARY_WORDS * 4);
         }
         (submission, rx)
     }
