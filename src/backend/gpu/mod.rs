@@ -693,8 +693,9 @@ impl GpuBackend {
         Ok(())
     }
 
-    /// Answers separate planes' occludee tests on the device (`on`, the default: the maps
-    /// stay there and only the answers come back, [`RasterBackend::render_tested`]) or reads
+    /// Answers occludee tests on the device where the bake records them (`on`, the default:
+    /// the maps stay there and only the answers come back, [`RasterBackend::render_tested`];
+    /// sweep planes' maps too unless [`GpuBackend::set_keep_sweep_maps`]`(false)`) or reads
     /// every map back for the CPU's pyramid (for comparisons). The same PVS either way.
     pub fn set_tests_on_device(&mut self, on: bool) {
         self.tests_wanted = on;
