@@ -331,9 +331,16 @@ fn the_bench_reports_the_device_per_cell() {
         d.kib_up_per_cell > 0.0 && d.device_ms_per_cell > 0.0,
         "{d:?}"
     );
+    // Each plane's map either came back, stayed on the device (sweep planes) or needed no
+    // device at all.
+    assert!(
+        d.maps_down_per_cell + d.maps_kept_per_cell <= d.passes_per_cell,
+        "{d:?}"
+    );
     let table = bench.table();
     assert!(table.contains("Per cell on the device"), "{table}");
     assert!(table.contains("KiB read back"), "{table}");
+    assert!(table.contains("maps read back / kept"), "{table}");
     let json = serde_json::to_value(&bench).unwrap();
     let rows = json["rows"].as_array().unwrap();
     assert!(

@@ -314,6 +314,11 @@ pub struct BackendCounters {
     pub bytes_uploaded: u64,
     /// Bytes read back from the device.
     pub bytes_read_back: u64,
+    /// Depth Maps read back, and sweep planes' maps kept on the device instead
+    /// ([`RasterBackend::render_kept`]).
+    pub maps_read_back: usize,
+    /// See `maps_read_back`.
+    pub maps_kept: usize,
     /// Wall time of the CPU's setup of the jobs.
     pub setup: std::time::Duration,
     /// Wall time of the device's section, from the first upload to the last read-back.
@@ -330,6 +335,8 @@ impl BackendCounters {
             passes: self.passes.saturating_sub(before.passes),
             bytes_uploaded: self.bytes_uploaded.saturating_sub(before.bytes_uploaded),
             bytes_read_back: self.bytes_read_back.saturating_sub(before.bytes_read_back),
+            maps_read_back: self.maps_read_back.saturating_sub(before.maps_read_back),
+            maps_kept: self.maps_kept.saturating_sub(before.maps_kept),
             setup: self.setup.saturating_sub(before.setup),
             gpu: self.gpu.saturating_sub(before.gpu),
             pass_time: self

@@ -1034,8 +1034,12 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                     sampler_checkpoints: checkpoints.as_ref(),
                     ..BakeHooks::default()
                 };
+                let before = backend.counters();
                 let result = with_ticker(args, &progress, study, &v.label, || {
                     bake_cells(&f.scene, &cells, &all, &v.settings, backend, hooks)
+                });
+                let device = backend.counters().zip(before).map(|(after, before)| {
+                    super::DeviceRow::of(&after.since(&before), cells.len())
                 });
                 if let Some(c) = &checkpoints {
                     let n = c.replayed.load(std::sync::atomic::Ordering::Relaxed);
@@ -1064,6 +1068,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                     if row.backend == "gpu" {
                         row.gpu_projection = Some(args.gpu_projection.to_string());
                     }
+                    row.device = device;
                     let curve = cost_curve(&r, f.scene.objects.len(), row.objects_culled_percent);
                     // The PVS document the harder checks read, if any is asked for.
                     let doc = (plan.hunt_rays.is_some() || plan.confirm_rays.is_some())
@@ -1104,6 +1109,21 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                 peak.map_or("n/a".into(), |p| format!("{p:.0} MiB")),
                 t.elapsed().as_secs_f64()
             );
+            if let Some(d) = &row.device {
+                say!(
+                    args.progress,
+                    "bench: foliage {study} [{}]: device per cell: {:.0} KiB up, {:.0} KiB down \
+                     ({:.1} maps read back, {:.1} sweep maps kept), setup {:.1} ms, device \
+                     section {:.1} ms",
+                    v.label,
+                    d.kib_up_per_cell,
+                    d.kib_down_per_cell,
+                    d.maps_down_per_cell,
+                    d.maps_kept_per_cell,
+                    d.setup_ms_per_cell,
+                    d.device_ms_per_cell
+                );
+            }
             rows.push(FoliageRow {
                 study: study.into(),
                 variant: v.label.clone(),

@@ -458,6 +458,10 @@ pub struct DeviceRow {
     pub kib_up_per_cell: f64,
     /// KiB read back from it.
     pub kib_down_per_cell: f64,
+    /// Depth Maps read back, and sweep planes' maps kept on the device instead.
+    pub maps_down_per_cell: f64,
+    /// See `maps_down_per_cell`.
+    pub maps_kept_per_cell: f64,
     /// Wall ms of the CPU's setup of the jobs.
     pub setup_ms_per_cell: f64,
     /// Wall ms of the device's section, from the first upload to the last read-back.
@@ -475,6 +479,8 @@ impl DeviceRow {
             passes_per_cell: c.passes as f64 / n,
             kib_up_per_cell: c.bytes_uploaded as f64 / 1024.0 / n,
             kib_down_per_cell: c.bytes_read_back as f64 / 1024.0 / n,
+            maps_down_per_cell: c.maps_read_back as f64 / n,
+            maps_kept_per_cell: c.maps_kept as f64 / n,
             setup_ms_per_cell: c.setup.as_secs_f64() * 1e3 / n,
             device_ms_per_cell: c.gpu.as_secs_f64() * 1e3 / n,
             pass_ms_per_cell: c.pass_time.map(|t| t.as_secs_f64() * 1e3 / n),
@@ -1170,12 +1176,13 @@ pub const COLUMNS: [&str; 13] = [
 ];
 
 /// The columns of the device table (rows of backends with a device).
-const DEVICE_COLUMNS: [&str; 8] = [
+const DEVICE_COLUMNS: [&str; 9] = [
     "scene",
     "backend",
     "passes",
     "KiB up",
     "KiB read back",
+    "maps read back / kept",
     "CPU setup ms",
     "device ms (wall)",
     "GPU pass ms (timestamps)",
@@ -1255,6 +1262,7 @@ impl Bench {
                     format!("{:.1}", d.passes_per_cell),
                     format!("{:.0}", d.kib_up_per_cell),
                     format!("{:.0}", d.kib_down_per_cell),
+                    format!("{:.1} / {:.1}", d.maps_down_per_cell, d.maps_kept_per_cell),
                     format!("{:.1}", d.setup_ms_per_cell),
                     format!("{:.1}", d.device_ms_per_cell),
                     d.pass_ms_per_cell

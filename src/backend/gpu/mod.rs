@@ -892,6 +892,8 @@ impl RasterBackend for GpuBackend {
             passes: t.passes,
             bytes_uploaded: t.bytes_uploaded,
             bytes_read_back: t.bytes_read_back,
+            maps_read_back: t.maps_read_back,
+            maps_kept: t.kept_maps,
             setup: t.setup,
             gpu: t.gpu,
             pass_time: (t.timed_passes > 0).then_some(t.pass_time),
