@@ -519,9 +519,6 @@ impl Prepared<'_> {
                     return None;
                 }
             }
-            if queries.borrow().list.len() > max {
-                return None;
-            }
         }
         Some(queries.into_inner())
     }
@@ -601,12 +598,10 @@ impl Prepared<'_> {
             .par_iter()
             .map(|&i| {
                 let r = &rendered[i];
-                let cell = round.cell;
-                let range = round.range(r.dir, true);
                 self.record_queries(
                     &r.job,
-                    cell,
-                    range,
+                    round.cell,
+                    round.range(r.dir, true),
                     hidden,
                     node_done,
                     piece_hidden,

@@ -1867,6 +1867,28 @@ fn read_back(
     Ok(())
 }
 
+/// The first `bytes` of a mapped read-back buffer as `u32` words; the buffer is unmapped.
+///
+/// # Errors
+/// [`BackendError::ReadBack`] (naming `step`) when the mapped range cannot be read.
+fn mapped_words(
+    staging: &wgpu::Buffer,
+    bytes: u64,
+    step: &'static str,
+) -> Result<Vec<u32>, BackendError> {
+    let words = {
+        let view = staging
+            .get_mapped_range(..bytes)
+            .map_err(|e| BackendError::ReadBack {
+                step,
+                message: e.to_string(),
+            })?;
+        bytemuck::cast_slice::<u8, u32>(&view).to_vec()
+    };
+    staging.unmap();
+    Ok(words)
+}
+
 /// Read-back step of the occludee tests: each tested plane's answers (`shaders/hdm.wgsl`'s
 /// codes) into `out`.
 ///
@@ -1886,16 +1908,8 @@ fn read_answers(
         return Ok(());
     };
     let bytes = (u64::from(layout.queries) * 4).max(4);
-    let codes: Vec<u32> = {
-        let view = staging
-            .get_mapped_range(..bytes)
-            .map_err(|e| BackendError::ReadBack {
-                step: "answers mapping",
-                message: e.to_string(),
-            })?;
-        bytemuck::cast_slice::<u8, u32>(&view)[..layout.queries as usize].to_vec()
-    };
-    staging.unmap();
+    let mut codes = mapped_words(staging, bytes, "answers mapping")?;
+    codes.truncate(layout.queries as usize);
     for plane in &layout.planes {
         let Some(tp) = &plane.tested else { continue };
         let (first, n) = (tp.queries.0 as usize, tp.queries.1 as usize);
@@ -1940,16 +1954,7 @@ impl GpuBackend {
             return Ok(());
         };
         let bytes = u64::from(layout.kept) * hdm::SUMMARY_WORDS * 4;
-        let words: Vec<u32> = {
-            let view = staging
-                .get_mapped_range(..bytes)
-                .map_err(|e| BackendError::ReadBack {
-                    step: "kept planes' summaries mapping",
-                    message: e.to_string(),
-                })?;
-            bytemuck::cast_slice::<u8, u32>(&view).to_vec()
-        };
-        staging.unmap();
+        let words = mapped_words(staging, bytes, "kept planes' summaries mapping")?;
         for (plane, texture) in layout.planes.iter().zip(textures) {
             let (Some(kp), Some(texture)) = (&plane.kept, texture) else {
                 continue;
