@@ -1621,17 +1621,24 @@ impl Hemicube {
             // Pixel units along u and v of a point.
             let upx = |p: DVec3| (p.x / p.z + 1.0) * half;
             let vpx = |p: DVec3| (p.y / p.z - v.vmin) * half;
+            let (u0, u1) = (upx(p0), upx(p1));
+            let (v0, v1) = (vpx(p0), vpx(p1));
+            // The pieces' ends: `t0`, the crossings of pixel boundaries in order, `t1`. Along
+            // the segment `u` and `v` are monotonic, so each coordinate's crossings come
+            // sorted (ascending or descending) and the two lists are merged; rounding that
+            // breaks the order falls back to sorting them all.
             ts.clear();
-            ts.extend([t0, t1]);
+            let mut split = [0usize; 2];
             for (coord, lo, hi) in [
-                (0usize, upx(p0).min(upx(p1)), upx(p0).max(upx(p1))),
-                (1, vpx(p0).min(vpx(p1)), vpx(p0).max(vpx(p1))),
+                (0usize, u0.min(u1), u0.max(u1)),
+                (1, v0.min(v1), v0.max(v1)),
             ] {
                 let (k0, k1) = (lo.ceil().max(0.0), hi.floor().min(res as f64));
                 let span = k1 - k0;
                 if span.is_nan() || span >= 4.0 * res as f64 {
                     return false;
                 }
+                let start = ts.len();
                 let mut k = k0;
                 while k <= k1 {
                     // The boundary w = k / half + offset: X − w·Z = 0 (or Y).
@@ -1649,12 +1656,45 @@ impl Hemicube {
                     }
                     k += 1.0;
                 }
+                let run = &mut ts[start..];
+                if run.len() > 1 && run[0] > run[run.len() - 1] {
+                    run.reverse();
+                }
+                split[coord] = ts.len();
             }
-            ts.sort_unstable_by(f64::total_cmp);
-            for w in ts.windows(2) {
-                let (q0, q1) = (at(w[0]), at(w[1]));
-                let (ua, ub) = (upx(q0), upx(q1));
-                let (va, vb) = (vpx(q0), vpx(q1));
+            let sorted = |r: &[f64]| r.windows(2).all(|w| w[0] <= w[1]);
+            let nu = split[0];
+            if sorted(&ts[..nu]) && sorted(&ts[nu..]) {
+                // Merge the two runs behind the buffer's end, then move them down.
+                let n = ts.len();
+                let (mut a, mut b) = (0, nu);
+                while a < nu || b < n {
+                    let x = if b >= n || (a < nu && ts[a] <= ts[b]) {
+                        a += 1;
+                        ts[a - 1]
+                    } else {
+                        b += 1;
+                        ts[b - 1]
+                    };
+                    ts.push(x);
+                }
+                ts.drain(..n);
+            } else {
+                ts.sort_unstable_by(f64::total_cmp);
+            }
+            ts.insert(0, t0);
+            ts.push(t1);
+            // Each piece's end is the next one's start: its point and pixel coordinates are
+            // computed once.
+            let end = |t: f64| {
+                let q = at(t);
+                (upx(q), vpx(q), q.z)
+            };
+            let mut a = end(ts[0]);
+            for &tb in &ts[1..] {
+                let b = end(tb);
+                let ((ua, va, za), (ub, vb, zb)) = (a, b);
+                a = b;
                 let pu = [ua.min(ub) - 1e-6, ua.max(ub) + 1e-6];
                 let pv = [va.min(vb) - 1e-6, va.max(vb) + 1e-6];
                 let i0 = pu[0].floor().clamp(0.0, res as f64 - 1.0) as usize;
@@ -1664,7 +1704,7 @@ impl Hemicube {
                 if i0 < v.need[0] || i1 >= v.need[1] || j0 < v.need[2] || j1 >= v.need[3] {
                     return false;
                 }
-                let z = q0.z.min(q1.z) * (1.0 - 1e-9);
+                let z = za.min(zb) * (1.0 - 1e-9);
                 for j in j0..=j1 {
                     for i in i0..=i1 {
                         let idx = j * res + i;
