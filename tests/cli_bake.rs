@@ -185,6 +185,10 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
         (&["--sampling-max-eps", "0"][..], "--sampling-max-eps 0"),
         (&["--sampling-probe", "2"][..], "--sampling-probe 2"),
         (
+            &["--sampling-probe-cull", "1.5"][..],
+            "--sampling-probe-cull 1.5",
+        ),
+        (
             &["--sampling-resolution", "8"][..],
             "--sampling-resolution 8",
         ),

@@ -57,6 +57,14 @@ fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
         DVec3::new(8.0, -0.5, -0.5),
         DVec3::new(9.0, 0.5, 0.5),
     );
+    leaf_layer(&mut obj, &mut nv, hole);
+    let scene = load_obj(&format!("leaves-{}", hole.is_some()), &obj);
+    (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
+}
+
+/// The object `leaves`: 3,000 leaves (~1 across) at z ∈ [3, 3.4] over x, y ∈ [-3, 3], with a
+/// hole of radius `hole` around the z axis when given.
+fn leaf_layer(obj: &mut String, nv: &mut usize, hole: Option<f64>) {
     writeln!(obj, "o leaves").unwrap();
     let mut rng = Rng(3);
     let mut n = 0;
@@ -75,12 +83,10 @@ fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
             let p = c + DVec3::new(a.cos(), a.sin(), 0.0) * 0.55 + tilt * a.sin();
             writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
         }
-        writeln!(obj, "f {} {} {}", nv + 1, nv + 2, nv + 3).unwrap();
-        nv += 3;
+        writeln!(obj, "f {} {} {}", *nv + 1, *nv + 2, *nv + 3).unwrap();
+        *nv += 3;
         n += 1;
     }
-    let scene = load_obj(&format!("leaves-{}", hole.is_some()), &obj);
-    (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
 }
 
 /// The scene of the OBJ text `obj`, through a file of its own (tests run in parallel threads
@@ -538,6 +544,90 @@ fn a_level_whose_probe_hides_nothing_everywhere_is_split_unsampled() {
     assert_eq!(probed_hidden, whole_hidden);
     assert!(probed_hidden[0], "the finest level hides the target");
     brute_force_hidden(&scene, &cell, 0);
+}
+
+/// A level whose probe proves some object hidden for the cell, but too few of the objects it
+/// tests (`--sampling-probe-cull`), is split unsampled too: its balls do not fuse what it
+/// tests. The cell `[-0.5, 0.5]³` under the layer of leaves of `scene`, with nine targets
+/// beyond it that only a fine ε hides, and over a wall (z = -1.5) hiding a tenth target at
+/// any ε. The coarsest level (ε 0.354) shrinks the leaves to nothing: its probe hides the
+/// wall's target at every probed rectangle and none of the others, 1 of at most 12.
+#[test]
+fn a_level_whose_probe_hides_too_few_everywhere_is_split_unsampled() {
+    let mut obj = String::new();
+    let mut nv = 0;
+    cube(
+        &mut obj,
+        &mut nv,
+        "walled",
+        DVec3::new(-0.5, -0.5, -4.5),
+        DVec3::new(0.5, 0.5, -4.0),
+    );
+    for i in 0..3 {
+        for j in 0..3 {
+            let c = DVec3::new(f64::from(i) - 1.0, f64::from(j) - 1.0, 8.5);
+            cube(
+                &mut obj,
+                &mut nv,
+                &format!("leafy{i}{j}"),
+                c - DVec3::splat(0.3),
+                c + DVec3::splat(0.3),
+            );
+        }
+    }
+    writeln!(obj, "o wall").unwrap();
+    for (x, y) in [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)] {
+        writeln!(obj, "v {x} {y} -1.5").unwrap();
+    }
+    writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
+    nv += 4;
+    leaf_layer(&mut obj, &mut nv, None);
+    let scene = load_obj("wall-and-leaves", &obj);
+    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let run = |probe_cull: f64| {
+        let mut s = settings();
+        s.sampling_settings.levels = 3;
+        s.sampling_settings.eps = Some(0.05);
+        s.sampling_settings.resolution = Some(64);
+        s.sampling_settings.probe = 0.01;
+        s.sampling_settings.probe_cull = probe_cull;
+        run_sampler(&scene, &cell, &s)
+    };
+    let (strict_hidden, strict) = run(0.15);
+    let (lenient_hidden, lenient) = run(0.05);
+    let (l0, s0) = (lenient.levels[0], strict.levels[0]);
+    // The probe's figures: the wall's target hidden at every probed rectangle, of the
+    // undecided objects it tested (at most the twelve).
+    assert_eq!(s0.probe_cell_hidden, Some(1), "{:?}", strict.levels);
+    let tested = s0.probe_objects.unwrap();
+    assert!((7..=12).contains(&tested), "{:?}", strict.levels);
+    assert_eq!(
+        (l0.probe_cell_hidden, l0.probe_objects),
+        (s0.probe_cell_hidden, s0.probe_objects)
+    );
+    // A share between 0.05 and 0.15: only the strict bake splits the level unsampled.
+    assert!(s0.probe_only, "{:?}", strict.levels);
+    assert!(!l0.probe_only, "{:?}", lenient.levels);
+    assert!(
+        s0.points < l0.points,
+        "{:?} {:?}",
+        strict.levels,
+        lenient.levels
+    );
+    // Sampled whole, the level proves the wall's target hidden for the cell.
+    assert_eq!(l0.hidden, 1, "{:?}", lenient.levels);
+    // The finest level is sampled whole either way, and the result is the same: the wall's
+    // target and the leaves' targets hidden.
+    assert!(!strict.levels.last().unwrap().probe_only);
+    assert_eq!(strict_hidden, lenient_hidden);
+    assert!(strict_hidden[0], "the wall hides its target");
+    assert!(
+        strict_hidden[1..10].iter().any(|&h| h),
+        "the fused leaves hide targets"
+    );
+    for o in (0..10).filter(|&o| strict_hidden[o]) {
+        brute_force_hidden(&scene, &cell, o as u32);
+    }
 }
 
 /// `--max-memory`'s estimate holds one hemicube per worker thread at the largest resolution

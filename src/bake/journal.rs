@@ -327,6 +327,8 @@ mod tests {
                         hidden: k,
                         probe_only: k.is_multiple_of(2),
                         probe_hidden: k.is_multiple_of(2).then_some(0.25),
+                        probe_cell_hidden: k.is_multiple_of(2).then_some(k),
+                        probe_objects: k.is_multiple_of(2).then_some(100),
                     }],
                     cpu_fallback: k
                         .is_multiple_of(3)

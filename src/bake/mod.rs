@@ -684,14 +684,23 @@ fn level_summary(curves: &[&[crate::pvs::SamplingLevel]]) -> Vec<crate::pvs::Pvs
                 seconds: mean(&|l| l.seconds),
                 hidden: mean(&|l| f64::from(l.hidden)),
                 probe_only: mean(&|l| f64::from(u8::from(l.probe_only))),
-                probe_hidden: {
-                    let shares: Vec<f64> = curves
-                        .iter()
-                        .filter_map(|c| c.get(k).and_then(|l| l.probe_hidden))
-                        .collect();
-                    (!shares.is_empty()).then(|| shares.iter().sum::<f64>() / shares.len() as f64)
-                },
+                probe_hidden: probe_mean(curves, k, |l| l.probe_hidden),
+                probe_cell_hidden: probe_mean(curves, k, |l| l.probe_cell_hidden.map(f64::from)),
+                probe_objects: probe_mean(curves, k, |l| l.probe_objects.map(f64::from)),
             }
         })
         .collect()
+}
+
+/// The mean of a probe figure of level `k` over the cells whose level `k` had a probe.
+fn probe_mean(
+    curves: &[&[crate::pvs::SamplingLevel]],
+    k: usize,
+    f: impl Fn(&crate::pvs::SamplingLevel) -> Option<f64>,
+) -> Option<f64> {
+    let v: Vec<f64> = curves
+        .iter()
+        .filter_map(|c| c.get(k).and_then(&f))
+        .collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }

@@ -38,9 +38,11 @@
 //!    Levels coarser than `--sampling-max-eps` are split without being sampled: their
 //!    quadrants cover them exactly and inherit every candidate. So is the rest of a level
 //!    (never the finest) whose probe, every 16th of its rectangles, proves hidden less than
-//!    `--sampling-probe` of the objects it tests, or hides no undecided object at every probed
-//!    rectangle that tests it (a heuristic: the level then rarely culls anything, and only
-//!    which rectangles are sampled depends on it, never soundness): the probed
+//!    `--sampling-probe` of the objects it tests, or hides at every probed rectangle that
+//!    tests them less than `--sampling-probe-cull` of the undecided objects it tests (and at
+//!    least one): a heuristic — the level's balls then do not fuse the occluders, so its points
+//!    cost more than they save the finer levels; only which rectangles are sampled depends on
+//!    it, never soundness. The probed
 //!    rectangles pass on what they left open, the others every candidate still undecided.
 //! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
 //!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
@@ -701,6 +703,7 @@ impl Culler for SamplingCuller {
             let mut open: Vec<Option<Arc<Vec<u32>>>> = vec![None; level.len()];
             let mut probe_only = false;
             let mut probe_hidden = None;
+            let mut probe_cell = None;
             if s.probe > 0.0 && !finest_level && stride > 1 {
                 let probe: Vec<usize> = (0..level.len()).step_by(stride).collect();
                 let (t0, h0) = (
@@ -728,10 +731,22 @@ impl Culler for SamplingCuller {
                         seen[o as usize] |= 2;
                     }
                 }
-                let may_cull = seen
-                    .iter()
-                    .enumerate()
-                    .any(|(o, &f)| f == 1 && !shared.done[o].load(Ordering::Relaxed));
+                // Objects still undecided that the probe tested, and those of them that every
+                // probed rectangle testing them hid (the level's cull, had it been only its
+                // probe).
+                let (mut probe_tested, mut probe_all_hid) = (0u32, 0u32);
+                for (o, &f) in seen.iter().enumerate() {
+                    if f != 0 && !shared.done[o].load(Ordering::Relaxed) {
+                        probe_tested += 1;
+                        probe_all_hid += u32::from(f == 1);
+                    }
+                }
+                probe_cell = Some((probe_all_hid, probe_tested));
+                // ... and unless enough of them were, the level's balls do not fuse the
+                // occluders: its points cost far more than the finest level's and prune it
+                // little (`SamplingSettings::probe_cull`).
+                let may_cull = probe_all_hid > 0
+                    && f64::from(probe_all_hid) >= s.probe_cull * f64::from(probe_tested);
                 let rest: Vec<usize> = (0..level.len()).filter(|i| i % stride != 0).collect();
                 // A resumed level keeps the decision its interrupted run made.
                 let skip = ckpt
@@ -785,6 +800,8 @@ impl Culler for SamplingCuller {
                     .count() as u32,
                 probe_only,
                 probe_hidden,
+                probe_cell_hidden: probe_cell.map(|(h, _)| h),
+                probe_objects: probe_cell.map(|(_, t)| t),
             };
             // A level its interrupted run finished keeps the entry it made then.
             let entry = match &ckpt {

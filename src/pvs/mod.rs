@@ -172,6 +172,14 @@ pub struct SamplingLevel {
     /// compares; absent for a level without a probe.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_hidden: Option<f64>,
+    /// The level's probe: the objects still undecided that every probed rectangle testing
+    /// them proved hidden (what the level would have culled for the cell had it been only its
+    /// probe). Absent for a level without a probe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_cell_hidden: Option<u32>,
+    /// The level's probe: the objects still undecided that some probed rectangle tested.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_objects: Option<u32>,
 }
 
 fn is_zero(v: &u64) -> bool {
@@ -291,6 +299,12 @@ pub struct PvsLevelSummary {
     /// Mean over the cells whose level had a probe of [`SamplingLevel::probe_hidden`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_hidden: Option<f64>,
+    /// Mean over the cells whose level had a probe of [`SamplingLevel::probe_cell_hidden`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_cell_hidden: Option<f64>,
+    /// Mean over the cells whose level had a probe of [`SamplingLevel::probe_objects`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_objects: Option<f64>,
 }
 
 fn is_zero_f64(v: &f64) -> bool {
