@@ -115,6 +115,18 @@ fn settings() -> BakeSettings {
     }
 }
 
+/// Three levels above the finest ε 0.05, each level's probe asked to prove `probe` of its
+/// tests and `probe_cull` of its objects for the cell (at `resolution`, or 64 px).
+fn probed(resolution: Option<u32>, probe: f64, probe_cull: f64) -> BakeSettings {
+    let mut s = settings();
+    s.sampling_settings.levels = 3;
+    s.sampling_settings.eps = Some(0.05);
+    s.sampling_settings.resolution = resolution.or(s.sampling_settings.resolution);
+    s.sampling_settings.probe = probe;
+    s.sampling_settings.probe_cull = probe_cull;
+    s
+}
+
 /// Runs the sampler alone on the cell (nothing hidden before it): what it hid, its work.
 fn run_sampler(
     scene: &umbrasweep::Scene,
@@ -450,13 +462,7 @@ fn levels_coarser_than_the_largest_sampled_eps_are_split_unsampled() {
 #[test]
 fn a_level_whose_probe_proves_nothing_is_split_unsampled() {
     let (scene, cell) = scene(None);
-    let run = |probe: f64| {
-        let mut s = settings();
-        s.sampling_settings.levels = 3;
-        s.sampling_settings.eps = Some(0.05);
-        s.sampling_settings.probe = probe;
-        run_sampler(&scene, &cell, &s)
-    };
+    let run = |probe: f64| run_sampler(&scene, &cell, &probed(None, probe, 0.0));
     // Level 0 (ε 0.354, 2 × 2 rectangles per face; the probe takes every third, 8, less
     // those with nothing beyond them): the shrink leaves nothing of the ~1-unit leaves.
     let (whole_hidden, whole) = run(0.0);
@@ -524,14 +530,7 @@ fn a_level_whose_probe_hides_nothing_everywhere_is_split_unsampled() {
     }
     let scene = load_obj("window", &obj);
     let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
-    let run = |probe: f64| {
-        let mut s = settings();
-        s.sampling_settings.levels = 3;
-        s.sampling_settings.eps = Some(0.05);
-        s.sampling_settings.resolution = Some(256);
-        s.sampling_settings.probe = probe;
-        run_sampler(&scene, &cell, &s)
-    };
+    let run = |probe: f64| run_sampler(&scene, &cell, &probed(Some(256), probe, 0.0));
     let (whole_hidden, whole) = run(0.0);
     let (probed_hidden, probed) = run(0.01);
     // Sampled whole, the coarsest level hides the target from no more than some rectangles.
@@ -584,15 +583,7 @@ fn a_level_whose_probe_hides_too_few_everywhere_is_split_unsampled() {
     leaf_layer(&mut obj, &mut nv, None);
     let scene = load_obj("wall-and-leaves", &obj);
     let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
-    let run = |probe_cull: f64| {
-        let mut s = settings();
-        s.sampling_settings.levels = 3;
-        s.sampling_settings.eps = Some(0.05);
-        s.sampling_settings.resolution = Some(64);
-        s.sampling_settings.probe = 0.01;
-        s.sampling_settings.probe_cull = probe_cull;
-        run_sampler(&scene, &cell, &s)
-    };
+    let run = |probe_cull: f64| run_sampler(&scene, &cell, &probed(None, 0.01, probe_cull));
     let (strict_hidden, strict) = run(0.15);
     let (lenient_hidden, lenient) = run(0.05);
     let (l0, s0) = (lenient.levels[0], strict.levels[0]);
