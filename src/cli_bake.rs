@@ -256,7 +256,8 @@ pub struct BakeArgs {
     /// level enough to pay for it).
     #[arg(long, value_name = "E")]
     pub sampling_max_eps: Option<f64>,
-    /// Each level but the finest is first sampled at every 16th rectangle (at least 8); when
+    /// Each level but the finest is first sampled at every 16th rectangle (at least 8, about 64
+    /// at most); when
     /// those prove hidden less than this fraction of the objects they test, the rest of the
     /// level is split without sampling (on fine foliage the coarse levels hide nothing and
     /// cost as much per point as the finest). 0 samples every level whole.

@@ -37,7 +37,8 @@
 //!    the order never changes which rectangles cover a face, only how many are sampled.
 //!    Levels coarser than `--sampling-max-eps` are split without being sampled: their
 //!    quadrants cover them exactly and inherit every candidate. So is the rest of a level
-//!    (never the finest) whose probe, every 16th of its rectangles, proves hidden less than
+//!    (never the finest) whose probe, every 16th of its rectangles (8 to about 64 of them,
+//!    [`probe_stride`]), proves hidden less than
 //!    `--sampling-probe` of the objects it tests, or hides at every probed rectangle that
 //!    tests them less than `--sampling-probe-cull` of the undecided objects it tests (and at
 //!    least one): a heuristic — the level's balls then do not fuse the occluders, so its points
@@ -697,9 +698,7 @@ impl Culler for SamplingCuller {
             // proves too little the rest is split unsampled (their quadrants inherit every
             // candidate, as for `--sampling-max-eps`).
             let finest_level = level_eps <= data.eps * (1.0 + 1e-6);
-            let stride = SamplingSettings::PROBE_STRIDE
-                .min(level.len() / SamplingSettings::PROBE_MIN)
-                .max(1);
+            let stride = probe_stride(level.len());
             let mut open: Vec<Option<Arc<Vec<u32>>>> = vec![None; level.len()];
             let mut probe_only = false;
             let mut probe_hidden = None;
@@ -943,6 +942,17 @@ const LANE_MAX: usize = 32;
 /// number of threads. Within a lane what one rectangle finds visible (certified by its rays,
 /// or given up at the finest ε) spares the next at once; across lanes from the next chunk on.
 ///
+/// The stride of a level's probe of `n` rectangles (every `stride`-th is probed): every
+/// [`SamplingSettings::PROBE_STRIDE`]-th, but at least [`SamplingSettings::PROBE_MIN`]
+/// rectangles and about [`SamplingSettings::PROBE_MAX`] at most; 1 (all of them, no probe)
+/// when there are too few.
+fn probe_stride(n: usize) -> usize {
+    (n / SamplingSettings::PROBE_MAX)
+        .max(SamplingSettings::PROBE_STRIDE)
+        .min(n / SamplingSettings::PROBE_MIN)
+        .max(1)
+}
+
 /// Measured on the coarse forest's middle 1×1×1 cell (`bake --sampling --sampling-eps
 /// 0.044`, CPU, two cores, one bake each): when every rectangle saw at once what any other
 /// found (results depending on the threads), 2,116 points, 118 and 136 s, 664 objects hidden
@@ -1464,6 +1474,25 @@ mod tests {
     /// A unit cube at finest ε = 0.25/√2 (squares of side 0.25) has 16 finest rectangles per
     /// face, whatever the levels above; a 4×2×4 cell at 0.042 about its boundary's area
     /// (64) / (2ε²) ≈ 18,000.
+    #[test]
+    fn a_probe_takes_every_16th_rectangle_within_its_bounds() {
+        let probed = |n: usize| (0..n).step_by(probe_stride(n)).count();
+        // Every 16th of a middling level.
+        assert_eq!(probe_stride(576), 16);
+        assert_eq!(probed(576), 36);
+        // At least 8 of a small one, and none of a level of fewer than 16 (stride 1: the
+        // whole level, no probe).
+        assert_eq!(probe_stride(24), 3);
+        assert_eq!(probed(24), 8);
+        assert_eq!(probe_stride(15), 1);
+        // About 64 of a large one, where every 16th would be hundreds.
+        for n in [1_100, 4_760, 19_040, 1_000_000] {
+            let p = probed(n);
+            assert!((64..=66).contains(&p), "{n}: {p}");
+            assert!(probe_stride(n) >= 16);
+        }
+    }
+
     #[test]
     fn finest_rectangles_count_the_full_refinement() {
         let cube = DAabb {
