@@ -127,6 +127,21 @@ fn len3(a: vec3<f64>) -> f64 {
     return sqrt(dot3(a, a));
 }
 
+// `hemicube::edge_reach`: the radius an edge is shrunk for when the render stands for a face
+// rectangle, the smaller of its extent seen along the edge (`cyl`) and
+// `r·h_n / √(h_n² + (r − h_w)²)` (the rectangle's supports along the plane normal `m` and
+// along `t × m`), rounded up by a relative 1e-9.
+fn edge_reach(cyl: f64, hb: f64, hc: f64, m: vec3<f64>, t: vec3<f64>, r: f64, b_ax: u32, c_ax: u32) -> f64 {
+    let w = cross3(t, m);
+    let hn = hb * abs(m[b_ax]) + hc * abs(m[c_ax]);
+    let hw = (hb * abs(w[b_ax]) + hc * abs(w[c_ax])) * (1.0lf + 1e-9lf);
+    if !(r > hw) {
+        return cyl;
+    }
+    let rw = r - hw;
+    return min(cyl, r * hn / sqrt(hn * hn + rw * rw) * (1.0lf + 1e-9lf));
+}
+
 // View k's coordinates of a world offset (`sampler_views.wgsl`).
 fn to_view(k: u32, p: vec3<f64>) -> vec3<f64> {
     return view_of(k, frame_u[0], frame_u[1], p);
@@ -291,10 +306,14 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
             mk = -mk;
         }
         let r = cl / el;
-        var sk = reach[k] / r;
+        var rk = reach[k];
+        if frame_u[2] == 1u {
+            rk = edge_reach(rk, hb, hc, mk, (b - a) / el, r, b_ax, c_ax);
+        }
+        var sk = rk / r;
         if frame_u[3] == 1u {
             let dd = max_dist * (1.0lf + 1e-9lf);
-            let den = 1.0lf - SQRT_2 * reach[k] / sqrt(r * dd);
+            let den = 1.0lf - SQRT_2 * rk / sqrt(r * dd);
             if den > 0.0lf {
                 sk = min(sk, sk * abs(1.0lf - r / dd) / den);
             }

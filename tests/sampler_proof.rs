@@ -19,9 +19,10 @@
 //! slanted, tiled ground drawn with per-pixel plane depths, boxes just under, on and over it,
 //! boxes glued behind walls), `general` (a mix, with `eps = 0`, many-vertex and degenerate
 //! polygons, flat and point boxes) and `scaled` (any of them scaled by 1e-3 and offset by 1e5).
-//! `patch` and `patch_scaled` check `Hemicube::begin_patch` the same way, from the points of a
-//! rectangle of the face (half diagonal `eps`, some flat) instead of the ball, with near
-//! polygons also nearer than `eps`. Hemicubes are reused across configurations.
+//! `patch`, `patch_low` and `patch_scaled` check `Hemicube::begin_patch` the same way, from the
+//! points of a rectangle of the face (half diagonal `eps`, some flat) instead of the ball, with
+//! near polygons also nearer than `eps` and (`patch_low`) leaves and slats seen a few degrees
+//! over the face's plane, whose edges across the line of sight the rectangle barely shrinks. Hemicubes are reused across configurations.
 //!
 //! For every box reported hidden, the check samples points `b` (the eye, the ball's axis and
 //! diagonal points, random points on its sphere and inside, points of the disc in the face
@@ -435,6 +436,52 @@ fn gen_grazing(rng: &mut Rng) -> Local {
     let dist = d * rng.u(0.5, 2.0);
     let size = rng.u(0.05, 0.5);
     l.boxes.push(random_box(rng, dist, size));
+    l
+}
+
+/// Low over the face: a cluster of leaves and stacked slats a few degrees (0.06°–17°) above
+/// the face's plane, some reaching below it, boxes behind them, and balls up to 20 pixels at
+/// the cluster. For rectangles (`begin_patch`): edges seen across the line of sight there lie
+/// in planes through the eye nearly parallel to the face, which the rectangle's support
+/// barely shrinks, so these leaves fuse where a ball's shrink would open them.
+fn gen_low(rng: &mut Rng) -> Local {
+    let d = rng.u(1.5, 8.0);
+    let phi = rng.u(0.0, TAU);
+    let elev = rng.log_u(1e-3, 0.3);
+    let dir = DVec3::new(phi.cos(), phi.sin(), elev.tan()).normalize();
+    let across = DVec3::new(-phi.sin(), phi.cos(), 0.0);
+    let c = dir * d;
+    let res = rng.pick(&[64, 128, 256, 256]);
+    let px = 2.0 / res as f64 * d;
+    let s = rng.u(3.0, 12.0) * px / 2.0;
+    let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
+    let tau = rng.u(2.0, 10.0);
+    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(200, 2000);
+    let mut l = Local {
+        eps: px * rng.log_u(0.3, 20.0),
+        res,
+        ..Local::default()
+    };
+    cluster(rng, &mut l.polys, c, dir, r, n, s);
+    // Slats across the line of sight, stacked in height, each overlapping the next by a
+    // share of its height, each a little farther than the one below or above it.
+    let k = 2 + rng.below(6);
+    let h = r * rng.u(0.1, 0.5);
+    let w = r * rng.u(0.5, 2.0);
+    let overlap = h * rng.log_u(0.02, 0.5);
+    let mut z = c.z - 0.5 * k as f64 * (h - overlap);
+    let mut t = d * rng.u(0.9, 1.1);
+    let step = d * rng.u(-0.03, 0.03);
+    for _ in 0..k {
+        let foot = DVec3::new(dir.x, dir.y, 0.0).normalize() * t;
+        let (a, b) = (foot - across * w, foot + across * w);
+        // A quad in the vertical plane through `a` and `b`: exactly planar (two distinct
+        // projections along z).
+        l.polys.push(strip(2, a, b, z, z + h));
+        z += h - overlap;
+        t += step;
+    }
+    boxes_behind(rng, &mut l.boxes, c, dir, d, r, 6);
     l
 }
 
@@ -1691,10 +1738,13 @@ struct Family {
     min_hidden: f64,
 }
 
-/// For rectangles: near polygons (nearer than the half diagonal too), or any family.
+/// For rectangles: near polygons (nearer than the half diagonal too), leaves low over the
+/// face, or any family.
 fn gen_patch(rng: &mut Rng) -> Local {
     if rng.chance(0.4) {
         gen_near_patch(rng)
+    } else if rng.chance(0.2) {
+        gen_low(rng)
     } else {
         gen_any(rng)
     }
@@ -1717,7 +1767,7 @@ fn gen_any(rng: &mut Rng) -> Local {
     g(rng)
 }
 
-const FAMILIES: [Family; 12] = [
+const FAMILIES: [Family; 13] = [
     Family {
         name: "depth_bounded",
         seed: 0xDE_B0DED,
@@ -1815,6 +1865,15 @@ const FAMILIES: [Family; 12] = [
         scaled: false,
         patch: true,
         generate: gen_patch,
+        min_hidden: 0.05,
+    },
+    Family {
+        name: "patch_low",
+        seed: 0x009A_7C10,
+        configs: 800,
+        scaled: false,
+        patch: true,
+        generate: gen_low,
         min_hidden: 0.05,
     },
     Family {
@@ -2013,6 +2072,7 @@ fn ground_and_glued_boxes() {
 #[test]
 fn patches_instead_of_balls() {
     family("patch");
+    family("patch_low");
     family("patch_scaled");
 }
 

@@ -23,6 +23,35 @@ const PIXEL_CHECK: usize = 64;
 /// `|u|, |v| ≤ 1`, `√(u²+v²+1) ≤ √3`).
 const CORNER_MARGIN: f32 = 4e-6;
 
+/// The radius an edge is shrunk for when the render stands for a face rectangle with half
+/// sides `[h_b, h_c]` (along the face's axes `b_ax`, `c_ax`): the smaller of `cyl` (the
+/// rectangle's extent seen along the edge) and `r·h_n / √(h_n² + (r − h_w)²)`, where `m` is
+/// the unit normal of the plane through the eye and the edge's line, `t` the edge's unit
+/// direction, `r` the line's distance, and `h_n`, `h_w` the rectangle's support along `m` and
+/// along `t × m` (`h(x) = h_b·|x_b| + h_c·|x_c|`). The second is the tighter bound the module
+/// docs prove ("Supports instead of extents"): an edge seen across the face's plane (its
+/// plane through the eye nearly parallel to the face) barely moves as the eye moves within
+/// the face, so it is barely shrunk. Rounded up by a relative 1e-9.
+#[inline]
+fn edge_reach(
+    cyl: f64,
+    [hb, hc]: [f64; 2],
+    m: DVec3,
+    t: DVec3,
+    r: f64,
+    b_ax: usize,
+    c_ax: usize,
+) -> f64 {
+    let w = t.cross(m);
+    let hn = hb * m[b_ax].abs() + hc * m[c_ax].abs();
+    let hw = (hb * w[b_ax].abs() + hc * w[c_ax].abs()) * (1.0 + 1e-9);
+    if r.is_nan() || r <= hw {
+        return cyl;
+    }
+    let rw = r - hw;
+    cyl.min(r * hn / (hn * hn + rw * rw).sqrt() * (1.0 + 1e-9))
+}
+
 /// The pixels `[i0, i1) × [j0, j1)` of `px` (a view's, `ps` the pixel size, `vmin` the
 /// view's lowest `v`) that can meet the silhouette shrunk by the edges `ev`
 /// (`[a, b, c, s]`: a direction `(u, v, 1)` passes when `a·u + b·v + c ≥ s·√(u²+v²+1)`), or
@@ -1155,7 +1184,10 @@ impl Hemicube {
                 m = -m;
             }
             let r = cl / el;
-            let reach = edges[k].1;
+            let reach = match self.patch {
+                None => edges[k].1,
+                Some(half) => edge_reach(edges[k].1, half, m, (b - a) / el, r, b_ax, c_ax),
+            };
             let mut s = reach / r;
             // (Polygons of more than 32 edges have only their first 32 tucked.)
             if k < 32 && tucked >> k & 1 == 1 {
@@ -2430,5 +2462,56 @@ mod depth_tests {
             "the ball of radius {} shrinks the seam open",
             hx.hypot(hy)
         );
+    }
+
+    /// An edge seen low over the face's plane, across the line of sight, barely moves as the
+    /// eye moves within the face: the plane through the eye and the edge is nearly the
+    /// face's, so the rectangle's support across it is small ([`edge_reach`]). Two walls
+    /// 5 units out along x, just above the face's plane (z = 0), overlap by 0.1 at a seam
+    /// along y: a square of half side 0.1 (its extent along the seam's edges is its full
+    /// 0.1, which shrinks each edge by 0.02 rad and opens the 0.02 rad overlap) still hides a
+    /// box behind the seam.
+    #[test]
+    fn an_edge_seen_low_over_the_face_shrinks_by_the_rectangles_support_across_it() {
+        let low = vec![
+            DVec3::new(5.0, -3.0, 0.01),
+            DVec3::new(5.0, 3.0, 0.01),
+            DVec3::new(5.0, 3.0, 0.35),
+            DVec3::new(5.0, -3.0, 0.35),
+        ];
+        let high = vec![
+            DVec3::new(5.1, -3.0, 0.25),
+            DVec3::new(5.1, 3.0, 0.25),
+            DVec3::new(5.1, 3.0, 2.0),
+            DVec3::new(5.1, -3.0, 2.0),
+        ];
+        let occ = SampleOccluders::from_polygons(&[(low, 0), (high, 0)]);
+        let target = DAabb {
+            min: DVec3::new(8.0, -0.3, 0.35),
+            max: DVec3::new(8.5, 0.3, 0.6),
+        };
+        let half = [0.1, 0.1];
+        let mut hc = Hemicube::new(256);
+        hc.set_depth_bounded(false);
+        hc.begin_patch(DVec3::ZERO, 2, 1.0, half, &[target]);
+        hc.draw(&occ);
+        assert_eq!(
+            hc.test_box(&target),
+            BoxTest::Hidden,
+            "the rectangle's support"
+        );
+        // The seam's edges as the extent bound shrinks them: the overlap opens.
+        let (m, t) = (DVec3::new(0.35, 0.0, -5.0).normalize(), DVec3::Y);
+        let r = DVec3::new(5.0, 0.0, 0.35).length();
+        let tight = edge_reach(0.1, half, m, t, r, 0, 1);
+        assert!(tight < 0.1 * 0.1, "support across the seam {tight}");
+        assert!(
+            (0.1f64 / r).asin() > 0.02 - 1e-3,
+            "the extent's shrink closes the overlap"
+        );
+        // Seen head-on (the edge along y at height 5, its plane through the eye across the
+        // face), the bound is about the extent's.
+        let head_on = edge_reach(0.1, half, DVec3::X, DVec3::Y, 5.0, 0, 1);
+        assert!(head_on <= 0.1 && head_on > 0.0999, "{head_on}");
     }
 }

@@ -43,6 +43,25 @@
 //! shrunk by `ε_e / r_e` instead, and a polygon is left out unless its plane is farther than
 //! every `ε_e`; then every segment from a point of `R` to `q` crosses `L`.
 //!
+//! **Supports instead of extents** (`edge_reach` in `hemicube.rs`). The disc of radius `ε_e`
+//! is more than the last step needs: it needs every point of `R`'s projection on `p`'s side
+//! of the line `Q_e` (through `E` at the angle `φ` from `Ep`), that is
+//! `r_e·sin φ ≥ h(ν_φ)`, where `h(x) = h_b·|x_b| + h_c·|x_c|` is the rectangle's support
+//! (it is centred on `p`) and `ν_φ` the unit normal of `Q_e`. In the plane normal to `ℓ_e`
+//! take `m_e` (the normal of `Ep`) and `w_e = t × m_e` (along `Ep`); then
+//! `ν_φ = cos φ·m_e ± sin φ·w_e` and, `h` being a symmetric norm,
+//! `h(ν_φ) ≤ |cos φ|·h_n + sin φ·h_w` with `h_n = h(m_e)`, `h_w = h(w_e)`. So for
+//! `r_e > h_w` the step holds whenever `sin φ·(r_e − h_w) ≥ |cos φ|·h_n`, i.e. whenever
+//! `sin φ ≥ σ_e = h_n / √(h_n² + (r_e − h_w)²)`. That is the ball's condition
+//! `r_e·sin φ ≥ ε` with `ε` replaced by `ε'_e = r_e·σ_e`: every step above (and the
+//! depth-bounded one below) goes through with `ε'_e`, given `sin φ_x ≥ σ_e`, which holds as
+//! `dist(p, plane(L))` exceeds `ε_e ≥ min(ε_e, ε'_e)`. Each edge is shrunk by the smaller of
+//! `ε_e` and `ε'_e` over `r_e`. An edge whose plane through `p` is nearly the face's (seen low
+//! over the face, across the line of sight) has `h_n ≈ 0`: moving the eye within the face
+//! barely moves it, and it is barely shrunk. Head-on (`m_e` in the face's plane) `ε'_e` is
+//! about `ε_e`. (`tests/sampler_proof.rs`, family `patch_low`, checks such edges from the
+//! rectangle's corners; dropping the `h_w` term fails the check.)
+//!
 //! **Depth-bounded shrinks** ([`Hemicube::set_depth_bounded`], on by default). The last step
 //! needs `r_e·sin φ ≥ ε` only at the angles `φ` that tested points reach. Every point a render
 //! tests lies within `D` of `p`, the farthest corner of the boxes given to `begin` (a test of
