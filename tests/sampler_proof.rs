@@ -207,6 +207,12 @@ fn leaves_for(rng: &mut Rng, r: f64, tau: f64) -> (usize, f64) {
     (n, s)
 }
 
+/// Leaves of circumradius `s` (area about 0.7 s²) that give a disc of radius `r` the optical
+/// depth `tau`, within `[lo, hi]`.
+fn leaves_to_fill(tau: f64, r: f64, s: f64, lo: usize, hi: usize) -> usize {
+    ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(lo, hi)
+}
+
 /// A foliage cluster: `n` leaves in a ball (or a slab across `dir`) about `c`.
 fn cluster(
     rng: &mut Rng,
@@ -275,7 +281,7 @@ fn gen_foliage(rng: &mut Rng) -> Local {
     let s = rng.u(5.0, 16.0) * 2.0 / res as f64 * d / 2.0;
     let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
     let tau = rng.u(1.0, 10.0);
-    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(200, 2000);
+    let n = leaves_to_fill(tau, r, s, 200, 2000);
     let mut l = Local {
         // The shrink from a twentieth of a pixel to six pixels.
         eps: d * 2.0 / res as f64 * rng.log_u(0.05, 6.0),
@@ -301,7 +307,7 @@ fn gen_fine_foliage(rng: &mut Rng) -> Local {
     let s = rng.log_u(0.3, 4.0) * px / 2.0;
     let r = (px * rng.u(3.0, 8.0)).min(0.4 * d);
     let tau = rng.u(5.0, 15.0);
-    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(300, 5000);
+    let n = leaves_to_fill(tau, r, s, 300, 5000);
     let mut l = Local {
         // The shrink from a hundredth of a pixel to a third of a pixel at the cluster.
         eps: px * rng.log_u(0.01, 0.3),
@@ -326,7 +332,7 @@ fn gen_depth_bounded(rng: &mut Rng) -> Local {
     let s = rng.u(3.0, 12.0) * px / 2.0;
     let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
     let tau = rng.u(4.0, 12.0);
-    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(200, 2000);
+    let n = leaves_to_fill(tau, r, s, 200, 2000);
     let mut l = Local {
         eps: px * rng.log_u(0.3, 8.0),
         res,
@@ -456,7 +462,7 @@ fn gen_low(rng: &mut Rng) -> Local {
     let s = rng.u(3.0, 12.0) * px / 2.0;
     let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
     let tau = rng.u(2.0, 10.0);
-    let n = ((tau * PI * r * r / (0.7 * s * s)) as usize).clamp(200, 2000);
+    let n = leaves_to_fill(tau, r, s, 200, 2000);
     let mut l = Local {
         eps: px * rng.log_u(0.3, 20.0),
         res,
