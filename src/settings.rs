@@ -266,7 +266,7 @@ pub struct SamplingSettings {
     /// 77.1 % in 160 s; on its 4×2×4 cell, 54.3 % against 51.8 % for 1.2× the time (README,
     /// "The tuck pass, measured", and "Defaults on fine foliage"; measured before edges were
     /// shrunk by the rectangle's support, which took those cells to 74.5 % and 58.5 % without
-    /// the pass in the same time).
+    /// the pass in about the same time).
     /// Renders on the CPU's hemicube only (a GPU backend samples on the CPU with it).
     /// Documents written before it existed read as off.
     #[serde(rename = "sampling_tuck", default)]
