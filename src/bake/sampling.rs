@@ -928,6 +928,17 @@ pub fn finest_rectangles(cell: &DAabb, eps: f64, levels: u32) -> u64 {
     total
 }
 
+/// The stride of a level's probe of `n` rectangles (every `stride`-th is probed): every
+/// [`SamplingSettings::PROBE_STRIDE`]-th, but at least [`SamplingSettings::PROBE_MIN`]
+/// rectangles and about [`SamplingSettings::PROBE_MAX`] at most; 1 (all of them, no probe)
+/// when there are too few.
+fn probe_stride(n: usize) -> usize {
+    (n / SamplingSettings::PROBE_MAX)
+        .max(SamplingSettings::PROBE_STRIDE)
+        .min(n / SamplingSettings::PROBE_MIN)
+        .max(1)
+}
+
 /// A level sampled whole starts with every this-many-th rectangle.
 const SCOUT_STRIDE: usize = 16;
 
@@ -942,17 +953,6 @@ const LANE_MAX: usize = 32;
 /// number of threads. Within a lane what one rectangle finds visible (certified by its rays,
 /// or given up at the finest ε) spares the next at once; across lanes from the next chunk on.
 ///
-/// The stride of a level's probe of `n` rectangles (every `stride`-th is probed): every
-/// [`SamplingSettings::PROBE_STRIDE`]-th, but at least [`SamplingSettings::PROBE_MIN`]
-/// rectangles and about [`SamplingSettings::PROBE_MAX`] at most; 1 (all of them, no probe)
-/// when there are too few.
-fn probe_stride(n: usize) -> usize {
-    (n / SamplingSettings::PROBE_MAX)
-        .max(SamplingSettings::PROBE_STRIDE)
-        .min(n / SamplingSettings::PROBE_MIN)
-        .max(1)
-}
-
 /// Measured on the coarse forest's middle 1×1×1 cell (`bake --sampling --sampling-eps
 /// 0.044`, CPU, two cores, one bake each): when every rectangle saw at once what any other
 /// found (results depending on the threads), 2,116 points, 118 and 136 s, 664 objects hidden
@@ -1471,9 +1471,7 @@ mod tests {
         assert_eq!(live.load(Ordering::SeqCst), 0);
     }
 
-    /// A unit cube at finest ε = 0.25/√2 (squares of side 0.25) has 16 finest rectangles per
-    /// face, whatever the levels above; a 4×2×4 cell at 0.042 about its boundary's area
-    /// (64) / (2ε²) ≈ 18,000.
+    /// [`probe_stride`]: every 16th rectangle, at least 8 and about 64 at most.
     #[test]
     fn a_probe_takes_every_16th_rectangle_within_its_bounds() {
         let probed = |n: usize| (0..n).step_by(probe_stride(n)).count();
@@ -1493,6 +1491,9 @@ mod tests {
         }
     }
 
+    /// A unit cube at finest ε = 0.25/√2 (squares of side 0.25) has 16 finest rectangles per
+    /// face, whatever the levels above; a 4×2×4 cell at 0.042 about its boundary's area
+    /// (64) / (2ε²) ≈ 18,000.
     #[test]
     fn finest_rectangles_count_the_full_refinement() {
         let cube = DAabb {
