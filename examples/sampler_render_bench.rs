@@ -1,0 +1,82 @@
+//! Times the CPU hemicube's render alone (one thread), for profiling: N rectangles of side
+//! `2·EPS/√2` at fixed pseudo-random places on a cell's faces (the same every run), each
+//! rendered for every object beyond its face, repeated R times (3 by default); prints the median of the
+//! runs' milliseconds per render and the polygons reached and drawn per render, and how many
+//! boxes the renders hid (a check that two builds render the same). `cargo run --release
+//! --example sampler_render_bench -- SCENE CELLS CELL EPS RES N [R]`.
+
+mod common;
+
+use glam::DVec3;
+use std::time::Instant;
+use umbrasweep::sampler::{BoxTest, Hemicube};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() < 7 {
+        eprintln!("usage: sampler_render_bench SCENE CELLS CELL EPS RES N [R]");
+        std::process::exit(2);
+    }
+    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
+    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
+    let ci: usize = args[3].parse().expect("cell index");
+    let eps: f64 = args[4].parse().expect("eps");
+    let res: u32 = args[5].parse().expect("resolution");
+    let n: usize = args[6].parse().expect("rectangles");
+    let runs: usize = args.get(7).map_or(3, |s| s.parse().expect("runs"));
+    let data = common::sampler_data(&scene);
+    let cell = cells[ci].to_f64();
+    let beyond: Vec<_> = (0..6)
+        .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
+        .collect();
+    let half = eps / 2f64.sqrt();
+    let mut seed = 7u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let eyes: Vec<(usize, DVec3)> = (0..n)
+        .map(|k| {
+            let f = k % 6;
+            let mut eye = DVec3::ZERO;
+            for a in 0..3 {
+                eye[a] = cell.min[a] + rnd() * (cell.max[a] - cell.min[a]);
+            }
+            (f, common::Face::from_index(f).onto(&cell, eye))
+        })
+        .collect();
+    let mut hc = Hemicube::new(res);
+    let mut times = Vec::new();
+    let (mut reached, mut drawn, mut hidden) = (0u64, 0u64, 0usize);
+    for run in 0..runs {
+        let mut spent = std::time::Duration::ZERO;
+        for &(f, eye) in &eyes {
+            let face = common::Face::from_index(f);
+            let boxes = &beyond[f].1;
+            hc.begin_patch(eye, face.axis, face.sign, [half, half], boxes);
+            let t = Instant::now();
+            let st = hc.draw(&data.occluders);
+            spent += t.elapsed();
+            if run == 0 {
+                reached += st.reached;
+                drawn += st.polygons;
+                hidden += boxes
+                    .iter()
+                    .filter(|b| hc.test_box(b) == BoxTest::Hidden)
+                    .count();
+            }
+        }
+        times.push(spent.as_secs_f64() * 1e3 / n as f64);
+    }
+    times.sort_by(f64::total_cmp);
+    println!(
+        "{n} renders at {res} px, eps {eps}: median {:.2} ms per render (runs {:.2?}); \
+         {} polygons reached, {} drawn per render; {hidden} boxes hidden",
+        times[times.len() / 2],
+        times,
+        reached / n as u64,
+        drawn / n as u64
+    );
+}
