@@ -69,13 +69,7 @@ fn main() {
     let beyond: Vec<_> = (0..6)
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
         .collect();
-    let mut seed = 11u64;
-    let mut rnd = || {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::uniform(11u64);
     let nf = fills.len();
     let mut t_cpu = Duration::ZERO;
     let (mut t_rec, mut t_dev) = (vec![Duration::ZERO; nf], vec![Duration::ZERO; nf]);

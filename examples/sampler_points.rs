@@ -26,13 +26,7 @@ fn main() {
     hc.set_subpixel(args.get(7).map(String::as_str) != Some("whole"));
     // `TUCK=1` turns the tuck pass on.
     hc.set_tuck(std::env::var("TUCK").is_ok_and(|v| v == "1"));
-    let mut seed = 7u64;
-    let mut rnd = || {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::uniform(7u64);
     // The objects each face's points test do not depend on the point.
     let beyond: Vec<_> = (0..6)
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))

@@ -46,13 +46,7 @@ fn main() {
         {
             let mut ts = Vec::new();
             let mut hits_ground = 0;
-            let mut seed = 12345u64;
-            let mut rnd = || {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (seed >> 11) as f64 / (1u64 << 53) as f64
-            };
+            let mut rnd = common::uniform(12345u64);
             for _ in 0..4000 {
                 let mut d = DVec3::new(rnd() * 2.0 - 1.0, rnd() * 2.0 - 1.0, rnd() * 2.0 - 1.0);
                 if d.length() > 1.0 {

@@ -30,13 +30,7 @@ fn main() {
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
         .collect();
     let half = eps / 2f64.sqrt();
-    let mut seed = 7u64;
-    let mut rnd = || {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::uniform(7u64);
     let eyes: Vec<(usize, DVec3)> = (0..n)
         .map(|k| {
             let f = k % 6;

@@ -131,13 +131,7 @@ fn main() {
                 }
                 if k == 1 {
                     // Rays from the face centre at random points of the object's triangles.
-                    let mut h = u64::from(o) * 0x9e37_79b9_7f4a_7c15 + fi as u64;
-                    let mut rnd = || {
-                        h = h
-                            .wrapping_mul(6364136223846793005)
-                            .wrapping_add(1442695040888963407);
-                        (h >> 11) as f64 / (1u64 << 53) as f64
-                    };
+                    let mut rnd = common::uniform(u64::from(o) * 0x9e37_79b9_7f4a_7c15 + fi as u64);
                     let n = ob.triangles.len();
                     for _ in 0..2000 {
                         let t =

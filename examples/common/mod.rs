@@ -89,6 +89,17 @@ impl Face {
     }
 }
 
+/// A generator of uniform numbers in `[0, 1)` from `seed` (a 64-bit linear congruential
+/// generator's top 53 bits): the examples' fixed pseudo-random points.
+pub fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// The sampler's data for a scene with every object an occluder, no alpha-tested cards and
 /// the default settings.
 pub fn sampler_data(scene: &Scene) -> SamplerData {
