@@ -556,35 +556,7 @@ fn a_level_whose_probe_hides_nothing_everywhere_is_split_unsampled() {
 /// wall's target at every probed rectangle and none of the others, 1 of at most 12.
 #[test]
 fn a_level_whose_probe_hides_too_few_everywhere_is_split_unsampled() {
-    let mut obj = String::new();
-    let mut nv = 0;
-    cube(
-        &mut obj,
-        &mut nv,
-        "walled",
-        DVec3::new(-0.5, -0.5, -4.5),
-        DVec3::new(0.5, 0.5, -4.0),
-    );
-    for i in 0..3 {
-        for j in 0..3 {
-            let c = DVec3::new(f64::from(i) - 1.0, f64::from(j) - 1.0, 8.5);
-            cube(
-                &mut obj,
-                &mut nv,
-                &format!("leafy{i}{j}"),
-                c - DVec3::splat(0.3),
-                c + DVec3::splat(0.3),
-            );
-        }
-    }
-    writeln!(obj, "o wall").unwrap();
-    for (x, y) in [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)] {
-        writeln!(obj, "v {x} {y} -1.5").unwrap();
-    }
-    writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
-    nv += 4;
-    leaf_layer(&mut obj, &mut nv, None);
-    let scene = load_obj("wall-and-leaves", &obj);
+    let scene = wall_and_leaves();
     let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
     let run = |probe_cull: f64| run_sampler(&scene, &cell, &probed(None, 0.01, probe_cull));
     let (strict_hidden, strict) = run(0.15);
@@ -622,6 +594,72 @@ fn a_level_whose_probe_hides_too_few_everywhere_is_split_unsampled() {
     for o in (0..10).filter(|&o| strict_hidden[o]) {
         brute_force_hidden(&scene, &cell, o as u32);
     }
+}
+
+/// The scene of the two tests above and below: a wall (z = -1.5) under the cell
+/// `[-0.5, 0.5]³` hiding the target `walled`, and nine targets (`leafy…`) beyond the layer of
+/// leaves of `scene` over it.
+fn wall_and_leaves() -> umbrasweep::Scene {
+    let mut obj = String::new();
+    let mut nv = 0;
+    cube(
+        &mut obj,
+        &mut nv,
+        "walled",
+        DVec3::new(-0.5, -0.5, -4.5),
+        DVec3::new(0.5, 0.5, -4.0),
+    );
+    for i in 0..3 {
+        for j in 0..3 {
+            let c = DVec3::new(f64::from(i) - 1.0, f64::from(j) - 1.0, 8.5);
+            cube(
+                &mut obj,
+                &mut nv,
+                &format!("leafy{i}{j}"),
+                c - DVec3::splat(0.3),
+                c + DVec3::splat(0.3),
+            );
+        }
+    }
+    writeln!(obj, "o wall").unwrap();
+    for (x, y) in [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)] {
+        writeln!(obj, "v {x} {y} -1.5").unwrap();
+    }
+    writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
+    nv += 4;
+    leaf_layer(&mut obj, &mut nv, None);
+    load_obj("wall-and-leaves", &obj)
+}
+
+/// The probe's share rule alone (`--sampling-probe`): the same coarsest level, whose probe
+/// proves the wall's target hidden for the cell (enough for `--sampling-probe-cull` 0.05), is
+/// sampled whole when the probe hides at least `--sampling-probe` of its tests and split
+/// unsampled when it hides less.
+#[test]
+fn a_level_whose_probe_hides_too_small_a_share_is_split_unsampled() {
+    let scene = wall_and_leaves();
+    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let run = |probe: f64| run_sampler(&scene, &cell, &probed(None, probe, 0.05));
+    let (low_hidden, low) = run(0.01);
+    let (high_hidden, high) = run(0.9);
+    let (l0, h0) = (low.levels[0], high.levels[0]);
+    // The same probe either way: it hides the wall's target at every probed rectangle and
+    // nothing else, a share of its tests between the two thresholds.
+    assert_eq!(
+        (l0.probe_hidden, l0.probe_cell_hidden, l0.probe_objects),
+        (h0.probe_hidden, h0.probe_cell_hidden, h0.probe_objects)
+    );
+    assert_eq!(h0.probe_cell_hidden, Some(1), "{:?}", high.levels);
+    let share = h0.probe_hidden.unwrap();
+    assert!((0.01..0.9).contains(&share), "{:?}", high.levels);
+    // Only the share rule tells the two bakes apart.
+    assert!(!l0.probe_only, "{:?}", low.levels);
+    assert!(h0.probe_only, "{:?}", high.levels);
+    assert!(h0.points < l0.points, "{:?} {:?}", high.levels, low.levels);
+    // The finest level is sampled whole either way, with the same result.
+    assert!(!high.levels.last().unwrap().probe_only);
+    assert_eq!(low_hidden, high_hidden);
+    assert!(high_hidden[0], "the wall hides its target");
 }
 
 /// `--max-memory`'s estimate holds one hemicube per worker thread at the largest resolution
