@@ -26,6 +26,24 @@ impl Rng {
     }
 }
 
+/// A new OBJ text holding only the box `walled` (its vertex count with it).
+fn walled_target(min: DVec3, max: DVec3) -> (String, usize) {
+    let (mut obj, mut nv) = (String::new(), 0);
+    cube(&mut obj, &mut nv, "walled", min, max);
+    (obj, nv)
+}
+
+/// Appends object `wall`: the square `[-20, 20]²` of a plane, its point `(u, v)` at `at(u, v)`.
+fn wall(obj: &mut String, nv: &mut usize, at: impl Fn(f64, f64) -> DVec3) {
+    writeln!(obj, "o wall").unwrap();
+    for (u, v) in [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)] {
+        let p = at(u, v);
+        writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
+    }
+    writeln!(obj, "f {} {} {} {}", *nv + 1, *nv + 2, *nv + 3, *nv + 4).unwrap();
+    *nv += 4;
+}
+
 fn cube(obj: &mut String, nv: &mut usize, name: &str, min: DVec3, max: DVec3) {
     writeln!(obj, "o {name}").unwrap();
     for t in umbrasweep::geom::box_triangles(min.as_vec3(), max.as_vec3()) {
@@ -291,21 +309,8 @@ fn the_default_leaves_the_sampler_off_and_says_why() {
 fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
     let (leafy, cell) = scene(None);
     // The leaves scene's OBJ plus the wall and the target behind it.
-    let mut obj = String::new();
-    let mut nv = 0;
-    cube(
-        &mut obj,
-        &mut nv,
-        "walled",
-        DVec3::new(-5.0, -0.4, -0.4),
-        DVec3::new(-4.0, 0.4, 0.4),
-    );
-    writeln!(obj, "o wall").unwrap();
-    for (y, z) in [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)] {
-        writeln!(obj, "v -2 {y} {z}").unwrap();
-    }
-    writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
-    nv += 4;
+    let (mut obj, mut nv) = walled_target(DVec3::new(-5.0, -0.4, -0.4), DVec3::new(-4.0, 0.4, 0.4));
+    wall(&mut obj, &mut nv, |u, v| DVec3::new(-2.0, u, v));
     for o in &leafy.objects {
         writeln!(obj, "o {}", o.name).unwrap();
         for t in o.triangles.clone() {
@@ -600,15 +605,7 @@ fn a_level_whose_probe_hides_too_few_everywhere_is_split_unsampled() {
 /// `[-0.5, 0.5]³` hiding the target `walled`, and nine targets (`leafy…`) beyond the layer of
 /// leaves of `scene` over it.
 fn wall_and_leaves() -> umbrasweep::Scene {
-    let mut obj = String::new();
-    let mut nv = 0;
-    cube(
-        &mut obj,
-        &mut nv,
-        "walled",
-        DVec3::new(-0.5, -0.5, -4.5),
-        DVec3::new(0.5, 0.5, -4.0),
-    );
+    let (mut obj, mut nv) = walled_target(DVec3::new(-0.5, -0.5, -4.5), DVec3::new(0.5, 0.5, -4.0));
     for i in 0..3 {
         for j in 0..3 {
             let c = DVec3::new(f64::from(i) - 1.0, f64::from(j) - 1.0, 8.5);
@@ -621,12 +618,7 @@ fn wall_and_leaves() -> umbrasweep::Scene {
             );
         }
     }
-    writeln!(obj, "o wall").unwrap();
-    for (x, y) in [(-20.0, -20.0), (20.0, -20.0), (20.0, 20.0), (-20.0, 20.0)] {
-        writeln!(obj, "v {x} {y} -1.5").unwrap();
-    }
-    writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
-    nv += 4;
+    wall(&mut obj, &mut nv, |u, v| DVec3::new(u, v, -1.5));
     leaf_layer(&mut obj, &mut nv, None);
     load_obj("wall-and-leaves", &obj)
 }
