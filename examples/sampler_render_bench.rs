@@ -1,7 +1,8 @@
-//! Times the CPU hemicube's render alone (one thread), for profiling: N rectangles of side
-//! `2·EPS/√2` at fixed pseudo-random places on a cell's faces (the same every run), each
-//! rendered for every object beyond its face, repeated R times (3 by default); prints the median of the
-//! runs' milliseconds per render and the polygons reached and drawn per render, and how many
+//! Times the CPU hemicube's drawing alone (`Hemicube::draw`: traversal and rasterisation,
+//! not the set-up; one thread), for profiling: N rectangles of side `√2·EPS` (half-diagonal
+//! EPS) at fixed pseudo-random places on a cell's faces (the same every run), each rendered
+//! for every object beyond its face, repeated R times (3 by default); prints the median of
+//! the runs' milliseconds per render, the polygons reached and drawn per render, and how many
 //! boxes the renders hid (a check that two builds render the same). `cargo run --release
 //! --example sampler_render_bench -- SCENE CELLS CELL EPS RES N [R]`.
 
@@ -24,6 +25,10 @@ fn main() {
     let res: u32 = args[5].parse().expect("resolution");
     let n: usize = args[6].parse().expect("rectangles");
     let runs: usize = args.get(7).map_or(3, |s| s.parse().expect("runs"));
+    if n == 0 || runs == 0 {
+        eprintln!("sampler_render_bench: N and R must be at least 1");
+        std::process::exit(2);
+    }
     let data = common::sampler_data(&scene);
     let cell = cells[ci].to_f64();
     let beyond: Vec<_> = (0..6)
