@@ -271,19 +271,20 @@ fn random_box(rng: &mut Rng, dist: f64, size: f64) -> [DVec3; 2] {
 // Families (generators of local configurations).
 
 /// A configuration holding one foliage cluster about `c` (at distance `|c|` along `dir`): a
-/// resolution of 64–256 pixels, leaves of `leaf_px` pixels (a random share of that range),
+/// resolution picked from `resolutions`, leaves of `leaf_px` pixels (a random share of that range),
 /// clusters of 4–9 leaves across, an optical depth in `tau`, 200–2000 leaves, and a ball of
 /// `eps_px` pixels at the cluster (log-uniform). Returns it and the cluster's radius.
 fn dense_cluster(
     rng: &mut Rng,
     c: DVec3,
     dir: DVec3,
+    resolutions: &[u32],
     leaf_px: (f64, f64),
     tau: (f64, f64),
     eps_px: (f64, f64),
 ) -> (Local, f64) {
     let d = c.length();
-    let res = rng.pick(&[64, 128, 256, 256]);
+    let res = rng.pick(resolutions);
     let px = 2.0 / res as f64 * d;
     let s = rng.u(leaf_px.0, leaf_px.1) * px / 2.0;
     let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
@@ -305,7 +306,15 @@ fn gen_foliage(rng: &mut Rng) -> Local {
     let c = dir * d;
     // Leaves of 5–16 pixels (so that they cover whole pixels and fuse), balls from a
     // twentieth of a pixel to six pixels.
-    let (mut l, r) = dense_cluster(rng, c, dir, (5.0, 16.0), (1.0, 10.0), (0.05, 6.0));
+    let (mut l, r) = dense_cluster(
+        rng,
+        c,
+        dir,
+        &[64, 128, 256, 256],
+        (5.0, 16.0),
+        (1.0, 10.0),
+        (0.05, 6.0),
+    );
     boxes_behind(rng, &mut l.boxes, c, dir, d, r, 5);
     let dist = d * rng.u(0.5, 2.5);
     let size = rng.u(0.05, 0.5);
@@ -344,18 +353,15 @@ fn gen_depth_bounded(rng: &mut Rng) -> Local {
     let d = rng.u(1.5, 8.0);
     let dir = rng.unit_up(0.15);
     let c = dir * d;
-    let res = rng.pick(&[64, 128, 256]);
-    let px = 2.0 / res as f64 * d;
-    let s = rng.u(3.0, 12.0) * px / 2.0;
-    let r = (s * rng.u(4.0, 9.0)).min(0.4 * d);
-    let tau = rng.u(4.0, 12.0);
-    let n = leaves_to_fill(tau, r, s, 200, 2000);
-    let mut l = Local {
-        eps: px * rng.log_u(0.3, 8.0),
-        res,
-        ..Local::default()
-    };
-    cluster(rng, &mut l.polys, c, dir, r, n, s);
+    let (mut l, r) = dense_cluster(
+        rng,
+        c,
+        dir,
+        &[64, 128, 256],
+        (3.0, 12.0),
+        (4.0, 12.0),
+        (0.3, 8.0),
+    );
     for _ in 0..6 {
         let t = d + r * rng.u(-0.3, 1.5);
         let lat = rng.in_ball() * r * 0.4;
@@ -474,7 +480,15 @@ fn gen_low(rng: &mut Rng) -> Local {
     let dir = DVec3::new(phi.cos(), phi.sin(), elev.tan()).normalize();
     let across = DVec3::new(-phi.sin(), phi.cos(), 0.0);
     let c = dir * d;
-    let (mut l, r) = dense_cluster(rng, c, dir, (3.0, 12.0), (2.0, 10.0), (0.3, 20.0));
+    let (mut l, r) = dense_cluster(
+        rng,
+        c,
+        dir,
+        &[64, 128, 256, 256],
+        (3.0, 12.0),
+        (2.0, 10.0),
+        (0.3, 20.0),
+    );
     // Slats across the line of sight, stacked in height, each overlapping the next by a
     // share of its height, each a little farther than the one below or above it.
     let k = 2 + rng.below(6);
