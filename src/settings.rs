@@ -253,7 +253,7 @@ pub struct SamplingSettings {
     /// off). The bands then form over those few objects only, so each band's farthest
     /// distance, which sets its shrinks, lies closer to its objects' own. On by default: on
     /// the fine forest's 4×2×4 cell at ε 0.0625 it hid 961 objects in 545 s against 634 in
-    /// 669 s with the tuck pass, 567 in 261 s against 310 in 241 s without (README).
+    /// 669 s with the tuck pass, 567 in 261 s against 310 in 241 s without (`docs/sampling.md`).
     /// Documents written before it existed read as off.
     #[serde(rename = "sampling_whole_first", default)]
     pub whole_first: bool,
@@ -263,7 +263,7 @@ pub struct SamplingSettings {
     /// default: a finer ε buys as much or more for its time, and it has no GPU twin. On the
     /// fine forest's 1×1×1 cell at 512 px it hid 3 % more objects at ε 0.0312 (72.4 % culled
     /// against 70.0 %) for 1.4× the time (154 s against 108 s), and without it ε 0.0221 culled
-    /// 77.1 % in 160 s; on its 4×2×4 cell, 54.3 % against 51.8 % for 1.2× the time (README,
+    /// 77.1 % in 160 s; on its 4×2×4 cell, 54.3 % against 51.8 % for 1.2× the time (`docs/sampling.md`,
     /// "The tuck pass, measured", and "Defaults on fine foliage"; measured before edges were
     /// shrunk by the rectangle's support, which took those cells to 74.5 % and 58.5 % without
     /// the pass in about the same time).
@@ -334,7 +334,7 @@ impl SamplingSettings {
     /// ([`Self::hemicube_bytes`]). For a budget of time rather than of points the rule is not
     /// the best: whole bakes of the fine forest's 4×2×4 cell culled more at 512 px with a √2
     /// finer ε than at the 1,024 px it picks (54.3 % in 915 s at ε 0.0312 against 46.9 % in
-    /// 990 s at ε 0.0442; README, "Pixels against points").
+    /// 990 s at ε 0.0442; `docs/sampling.md`, "Pixels against points").
     ///
     /// ```
     /// use umbrasweep::settings::SamplingSettings;

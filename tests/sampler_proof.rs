@@ -2037,7 +2037,7 @@ fn tucked_edges_keep_every_family_hidden_from_the_whole_ball() {
 
 /// The tuck pass hides more of the foliage family's boxes and triangles: with it, from the
 /// same configurations, more are hidden (these sparse clusters gain a few per cent, the fine
-/// forest's renders about a sixth, README; the fine-foliage family's leaves of a few pixels,
+/// forest's renders about a sixth, `docs/sampling.md`; the fine-foliage family's leaves of a few pixels,
 /// fused by sub-pixel masks, gain almost nothing).
 #[test]
 fn tucked_edges_fuse_what_shrunk_ones_cannot() {
