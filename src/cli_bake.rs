@@ -808,13 +808,15 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         let ticker = (!a.quiet).then(|| {
             s.spawn(|| {
                 use std::sync::atomic::Ordering::Relaxed;
+                let mut pace = bake::RectPace::default();
                 while baking.load(Relaxed) {
                     let w = work();
+                    let left = pace.update(std::time::Instant::now(), w.points, w.rects);
                     if w.points > 0 {
-                        let (d, b) = w.rects;
                         bar.set_message(format!(
-                            ", {} sample points ({d} of {b} rectangles)",
-                            w.points
+                            ", {} sample points ({})",
+                            w.points,
+                            crate::cli_progress::rectangles(w, left)
                         ));
                     }
                     if let Some(p) = &plain {

@@ -7,7 +7,7 @@
 use std::sync::Mutex;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-use umbrasweep::bake::SamplerProgress;
+use umbrasweep::bake::{RectPace, SamplerProgress};
 
 /// `--progress-every` (`bake`, `validate`): seconds between two plain progress lines, or none.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -79,6 +79,8 @@ struct State {
     /// The cells and sampler work the last line reported (at first, nothing done: nothing
     /// to say yet).
     printed: (usize, SamplerWork),
+    /// The pace of the sampler's rectangles.
+    pace: RectPace,
 }
 
 /// A bake's plain progress log (see the module docs). Shared by the workers, which report
@@ -106,6 +108,7 @@ impl PlainProgress {
                 done: 0,
                 last: start,
                 printed: (0, SamplerWork::default()),
+                pace: RectPace::default(),
             }),
         }
     }
@@ -128,25 +131,33 @@ impl PlainProgress {
 
     fn maybe_print(&self, s: &mut State, work: SamplerWork, force: bool) {
         let now = Instant::now();
+        let rects_left = s.pace.update(now, work.points, work.rects);
         let now_state = (s.done, work);
         if s.printed == now_state || (!force && now - s.last < self.every) {
             return;
         }
-        eprintln!("{}", self.line(s.done, work, now - self.start));
+        eprintln!("{}", self.line(s.done, work, now - self.start, rects_left));
         s.last = now;
         s.printed = now_state;
     }
 
-    /// `bake: 3/10 cells, 1,234 sample points (1,100 of 2,048 rectangles), 00:05:02 elapsed,
-    /// about 00:11:45 left`.
-    fn line(&self, done: usize, work: SamplerWork, elapsed: Duration) -> String {
+    /// `bake: 3/10 cells, 1,234 sample points (1,100 of 2,048 rectangles, about 00:02:10 more
+    /// at this pace), 00:05:02 elapsed, about 00:11:45 left` (`rects_left`: the rectangles'
+    /// estimate, [`RectPace`]).
+    fn line(
+        &self,
+        done: usize,
+        work: SamplerWork,
+        elapsed: Duration,
+        rects_left: Option<Duration>,
+    ) -> String {
         let mut line = format!("bake: {}/{} cells", self.resumed + done, self.total);
         if work.points > 0 {
             line += &format!(", {} sample points", thousands(work.points));
         }
         let (rd, rb) = work.rects;
         if rb > 0 && rd < rb {
-            line += &format!(" ({} of {} rectangles)", thousands(rd), thousands(rb));
+            line += &format!(" ({})", rectangles(work, rects_left));
         }
         line += &format!(", {} elapsed", clock(elapsed));
         let left = self.total.saturating_sub(self.resumed + done);
@@ -213,6 +224,17 @@ pub fn plain_rays(every: f64) -> umbrasweep::validate::ProgressFn {
     })
 }
 
+/// `1,100 of 2,048 rectangles`, and `, about 00:02:10 more at this pace` with an estimate of
+/// a second or more: what the bar and the plain lines say of the sampler's rectangles.
+pub fn rectangles(work: SamplerWork, left: Option<Duration>) -> String {
+    let (rd, rb) = work.rects;
+    let mut s = format!("{} of {} rectangles", thousands(rd), thousands(rb));
+    if let Some(d) = left.filter(|d| d.as_secs() > 0) {
+        s += &format!(", about {} more at this pace", clock(d));
+    }
+    s
+}
+
 /// `01:02:03` (hours, minutes, seconds; days before them when there are any).
 fn clock(d: Duration) -> String {
     indicatif::FormattedDuration(d).to_string()
@@ -240,7 +262,7 @@ mod tests {
     #[test]
     fn the_estimate_scales_the_time_so_far_by_the_cells_left() {
         let p = PlainProgress::new(10, 2, 60.0);
-        let line = p.line(2, SamplerWork::default(), Duration::from_secs(120));
+        let line = p.line(2, SamplerWork::default(), Duration::from_secs(120), None);
         assert_eq!(
             line,
             "bake: 4/10 cells, 00:02:00 elapsed, about 00:06:00 left"
@@ -249,11 +271,51 @@ mod tests {
             points: 1_500,
             rects: (1_600, 65_536),
         };
-        let line = p.line(0, work, Duration::from_secs(30));
+        let line = p.line(0, work, Duration::from_secs(30), None);
         assert_eq!(
             line,
             "bake: 2/10 cells, 1,500 sample points (1,600 of 65,536 rectangles), 00:00:30 elapsed"
         );
+        let line = p.line(
+            0,
+            work,
+            Duration::from_secs(30),
+            Some(Duration::from_secs(130)),
+        );
+        assert_eq!(
+            line,
+            "bake: 2/10 cells, 1,500 sample points (1,600 of 65,536 rectangles, about 00:02:10 \
+             more at this pace), 00:00:30 elapsed"
+        );
+    }
+
+    #[test]
+    fn the_rectangles_pace_is_that_of_the_points_since_their_level_began() {
+        let t = Instant::now();
+        let at = |s: u64| t + Duration::from_secs(s);
+        let mut pace = RectPace::default();
+        // A level of 100 rectangles begins (10 done before it): nothing to go by yet.
+        assert_eq!(pace.update(at(0), 0, (10, 110)), None);
+        assert_eq!(pace.update(at(5), 10, (10, 110)), None, "too soon");
+        // 20 points in 20 s, no chunk counted done yet: the other 80 take about 80 s.
+        assert_eq!(
+            pace.update(at(20), 20, (10, 110)),
+            Some(Duration::from_secs(80))
+        );
+        // A chunk counted done ahead of the points (a probe's rectangles left unsampled):
+        // what is left is what is not done.
+        assert_eq!(
+            pace.update(at(40), 40, (100, 110)),
+            Some(Duration::from_secs(10))
+        );
+        // The next level's 400 begin: its own pace, from its start.
+        assert_eq!(pace.update(at(50), 45, (110, 510)), None);
+        assert_eq!(
+            pace.update(at(70), 55, (110, 510)),
+            Some(Duration::from_secs(780))
+        );
+        // Everything begun is done: nothing left to estimate.
+        assert_eq!(pace.update(at(80), 500, (510, 510)), None);
     }
 
     #[test]

@@ -280,6 +280,53 @@ pub struct SamplerProgress {
     pub rects_done: std::sync::atomic::AtomicU64,
 }
 
+/// How fast the sampler gets through the face rectangles of the levels begun, for progress
+/// lines: measured from the moment the count begun last changed (a level started), so that
+/// each level is timed on its own rectangles, whose cost differs by orders of magnitude
+/// between levels. The pace is that of the sample points, which move one by one, where
+/// rectangles are counted done a whole chunk at a time; each point since the level began
+/// stands for one of its rectangles.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RectPace {
+    /// When the rectangles begun last changed, and the points and rectangles done then
+    /// (`None` before the first update).
+    since: Option<(std::time::Instant, u64, u64)>,
+    /// The rectangles begun then.
+    begun: u64,
+}
+
+impl RectPace {
+    /// The seconds at least between a level's start and an estimate: before, the pace of a
+    /// handful of points says little.
+    pub const MIN_SECONDS: f64 = 10.0;
+
+    /// Notes the sample points rendered and the rectangles `(done, begun)` at `now`
+    /// ([`SamplerProgress`]); returns about how long the rectangles begun but not yet done
+    /// will take at the pace of the points since their level began, one point each (`None`:
+    /// nothing to estimate yet). Rectangles that a level's probe leaves unsampled take no
+    /// time, so the estimate is at most what is left.
+    pub fn update(
+        &mut self,
+        now: std::time::Instant,
+        points: u64,
+        (done, begun): (u64, u64),
+    ) -> Option<std::time::Duration> {
+        let Some((t0, p0, d0)) = self.since.filter(|_| begun == self.begun) else {
+            self.since = Some((now, points, done));
+            self.begun = begun;
+            return None;
+        };
+        let seconds = (now - t0).as_secs_f64();
+        let rendered = points.saturating_sub(p0);
+        if rendered == 0 || seconds < Self::MIN_SECONDS {
+            return None;
+        }
+        let left = begun.saturating_sub(done.max(d0 + rendered));
+        (left > 0)
+            .then(|| std::time::Duration::from_secs_f64(seconds / rendered as f64 * left as f64))
+    }
+}
+
 /// What [`bake_cells`] reports while it works.
 #[derive(Clone, Copy, Default)]
 pub struct BakeHooks<'a> {

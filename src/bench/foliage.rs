@@ -701,17 +701,29 @@ fn with_ticker<T>(
     let (stop, wait) = std::sync::mpsc::channel::<()>();
     std::thread::scope(|s| {
         s.spawn(move || {
+            let mut pace = crate::bake::RectPace::default();
+            let mut note = || {
+                use std::sync::atomic::Ordering::Relaxed;
+                let rects = (
+                    progress.rects_done.load(Relaxed),
+                    progress.rects_begun.load(Relaxed),
+                );
+                let points = progress.points.load(Relaxed);
+                (points, rects, pace.update(Instant::now(), points, rects))
+            };
+            note();
             while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
                 wait.recv_timeout(std::time::Duration::from_secs(60))
             {
-                use std::sync::atomic::Ordering::Relaxed;
-                let n = progress.points.load(Relaxed);
+                let (n, (done, begun), left) = note();
                 if n > 0 {
                     log(&format!(
-                        "bench: foliage {study} [{label}]: {n} sample points so far, {} of {} \
-                         rectangles ({:.0} s)",
-                        progress.rects_done.load(Relaxed),
-                        progress.rects_begun.load(Relaxed),
+                        "bench: foliage {study} [{label}]: {n} sample points so far, {done} of \
+                         {begun} rectangles{} ({:.0} s)",
+                        left.map_or(String::new(), |d| format!(
+                            ", about {:.0} s more at this pace",
+                            d.as_secs_f64()
+                        )),
                         t.elapsed().as_secs_f64()
                     ));
                 }
