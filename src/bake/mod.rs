@@ -304,7 +304,7 @@ impl RectPace {
     /// ([`SamplerProgress`]); returns about how long the rectangles begun but not yet done
     /// will take at the pace of the points since their level began, one point each (`None`:
     /// nothing to estimate yet). Rectangles that a level's probe leaves unsampled take no
-    /// time, so the estimate is at most what is left.
+    /// time, so such a level finishes sooner than the estimate says.
     pub fn update(
         &mut self,
         now: std::time::Instant,
