@@ -304,7 +304,8 @@ impl RectPace {
     /// ([`SamplerProgress`]); returns about how long the rectangles begun but not yet done
     /// will take at the pace of the points since their level began, one point each (`None`:
     /// nothing to estimate yet). Rectangles that a level's probe leaves unsampled take no
-    /// time, so such a level finishes sooner than the estimate says.
+    /// time, so such a level finishes sooner than the estimate says; points replayed from a
+    /// checkpoint count too, so a resumed level looks faster than it is until they are past.
     pub fn update(
         &mut self,
         now: std::time::Instant,
