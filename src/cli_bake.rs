@@ -247,7 +247,12 @@ pub struct BakeArgs {
     #[arg(long, value_name = "N|Ts", value_delimiter = ',')]
     pub sampling_budget: Option<Vec<String>>,
     /// Refinement levels of the sampler: faces are first sampled with balls 2^LEVELS × the
-    /// finest ε, and a ball is split in four only where objects are still undecided.
+    /// finest ε, and a ball is split in four only where objects are still undecided. On
+    /// coarse foliage the coarse levels prune the finest level's lists and pay; on fine
+    /// foliage with a finer ε than the default, 0 is faster: there a coarse level's
+    /// rectangle costs several of the finest level's points (what it leaves open goes down to
+    /// its quadrants, where the finest level drops it as visible) and may still pass its
+    /// probe.
     #[arg(long, default_value_t = BakeSettings::default_settings().sampling_settings.levels)]
     pub sampling_levels: u32,
     /// The coarsest ε the sampler renders: coarser levels are split without sampling (the
