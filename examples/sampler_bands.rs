@@ -13,16 +13,11 @@ use umbrasweep::sampler::{BoxTest, Hemicube};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
-    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
-    let ci: usize = args[3].parse().expect("cell");
-    let eps: f64 = args[4].parse().expect("eps");
-    let res: u32 = args[5].parse().expect("res");
+    let (scene, cell, eps, res) = common::scene_cell_eps_res(&args);
     let face = common::Face::parse(args.get(6).map_or("+x", String::as_str));
     let (axis, sign) = (face.axis, face.sign);
     let ratio: f64 = args.get(7).map_or(2.0, |s| s.parse().expect("ratio"));
     let data = common::sampler_data(&scene);
-    let cell = cells[ci].to_f64();
     let eye = face.centre(&cell);
     let (objs, boxes) = face.beyond(&scene, &cell);
     let far = |b: &DAabb| (b.min - eye).abs().max((b.max - eye).abs()).length();

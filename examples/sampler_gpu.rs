@@ -21,14 +21,9 @@ fn main() {
         eprintln!("usage: sampler_gpu SCENE CELLS CELL EPS RES N [compute|render|both|cull]");
         std::process::exit(2);
     }
-    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
-    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
-    let ci: usize = args[3].parse().expect("CELL");
-    let eps: f64 = args[4].parse().expect("EPS");
-    let res: u32 = args[5].parse().expect("RES");
+    let (scene, cell, eps, res) = common::scene_cell_eps_res(&args);
     let n: usize = args[6].parse().expect("N");
     let data = common::sampler_data(&scene);
-    let cell = cells[ci].to_f64();
     let gpu = GpuBackend::new().expect("GPU backend");
     println!("GPU: {}", gpu.adapter_info().name);
     // `cull`: the compute fill in one round and in rounds (`GpuSampler::set_culling`).

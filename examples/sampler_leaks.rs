@@ -14,11 +14,7 @@ use umbrasweep::sampler::{BoxTest, Hemicube};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
-    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
-    let ci: usize = args[3].parse().expect("cell");
-    let eps: f64 = args[4].parse().expect("eps");
-    let res: u32 = args[5].parse().expect("res");
+    let (scene, cell, eps, res) = common::scene_cell_eps_res(&args);
     let face = common::Face::parse(args.get(6).map_or("+x", String::as_str));
     let (axis, sign) = (face.axis, face.sign);
     // Alpha-tested cards: trusted mip levels (0 = all) and whether the sampler also tests
@@ -41,7 +37,6 @@ fn main() {
         occ.card_triangles.clear();
     }
     let data = SamplerData::new(&occ, &scene, &settings);
-    let cell = cells[ci].to_f64();
     let eye = face.centre(&cell);
     let (objs, boxes) = face.beyond(&scene, &cell);
     let mut hc = Hemicube::new(res);

@@ -11,14 +11,9 @@ use umbrasweep::sampler::{BoxTest, Hemicube};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
-    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
-    let ci: usize = args[3].parse().unwrap();
-    let eps: f64 = args[4].parse().unwrap();
-    let res: u32 = args[5].parse().unwrap();
+    let (scene, cell, eps, res) = common::scene_cell_eps_res(&args);
     let n: usize = args[6].parse().unwrap();
     let data = common::sampler_data(&scene);
-    let cell = cells[ci].to_f64();
     let mut open = vec![0u32; scene.objects.len()];
     let mut seen_from = vec![0u32; scene.objects.len()];
     let mut hc = Hemicube::new(res);

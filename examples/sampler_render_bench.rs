@@ -18,11 +18,7 @@ fn main() {
         eprintln!("usage: sampler_render_bench SCENE CELLS CELL EPS RES N [R]");
         std::process::exit(2);
     }
-    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("scene");
-    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("cells");
-    let ci: usize = args[3].parse().expect("cell index");
-    let eps: f64 = args[4].parse().expect("eps");
-    let res: u32 = args[5].parse().expect("resolution");
+    let (scene, cell, eps, res) = common::scene_cell_eps_res(&args);
     let n: usize = args[6].parse().expect("rectangles");
     let runs: usize = args.get(7).map_or(3, |s| s.parse().expect("runs"));
     if n == 0 || runs == 0 {
@@ -30,7 +26,6 @@ fn main() {
         std::process::exit(2);
     }
     let data = common::sampler_data(&scene);
-    let cell = cells[ci].to_f64();
     let beyond: Vec<_> = (0..6)
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
         .collect();

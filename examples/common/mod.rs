@@ -1,7 +1,7 @@
 //! Setup shared by the sampler's probe examples (`sampler_bands`, `sampler_leaks`,
 //! `sampler_points`, `sampler_probe`, `sampler_render_bench`, `sampler_why`): which face of a
-//! cell a probe looks out of, the eye on it, the objects beyond it, and the sampler's
-//! per-scene data. Each example uses part of it.
+//! cell a probe looks out of, the eye on it, the objects beyond it, the sampler's per-scene
+//! data, and the arguments most of them begin with. Each example uses part of it.
 #![allow(dead_code, reason = "each example uses part of this module")]
 
 use glam::DVec3;
@@ -110,4 +110,19 @@ pub fn sampler_data(scene: &Scene) -> SamplerData {
         None,
     );
     SamplerData::new(&occ, scene, &BakeSettings::default())
+}
+
+/// The arguments `SCENE CELLS CELL EPS RES` that most sampler examples begin with
+/// (`args[1..=5]`, `args[0]` the program): the scene, the box of cell `CELL` of the cells
+/// file, ε and the pixels per view.
+///
+/// # Panics
+/// A file that does not load or an argument that does not parse, naming the argument.
+pub fn scene_cell_eps_res(args: &[String]) -> (Scene, DAabb, f64, u32) {
+    let scene = umbrasweep::scene::load(std::path::Path::new(&args[1])).expect("SCENE");
+    let cells = umbrasweep::cells::load_json(std::path::Path::new(&args[2])).expect("CELLS");
+    let ci: usize = args[3].parse().expect("CELL");
+    let eps = args[4].parse().expect("EPS");
+    let res = args[5].parse().expect("RES");
+    (scene, cells[ci].to_f64(), eps, res)
 }
