@@ -74,7 +74,7 @@ pub struct BakeSettings {
     pub sampling: SamplingChoice,
     /// The sampler's finest ε, budget, resolution and certification rays (recorded as
     /// `sampling_eps`, `sampling_levels`, `sampling_max_eps`, `sampling_probe`,
-    /// `sampling_probe_cull`,
+    /// `sampling_probe_cull`, `sampling_probe_pay`,
     /// `sampling_budget_points`,
     /// `sampling_budget_seconds`, `sampling_resolution`, `sampling_rays`,
     /// `sampling_band_ratio`).
@@ -224,6 +224,23 @@ pub struct SamplingSettings {
     /// keeps only the rule that some object be proved. Documents written before it read as 0.
     #[serde(rename = "sampling_probe_cull", default)]
     pub probe_cull: f64,
+    /// The level just above the finest, when it passes both probe rules, is sampled whole
+    /// only when what one of its rectangles is expected to save the finest level is at least
+    /// this many times what it costs, both in polygons drawn (what a sample point's time
+    /// follows) weighted by resolution ([`SamplingSettings::polygon_weight`]). A pilot renders
+    /// a few probed rectangles again as trials, and one quadrant of each twice: with the
+    /// candidates it inherits were the level split unsampled, and with what the rectangle
+    /// left open; the saving is four times the quadrant's difference. Counted, not timed, so
+    /// that the decision, hence the PVS, is the same on any machine, thread count and
+    /// backend. Coarser levels have no pilot (they save the finest level through the levels
+    /// between, which the trials do not see). A level whose balls are too coarse to fuse the
+    /// leaves (fine foliage at twice a fine ε) costs more per rectangle than the finest points
+    /// it prunes; measured in `docs/sampling.md` ("A pilot for the level above the finest"):
+    /// the coarse forest's 4×2×4 cell at ε 0.059 with three levels sampled in 174 s instead
+    /// of 257 s for one object fewer. Default 1; 0 turns the estimate off. Documents written
+    /// before it read as 0.
+    #[serde(rename = "sampling_probe_pay", default)]
+    pub probe_pay: f64,
     /// At most this many sample points per cell; objects still undecided then stay visible.
     /// Default 50,000.
     #[serde(rename = "sampling_budget_points")]
@@ -304,6 +321,51 @@ impl SamplingSettings {
     /// The automatic resolution's least and greatest values.
     pub const AUTO_RESOLUTION: (u32, u32) = (256, 1024);
 
+    /// Pixels traded for points: where both ε and the resolution are automatic, a cell whose
+    /// finest level the automatic rule would render at more than this many pixels per view
+    /// renders every level at this many at most, with its finest ε `1/√2` smaller (about
+    /// twice the points) — see [`Self::cell_finest`].
+    pub const TRADE_RESOLUTION: u32 = 512;
+
+    /// A cell's finest ε and the most pixels per view its levels render at (`None`: no cap
+    /// beyond the automatic rule's), for the settings' finest ε `eps` and the cell's median
+    /// ray hit distance `h` (the scale of [`Self::auto_resolution`]).
+    ///
+    /// With `--sampling-eps` or `--sampling-resolution` given, they are the user's. Otherwise,
+    /// where the automatic rule would render the finest level at more than
+    /// [`Self::TRADE_RESOLUTION`] pixels, the cell renders at that many with ε `eps/√2`: for
+    /// a budget of time, points pay more than pixels on such cells (large cells in fine
+    /// foliage). The fine forest's 4×2×4 cell, whole bakes on two cores: the automatic
+    /// choice (ε 0.0405, 1,024 px) culled 54.8 % in 825 s of sampling, the trade (ε 0.0286,
+    /// 512 px) 59.6 % in 791 s, with the level at twice its ε stopped by its pilot
+    /// ([`Self::probe_pay`]; without that it passes its probe and costs more than the whole
+    /// finest level). `docs/sampling.md`, "A pilot for coarse levels; pixels traded for
+    /// points".
+    ///
+    /// ```
+    /// use umbrasweep::settings::SamplingSettings;
+    /// let auto = SamplingSettings::default();
+    /// // A large cell in fine foliage: 1,024 px wanted, 512 px and a √2 finer ε instead.
+    /// let (eps, cap) = auto.cell_finest(0.04, 5.0);
+    /// assert!((eps - 0.04 / 2f64.sqrt()).abs() < 1e-12);
+    /// assert_eq!(cap, Some(512));
+    /// // Coarse foliage: 256 px wanted, nothing traded.
+    /// assert_eq!(auto.cell_finest(0.12, 4.0), (0.12, None));
+    /// // An ε the user gave is kept.
+    /// let given = SamplingSettings { eps: Some(0.04), ..auto };
+    /// assert_eq!(given.cell_finest(0.04, 5.0), (0.04, None));
+    /// ```
+    pub fn cell_finest(&self, eps: f64, h: f64) -> (f64, Option<u32>) {
+        if self.eps.is_none()
+            && self.resolution.is_none()
+            && Self::auto_resolution(h, eps) > Self::TRADE_RESOLUTION
+        {
+            (eps / std::f64::consts::SQRT_2, Some(Self::TRADE_RESOLUTION))
+        } else {
+            (eps, None)
+        }
+    }
+
     /// Bytes of one sample point's hemicube at resolution `res` (per worker thread): three
     /// `res²` views' worth of pixels, each with a depth and eight sub-pixel layers.
     pub const fn hemicube_bytes(res: u32) -> u64 {
@@ -356,6 +418,22 @@ impl SamplingSettings {
         1u32 << (k as u32)
     }
 
+    /// The relative cost of drawing one polygon in a hemicube of `res` pixels, 1 up to
+    /// 512 px, for comparing levels at different resolutions ([`SamplingSettings::probe_pay`]):
+    /// `max(1, 0.28 + 0.72·res/512)`. Measured on the fine forest's 4×2×4 cell
+    /// (`examples/sampler_render_bench`, 6 points at ε 0.0286, one thread): 11.7, 10.4 and
+    /// 17.9 µs per polygon drawn at 256, 512 and 1,024 px; 2,048 px costs about twice 1,024.
+    ///
+    /// ```
+    /// use umbrasweep::settings::SamplingSettings;
+    /// assert_eq!(SamplingSettings::polygon_weight(512), 1.0);
+    /// assert_eq!(SamplingSettings::polygon_weight(256), 1.0);
+    /// assert!((SamplingSettings::polygon_weight(1024) - 1.72).abs() < 1e-9);
+    /// ```
+    pub fn polygon_weight(res: u32) -> f64 {
+        (0.28 + 0.72 * f64::from(res) / 512.0).max(1.0)
+    }
+
     /// The defaults, as a `const fn` for presets.
     pub const fn default_settings() -> Self {
         SamplingSettings {
@@ -364,6 +442,7 @@ impl SamplingSettings {
             max_eps: None,
             probe: 0.01,
             probe_cull: 0.4,
+            probe_pay: 1.0,
             budget_points: 50_000,
             budget_seconds: None,
             resolution: None,
@@ -636,6 +715,13 @@ impl BakeSettings {
                 "sampling-probe-cull",
                 sa.probe_cull,
                 "must be a fraction between 0 (a probe need prove only one object) and 1 (e.g. 0.4)",
+            ));
+        }
+        if !(sa.probe_pay.is_finite() && sa.probe_pay >= 0.0) {
+            return Err(SettingsError::new(
+                "sampling-probe-pay",
+                sa.probe_pay,
+                "must be a ratio of at least 0 (0: no estimate of what a level saves; e.g. 1)",
             ));
         }
         if let Some(e) = sa.max_eps

@@ -134,7 +134,9 @@ fn settings() -> BakeSettings {
 }
 
 /// Three levels above the finest ε 0.05, each level's probe asked to prove `probe` of its
-/// tests and `probe_cull` of its objects for the cell (at `resolution`, or 64 px).
+/// tests and `probe_cull` of its objects for the cell (at `resolution`, or 64 px), without the
+/// pilot's estimate of what a level saves (`--sampling-probe-pay 0`), which the tests of
+/// those two rules leave out.
 fn probed(resolution: Option<u32>, probe: f64, probe_cull: f64) -> BakeSettings {
     let mut s = settings();
     s.sampling_settings.levels = 3;
@@ -142,6 +144,7 @@ fn probed(resolution: Option<u32>, probe: f64, probe_cull: f64) -> BakeSettings 
     s.sampling_settings.resolution = resolution.or(s.sampling_settings.resolution);
     s.sampling_settings.probe = probe;
     s.sampling_settings.probe_cull = probe_cull;
+    s.sampling_settings.probe_pay = 0.0;
     s
 }
 
@@ -623,6 +626,110 @@ fn wall_and_leaves() -> umbrasweep::Scene {
     load_obj("wall-and-leaves", &obj)
 }
 
+/// `--sampling-probe-pay`: a level that proves much per rectangle but saves the finest level
+/// little is split unsampled. In a small forest's middle cell the level just above the
+/// finest passes the probe's share rules (objects hidden at every probed rectangle:
+/// `small_forest` asks only for one), but what keeps the finest level drawing is the leaves
+/// in front of the objects the level leaves open: its pilot finds each rectangle costing more
+/// polygons than it saves its quadrants, and the level stops at its probe. The coarsest level
+/// has no pilot and is sampled whole as without the estimate (ratio 0), where the level above
+/// the finest is sampled whole too and the sample points draw more polygons. What either bake
+/// hides is hidden (brute force).
+#[test]
+fn a_level_that_saves_the_finest_level_less_than_it_costs_is_split_unsampled() {
+    let (scene, cell, settings) = small_forest();
+    let run = |pay: f64| {
+        let mut s = settings.clone();
+        s.sampling_settings.probe_pay = pay;
+        run_sampler(&scene, &cell, &s)
+    };
+    let (paid_hidden, paid) = run(1.0);
+    let (free_hidden, free) = run(0.0);
+    let timeless =
+        |l: &umbrasweep::pvs::SamplingLevel| umbrasweep::pvs::SamplingLevel { seconds: 0.0, ..*l };
+    let n = paid.levels.len();
+    assert!(n == 3 && free.levels.len() == 3, "{:?}", paid.levels);
+    // The coarsest level: no pilot, the same either way.
+    assert_eq!(timeless(&paid.levels[0]), timeless(&free.levels[0]));
+    assert_eq!(paid.levels[0].probe_cost, None);
+    assert!(!paid.levels[0].probe_only, "{:?}", paid.levels);
+    // The level above the finest: the same probe, passing the share rules; only the pilot
+    // tells the bakes apart.
+    let (p, f) = (paid.levels[1], free.levels[1]);
+    assert!(p.probe_cell_hidden.unwrap() > 0, "{:?}", paid.levels);
+    assert_eq!(
+        (p.probe_hidden, p.probe_cell_hidden, p.probe_objects),
+        (f.probe_hidden, f.probe_cell_hidden, f.probe_objects)
+    );
+    let (cost, saving) = (p.probe_cost.unwrap(), p.pilot_saving.unwrap());
+    assert!(cost > 0.0 && saving < cost, "{:?}", paid.levels);
+    assert!(p.probe_only, "{:?}", paid.levels);
+    assert!(!f.probe_only, "{:?}", free.levels);
+    assert_eq!((f.probe_cost, f.pilot_saving), (None, None));
+    assert!(
+        paid.polygons < free.polygons,
+        "polygons drawn: {} with the pilot, {} without",
+        paid.polygons,
+        free.polygons
+    );
+    assert!(paid_hidden.iter().any(|&h| h) && free_hidden.iter().any(|&h| h));
+    for hidden in [&paid_hidden, &free_hidden] {
+        for o in (0..scene.objects.len()).filter(|&o| hidden[o]).step_by(7) {
+            brute_force_hidden(&scene, &cell, o as u32);
+        }
+    }
+}
+
+/// `--sampling-probe-pay`: a level whose rectangles close pays for itself. The cell inside a
+/// closed room of six walls, a target beyond each: the level above the finest (ε 0.4, the
+/// finest 0.2) hides every target at every rectangle, so none of its quadrants is rendered;
+/// its pilot finds that saving (four quadrants' renders) above its cost (one render) and the
+/// level is sampled whole, and nothing finer is.
+#[test]
+fn a_level_whose_rectangles_close_pays_for_itself() {
+    let (mut obj, mut nv) = (String::new(), 0);
+    for axis in 0..3 {
+        for side in [-1.0, 1.0] {
+            let mut c = DVec3::ZERO;
+            c[axis] = 5.0 * side;
+            cube(
+                &mut obj,
+                &mut nv,
+                &format!("target{axis}{}", side > 0.0),
+                c - DVec3::splat(0.5),
+                c + DVec3::splat(0.5),
+            );
+        }
+    }
+    for axis in 0..3 {
+        for side in [-1.0, 1.0] {
+            wall(&mut obj, &mut nv, |u, v| {
+                let mut p = DVec3::ZERO;
+                p[axis] = 2.0 * side;
+                p[(axis + 1) % 3] = u;
+                p[(axis + 2) % 3] = v;
+                p
+            });
+        }
+    }
+    let scene = load_obj("room", &obj);
+    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let mut s = probed(None, 0.01, 0.4);
+    s.sampling_settings.eps = Some(0.2);
+    s.sampling_settings.levels = 1;
+    s.sampling_settings.probe_pay = 1.0;
+    let (hidden, work) = run_sampler(&scene, &cell, &s);
+    let l0 = work.levels[0];
+    assert!(!l0.probe_only, "{:?}", work.levels);
+    let (cost, saving) = (l0.probe_cost.unwrap(), l0.pilot_saving.unwrap());
+    assert!(cost > 0.0 && saving >= 2.0 * cost, "{:?}", work.levels);
+    // Every target hidden by the coarsest level alone: its 24 rectangles are all the points.
+    assert_eq!(work.levels.len(), 1, "{:?}", work.levels);
+    assert_eq!(work.points, 24);
+    assert!(hidden[..6].iter().all(|&h| h), "{hidden:?}");
+    brute_force_hidden(&scene, &cell, 0);
+}
+
 /// The probe's share rule alone (`--sampling-probe`): the same coarsest level, whose probe
 /// proves the wall's target hidden for the cell (enough for `--sampling-probe-cull` 0.05), is
 /// sampled whole when the probe hides at least `--sampling-probe` of its tests and split
@@ -752,13 +859,33 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
 }
 
 /// `bake --resume` inside a cell: a cell whose sampler stops right after its n-th checkpoint
-/// resumes from the file to the same PVS, points and cost curve as an uninterrupted bake
-/// (cuts in the first level and in a later one), replaying the recorded rectangles instead of
-/// rendering them; the file is gone once the cell is finished. A file made for other inputs
-/// is not resumed.
+/// resumes from the file to the same PVS, points and cost curve as an uninterrupted bake,
+/// replaying the recorded rectangles instead of rendering them; the file is gone once the
+/// cell is finished. A file made for other inputs, or laid out for another finest ε, is not
+/// resumed. Twice: without the pilot (`--sampling-probe-pay 0`: every level sampled whole
+/// after its probe, cuts in the first level and in a later one), and with it, where the level
+/// above the finest stops at its probe (cuts in the first level; right after the second
+/// level's probe, so that the resumed bake runs the pilot itself; and in the finest level,
+/// so that it takes the decision and figures saved).
 #[test]
 fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
-    let (scene, cell, settings) = small_forest();
+    let (scene, cell, paid) = small_forest();
+    let mut free = paid.clone();
+    free.sampling_settings.probe_pay = 0.0;
+    for (settings, cuts) in [(&free, &[1, 5][..]), (&paid, &[1, 3, 4][..])] {
+        resume_after_cuts(&scene, cell, settings, cuts, std::ptr::eq(settings, &free));
+    }
+}
+
+/// The body of the test above: stops the cell after each of `cuts` checkpoints and resumes
+/// it; with `others`, also the files that must not be resumed.
+fn resume_after_cuts(
+    scene: &umbrasweep::Scene,
+    cell: Aabb,
+    settings: &BakeSettings,
+    cuts: &[u32],
+    others: bool,
+) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("forest.pvs");
     let files = || -> Vec<std::path::PathBuf> {
@@ -770,9 +897,9 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
     };
     let run = |spec: Option<&bake::SamplerCheckpoints>| {
         bake_with(
-            &scene,
+            scene,
             cell,
-            &settings,
+            settings,
             bake::BakeHooks {
                 sampler_checkpoints: spec,
                 ..bake::BakeHooks::default()
@@ -787,7 +914,16 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
         let curve: Vec<_> = w
             .levels
             .iter()
-            .map(|l| (l.eps, l.points, l.hidden, l.probe_only))
+            .map(|l| {
+                (
+                    l.eps,
+                    l.points,
+                    l.hidden,
+                    l.probe_only,
+                    l.probe_cost,
+                    l.pilot_saving,
+                )
+            })
             .collect();
         (
             c.visible.clone(),
@@ -810,7 +946,7 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
         assert!(matches!(e, bake::BakeError::Interrupted), "{e}");
         assert_eq!(files().len(), 1, "one checkpoint for the one cell");
     };
-    for writes in [1, 5] {
+    for &writes in cuts {
         stop("inputs A", writes);
         let spec = bake::SamplerCheckpoints::new(&out, "inputs A", true, 0.0);
         let resumed = key(&run(Some(&spec)).unwrap());
@@ -822,9 +958,27 @@ fn a_cell_stopped_after_a_checkpoint_resumes_to_the_same_result() {
             "the finished cell's checkpoint is removed"
         );
     }
+    if !others {
+        return;
+    }
     // Another bake's checkpoint is not resumed (and is replaced, then removed).
     stop("inputs A", 2);
     let spec = bake::SamplerCheckpoints::new(&out, "inputs B", true, 0.0);
+    assert_eq!(key(&run(Some(&spec)).unwrap()), whole);
+    assert_eq!(spec.replayed.load(std::sync::atomic::Ordering::Relaxed), 0);
+    assert!(files().is_empty());
+    // Nor is one laid out for another finest ε (its rectangles are other rectangles), even
+    // with the same inputs.
+    stop("inputs A", 2);
+    let path = files().pop().unwrap();
+    let mut file: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let eps = file["finest_eps"]
+        .as_f64()
+        .expect("the file records its finest ε");
+    file["finest_eps"] = serde_json::json!(eps / 2f64.sqrt());
+    std::fs::write(&path, serde_json::to_vec(&file).unwrap()).unwrap();
+    let spec = bake::SamplerCheckpoints::new(&out, "inputs A", true, 0.0);
     assert_eq!(key(&run(Some(&spec)).unwrap()), whole);
     assert_eq!(spec.replayed.load(std::sync::atomic::Ordering::Relaxed), 0);
     assert!(files().is_empty());
@@ -961,4 +1115,84 @@ fn what_the_first_render_hides_is_not_rendered_for_again() {
         w_first.polygons,
         w_bands.polygons
     );
+}
+
+/// Pixels traded for points (`SamplingSettings::cell_finest`): a cell among leaves 0.2 across
+/// with walls 5 away, where the automatic rule would render the finest level at 1,024 pixels,
+/// renders at 512 with its finest ε `1/√2` of the automatic one; the same automatic ε given
+/// with `--sampling-eps` is the user's: 1,024 pixels at that ε.
+#[test]
+fn a_large_cell_in_fine_leaves_trades_pixels_for_points() {
+    let mut obj = String::new();
+    let mut nv = 0;
+    // The room's walls: the rays' hits, about 5 away.
+    for (axis, side) in [
+        (0, -1.0),
+        (0, 1.0),
+        (1, -1.0),
+        (1, 1.0),
+        (2, -1.0),
+        (2, 1.0),
+    ] {
+        wall(&mut obj, &mut nv, |u, v| {
+            let mut p = DVec3::ZERO;
+            p[axis] = 5.0 * side;
+            p[(axis + 1) % 3] = u / 4.0;
+            p[(axis + 2) % 3] = v / 4.0;
+            p
+        });
+    }
+    // A target beyond them (the walls are one object, around the cell: never a candidate).
+    cube(
+        &mut obj,
+        &mut nv,
+        "target",
+        DVec3::new(-0.3, -0.3, 4.3),
+        DVec3::new(0.3, 0.3, 4.8),
+    );
+    // Sparse leaves 0.2 across between 1.5 and 4 from the centre: the median inradius.
+    writeln!(obj, "o leaves").unwrap();
+    let mut rng = Rng(11);
+    let mut n = 0;
+    while n < 2000 {
+        let c = DVec3::new(rng.f(), rng.f(), rng.f()) * 8.0 - DVec3::splat(4.0);
+        if !(1.5..4.0).contains(&c.length()) {
+            continue;
+        }
+        for k in 0..3 {
+            let a = std::f64::consts::TAU * f64::from(k) / 3.0;
+            let p = c + DVec3::new(a.cos(), a.sin(), rng.f() - 0.5) * 0.1;
+            writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
+        }
+        writeln!(obj, "f {} {} {}", nv + 1, nv + 2, nv + 3).unwrap();
+        nv += 3;
+        n += 1;
+    }
+    let scene = load_obj("trade", &obj);
+    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let mut s = settings();
+    s.sampling_settings.eps = None;
+    s.sampling_settings.resolution = None;
+    s.sampling_settings.levels = 0;
+    s.sampling_settings.budget_points = 6;
+    let auto_eps = Prepared::new(&scene, &s, &[cell])
+        .unwrap()
+        .sampling_eps()
+        .expect("the sampler is on");
+    let (_, traded) = run_sampler(&scene, &cell, &s);
+    s.sampling_settings.eps = Some(auto_eps);
+    let (_, given) = run_sampler(&scene, &cell, &s);
+    let (t, g) = (traded.levels.last().unwrap(), given.levels.last().unwrap());
+    assert_eq!(
+        (t.resolution, g.resolution),
+        (SamplingSettings::TRADE_RESOLUTION, 1024),
+        "{traded:?}\n{given:?}"
+    );
+    assert!(traded.points > 0 && given.points > 0);
+    let (te, ge) = (traded.finest_eps.unwrap(), given.finest_eps.unwrap());
+    assert!(
+        ge <= auto_eps * (1.0 + 1e-9) && te <= auto_eps / 2f64.sqrt() * (1.0 + 1e-9),
+        "finest ε {te} traded, {ge} given, automatic {auto_eps}"
+    );
+    assert!(te < ge * 0.75, "finest ε {te} traded, {ge} given");
 }

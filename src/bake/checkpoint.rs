@@ -15,14 +15,19 @@
 //! compare them byte for byte with `--reproducible`).
 //!
 //! **When it is used.** Only with `--resume`, and only a file whose inputs (the journal's
-//! hash of scene, cells and settings) and cell match; anything else is replaced. Files are
+//! hash of scene, cells and settings), cell and finest ε match; anything else is replaced.
+//! The finest ε fixes the cell's rectangles (every level's grid is cut from it), so a file
+//! written by a build that laid the cell out otherwise (version 1 files, before a cell's
+//! finest ε could differ from the settings') is never replayed onto other rectangles: its
+//! outcomes would stand for points the new rectangles do not hold. Files are
 //! written to a temporary name and renamed, at most every `every_seconds` (after a chunk
 //! ends), and removed when their cell is finished.
 //!
-//! Format: JSON, `{"format": "umbrasweep-sampler-checkpoint", "version": 1, "inputs": …,
-//! "cell": [min, max], "seconds": …, "known": "<hex bits per object>", "levels": [{"probe_only":
-//! …, "curve": …, "rects": {"<index>": {"open": [ids] | null, "tested": …, "hid": …, "point":
-//! …, "polygons": …}}}]}`.
+//! Format: JSON, `{"format": "umbrasweep-sampler-checkpoint", "version": 2, "inputs": …,
+//! "cell": [min, max], "finest_eps": …, "seconds": …, "known": "<hex bits per object>",
+//! "levels": [{"probe_only": …, "pilot": [cost, saving], "curve": …, "rects": {"<index>":
+//! {"open": [ids] | null, "tested": …, "hid": …, "point": …, "polygons": …}}}]}` (`pilot`
+//! only where the level's pilot ran: a resumed level takes its decision and figures).
 
 use super::BakeError;
 use crate::geom::Aabb;
@@ -37,7 +42,7 @@ use std::time::Instant;
 /// The first field of a checkpoint file.
 pub const CHECKPOINT_FORMAT: &str = "umbrasweep-sampler-checkpoint";
 /// The checkpoint format's version.
-pub const CHECKPOINT_VERSION: u32 = 1;
+pub const CHECKPOINT_VERSION: u32 = 2;
 
 /// Where and how often the sampler saves its progress inside a cell
 /// ([`super::BakeHooks::sampler_checkpoints`]).
@@ -114,6 +119,9 @@ pub(super) struct LevelRecord {
     /// The probe's decision, once made.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_only: Option<bool>,
+    /// The pilot's estimates per rectangle (cost, saving), when one ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pilot: Option<(f64, f64)>,
     /// The level's cost-curve entry, once the level is finished.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub curve: Option<SamplingLevel>,
@@ -127,6 +135,8 @@ struct CheckpointFile {
     version: u32,
     inputs: String,
     cell: [[f32; 3]; 2],
+    /// The cell's finest ε, which fixes its rectangles.
+    finest_eps: f64,
     seconds: f64,
     known: String,
     levels: Vec<LevelRecord>,
@@ -138,6 +148,7 @@ pub(super) struct CellCheckpoint<'a> {
     spec: &'a SamplerCheckpoints,
     path: PathBuf,
     cell: [[f32; 3]; 2],
+    finest_eps: f64,
     levels: Mutex<Vec<LevelRecord>>,
     last_write: Mutex<Instant>,
     writes: AtomicU32,
@@ -152,13 +163,14 @@ pub(super) struct Resumed {
 }
 
 impl<'a> CellCheckpoint<'a> {
-    /// The checkpoint of `cell` (sampler seed `key`, `objects` scene objects): with
-    /// `--resume` and a matching file, what it recorded.
+    /// The checkpoint of `cell` (sampler seed `key`, `objects` scene objects, finest ε
+    /// `finest_eps`): with `--resume` and a matching file, what it recorded.
     pub fn open(
         spec: &'a SamplerCheckpoints,
         cell: &Aabb,
         key: u64,
         objects: usize,
+        finest_eps: f64,
     ) -> (Self, Option<Resumed>) {
         let path = spec.path(key);
         let cell = [cell.min.to_array(), cell.max.to_array()];
@@ -171,6 +183,7 @@ impl<'a> CellCheckpoint<'a> {
                 f.format == CHECKPOINT_FORMAT
                     && f.version == CHECKPOINT_VERSION
                     && f.inputs == spec.inputs
+                    && f.finest_eps.to_bits() == finest_eps.to_bits()
                     && f.cell
                         .iter()
                         .flatten()
@@ -196,6 +209,7 @@ impl<'a> CellCheckpoint<'a> {
                 spec,
                 path,
                 cell,
+                finest_eps,
                 levels: Mutex::new(levels),
                 last_write: Mutex::new(Instant::now()),
                 writes: AtomicU32::new(0),
@@ -263,6 +277,7 @@ impl<'a> CellCheckpoint<'a> {
             version: CHECKPOINT_VERSION,
             inputs: self.spec.inputs.clone(),
             cell: self.cell,
+            finest_eps: self.finest_eps,
             seconds,
             known: to_hex(&known()),
             levels: self

@@ -10,6 +10,7 @@ use crate::geom::{Aabb, DAabb};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::Sliceable;
 use crate::scene::Scene;
+use crate::settings::SamplingSettings;
 use obvhs::bvh2::Bvh2;
 use std::time::Instant;
 
@@ -302,14 +303,24 @@ impl<'a> Prepared<'a> {
                     }
                 );
             }
-            sampling_reason = match settings.sampling_settings.resolution {
+            let ss = &settings.sampling_settings;
+            sampling_reason = match ss.resolution {
                 Some(r) => format!("{sampling_reason}; {r} px per view (--sampling-resolution)"),
                 None => format!(
                     "{sampling_reason}; pixels per view chosen per cell and level ({} × the \
-                     median ray hit distance / ε, {}–{})",
-                    crate::settings::SamplingSettings::AUTO_PIXELS,
-                    crate::settings::SamplingSettings::AUTO_RESOLUTION.0,
-                    crate::settings::SamplingSettings::AUTO_RESOLUTION.1
+                     median ray hit distance / ε, {}–{}){}",
+                    SamplingSettings::AUTO_PIXELS,
+                    SamplingSettings::AUTO_RESOLUTION.0,
+                    SamplingSettings::AUTO_RESOLUTION.1,
+                    if ss.eps.is_none() {
+                        format!(
+                            "; a cell whose finest level that gives more than {t} px renders \
+                             at {t} px with its finest ε / √2 instead (about twice the points)",
+                            t = SamplingSettings::TRADE_RESOLUTION
+                        )
+                    } else {
+                        String::new()
+                    }
                 ),
             };
             d
@@ -374,6 +385,13 @@ impl<'a> Prepared<'a> {
                 Some(why) => format!("on the CPU: {why}"),
             },
         )
+    }
+
+    /// The sampler's finest ε from the settings or the occluders (`None` without the
+    /// sampler). A cell may sample a finer one where it trades pixels for points
+    /// ([`crate::settings::SamplingSettings::cell_finest`]).
+    pub fn sampling_eps(&self) -> Option<f64> {
+        self.sampler.as_ref().map(|d| d.eps)
     }
 
     /// The names of the cullers every cell runs, in order.

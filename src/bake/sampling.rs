@@ -41,9 +41,13 @@
 //!    [`probe_stride`]), proves hidden less than
 //!    `--sampling-probe` of the objects it tests, or hides at every probed rectangle that
 //!    tests them less than `--sampling-probe-cull` of the undecided objects it tests (and at
-//!    least one): a heuristic — the level's balls then do not fuse the occluders, so its points
-//!    cost more than they save the finer levels; only which rectangles are sampled depends on
-//!    it, never soundness. The probed
+//!    least one), or, for the level just above the finest, is expected to save the finest
+//!    level less than it costs (`--sampling-probe-pay`: a pilot renders a few probed
+//!    rectangles and their quadrants with and without what the probe proved, in polygons
+//!    drawn, [`Shared::pilot`]): a heuristic —
+//!    the level's balls then do not fuse the occluders, so its points cost more than they
+//!    save the finer levels; only which rectangles are sampled depends on it, never
+//!    soundness (the pilot's trial renders decide nothing). The probed
 //!    rectangles pass on what they left open, the others every candidate still undecided.
 //! 5. **Certification only keeps objects.** Objects seen by a real ray (the validator's
 //!    sampler from the cell, or a ray from a sample point) are visible for sure and leave the
@@ -350,6 +354,9 @@ struct Shared<'a> {
     done: Vec<AtomicBool>,
     points: AtomicU64,
     polygons: AtomicU64,
+    /// The cell's finest ε (the settings', or `1/√2` of it where pixels are traded for
+    /// points: [`SamplingSettings::cell_finest`]).
+    finest_eps: f64,
     /// The smallest ε rendered, as f64 bits (positive floats order like their bits).
     finest: AtomicU64,
     /// Object tests at a sample point so far, and those that proved the object hidden there
@@ -413,11 +420,25 @@ impl Culler for SamplingCuller {
             }
             candidates.retain(|&o| !done[o as usize].load(Ordering::Relaxed));
         }
+        // The automatic resolution's scale: where the cell's rays first hit (NaN: never).
+        let hit_distance = if data.settings.resolution.is_none() {
+            median_hit_distance(
+                &data.rays,
+                cell,
+                cell_seed(cell),
+                prepared.settings.alpha_occluders,
+            )
+        } else {
+            f64::NAN
+        };
+        // The cell's finest ε and its cap on the automatic resolution (pixels traded for
+        // points); the finest ε fixes the cell's rectangles, so a checkpoint must match it.
+        let (finest_eps, resolution_cap) = data.settings.cell_finest(data.eps, hit_distance);
         // A checkpoint of this cell (`--resume`): what was known visible at its cut; its
         // rectangles are replayed below.
         let (ckpt, resumed) = match prepared.checkpoints {
             Some(spec) => {
-                let (c, r) = CellCheckpoint::open(spec, cell, cell_seed(cell), n);
+                let (c, r) = CellCheckpoint::open(spec, cell, cell_seed(cell), n, finest_eps);
                 (Some(c), r)
             }
             None => (None, None),
@@ -454,18 +475,7 @@ impl Culler for SamplingCuller {
             }
             _ => None,
         };
-        let eps0 = data.eps * f64::from(1u32 << s.levels.min(20));
-        // The automatic resolution's scale: where the cell's rays first hit (NaN: never).
-        let hit_distance = if s.resolution.is_none() {
-            median_hit_distance(
-                &data.rays,
-                cell,
-                cell_seed(cell),
-                prepared.settings.alpha_occluders,
-            )
-        } else {
-            f64::NAN
-        };
+        let eps0 = finest_eps * f64::from(1u32 << s.levels.min(20));
         let shared = Shared {
             data,
             prepared,
@@ -473,6 +483,7 @@ impl Culler for SamplingCuller {
             done,
             points: AtomicU64::new(0),
             polygons: AtomicU64::new(0),
+            finest_eps,
             finest: AtomicU64::new(f64::INFINITY.to_bits()),
             tested: AtomicU64::new(0),
             hid: AtomicU64::new(0),
@@ -532,6 +543,13 @@ impl Culler for SamplingCuller {
                 }
             }
         }
+        // The pixels per view of a level whose balls have radius `eps`.
+        let level_resolution = |eps: f64| {
+            s.resolution.unwrap_or_else(|| {
+                let r = SamplingSettings::auto_resolution(hit_distance, eps);
+                resolution_cap.map_or(r, |c| r.min(c))
+            })
+        };
         // Breadth-first: every rectangle of one level (in parallel) before any of the next, so
         // that a budget that runs out leaves only the finest levels unsampled, never a face.
         let mut level = top;
@@ -545,7 +563,7 @@ impl Culler for SamplingCuller {
                 .iter()
                 .map(|(p, _)| p.half_diagonal())
                 .fold(0.0, f64::max);
-            if s.max_eps.is_some_and(|m| level_eps > m) && level_eps > data.eps * (1.0 + 1e-6) {
+            if s.max_eps.is_some_and(|m| level_eps > m) && level_eps > finest_eps * (1.0 + 1e-6) {
                 // Coarser than `--sampling-max-eps`: split without sampling (the quadrants
                 // cover each rectangle exactly, so the faces stay covered).
                 level = level
@@ -554,9 +572,7 @@ impl Culler for SamplingCuller {
                     .collect();
                 continue;
             }
-            let resolution = s
-                .resolution
-                .unwrap_or_else(|| SamplingSettings::auto_resolution(hit_distance, level_eps));
+            let resolution = level_resolution(level_eps);
             let rects_done = |k: usize| {
                 if let Some(p) = prepared.sampler_progress {
                     p.rects_done.fetch_add(k as u64, Ordering::Relaxed);
@@ -656,6 +672,7 @@ impl Culler for SamplingCuller {
                                         &level[i].1,
                                         &mut known,
                                         &mut rec,
+                                        false,
                                     );
                                     (o, rec)
                                 })
@@ -697,12 +714,14 @@ impl Culler for SamplingCuller {
             // Every level but the finest starts with a probe of its rectangles; when that
             // proves too little the rest is split unsampled (their quadrants inherit every
             // candidate, as for `--sampling-max-eps`).
-            let finest_level = level_eps <= data.eps * (1.0 + 1e-6);
+            let finest_level = level_eps <= finest_eps * (1.0 + 1e-6);
             let stride = probe_stride(level.len());
             let mut open: Vec<Option<Arc<Vec<u32>>>> = vec![None; level.len()];
             let mut probe_only = false;
             let mut probe_hidden = None;
             let mut probe_cell = None;
+            let mut probe_cost = None;
+            let mut pilot_saving = None;
             if s.probe > 0.0 && !finest_level && stride > 1 {
                 let probe: Vec<usize> = (0..level.len()).step_by(stride).collect();
                 let (t0, h0) = (
@@ -748,14 +767,51 @@ impl Culler for SamplingCuller {
                     && f64::from(probe_all_hid) >= s.probe_cull * f64::from(probe_tested);
                 let rest: Vec<usize> = (0..level.len()).filter(|i| i % stride != 0).collect();
                 // A resumed level keeps the decision its interrupted run made.
-                let skip = ckpt
+                let resumed = ckpt
                     .as_ref()
-                    .and_then(|c| c.with_level(this_level, |l| l.probe_only))
-                    .unwrap_or(
-                        ((hid as f64) < s.probe * tested as f64 || !may_cull) && !shared.spent(),
-                    );
+                    .and_then(|c| c.with_level(this_level, |l| l.probe_only.map(|p| (p, l.pilot))));
+                let skip = match resumed {
+                    Some((skip, pilot)) => {
+                        (probe_cost, pilot_saving) = (pilot.map(|p| p.0), pilot.map(|p| p.1));
+                        skip
+                    }
+                    None => {
+                        let proves_little = (hid as f64) < s.probe * tested as f64 || !may_cull;
+                        // The level just above the finest must also save the finest level
+                        // more than it costs (`SamplingSettings::probe_pay`).
+                        let above_finest = level_eps * 0.5 <= finest_eps * (1.0 + 1e-6);
+                        // (Not in a cell already failing: its lists are not results.)
+                        let failing = ckpt_failed
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .is_some()
+                            || shared
+                                .failed
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .is_some();
+                        if !proves_little
+                            && above_finest
+                            && s.probe_pay > 0.0
+                            && !shared.spent()
+                            && !failing
+                        {
+                            let finest_res = level_resolution(finest_eps);
+                            let (cost, saving) =
+                                shared.pilot(&level, &open, &probe, resolution, finest_res);
+                            (probe_cost, pilot_saving) = (Some(cost), Some(saving));
+                        }
+                        let too_dear = probe_cost
+                            .zip(pilot_saving)
+                            .is_some_and(|(cost, saving)| saving < s.probe_pay * cost);
+                        (proves_little || too_dear) && !shared.spent()
+                    }
+                };
                 if let Some(c) = &ckpt {
-                    c.with_level(this_level, |l| l.probe_only = Some(skip));
+                    c.with_level(this_level, |l| {
+                        l.probe_only = Some(skip);
+                        l.pilot = probe_cost.zip(pilot_saving);
+                    });
                 }
                 if skip {
                     probe_only = true;
@@ -801,6 +857,8 @@ impl Culler for SamplingCuller {
                 probe_hidden,
                 probe_cell_hidden: probe_cell.map(|(h, _)| h),
                 probe_objects: probe_cell.map(|(_, t)| t),
+                probe_cost,
+                pilot_saving,
             };
             // A level its interrupted run finished keeps the entry it made then.
             let entry = match &ckpt {
@@ -941,6 +999,9 @@ fn probe_stride(n: usize) -> usize {
 
 /// A level sampled whole starts with every this-many-th rectangle.
 const SCOUT_STRIDE: usize = 16;
+/// A level's pilot ([`Shared::pilot`]) renders the finest descendants of at most this many of
+/// its probed rectangles (twice each).
+const PILOT_RECTS: usize = 8;
 
 /// Lanes per chunk of rectangles at most ([`lanes`]).
 const LANES: usize = 16;
@@ -1093,6 +1154,10 @@ impl Shared<'_> {
     /// and what the lane found since): the rectangle decides with it, not with the live set
     /// that other lanes update meanwhile, so that its result is the same whatever runs beside
     /// it, and adds to it what it finds visible.
+    ///
+    /// A `trial` (a level's pilot, [`Shared::pilot`]) renders and tests as the rectangle
+    /// would but takes no point of the budget and gives nothing up: what it leaves open at the
+    /// finest ε stays undecided (only its counts in `rec` are used).
     fn patch(
         &self,
         renderer: &mut Renderer,
@@ -1100,6 +1165,7 @@ impl Shared<'_> {
         list: &[u32],
         known: &mut [bool],
         rec: &mut RectRecord,
+        trial: bool,
     ) -> Option<Arc<Vec<u32>>> {
         let list: Vec<u32> = list
             .iter()
@@ -1109,11 +1175,13 @@ impl Shared<'_> {
         if list.is_empty() {
             return None;
         }
-        if !self.take_point() {
-            self.give_up(&list, known);
-            return None;
+        if !trial {
+            if !self.take_point() {
+                self.give_up(&list, known);
+                return None;
+            }
+            rec.point = true;
         }
-        rec.point = true;
         let f = self.faces[patch.face];
         let (b, c) = ((f.axis + 1) % 3, (f.axis + 2) % 3);
         let mut eye = DVec3::ZERO;
@@ -1122,7 +1190,9 @@ impl Shared<'_> {
         eye[c] = 0.5 * (patch.c[0] + patch.c[1]);
         let (hb, hcx) = patch.half_sides();
         let eps = patch.ball_eps();
-        self.finest.fetch_min(eps.to_bits(), Ordering::Relaxed);
+        if !trial {
+            self.finest.fetch_min(eps.to_bits(), Ordering::Relaxed);
+        }
         let scene = self.prepared.scene;
         let boxes: Vec<DAabb> = list
             .iter()
@@ -1180,11 +1250,83 @@ impl Shared<'_> {
         if open.is_empty() {
             return None;
         }
-        if eps <= self.data.eps * (1.0 + 1e-6) {
-            self.give_up(&open, known);
+        if eps <= self.finest_eps * (1.0 + 1e-6) {
+            if !trial {
+                self.give_up(&open, known);
+            }
             return None;
         }
         Some(Arc::new(open))
+    }
+
+    /// The pilot of the level just above the finest ([`SamplingSettings::probe_pay`]): what
+    /// sampling one more of the level's rectangles costs and what it is expected to save the
+    /// finest level, both in polygons drawn weighted by resolution
+    /// ([`SamplingSettings::polygon_weight`]; the level's `resolution`, the finest level's
+    /// `finest_res`). For up to [`PILOT_RECTS`] of the probed rectangles (`probe`, indices
+    /// into `level`; `open`, what each left open) it renders as trials the rectangle itself,
+    /// with its candidates, and one of its quadrants (a rectangle of the finest level) twice:
+    /// with the candidates it inherits if the rest of the level is split unsampled, and with
+    /// what the probed rectangle left open (nothing to render when that left nothing). The
+    /// saving is four times the quadrant's difference. (Coarser levels save the finest level
+    /// through the levels between, which such trials cannot see: they have no pilot.) Trials
+    /// render on the CPU's hemicube whatever the backend,
+    /// from one snapshot of what is known visible, so the estimate depends only on the
+    /// level's results, never on the backend, threads or timing, and none of it counts as
+    /// the cell's points or polygons. Runs alone (no lane renders meanwhile). Returns the
+    /// means per rectangle `(cost, saving)`.
+    fn pilot(
+        &self,
+        level: &[(Patch, Arc<Vec<u32>>)],
+        open: &[Option<Arc<Vec<u32>>>],
+        probe: &[usize],
+        resolution: u32,
+        finest_res: u32,
+    ) -> (f64, f64) {
+        let step = probe.len().div_ceil(PILOT_RECTS).max(1);
+        let picks: Vec<usize> = probe.iter().copied().step_by(step).collect();
+        if picks.is_empty() {
+            return (0.0, 0.0);
+        }
+        let known = self.known_now();
+        let tuck = self.data.settings.tuck;
+        let hemicube = |res: u32| {
+            let mut hc = Hemicube::new(res);
+            hc.set_tuck(tuck);
+            Renderer::Cpu(Box::new(hc))
+        };
+        let drawn = |r: &mut Renderer, q: Patch, list: &[u32]| {
+            let mut rec = RectRecord::default();
+            self.patch(r, q, list, &mut known.clone(), &mut rec, true);
+            rec.polygons as f64
+        };
+        let (wl, wf) = (
+            SamplingSettings::polygon_weight(resolution),
+            SamplingSettings::polygon_weight(finest_res),
+        );
+        // Trials are not sample points: the cell's polygon count leaves them out (a resumed
+        // cell that replays the decision renders none).
+        let polygons = self.polygons.load(Ordering::Relaxed);
+        let each: Vec<(f64, f64)> = picks
+            .par_iter()
+            .map_init(
+                || (hemicube(resolution), hemicube(finest_res)),
+                |(rl, rf), &i| {
+                    // One quadrant (which one varies with the rectangle).
+                    let q = level[i].0.quadrants().nth(i % 4).unwrap_or(level[i].0);
+                    let cost = drawn(rl, level[i].0, &level[i].1);
+                    let skipped = drawn(rf, q, &level[i].1);
+                    let kept = open[i].as_deref().map_or(0.0, |l| drawn(rf, q, l));
+                    (cost * wl, 4.0 * (skipped - kept) * wf)
+                },
+            )
+            .collect();
+        self.polygons.store(polygons, Ordering::Relaxed);
+        let m = each.len() as f64;
+        (
+            each.iter().map(|e| e.0).sum::<f64>() / m,
+            each.iter().map(|e| e.1).sum::<f64>() / m,
+        )
     }
 
     /// Renders for one group of a rectangle's candidates (`group`: indices into `list` and

@@ -180,6 +180,17 @@ pub struct SamplingLevel {
     /// The level's probe: the objects still undecided that some probed rectangle tested.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_objects: Option<u32>,
+    /// The level's pilot (`sampling_probe_pay`): what sampling one more of its rectangles
+    /// costs, in polygons drawn weighted by resolution (`SamplingSettings::polygon_weight`).
+    /// Absent where no pilot ran (no probe, a probe that stopped the level already, or the
+    /// estimate off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_cost: Option<f64>,
+    /// The level's pilot: what one of its rectangles was estimated to save the finest level,
+    /// in the same weighted polygons. The rest of the level was sampled only when this was at
+    /// least `sampling_probe_pay` × `probe_cost`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pilot_saving: Option<f64>,
 }
 
 fn is_zero(v: &u64) -> bool {
