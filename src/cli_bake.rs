@@ -1110,9 +1110,14 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                         "; {h:.0} of the {t:.0} undecided objects it tested were hidden at every probed rectangle"
                     );
                 }
+                if let (Some(c), Some(v)) = (l.probe_cost, l.pilot_saving) {
+                    probe += &format!(
+                        "; its pilot: a rectangle draws {c:.0} polygons and saves the finest level {v:.0} (weighted)"
+                    );
+                }
                 if l.probe_only > 0.0 {
                     probe += &format!(
-                        "; in {:.0} % of the cells only its probe was sampled (--sampling-probe, --sampling-probe-cull)",
+                        "; in {:.0} % of the cells only its probe was sampled (--sampling-probe, --sampling-probe-cull, --sampling-probe-pay)",
                         100.0 * l.probe_only
                     );
                 }

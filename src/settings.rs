@@ -339,8 +339,8 @@ impl SamplingSettings {
     /// choice (ε 0.0405, 1,024 px) culled 54.8 % in 825 s of sampling, the trade (ε 0.0286,
     /// 512 px) 59.6 % in 791 s, with the level at twice its ε stopped by its pilot
     /// ([`Self::probe_pay`]; without that it passes its probe and costs more than the whole
-    /// finest level). `docs/sampling.md`, "A pilot for coarse levels; pixels traded for
-    /// points".
+    /// finest level). `docs/sampling.md`, "A pilot for the level above the finest; pixels
+    /// traded for points".
     ///
     /// ```
     /// use umbrasweep::settings::SamplingSettings;
@@ -396,7 +396,8 @@ impl SamplingSettings {
     /// ([`Self::hemicube_bytes`]). For a budget of time rather than of points the rule is not
     /// the best: whole bakes of the fine forest's 4×2×4 cell culled more at 512 px with a √2
     /// finer ε than at the 1,024 px it picks (54.3 % in 915 s at ε 0.0312 against 46.9 % in
-    /// 990 s at ε 0.0442; `docs/sampling.md`, "Pixels against points").
+    /// 990 s at ε 0.0442; `docs/sampling.md`, "Pixels against points"), so where ε is
+    /// automatic too a cell trades them ([`Self::cell_finest`]).
     ///
     /// ```
     /// use umbrasweep::settings::SamplingSettings;

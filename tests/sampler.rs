@@ -672,6 +672,24 @@ fn a_level_that_saves_the_finest_level_less_than_it_costs_is_split_unsampled() {
         paid.polygons,
         free.polygons
     );
+    // The PVS document records the pilot's figures per cell (`probe_cost`, `pilot_saving`)
+    // and their means in the summary (here over the one cell: the same).
+    let r = bake::bake(&scene, &[cell], &settings, &CpuBackend::new(), None).unwrap();
+    let json = serde_json::to_value(bake::to_document(&scene, &[cell], &r, &settings)).unwrap();
+    let k = sampler_index(&r);
+    let levels = json["cells"][0]["cullers"][k]["levels"].as_array().unwrap();
+    let summary = json["summary"]["cullers"][k]["levels"].as_array().unwrap();
+    let piloted: Vec<usize> = (0..levels.len())
+        .filter(|&i| levels[i].get("probe_cost").is_some())
+        .collect();
+    assert!(!piloted.is_empty(), "{levels:?}");
+    for i in piloted {
+        for key in ["probe_cost", "pilot_saving"] {
+            let v = levels[i][key].as_f64().unwrap();
+            assert!(v.is_finite(), "{key} {v}");
+            assert!((summary[i][key].as_f64().unwrap() - v).abs() <= 1e-9 * v.abs());
+        }
+    }
     assert!(paid_hidden.iter().any(|&h| h) && free_hidden.iter().any(|&h| h));
     for hidden in [&paid_hidden, &free_hidden] {
         for o in (0..scene.objects.len()).filter(|&o| hidden[o]).step_by(7) {

@@ -238,6 +238,20 @@ impl<'l, T> Pool<'l, T> {
         st.0.push(r);
         self.given.notify_one();
     }
+
+    /// Drops the renderers not in use, so that their memory is free for other work (a
+    /// level's pilot); [`Pool::take`] makes new ones when asked.
+    fn clear(&self) {
+        let free = {
+            let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+            let free = std::mem::take(&mut st.0);
+            st.1 -= free.len();
+            self.live
+                .fetch_sub(free.len() as u64 * self.bytes, Ordering::AcqRel);
+            free
+        };
+        drop(free);
+    }
 }
 
 impl<T> Drop for Pool<'_, T> {
@@ -797,6 +811,8 @@ impl Culler for SamplingCuller {
                             && !failing
                         {
                             let finest_res = level_resolution(finest_eps);
+                            // The pilot's hemicubes replace the level's (one per thread).
+                            pool.clear();
                             let (cost, saving) =
                                 shared.pilot(&level, &open, &probe, resolution, finest_res);
                             (probe_cost, pilot_saving) = (Some(cost), Some(saving));
@@ -999,8 +1015,8 @@ fn probe_stride(n: usize) -> usize {
 
 /// A level sampled whole starts with every this-many-th rectangle.
 const SCOUT_STRIDE: usize = 16;
-/// A level's pilot ([`Shared::pilot`]) renders the finest descendants of at most this many of
-/// its probed rectangles (twice each).
+/// A level's pilot ([`Shared::pilot`]) renders at most this many of its probed rectangles
+/// again, and one quadrant of each twice.
 const PILOT_RECTS: usize = 8;
 
 /// Lanes per chunk of rectangles at most ([`lanes`]).
@@ -1290,12 +1306,18 @@ impl Shared<'_> {
         }
         let known = self.known_now();
         let tuck = self.data.settings.tuck;
-        let hemicube = |res: u32| {
-            let mut hc = Hemicube::new(res);
-            hc.set_tuck(tuck);
-            Renderer::Cpu(Box::new(hc))
-        };
-        let drawn = |r: &mut Renderer, q: Patch, list: &[u32]| {
+        // One hemicube per thread at a time (made again when the resolution changes), as
+        // the bake's memory estimate allows.
+        let drawn = |slot: &mut Option<(u32, Renderer)>, res: u32, q: Patch, list: &[u32]| {
+            if slot.as_ref().is_none_or(|(r, _)| *r != res) {
+                *slot = None;
+                let mut hc = Hemicube::new(res);
+                hc.set_tuck(tuck);
+                *slot = Some((res, Renderer::Cpu(Box::new(hc))));
+            }
+            let Some((_, r)) = slot.as_mut() else {
+                unreachable!("made above")
+            };
             let mut rec = RectRecord::default();
             self.patch(r, q, list, &mut known.clone(), &mut rec, true);
             rec.polygons as f64
@@ -1310,13 +1332,15 @@ impl Shared<'_> {
         let each: Vec<(f64, f64)> = picks
             .par_iter()
             .map_init(
-                || (hemicube(resolution), hemicube(finest_res)),
-                |(rl, rf), &i| {
+                || None,
+                |slot, &i| {
                     // One quadrant (which one varies with the rectangle).
                     let q = level[i].0.quadrants().nth(i % 4).unwrap_or(level[i].0);
-                    let cost = drawn(rl, level[i].0, &level[i].1);
-                    let skipped = drawn(rf, q, &level[i].1);
-                    let kept = open[i].as_deref().map_or(0.0, |l| drawn(rf, q, l));
+                    let cost = drawn(slot, resolution, level[i].0, &level[i].1);
+                    let skipped = drawn(slot, finest_res, q, &level[i].1);
+                    let kept = open[i]
+                        .as_deref()
+                        .map_or(0.0, |l| drawn(slot, finest_res, q, l));
                     (cost * wl, 4.0 * (skipped - kept) * wf)
                 },
             )
@@ -1597,6 +1621,14 @@ mod tests {
         assert_eq!(pool.made(), 2, "two fit beside the other level's one");
         assert!(most.load(Ordering::SeqCst) <= 2);
         assert_eq!(live.load(Ordering::SeqCst), 30);
+        // Cleared (a pilot's turn), its renderers and their bytes are gone; the next take
+        // makes a new one, within the budget again.
+        pool.clear();
+        assert_eq!(pool.made(), 0);
+        assert_eq!(live.load(Ordering::SeqCst), 10);
+        assert_eq!(pool.take(|| Some(9)), Some(9));
+        assert_eq!(live.load(Ordering::SeqCst), 20);
+        pool.give(9);
         drop(pool);
         assert_eq!(live.load(Ordering::SeqCst), 10);
         // Over budget already: a new level still makes its first, and only that.

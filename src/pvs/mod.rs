@@ -316,6 +316,12 @@ pub struct PvsLevelSummary {
     /// Mean over the cells whose level had a probe of [`SamplingLevel::probe_objects`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_objects: Option<f64>,
+    /// Mean over the cells whose level had a pilot of [`SamplingLevel::probe_cost`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_cost: Option<f64>,
+    /// Mean over the cells whose level had a pilot of [`SamplingLevel::pilot_saving`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pilot_saving: Option<f64>,
 }
 
 fn is_zero_f64(v: &f64) -> bool {
