@@ -314,8 +314,9 @@ impl<'a> Prepared<'a> {
                     SamplingSettings::AUTO_RESOLUTION.1,
                     if ss.eps.is_none() {
                         format!(
-                            "; a cell whose finest level that gives more than {t} px renders \
-                             at {t} px with its finest ε / √2 instead (about twice the points)",
+                            "; a cell whose finest level that rule would render above {t} px \
+                             renders at {t} px with its finest ε / √2 instead (about twice the \
+                             points)",
                             t = SamplingSettings::TRADE_RESOLUTION
                         )
                     } else {
