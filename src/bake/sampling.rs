@@ -291,6 +291,15 @@ enum Renderer<'a> {
     Gpu(Box<GpuSampler<'a>>),
 }
 
+impl Renderer<'_> {
+    /// The CPU's hemicube at `res` pixels per view, with the tuck pass when `tuck`.
+    fn cpu(res: u32, tuck: bool) -> Self {
+        let mut hc = Hemicube::new(res);
+        hc.set_tuck(tuck);
+        Renderer::Cpu(Box::new(hc))
+    }
+}
+
 /// Whether a failure to make a GPU sampler leaves the device usable, so that the CPU's
 /// hemicube can render in its place: the sampler does not fit (its textures or buffers exceed
 /// the device's limits) or its memory could not be had. A lost or failing device ends the
@@ -616,11 +625,7 @@ impl Culler for SamplingCuller {
             // gives the same answers, and so is every later one of the level.
             let level_on_cpu = AtomicBool::new(false);
             let new_renderer = || -> Option<Renderer> {
-                let cpu = || {
-                    let mut hc = Hemicube::new(resolution);
-                    hc.set_tuck(s.tuck);
-                    Some(Renderer::Cpu(Box::new(hc)))
-                };
+                let cpu = || Some(Renderer::cpu(resolution, s.tuck));
                 match &gpu_scene {
                     Some((g, scene)) if !level_on_cpu.load(Ordering::Relaxed) => {
                         match GpuSampler::new(g, scene, resolution) {
@@ -688,6 +693,7 @@ impl Culler for SamplingCuller {
                                         &mut rec,
                                         false,
                                     );
+                                    shared.count(&rec);
                                     (o, rec)
                                 })
                                 .collect();
@@ -1106,12 +1112,18 @@ impl Shared<'_> {
         true
     }
 
-    /// Adds what a recorded rectangle counted (a replayed checkpoint) to the totals, as
-    /// [`Shared::patch`] did when it sampled it.
-    fn replay(&self, patch: Patch, r: &RectRecord) {
+    /// Adds a sampled rectangle's object tests, hides and polygons drawn to the cell's
+    /// totals (a level's probe compares the first two; trials are never counted).
+    fn count(&self, r: &RectRecord) {
         self.tested.fetch_add(r.tested, Ordering::Relaxed);
         self.hid.fetch_add(r.hid, Ordering::Relaxed);
         self.polygons.fetch_add(r.polygons, Ordering::Relaxed);
+    }
+
+    /// Adds what a recorded rectangle counted (a replayed checkpoint) to the totals, as
+    /// [`Shared::patch`] did when it sampled it.
+    fn replay(&self, patch: Patch, r: &RectRecord) {
+        self.count(r);
         if r.point {
             self.points.fetch_add(1, Ordering::Relaxed);
             if let Some(p) = self.prepared.sampler_progress {
@@ -1289,8 +1301,8 @@ impl Shared<'_> {
     /// render on the CPU's hemicube whatever the backend,
     /// from one snapshot of what is known visible, so the estimate depends only on the
     /// level's results, never on the backend, threads or timing, and none of it counts as
-    /// the cell's points or polygons. Runs alone (no lane renders meanwhile). Returns the
-    /// means per rectangle `(cost, saving)`.
+    /// the cell's points or polygons. Runs while no lane renders. Returns the means per
+    /// rectangle `(cost, saving)`.
     fn pilot(
         &self,
         level: &[(Patch, Arc<Vec<u32>>)],
@@ -1307,17 +1319,14 @@ impl Shared<'_> {
         let known = self.known_now();
         let tuck = self.data.settings.tuck;
         // One hemicube per thread at a time (made again when the resolution changes), as
-        // the bake's memory estimate allows.
+        // the bake's memory estimate allows. Trials are not sample points: nothing of theirs
+        // is counted in the cell's totals (a resumed cell that replays the decision renders
+        // none).
         let drawn = |slot: &mut Option<(u32, Renderer)>, res: u32, q: Patch, list: &[u32]| {
-            if slot.as_ref().is_none_or(|(r, _)| *r != res) {
+            if slot.as_ref().is_some_and(|(r, _)| *r != res) {
                 *slot = None;
-                let mut hc = Hemicube::new(res);
-                hc.set_tuck(tuck);
-                *slot = Some((res, Renderer::Cpu(Box::new(hc))));
             }
-            let Some((_, r)) = slot.as_mut() else {
-                unreachable!("made above")
-            };
+            let (_, r) = slot.get_or_insert_with(|| (res, Renderer::cpu(res, tuck)));
             let mut rec = RectRecord::default();
             self.patch(r, q, list, &mut known.clone(), &mut rec, true);
             rec.polygons as f64
@@ -1326,9 +1335,6 @@ impl Shared<'_> {
             SamplingSettings::polygon_weight(resolution),
             SamplingSettings::polygon_weight(finest_res),
         );
-        // Trials are not sample points: the cell's polygon count leaves them out (a resumed
-        // cell that replays the decision renders none).
-        let polygons = self.polygons.load(Ordering::Relaxed);
         let each: Vec<(f64, f64)> = picks
             .par_iter()
             .map_init(
@@ -1345,7 +1351,6 @@ impl Shared<'_> {
                 },
             )
             .collect();
-        self.polygons.store(polygons, Ordering::Relaxed);
         let m = each.len() as f64;
         (
             each.iter().map(|e| e.0).sum::<f64>() / m,
@@ -1382,9 +1387,7 @@ impl Shared<'_> {
         let batch = match renderer {
             Renderer::Cpu(hc) => {
                 hc.begin_patch(eye, f.axis, f.sign, half, &group_boxes);
-                let st = hc.draw(&self.data.occluders);
-                self.polygons.fetch_add(st.polygons, Ordering::Relaxed);
-                rec.polygons += st.polygons;
+                rec.polygons += hc.draw(&self.data.occluders).polygons;
                 None
             }
             Renderer::Gpu(gs) => {
@@ -1396,7 +1399,6 @@ impl Shared<'_> {
                     .collect();
                 match self.test_on_gpu(gs, eye, &objects) {
                     Ok(r) => {
-                        self.polygons.fetch_add(gs.last_draws(), Ordering::Relaxed);
                         rec.polygons += gs.last_draws();
                         Some(objects.iter().map(|p| p.0).zip(r).collect::<Vec<_>>())
                     }
@@ -1424,7 +1426,6 @@ impl Shared<'_> {
                 continue;
             }
             if count {
-                self.tested.fetch_add(1, Ordering::Relaxed);
                 rec.tested += 1;
             }
             let test = match (renderer as &Renderer, from_gpu) {
@@ -1434,7 +1435,6 @@ impl Shared<'_> {
             };
             out.push(match test {
                 None => {
-                    self.hid.fetch_add(1, Ordering::Relaxed);
                     rec.hid += 1;
                     GroupTest::Hidden
                 }
