@@ -57,7 +57,8 @@ struct Params {
     sign: u32,
     // The first draw of the pass's view.
     base: u32,
-    pad0: u32,
+    // The triangle test: 1 when `tris` holds indices of the resident `scene_tris`.
+    tri_ids: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -395,8 +396,12 @@ fn test(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 // ---------------------------------------------------------------------------------------------
 // Triangles (`Hemicube::test_triangle`)
 
-// The eye (3 f64, then one unused), then 9 f64 per triangle (scene coordinates).
+// The eye (3 f64, then one unused), then per triangle 9 f64 (scene coordinates) or, with
+// `P.tri_ids`, its index in `scene_tris` (an integer, exact in f64).
 @group(0) @binding(10) var<storage, read> tris: array<f64>;
+// The scene's occludee triangles, 9 f32 each, uploaded once (`GpuSamplerScene::upload_triangles`):
+// scene vertices are f32, so their f64 is the CPU's exactly.
+@group(0) @binding(19) var<storage, read> scene_tris: array<f32>;
 // Per triangle: 0 hidden, 1 open, 2 reaches the eye (its box decides).
 @group(0) @binding(11) var<storage, read_write> tflags: array<atomic<u32>>;
 // `sampler_setup.wgsl`'s u32 frame: the views' needed pixels at NEED.
@@ -469,8 +474,15 @@ fn test_tri(@builtin(global_invocation_id) g: vec3<u32>) {
     let eye = vec3<f64>(tris[0], tris[1], tris[2]);
     var poly: array<vec3<f64>, 16>;
     for (var c = 0u; c < 3u; c++) {
-        let b = 4u + 9u * t + 3u * c;
-        poly[c] = view_f64_k(k, vec3<f64>(tris[b], tris[b + 1u], tris[b + 2u]) - eye);
+        var p: vec3<f64>;
+        if P.tri_ids != 0u {
+            let b = 9u * u32(tris[4u + t]) + 3u * c;
+            p = vec3<f64>(f64(scene_tris[b]), f64(scene_tris[b + 1u]), f64(scene_tris[b + 2u]));
+        } else {
+            let b = 4u + 9u * t + 3u * c;
+            p = vec3<f64>(tris[b], tris[b + 1u], tris[b + 2u]);
+        }
+        poly[c] = view_f64_k(k, p - eye);
     }
     var n = 3u;
     let vmax = vmin + f64(rows) * ps;

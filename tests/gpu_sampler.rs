@@ -13,7 +13,7 @@
 
 mod common;
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use std::sync::OnceLock;
 use umbrasweep::backend::BackendError;
 use umbrasweep::backend::RasterBackend;
@@ -289,8 +289,27 @@ fn on_gpu(
     occ: &SampleOccluders,
     fill: SamplerFill,
 ) -> (Vec<bool>, Vec<bool>) {
-    let scene = GpuSamplerScene::with_fill(gpu, occ, fill).expect("GPU sampler scene");
+    let mut scene = GpuSamplerScene::with_fill(gpu, occ, fill).expect("GPU sampler scene");
     assert_eq!(scene.fill(), fill);
+    // The triangles rounded to f32 (as a scene's are) go up as the scene's, in reverse order
+    // after a decoy, so that a test by index must find each in its place.
+    let tris32: Vec<[DVec3; 3]> = cfg
+        .tris
+        .iter()
+        .map(|t| t.map(|p| p.as_vec3().as_dvec3()))
+        .collect();
+    let mut resident: Vec<[Vec3; 3]> = vec![[Vec3::splat(1e3); 3]];
+    resident.extend(tris32.iter().rev().map(|t| t.map(|p| p.as_vec3())));
+    assert!(
+        scene
+            .upload_triangles(gpu, &resident)
+            .expect("triangles upload"),
+        "a few triangles fit any device"
+    );
+    assert_eq!(scene.resident_triangles() as usize, resident.len());
+    let ids: Vec<u32> = (0..tris32.len() as u32)
+        .map(|k| tris32.len() as u32 - k)
+        .collect();
     let mut gs = GpuSampler::new(gpu, &scene, cfg.res).expect("GPU sampler");
     gs.hemicube().set_subpixel(cfg.subpixel);
     match cfg.patch {
@@ -299,6 +318,16 @@ fn on_gpu(
     }
     let g_boxes = gs.test_boxes(&cfg.boxes).expect("GPU sampler render");
     let g_tris = gs.test_triangles(&cfg.tris).expect("GPU triangle test");
+    // By index from the resident triangles, the same answers as with their corners sent.
+    let sent = gs.test_triangles(&tris32).expect("GPU triangle test");
+    let by_index = gs
+        .test_scene_triangles(&ids, &tris32)
+        .expect("GPU triangle test by index");
+    assert_eq!(
+        by_index, sent,
+        "resident triangles tested by index differ from the same triangles sent (res {})",
+        cfg.res
+    );
     (g_boxes, g_tris)
 }
 
@@ -459,6 +488,59 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
         gs.test_boxes(&[behind, beside, behind]).unwrap(),
         vec![true, false, true]
     );
+}
+
+/// Triangles that do not fit the device's largest storage binding stay on the CPU
+/// (`upload_triangles` says so and keeps none), and tests by index then send corners: the
+/// same answers. A wall hides a triangle behind it, not one beside it.
+#[test]
+fn triangles_too_large_for_a_binding_are_sent_with_each_test() {
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 64 << 10,
+        ..wgpu::Limits::default()
+    };
+    let features = GpuBackend::REQUIRED_FEATURES | wgpu::Features::SHADER_F64;
+    let Some((device, queue)) = common::engine_device(features, limits) else {
+        return;
+    };
+    let small = GpuBackend::with_device(device, queue).expect("a backend on it");
+    let wall = vec![
+        DVec3::new(-2.0, -2.0, 4.0),
+        DVec3::new(2.0, -2.0, 4.0),
+        DVec3::new(2.0, 2.0, 4.0),
+        DVec3::new(-2.0, 2.0, 4.0),
+    ];
+    let occ = SampleOccluders::from_polygons(&[(wall, 0)]);
+    let behind = [
+        Vec3::new(-0.5, -0.5, 8.0),
+        Vec3::new(0.5, -0.5, 8.5),
+        Vec3::new(0.0, 0.5, 9.0),
+    ];
+    let beside = behind.map(|p| p + Vec3::new(6.5, 0.0, 0.0));
+    let bounds = DAabb {
+        min: DVec3::new(-1.0, -1.0, 7.5),
+        max: DVec3::new(8.0, 1.0, 9.5),
+    };
+    // 2,000 triangles take 72,000 bytes, more than the 64 KiB binding; 100 fit.
+    let mut many = vec![[Vec3::splat(50.0); 3]; 2_000];
+    many[1_000] = behind;
+    many[1_999] = beside;
+    let mut few = vec![[Vec3::splat(50.0); 3]; 100];
+    few[10] = behind;
+    few[99] = beside;
+    let tris = [behind, beside].map(|t| t.map(|p| p.as_dvec3()));
+    let mut answers = Vec::new();
+    for (list, ids, fits) in [(&many, [1_000, 1_999], false), (&few, [10, 99], true)] {
+        let mut scene = GpuSamplerScene::new(&small, &occ).expect("GPU sampler scene");
+        assert_eq!(scene.upload_triangles(&small, list).unwrap(), fits);
+        let resident = if fits { list.len() } else { 0 };
+        assert_eq!(scene.resident_triangles() as usize, resident);
+        let mut gs = GpuSampler::new(&small, &scene, 32).expect("GPU sampler");
+        gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &[bounds]);
+        answers.push(gs.test_scene_triangles(&ids, &tris).unwrap());
+    }
+    assert_eq!(answers[0], vec![true, false]);
+    assert_eq!(answers[0], answers[1]);
 }
 
 /// A small forest and its middle cell.

@@ -81,9 +81,10 @@ use crate::backend::{BackendError, RasterBackend};
 use crate::geom::{Aabb, DAabb};
 use crate::pvs::SamplingLevel;
 use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
+use crate::scene::Scene;
 use crate::settings::SamplingSettings;
 use crate::validate::SceneRays;
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -265,17 +266,28 @@ impl SamplingCuller {
     /// The culler's name ([`Culler::name`]; in [`crate::bake::CULLER_NAMES`]).
     pub const NAME: &'static str = super::SHRUNK_SAMPLING;
 
-    /// The occluder polygons on `gpu`'s device (uploaded once per bake).
+    /// The occluder polygons on `gpu`'s device, and the occludees' triangles where they fit
+    /// (uploaded once per bake: a triangle test then sends indices, not corners).
     fn gpu_scene(
         &self,
         gpu: &GpuBackend,
         occ: &SampleOccluders,
+        scene: &Scene,
     ) -> Result<Arc<GpuSamplerScene>, BakeError> {
         let mut slot = self.gpu_scene.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(s) = slot.as_ref() {
             return Ok(s.clone());
         }
-        let s = Arc::new(GpuSamplerScene::new(gpu, occ)?);
+        let mut s = GpuSamplerScene::new(gpu, occ)?;
+        let triangles: Vec<[Vec3; 3]> = (0..scene.triangles.len())
+            .map(|t| scene.triangle(t))
+            .collect();
+        // Out of device memory for them: each test uploads its triangles instead.
+        match s.upload_triangles(gpu, &triangles) {
+            Err(e) if !falls_back(&e) => return Err(e.into()),
+            _ => {}
+        }
+        let s = Arc::new(s);
         *slot = Some(s.clone());
         Ok(s)
     }
@@ -494,7 +506,7 @@ impl Culler for SamplingCuller {
         let gpu_scene = match backend.as_gpu() {
             Some(_) if s.gpu_refusal().is_some() => None,
             Some(g) if GpuSamplerScene::refusal(g, &data.occluders).is_none() => {
-                Some((g, self.gpu_scene(g, &data.occluders)?))
+                Some((g, self.gpu_scene(g, &data.occluders, prepared.scene)?))
             }
             _ => None,
         };
@@ -1497,6 +1509,7 @@ impl Shared<'_> {
         };
         // The open pieces' triangles.
         let mut tris: Vec<[DVec3; 3]> = Vec::new();
+        let mut tri_ids: Vec<u32> = Vec::new();
         let mut tri_piece: Vec<usize> = Vec::new();
         for (m, &(_, k)) in pieces.iter().enumerate() {
             if piece_hidden[m] {
@@ -1505,6 +1518,7 @@ impl Shared<'_> {
             let r = &p.piece_triangle_ranges[k];
             for &t in &p.piece_triangles[r.start as usize..r.end as usize] {
                 tris.push(p.scene.triangle(t as usize).map(|v| v.as_dvec3()));
+                tri_ids.push(t);
                 tri_piece.push(m);
             }
         }
@@ -1512,7 +1526,10 @@ impl Shared<'_> {
         // piece without any is).
         let mut all = vec![true; pieces.len()];
         if !tris.is_empty() {
-            for (&m, h) in tri_piece.iter().zip(gs.test_triangles(&tris)?) {
+            for (&m, h) in tri_piece
+                .iter()
+                .zip(gs.test_scene_triangles(&tri_ids, &tris)?)
+            {
                 all[m] &= h;
             }
         }

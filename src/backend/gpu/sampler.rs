@@ -64,18 +64,23 @@
 //! # Use
 //! `bake::sampling` renders with it on the GPU backend (one [`GpuSampler`] per thread): per
 //! band of a rectangle, the objects' boxes, then the open ones' pieces, then the open pieces'
-//! triangles ([`GpuSampler::test_triangles`]), each a submission on the same maps.
+//! triangles, each a submission on the same maps. The scene's triangles go up once per bake
+//! where they fit in a storage binding ([`GpuSamplerScene::upload_triangles`], nine `f32`
+//! each: scene vertices are `f32`, so the shader's `f64` of them is exact), and a triangle
+//! test sends each triangle's index, 8 bytes, instead of its corners, 72
+//! ([`GpuSampler::test_scene_triangles`]; [`GpuSampler::test_triangles`] takes corners).
 //!
 //! # Not yet
-//! Several sample points per submission; rounds with the render fill (it draws each view's
-//! list once); the rounds measured on a real GPU.
+//! Several sample points per submission; one submission per band (the open boxes' pieces and
+//! the open pieces' triangles compacted on the device); rounds with the render fill (it draws
+//! each view's list once); the rounds measured on a real GPU.
 
 use super::GpuBackend;
 use super::device::ErrorScopes;
 use crate::backend::BackendError;
 use crate::geom::DAabb;
 use crate::sampler::{BoxRect, Hemicube, SampleOccluders};
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use std::num::NonZeroU64;
 
 /// Bytes of one parameter slot (WebGPU's largest uniform offset alignment).
@@ -279,7 +284,9 @@ struct Params {
     axis: u32,
     sign: u32,
     base: u32,
-    pad: [u32; 3],
+    /// The triangle test reads scene triangles by index (1) or inline (0).
+    tri_ids: u32,
+    pad: [u32; 2],
 }
 
 /// A compute pass's timestamp writes: the pair at `i` of the query set, if any.
@@ -459,6 +466,11 @@ pub struct GpuSamplerScene {
     /// The boxes of the clusters of [`CLUSTER`] consecutive uploaded polygons (on the device
     /// after the points).
     clusters: Vec<DAabb>,
+    /// The occludees' triangles (nine `f32` each), uploaded once when they fit
+    /// ([`GpuSamplerScene::upload_triangles`]); else a 16-byte stand-in.
+    triangles: wgpu::Buffer,
+    /// How many `triangles` holds (0: none uploaded).
+    triangle_count: u32,
 }
 
 impl std::fmt::Debug for GpuSamplerScene {
@@ -514,6 +526,10 @@ fn storage_buffer(
 
 /// Bytes of one polygon point in its storage binding (three `f64`): the scene's largest.
 const POINT_BYTES: u64 = 24;
+
+/// Bytes of one resident occludee triangle (nine `f32`: scene vertices are `f32`, so the
+/// shader's `f64` of them is the CPU's exactly).
+const TRIANGLE_BYTES: u64 = 36;
 
 impl GpuSamplerScene {
     /// Why the sampler cannot render `occ` on `gpu`'s device, or `None` when it can: the
@@ -739,6 +755,7 @@ impl GpuSamplerScene {
             storage(10, cs, true),
             storage(11, cs, false),
             storage(12, cs, true),
+            storage(19, cs, true),
         ];
         match fill {
             SamplerFill::Render => test_entries.push(texture(
@@ -873,7 +890,62 @@ impl GpuSamplerScene {
             poly_buf,
             points,
             clusters,
+            triangles: storage_buffer(
+                gpu,
+                16,
+                wgpu::BufferUsages::empty(),
+                "sampler scene triangles (none)",
+            )?,
+            triangle_count: 0,
         })
+    }
+}
+
+impl GpuSamplerScene {
+    /// Uploads the occludees' triangles once (`triangles[t]`, scene coordinates), so that
+    /// [`GpuSampler::test_scene_triangles`] sends only their indices (8 bytes a triangle
+    /// instead of 72). Returns false, keeping none, when they exceed the device's largest
+    /// storage binding (36 bytes each): the tests then upload each triangle tested, with
+    /// the same answers.
+    ///
+    /// # Errors
+    /// The device's failures ([`BackendError::device_failed`]).
+    pub fn upload_triangles(
+        &mut self,
+        gpu: &GpuBackend,
+        triangles: &[[Vec3; 3]],
+    ) -> Result<bool, BackendError> {
+        gpu.check_failure()?;
+        let size = TRIANGLE_BYTES * triangles.len() as u64;
+        if triangles.is_empty()
+            || size.next_multiple_of(16) > max_binding(gpu)
+            || triangles.len() > u32::MAX as usize
+        {
+            return Ok(false);
+        }
+        let scope = ErrorScopes::push(&gpu.device);
+        let buffer = storage_buffer(
+            gpu,
+            size,
+            wgpu::BufferUsages::empty(),
+            "sampler scene triangles",
+        )?;
+        let words: Vec<f32> = triangles
+            .iter()
+            .flat_map(|t| t.iter().flat_map(|v| v.to_array()))
+            .collect();
+        gpu.queue
+            .write_buffer(&buffer, 0, bytemuck::cast_slice(&words));
+        scope.check()?;
+        self.triangles = buffer;
+        self.triangle_count = triangles.len() as u32;
+        Ok(true)
+    }
+
+    /// How many occludee triangles are on the device ([`GpuSamplerScene::upload_triangles`];
+    /// 0 when none).
+    pub fn resident_triangles(&self) -> u32 {
+        self.triangle_count
     }
 }
 
@@ -1184,7 +1256,7 @@ impl<'a> GpuSampler<'a> {
     /// [`BackendError::BufferTooLarge`] for more boxes than a buffer holds or more draws than
     /// a view's share of the draws' buffer.
     pub fn test_boxes(&mut self, boxes: &[DAabb]) -> Result<Vec<bool>, BackendError> {
-        Ok(self.submit(boxes, &[])?.0)
+        Ok(self.submit(boxes, &[], None)?.0)
     }
 
     /// Tests triangles (each inside the boxes given to the last `begin`) as
@@ -1195,7 +1267,46 @@ impl<'a> GpuSampler<'a> {
     /// # Errors
     /// As [`GpuSampler::test_boxes`].
     pub fn test_triangles(&mut self, tris: &[[DVec3; 3]]) -> Result<Vec<bool>, BackendError> {
-        let (_, codes) = self.submit(&[], tris)?;
+        let (_, codes) = self.submit(&[], tris, None)?;
+        self.triangles_hidden(tris, &codes)
+    }
+
+    /// [`GpuSampler::test_triangles`] for triangles of the scene whose triangles were
+    /// uploaded ([`GpuSamplerScene::upload_triangles`]): `ids[k]` is the index there of
+    /// `tris[k]`, and only the indices go up. Without resident triangles, as
+    /// [`GpuSampler::test_triangles`]. The same answers either way.
+    ///
+    /// # Errors
+    /// As [`GpuSampler::test_boxes`].
+    ///
+    /// # Panics
+    /// When `ids` and `tris` differ in length, or an index is not below
+    /// [`GpuSamplerScene::resident_triangles`] (with resident triangles).
+    pub fn test_scene_triangles(
+        &mut self,
+        ids: &[u32],
+        tris: &[[DVec3; 3]],
+    ) -> Result<Vec<bool>, BackendError> {
+        assert_eq!(ids.len(), tris.len(), "one index per triangle");
+        let resident = self.scene.triangle_count;
+        if resident == 0 {
+            return self.test_triangles(tris);
+        }
+        assert!(
+            ids.iter().all(|&t| t < resident),
+            "triangle indices below {resident}"
+        );
+        let (_, codes) = self.submit(&[], tris, Some(ids))?;
+        self.triangles_hidden(tris, &codes)
+    }
+
+    /// The triangles' hidden flags from their codes: those reaching the eye are decided by
+    /// their boxes.
+    fn triangles_hidden(
+        &mut self,
+        tris: &[[DVec3; 3]],
+        codes: &[u32],
+    ) -> Result<Vec<bool>, BackendError> {
         let mut hidden: Vec<bool> = codes.iter().map(|&c| c == 0).collect();
         // Those reaching the eye: their boxes decide.
         let reach: Vec<usize> = (0..tris.len()).filter(|&t| codes[t] == 2).collect();
@@ -1218,12 +1329,14 @@ impl<'a> GpuSampler<'a> {
     }
 
     /// One submission: the render (unless done since the last `begin`), the boxes' parts and
-    /// the triangles tested. Returns the boxes' hidden flags and the triangles' codes (0 hidden,
-    /// 1 open, 2 reaching the eye).
+    /// the triangles tested (with `ids`, their indices among the scene's resident triangles go
+    /// up instead of their corners). Returns the boxes' hidden flags and the triangles' codes
+    /// (0 hidden, 1 open, 2 reaching the eye).
     fn submit(
         &mut self,
         boxes: &[DAabb],
         tris: &[[DVec3; 3]],
+        ids: Option<&[u32]>,
     ) -> Result<(Vec<bool>, Vec<u32>), BackendError> {
         let gpu = self.gpu;
         gpu.check_failure()?;
@@ -1256,14 +1369,18 @@ impl<'a> GpuSampler<'a> {
         parts_f.push(0.0);
         let cap = self.scene.cap;
         let (frame, frame_u) = self.hc.setup_frame(self.scene.polys, cap);
-        // The triangles after the eye; one reaching beyond the farthest box is open at once.
+        // The triangles after the eye (their corners, or their indices among the resident
+        // ones: exact in `f64`); one reaching beyond the farthest box is open at once.
         let mut tri_f: Vec<f64> = vec![frame[0], frame[1], frame[2], 0.0];
         let mut tri_codes = vec![0u32; tris.len().max(1)];
         for (t, tri) in tris.iter().enumerate() {
             if self.hc.beyond_bound(tri) {
                 tri_codes[t] = 1;
             }
-            tri_f.extend(tri.iter().flat_map(|p| p.to_array()));
+            match ids {
+                Some(ids) => tri_f.push(f64::from(ids[t])),
+                None => tri_f.extend(tri.iter().flat_map(|p| p.to_array())),
+            }
         }
         let n_tris = tris.len() as u32;
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
@@ -1479,6 +1596,7 @@ impl<'a> GpuSampler<'a> {
             groups_x: tri_groups.0,
             axis,
             sign,
+            tri_ids: u32::from(ids.is_some()),
             ..Params::default()
         };
         gpu.queue
@@ -1543,6 +1661,7 @@ impl<'a> GpuSampler<'a> {
             entry(10, tris_b),
             entry(11, tflags_b),
             entry(12, frame_u_b),
+            entry(19, &self.scene.triangles),
         ];
         // Per round (the render fill has one).
         let mut args_groups = Vec::new();
