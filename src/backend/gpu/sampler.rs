@@ -1287,17 +1287,33 @@ impl<'a> GpuSampler<'a> {
         ids: &[u32],
         tris: &[[DVec3; 3]],
     ) -> Result<Vec<bool>, BackendError> {
+        Ok(self.test_boxes_and_scene_triangles(&[], ids, tris)?.1)
+    }
+
+    /// [`GpuSampler::test_boxes`] and [`GpuSampler::test_scene_triangles`] in one submission
+    /// (a second only for triangles reaching the eye, whose boxes decide): the boxes' and the
+    /// triangles' hidden flags, each as the two would answer apart. (Testing an object's
+    /// pieces and all their triangles this way saves a submission per band but tests the
+    /// triangles of pieces whose boxes are hidden too: on lavapipe a coarse forest's cell
+    /// took twice as long, so the bake does not, until a real GPU has measured it;
+    /// `docs/sampling.md`.)
+    fn test_boxes_and_scene_triangles(
+        &mut self,
+        boxes: &[DAabb],
+        ids: &[u32],
+        tris: &[[DVec3; 3]],
+    ) -> Result<(Vec<bool>, Vec<bool>), BackendError> {
         assert_eq!(ids.len(), tris.len(), "one index per triangle");
         let resident = self.scene.triangle_count;
-        if resident == 0 {
-            return self.test_triangles(tris);
+        let ids = (resident > 0).then_some(ids);
+        if let Some(ids) = ids {
+            assert!(
+                ids.iter().all(|&t| t < resident),
+                "triangle indices below {resident}"
+            );
         }
-        assert!(
-            ids.iter().all(|&t| t < resident),
-            "triangle indices below {resident}"
-        );
-        let (_, codes) = self.submit(&[], tris, Some(ids))?;
-        self.triangles_hidden(tris, &codes)
+        let (hidden, codes) = self.submit(boxes, tris, ids)?;
+        Ok((hidden, self.triangles_hidden(tris, &codes)?))
     }
 
     /// The triangles' hidden flags from their codes: those reaching the eye are decided by
