@@ -462,12 +462,7 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
     gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &boxes);
     assert_eq!(gs.test_boxes(&boxes).unwrap(), vec![false, false]);
     assert_eq!(gs.last_draws(), 0);
-    let wall = vec![
-        DVec3::new(-2.0, -2.0, 4.0),
-        DVec3::new(2.0, -2.0, 4.0),
-        DVec3::new(2.0, 2.0, 4.0),
-        DVec3::new(-2.0, 2.0, 4.0),
-    ];
+    let wall = wall();
     let occ = SampleOccluders::from_polygons(&[(wall, 0)]);
     let scene = GpuSamplerScene::new(gpu, &occ).expect("GPU sampler scene");
     let mut gs = GpuSampler::new(gpu, &scene, 32).expect("GPU sampler");
@@ -490,26 +485,37 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
     );
 }
 
-/// Triangles that do not fit the device's largest storage binding stay on the CPU
-/// (`upload_triangles` says so and keeps none), and tests by index then send corners: the
-/// same answers. A wall hides a triangle behind it, not one beside it.
-#[test]
-fn triangles_too_large_for_a_binding_are_sent_with_each_test() {
+/// A backend on the engine's adapter whose largest storage binding is 64 KiB (`None`, after
+/// printing why, when there is no adapter outside CI).
+fn small_binding_backend() -> Option<GpuBackend> {
     let limits = wgpu::Limits {
         max_storage_buffer_binding_size: 64 << 10,
         ..wgpu::Limits::default()
     };
     let features = GpuBackend::REQUIRED_FEATURES | wgpu::Features::SHADER_F64;
-    let Some((device, queue)) = common::engine_device(features, limits) else {
-        return;
-    };
-    let small = GpuBackend::with_device(device, queue).expect("a backend on it");
-    let wall = vec![
+    let (device, queue) = common::engine_device(features, limits)?;
+    Some(GpuBackend::with_device(device, queue).expect("a backend on it"))
+}
+
+/// A 4 × 4 wall across the z axis at z = 4.
+fn wall() -> Vec<DVec3> {
+    vec![
         DVec3::new(-2.0, -2.0, 4.0),
         DVec3::new(2.0, -2.0, 4.0),
         DVec3::new(2.0, 2.0, 4.0),
         DVec3::new(-2.0, 2.0, 4.0),
-    ];
+    ]
+}
+
+/// Triangles that do not fit the device's largest storage binding stay on the CPU
+/// (`upload_triangles` says so and keeps none), and tests by index then send corners: the
+/// same answers. A wall hides a triangle behind it, not one beside it.
+#[test]
+fn triangles_too_large_for_a_binding_are_sent_with_each_test() {
+    let Some(small) = small_binding_backend() else {
+        return;
+    };
+    let wall = wall();
     let occ = SampleOccluders::from_polygons(&[(wall, 0)]);
     let behind = [
         Vec3::new(-0.5, -0.5, 8.0),
@@ -748,15 +754,9 @@ fn rendering_in_rounds_hides_the_same_boxes_with_fewer_draws() {
 /// CPU backend's, from the same points), where it used to end the bake with `BufferTooLarge`.
 #[test]
 fn a_scene_too_large_for_the_device_is_sampled_on_the_cpu() {
-    let limits = wgpu::Limits {
-        max_storage_buffer_binding_size: 64 << 10,
-        ..wgpu::Limits::default()
-    };
-    let features = GpuBackend::REQUIRED_FEATURES | wgpu::Features::SHADER_F64;
-    let Some((device, queue)) = common::engine_device(features, limits) else {
+    let Some(small) = small_binding_backend() else {
         return;
     };
-    let small = GpuBackend::with_device(device, queue).expect("a backend on it");
     let (scene, cell) = small_forest();
     let settings = BakeSettings {
         sampling: SweepChoice::On,
