@@ -19,7 +19,9 @@ use umbrasweep::backend::BackendError;
 use umbrasweep::backend::RasterBackend;
 use umbrasweep::backend::cpu::CpuBackend;
 use umbrasweep::backend::gpu::GpuBackend;
-use umbrasweep::backend::gpu::sampler::{GpuSampler, GpuSamplerScene, SamplerFill};
+use umbrasweep::backend::gpu::sampler::{
+    GpuSampler, GpuSamplerScene, SamplerFill, TRIANGLE_BYTES, UPLOAD_CHUNK,
+};
 use umbrasweep::bake::{
     BakeSettings, CullState, Culler, CullerWork, Prepared, SamplingCuller, SweepChoice,
 };
@@ -302,7 +304,7 @@ fn on_gpu(
     resident.extend(tris32.iter().rev().map(|t| t.map(|p| p.as_vec3())));
     assert!(
         scene
-            .upload_triangles(gpu, &resident)
+            .upload_triangles(gpu, resident.iter().copied())
             .expect("triangles upload"),
         "a few triangles fit any device"
     );
@@ -507,16 +509,16 @@ fn wall() -> Vec<DVec3> {
     ]
 }
 
-/// Triangles that do not fit the device's largest storage binding stay on the CPU
-/// (`upload_triangles` says so and keeps none), and tests by index then send corners: the
-/// same answers. A wall hides a triangle behind it, not one beside it.
+/// Resident triangles are found by index, past the first slice `upload_triangles` stages;
+/// triangles that do not fit the device's largest storage binding stay on the CPU
+/// (`upload_triangles` says so and keeps none), and tests by index then send corners. The
+/// same answers each way: a wall hides a triangle behind it, not one beside it.
 #[test]
-fn triangles_too_large_for_a_binding_are_sent_with_each_test() {
-    let Some(small) = small_binding_backend() else {
+fn triangles_are_tested_by_index_or_sent_when_too_large_for_a_binding() {
+    let (Some(shared), Some(small)) = (backend(), small_binding_backend()) else {
         return;
     };
-    let wall = wall();
-    let occ = SampleOccluders::from_polygons(&[(wall, 0)]);
+    let occ = SampleOccluders::from_polygons(&[(wall(), 0)]);
     let behind = [
         Vec3::new(-0.5, -0.5, 8.0),
         Vec3::new(0.5, -0.5, 8.5),
@@ -527,26 +529,35 @@ fn triangles_too_large_for_a_binding_are_sent_with_each_test() {
         min: DVec3::new(-1.0, -1.0, 7.5),
         max: DVec3::new(8.0, 1.0, 9.5),
     };
-    // 2,000 triangles take 72,000 bytes, more than the 64 KiB binding; 100 fit.
-    let mut many = vec![[Vec3::splat(50.0); 3]; 2_000];
-    many[1_000] = behind;
-    many[1_999] = beside;
-    let mut few = vec![[Vec3::splat(50.0); 3]; 100];
-    few[10] = behind;
-    few[99] = beside;
-    let tris = [behind, beside].map(|t| t.map(|p| p.as_dvec3()));
-    let mut answers = Vec::new();
-    for (list, ids, fits) in [(&many, [1_000, 1_999], false), (&few, [10, 99], true)] {
-        let mut scene = GpuSamplerScene::new(&small, &occ).expect("GPU sampler scene");
-        assert_eq!(scene.upload_triangles(&small, list).unwrap(), fits);
-        let resident = if fits { list.len() } else { 0 };
+    let tris = [behind, behind, beside].map(|t| t.map(|p| p.as_dvec3()));
+    // 2,000 triangles take 72,000 bytes, more than the 64 KiB binding; 100 fit; the shared
+    // backend takes more than one staged slice. Every triangle but two is `beside`, so that
+    // one read from a wrong place is open.
+    let beyond = (UPLOAD_CHUNK / TRIANGLE_BYTES) as u32 + 1_000;
+    let cases = [
+        (&small, 2_000, [1_000, 1_999, 3], false),
+        (&small, 100, [10, 99, 50], true),
+        (shared, beyond as usize + 10, [beyond, 5, beyond + 9], true),
+    ];
+    for (gpu, n, ids, fits) in cases {
+        let mut list = vec![beside; n];
+        list[ids[0] as usize] = behind;
+        list[ids[1] as usize] = behind;
+        let mut scene = GpuSamplerScene::new(gpu, &occ).expect("GPU sampler scene");
+        assert_eq!(
+            scene.upload_triangles(gpu, list.iter().copied()).unwrap(),
+            fits
+        );
+        let resident = if fits { n } else { 0 };
         assert_eq!(scene.resident_triangles() as usize, resident);
-        let mut gs = GpuSampler::new(&small, &scene, 32).expect("GPU sampler");
+        let mut gs = GpuSampler::new(gpu, &scene, 32).expect("GPU sampler");
         gs.begin(DVec3::ZERO, 2, 1.0, 0.05, &[bounds]);
-        answers.push(gs.test_scene_triangles(&ids, &tris).unwrap());
+        assert_eq!(
+            gs.test_scene_triangles(&ids, &tris).unwrap(),
+            vec![true, true, false],
+            "{n} triangles, {ids:?}"
+        );
     }
-    assert_eq!(answers[0], vec![true, false]);
-    assert_eq!(answers[0], answers[1]);
 }
 
 /// A small forest and its middle cell.

@@ -84,7 +84,7 @@ use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
 use crate::scene::Scene;
 use crate::settings::SamplingSettings;
 use crate::validate::SceneRays;
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -279,11 +279,8 @@ impl SamplingCuller {
             return Ok(s.clone());
         }
         let mut s = GpuSamplerScene::new(gpu, occ)?;
-        let triangles: Vec<[Vec3; 3]> = (0..scene.triangles.len())
-            .map(|t| scene.triangle(t))
-            .collect();
         // Out of device memory for them: each test uploads its triangles instead.
-        match s.upload_triangles(gpu, &triangles) {
+        match s.upload_triangles(gpu, (0..scene.triangles.len()).map(|t| scene.triangle(t))) {
             Err(e) if !falls_back(&e) => return Err(e.into()),
             _ => {}
         }

@@ -529,7 +529,12 @@ const POINT_BYTES: u64 = 24;
 
 /// Bytes of one resident occludee triangle (nine `f32`: scene vertices are `f32`, so the
 /// shader's `f64` of them is the CPU's exactly).
-const TRIANGLE_BYTES: u64 = 36;
+pub const TRIANGLE_BYTES: u64 = 36;
+
+/// The most bytes [`GpuSamplerScene::upload_triangles`] stages at once (a multiple of
+/// [`TRIANGLE_BYTES`], 4.5 MiB): the paper-size forest's 7.9 M triangles take 285 MB on the
+/// device and never a whole copy on the CPU.
+pub const UPLOAD_CHUNK: u64 = 36 << 17;
 
 impl GpuSamplerScene {
     /// Why the sampler cannot render `occ` on `gpu`'s device, or `None` when it can: the
@@ -902,25 +907,29 @@ impl GpuSamplerScene {
 }
 
 impl GpuSamplerScene {
-    /// Uploads the occludees' triangles once (`triangles[t]`, scene coordinates), so that
-    /// [`GpuSampler::test_scene_triangles`] sends only their indices (8 bytes a triangle
-    /// instead of 72). Returns false, keeping none, when they exceed the device's largest
-    /// storage binding (36 bytes each): the tests then upload each triangle tested, with
-    /// the same answers.
+    /// Uploads the occludees' triangles once (the `t`-th item is triangle `t`, scene
+    /// coordinates), so that [`GpuSampler::test_scene_triangles`] sends only their indices
+    /// (8 bytes a triangle instead of 72). They go up in slices of at most [`UPLOAD_CHUNK`]
+    /// bytes, never copied whole. Returns false, keeping none, when they exceed the device's
+    /// largest storage binding (36 bytes each): the tests then upload each triangle tested,
+    /// with the same answers.
     ///
     /// # Errors
     /// The device's failures ([`BackendError::device_failed`]).
-    pub fn upload_triangles(
+    pub fn upload_triangles<I>(
         &mut self,
         gpu: &GpuBackend,
-        triangles: &[[Vec3; 3]],
-    ) -> Result<bool, BackendError> {
+        triangles: I,
+    ) -> Result<bool, BackendError>
+    where
+        I: IntoIterator<Item = [Vec3; 3]>,
+        I::IntoIter: ExactSizeIterator,
+    {
         gpu.check_failure()?;
-        let size = TRIANGLE_BYTES * triangles.len() as u64;
-        if triangles.is_empty()
-            || size.next_multiple_of(16) > max_binding(gpu)
-            || triangles.len() > u32::MAX as usize
-        {
+        let triangles = triangles.into_iter();
+        let count = triangles.len();
+        let size = TRIANGLE_BYTES * count as u64;
+        if count == 0 || size.next_multiple_of(16) > max_binding(gpu) || count > u32::MAX as usize {
             return Ok(false);
         }
         let scope = ErrorScopes::push(&gpu.device);
@@ -930,15 +939,25 @@ impl GpuSamplerScene {
             wgpu::BufferUsages::empty(),
             "sampler scene triangles",
         )?;
-        let words: Vec<f32> = triangles
-            .iter()
-            .flat_map(|t| t.iter().flat_map(|v| v.to_array()))
-            .collect();
-        gpu.queue
-            .write_buffer(&buffer, 0, bytemuck::cast_slice(&words));
+        let per_chunk = (UPLOAD_CHUNK / TRIANGLE_BYTES) as usize;
+        let mut words: Vec<f32> = Vec::with_capacity(9 * per_chunk.min(count));
+        let mut offset = 0u64;
+        for t in triangles {
+            words.extend(t.iter().flat_map(|v| v.to_array()));
+            if words.len() == 9 * per_chunk {
+                gpu.queue
+                    .write_buffer(&buffer, offset, bytemuck::cast_slice(&words));
+                offset += 4 * words.len() as u64;
+                words.clear();
+            }
+        }
+        if !words.is_empty() {
+            gpu.queue
+                .write_buffer(&buffer, offset, bytemuck::cast_slice(&words));
+        }
         scope.check()?;
         self.triangles = buffer;
-        self.triangle_count = triangles.len() as u32;
+        self.triangle_count = count as u32;
         Ok(true)
     }
 
