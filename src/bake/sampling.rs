@@ -280,9 +280,11 @@ impl SamplingCuller {
         }
         let mut s = GpuSamplerScene::new(gpu, occ)?;
         // Out of device memory for them: each test uploads its triangles instead.
-        match s.upload_triangles(gpu, (0..scene.triangles.len()).map(|t| scene.triangle(t))) {
-            Err(e) if !falls_back(&e) => return Err(e.into()),
-            _ => {}
+        if let Err(e) =
+            s.upload_triangles(gpu, (0..scene.triangles.len()).map(|t| scene.triangle(t)))
+            && !falls_back(&e)
+        {
+            return Err(e.into());
         }
         let s = Arc::new(s);
         *slot = Some(s.clone());
@@ -483,6 +485,13 @@ impl Culler for SamplingCuller {
             }
         }
         let ckpt_failed: Mutex<Option<BakeError>> = Mutex::new(None);
+        // A checkpoint failed (or a test interrupted the bake): the cell fails below.
+        let stopped = || {
+            ckpt_failed
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .is_some()
+        };
         // Faces in the order −x, +x, −y, +y, −z, +z.
         let faces: [Face; 6] = std::array::from_fn(|k| {
             let (axis, sign) = (k / 2, if k % 2 == 0 { -1.0 } else { 1.0 });
@@ -657,11 +666,7 @@ impl Culler for SamplingCuller {
                 let mut out = Vec::with_capacity(indices.len());
                 let (chunk_len, lane_len) = lanes(indices.len());
                 for chunk in indices.chunks(chunk_len) {
-                    if ckpt_failed
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .is_some()
-                    {
+                    if stopped() {
                         // Stopped (a checkpoint failed, or a test's interruption): the cell
                         // fails below, whatever these rectangles would have found.
                         out.extend(chunk.iter().map(|_| None));
@@ -712,11 +717,7 @@ impl Culler for SamplingCuller {
                         .collect();
                     let results: Vec<_> = lanes.into_iter().flatten().collect();
                     if let Some(c) = &ckpt
-                        && shared
-                            .failed
-                            .lock()
-                            .unwrap_or_else(|e| e.into_inner())
-                            .is_none()
+                        && !shared.has_failed()
                     {
                         let recs = chunk.iter().zip(&results).map(|(&i, (o, rec))| {
                             let mut rec = rec.clone();
@@ -810,15 +811,7 @@ impl Culler for SamplingCuller {
                         // more than it costs (`SamplingSettings::probe_pay`).
                         let above_finest = level_eps * 0.5 <= finest_eps * (1.0 + 1e-6);
                         // (Not in a cell already failing: its lists are not results.)
-                        let failing = ckpt_failed
-                            .lock()
-                            .unwrap_or_else(|e| e.into_inner())
-                            .is_some()
-                            || shared
-                                .failed
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .is_some();
+                        let failing = stopped() || shared.has_failed();
                         if !proves_little
                             && above_finest
                             && s.probe_pay > 0.0
@@ -1166,6 +1159,14 @@ impl Shared<'_> {
                 "the device could not make a GPU sampler at {resolution} px: {e}"
             ));
         }
+    }
+
+    /// Whether a device failure was recorded ([`Shared::fail`]).
+    fn has_failed(&self) -> bool {
+        self.failed
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .is_some()
     }
 
     /// Records the first device failure.
