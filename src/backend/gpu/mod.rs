@@ -391,12 +391,6 @@ pub struct GpuBackend {
     adapter_name: String,
     device: wgpu::Device,
     queue: wgpu::Queue,
-    /// Held around every submission and poll ([`GpuBackend::submit_commands`],
-    /// `poll_until`): wgpu-core 30 asserts in `Device::maintain` when another thread's
-    /// submission or poll retires a submission between this poll's reading of the fence and
-    /// its look at the queue ("If the queue is empty, the current submission index …"; fixed
-    /// upstream in gfx-rs/wgpu#9958). Cells baked on several threads hit it in CI.
-    maintain: Mutex<()>,
     pipelines: Pipelines,
     /// First device-lost or uncaptured error message; once set, every call fails. Only the
     /// backend's own device ([`GpuBackend::new`]) reports into it.
@@ -415,6 +409,9 @@ pub struct GpuBackend {
     rsf_pipelines: Option<rsf::RsfPipelines>,
     /// Ray space factorization's charts asked on the device ([`GpuBackend::set_rsf_on_gpu`]).
     rsf_wanted: bool,
+    /// Submissions and polls one thread at a time, each poll blocking until its submission is
+    /// done ([`GpuBackend::set_serial_polls`]); held around each of them when set.
+    serial_polls: Option<Mutex<()>>,
     /// Ray space factorization's buffers, one set per cell in flight.
     rsf_pool: Mutex<Vec<rsf::RsfBuffers>>,
     /// The views pass and counted draw, where the device has `SHADER_F64`.
@@ -638,7 +635,6 @@ impl GpuBackend {
             adapter_name,
             device,
             queue,
-            maintain: Mutex::default(),
             pipelines,
             failure,
             limits,
@@ -648,6 +644,7 @@ impl GpuBackend {
             totals: Mutex::default(),
             rsf_pipelines,
             rsf_wanted: false,
+            serial_polls: None,
             rsf_pool: Mutex::default(),
             view_pipelines,
             hdm_pipelines,
@@ -672,6 +669,15 @@ impl GpuBackend {
         }
         self.projection = projection;
         Ok(())
+    }
+
+    /// Submits and polls one thread at a time, each poll blocking until the device has done
+    /// the submission waited for (`on`: how every GPU path waited before December 2026), or
+    /// lets every thread submit and poll at once (the default). Both give the same results;
+    /// the serial way leaves the device idle between one thread's submission and the next,
+    /// and is kept to measure that (`--example gpu_threads`).
+    pub fn set_serial_polls(&mut self, on: bool) {
+        self.serial_polls = on.then(Mutex::default);
     }
 
     /// Runs ray space factorization's charts on the device (`on`), or the CPU's charts (the

@@ -48,10 +48,14 @@ const DATA_BUDGET: u64 = 512 << 20;
 /// (each also capped by the device's largest storage binding); planes beyond it send their
 /// maps back instead.
 const TEST_BUDGET: u64 = 64 << 20;
-/// How long one poll blocks before the device-lost flag and the deadline are checked again.
-/// Short, as the poll holds [`GpuBackend::maintain`](super::GpuBackend): other threads submit
-/// and poll between slices (a poll returns as soon as its submission is done).
-const POLL_SLICE: Duration = Duration::from_millis(2);
+/// A wait polls back to back (yielding the thread) for this long, then pauses between polls.
+const POLL_SPIN: Duration = Duration::from_micros(50);
+/// Shortest and longest pause between two polls of one wait; in between, an eighth of the time
+/// waited so far, so that a pause adds at most about an eighth to a long wait.
+const POLL_PAUSE: (Duration, Duration) = (Duration::from_micros(20), Duration::from_millis(1));
+/// How long one blocking poll of the serial way (`GpuBackend::set_serial_polls`) blocks before
+/// the device-lost flag and the deadline are checked again, and other threads may submit.
+const SERIAL_POLL_SLICE: Duration = Duration::from_millis(2);
 /// A submission not finished after this long is reported as a device failure.
 const DEADLINE: Duration = Duration::from_secs(600);
 /// Bytes of one vertex.
@@ -569,7 +573,7 @@ impl GpuBackend {
         let (submission, mapped) = self.submit(pool, &layout, commands, timestamps.as_ref());
         scope.check()?;
         let waited = layout.mappings(timestamps.as_ref().map_or(0, |t| t.sets.len()));
-        self.wait(submission, mapped, waited)?;
+        self.wait(&submission, mapped, waited)?;
         self.check_failure()?;
         if let Some(t) = &timestamps {
             let (all, last) = t.read()?;
@@ -1502,20 +1506,20 @@ impl GpuBackend {
         (submission, rx)
     }
 
-    /// Waiting step: polls the device in slices of [`POLL_SLICE`] until all `planes`
-    /// read-back buffers are mapped, checking for a lost device between slices.
+    /// Waiting step: polls the device ([`Self::poll_until`]) until all `planes` read-back
+    /// buffers are mapped.
     ///
     /// # Errors
     /// As [`Self::poll_until`].
     fn wait(
         &self,
-        submission: wgpu::SubmissionIndex,
+        submission: &wgpu::SubmissionIndex,
         mapped: Mapped,
         planes: usize,
     ) -> Result<(), BackendError> {
         let mut done = vec![false; planes];
         let mut remaining = planes;
-        self.poll_until(&submission, &format!("{planes} planes"), || {
+        self.poll_until(submission, &format!("{planes} planes"), || {
             while let Ok((w, r)) = mapped.try_recv() {
                 r.map_err(|e| BackendError::ReadBack {
                     step: "read-back failed",
@@ -1530,16 +1534,34 @@ impl GpuBackend {
         })
     }
 
-    /// Submits `commands` on the queue, one thread at a time with the polls
-    /// ([`GpuBackend::maintain`]).
+    /// Submits `commands` on the queue. Any number of threads submit and poll at once: no lock
+    /// serialises them ([`Self::poll_until`] says why none is needed), unless
+    /// [`GpuBackend::set_serial_polls`](super::GpuBackend::set_serial_polls) asked for it.
     pub(super) fn submit_commands(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
-        let _one = self.maintain.lock().unwrap_or_else(|e| e.into_inner());
+        let _one =
+            (self.serial_polls.as_ref()).map(|m| m.lock().unwrap_or_else(|e| e.into_inner()));
         self.queue.submit([commands])
     }
 
-    /// Polls the device in slices of [`POLL_SLICE`] until `done` says the work of
-    /// `submission` (its read-backs mapped) is over, checking for a lost device between
-    /// slices. `work` names the work in a timeout's message.
+    /// Polls the device until `done` says the work of `submission` (its read-backs mapped) is
+    /// over, checking for a lost device between polls. `work` names the work in a timeout's
+    /// message.
+    ///
+    /// Every poll is non-blocking ([`wgpu::PollType::Poll`]): it retires what the device has
+    /// finished and runs the mapping callbacks, for this thread's submissions and any other's.
+    /// Between polls the thread yields for [`POLL_SPIN`], then sleeps for an eighth of the time
+    /// waited so far ([`POLL_PAUSE`] bounds it). A *blocking* poll for one submission
+    /// ([`wgpu::PollType::Wait`] with an index and a timeout) is what this avoids: wgpu-core 30
+    /// asserts in `Device::maintain` when another thread's submission or poll retires a
+    /// submission between that poll's timed-out look at the fence and its look at the queue
+    /// ("If the queue is empty, the current submission index …", gfx-rs/wgpu#9958; cells baked
+    /// on several threads hit it in CI, and `tests/gpu.rs` does within seconds). Such polls are
+    /// safe only with one lock around every submission and poll, and a poll holds the lock
+    /// while it blocks, so no other thread can submit until the device has finished the work
+    /// waited for: the threads' submissions run one at a time, and a device with many cells in
+    /// flight sits idle between them. That is the serial way
+    /// ([`GpuBackend::set_serial_polls`](super::GpuBackend::set_serial_polls)), kept to measure
+    /// the difference. A non-blocking poll has no index to assert on.
     ///
     /// # Errors
     /// The recorded failure ([`BackendError::DeviceLost`], [`BackendError::Uncaptured`]) on
@@ -1555,12 +1577,15 @@ impl GpuBackend {
         let start = Instant::now();
         loop {
             self.check_failure()?;
-            let polled = {
-                let _one = self.maintain.lock().unwrap_or_else(|e| e.into_inner());
-                self.device.poll(wgpu::PollType::Wait {
-                    submission_index: Some(submission.clone()),
-                    timeout: Some(POLL_SLICE),
-                })
+            let polled = match &self.serial_polls {
+                Some(serial) => {
+                    let _one = serial.lock().unwrap_or_else(|e| e.into_inner());
+                    self.device.poll(wgpu::PollType::Wait {
+                        submission_index: Some(submission.clone()),
+                        timeout: Some(SERIAL_POLL_SLICE),
+                    })
+                }
+                None => self.device.poll(wgpu::PollType::Poll),
             };
             match polled {
                 Ok(_) | Err(wgpu::PollError::Timeout) => {}
@@ -1576,11 +1601,19 @@ impl GpuBackend {
             if done()? {
                 return Ok(());
             }
-            if start.elapsed() > DEADLINE {
+            let waited = start.elapsed();
+            if waited > DEADLINE {
                 return Err(BackendError::Timeout {
                     work: work.to_string(),
                     deadline: DEADLINE,
                 });
+            }
+            if self.serial_polls.is_some() {
+                // The blocking poll waited.
+            } else if waited < POLL_SPIN {
+                std::thread::yield_now();
+            } else {
+                std::thread::sleep((waited / 8).clamp(POLL_PAUSE.0, POLL_PAUSE.1));
             }
         }
     }
