@@ -566,7 +566,11 @@ impl GpuBackend {
     /// back as [`BackendError`]s and never reach the engine's handler; a lost device fails
     /// the backend's next submission, poll or read-back. The backend's buffers and textures
     /// live as long as it does. The device may serve other work meanwhile; a `render` call
-    /// polls it (`Device::poll`) while it waits, which also runs the engine's callbacks.
+    /// polls it (`Device::poll`, never blocking) while it waits, which also runs the engine's
+    /// callbacks. An engine thread that waits on the same device with a timeout
+    /// (`PollType::Wait` with `timeout: Some(..)`) while the backend works may trip wgpu-core
+    /// 30's queue-empty assertion (gfx-rs/wgpu#9958) when its wait times out; use
+    /// `PollType::Poll`, or waits without a timeout.
     ///
     /// # Errors
     /// [`BackendError::MissingFeatures`], [`BackendError::LimitTooLow`] or
