@@ -114,7 +114,8 @@ pub struct BakeArgs {
     /// Run ray space factorization's charts on the GPU backend's device (needs SHADER_F64)
     /// instead of the CPU. Same charts; the default keeps them on the CPU, which was faster
     /// on every device measured (each wave of a cell's traversal waits for its submission: on
-    /// an NVIDIA H200 328 ms per city cell against 84 on its CPU). Ignored on the CPU backend.
+    /// an NVIDIA H200 328 ms per city cell against 84 on its CPU, measured while the bake's
+    /// threads still submitted one at a time). Ignored on the CPU backend.
     #[arg(long)]
     pub rsf_on_gpu: bool,
     /// Read the GPU backend's Depth Maps back (separate planes' and the occlusion sweep's)
@@ -129,6 +130,13 @@ pub struct BakeArgs {
     /// comparisons. Ignored on the CPU backend.
     #[arg(long)]
     pub sweep_maps_on_cpu: bool,
+    /// Device memory the shrunk-occluder sampler's GPU samplers may take together (e.g. 16G;
+    /// default 4G, which suits a consumer GPU). Each serves one thread's renders (about 0.7 GB
+    /// at 512 pixels on a fine forest, 1.8 GB at 1,024); beyond the budget a level's other
+    /// threads wait for one. More lets more threads render at once on a large GPU; the PVS is
+    /// the same. Ignored on the CPU backend.
+    #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+    pub gpu_sampler_memory: Option<u64>,
     /// Depth Map resolution per side (a power of two).
     #[arg(long, default_value_t = BakeSettings::default_settings().resolution)]
     pub resolution: u32,
@@ -527,6 +535,7 @@ pub fn make_backend(
     projection: GpuProjection,
     rsf_on_gpu: bool,
     (tests_on_cpu, sweep_maps_on_cpu): (bool, bool),
+    sampler_memory: Option<u64>,
 ) -> anyhow::Result<Box<dyn RasterBackend>> {
     use umbrasweep::backend::gpu::{GpuBackend, hardware_adapter_available};
     match choice {
@@ -545,6 +554,9 @@ pub fn make_backend(
                 }
                 b.set_tests_on_device(!tests_on_cpu);
                 b.set_keep_sweep_maps(!sweep_maps_on_cpu);
+                if let Some(bytes) = sampler_memory {
+                    b.set_sampler_memory(bytes);
+                }
                 Ok(Box::new(b))
             }
             Err(e) => bail!("--backend gpu: {e} (use --backend cpu)"),
@@ -715,6 +727,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         a.gpu_projection,
         a.rsf_on_gpu,
         (a.tests_on_cpu, a.sweep_maps_on_cpu),
+        a.gpu_sampler_memory,
     )?;
     let backend = backend.as_ref();
     let which: Vec<usize> = match a.shard {

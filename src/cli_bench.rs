@@ -77,6 +77,10 @@ pub struct BenchArgs {
     /// (the default): the same PVS, to compare the two.
     #[arg(long)]
     pub sweep_maps_on_cpu: bool,
+    /// Device memory the shrunk-occluder sampler's GPU samplers may take together (e.g. 16G;
+    /// default 4G), as `bake --gpu-sampler-memory`.
+    #[arg(long, value_name = "SIZE", value_parser = crate::cli_bake::parse_size)]
+    pub gpu_sampler_memory: Option<u64>,
     /// The shared scene folder (default: ../shared/scenes when it exists).
     #[arg(long, value_name = "DIR")]
     pub shared: Option<PathBuf>,
@@ -208,6 +212,7 @@ impl From<&BenchArgs> for BenchOptions {
             rsf_on_gpu: a.rsf_on_gpu,
             tests_on_cpu: a.tests_on_cpu,
             sweep_maps_on_cpu: a.sweep_maps_on_cpu,
+            gpu_sampler_memory: a.gpu_sampler_memory,
             shared: a.shared.clone(),
             scenes: a.scenes.clone(),
             pvs_out: a.pvs_out.clone(),

@@ -197,6 +197,8 @@ fn bad_input_exits_2_naming_the_problem_without_output() {
             "--sampling-resolution \"lots\"",
         ),
         (&["--sampling-levels", "40"][..], "--sampling-levels 40"),
+        (&["--gpu-sampler-memory", "0"][..], "--gpu-sampler-memory"),
+        (&["--gpu-sampler-memory", "lots"][..], "16G"),
         (&["--sampling", "--no-sampling"][..], "--no-sampling"),
         (
             &["--sampling-tuck", "--no-sampling-tuck"][..],

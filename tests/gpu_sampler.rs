@@ -686,6 +686,20 @@ fn the_sampler_culls_the_same_on_the_gpu_backend() {
         extra.is_empty(),
         "the GPU hid objects the CPU left open: {extra:?} (CPU {n_cpu}, GPU {n_gpu})"
     );
+    // With room for one sampler at a time (`--gpu-sampler-memory`), four threads' lanes take
+    // turns with it: the same objects hidden.
+    let mut one = GpuBackend::new().expect("a second device");
+    assert_eq!(one.sampler_memory(), umbrasweep::bake::GPU_SAMPLERS_BUDGET);
+    one.set_sampler_memory(1);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(4)
+        .build()
+        .unwrap();
+    let (taking_turns, _) = pool.install(|| sample_forest(&one));
+    assert!(
+        taking_turns == on_gpu,
+        "one sampler at a time hid other objects"
+    );
 }
 
 /// Rendering in rounds (`GpuSampler::set_culling`, on by default) sets up only the clusters

@@ -154,16 +154,17 @@ pub struct SamplingCuller {
     /// and kept for the bake.
     gpu_scene: Mutex<Option<Arc<GpuSamplerScene>>>,
     /// Device bytes of the GPU samplers alive in all levels of all cells
-    /// ([`GPU_SAMPLERS_BUDGET`]).
+    /// ([`GpuBackend::sampler_memory`]).
     gpu_bytes: AtomicU64,
 }
 
-/// Device memory the GPU samplers of a bake may take together (each is its maps, 8× the
-/// resolution squared per view, and per-render buffers: about 0.7 GB at 512 pixels for the
-/// fine forest, 1.8 GB at 1,024). A level makes its first sampler whatever the budget, and more
-/// only while the bake's samplers fit; beyond, its lanes wait for one of its own (a GPU gains
-/// little from more renders in flight than it takes to keep it busy).
-pub const GPU_SAMPLERS_BUDGET: u64 = 4 << 30;
+/// Device memory the GPU samplers of a bake may take together by default
+/// ([`GpuBackend::sampler_memory`]; each is its maps, 8× the resolution squared per view, and
+/// per-render buffers: about 0.7 GB at 512 pixels for the fine forest, 1.8 GB at 1,024). A
+/// level makes its first sampler whatever the budget, and more only while the bake's samplers
+/// fit; beyond, its lanes wait for one of its own (a GPU gains little from more renders in
+/// flight than it takes to keep it busy).
+pub const GPU_SAMPLERS_BUDGET: u64 = crate::backend::gpu::sampler::DEFAULT_SAMPLER_MEMORY;
 
 /// The renderers of one level, shared by its lanes: a lane takes a free one, or makes one
 /// (the level's first always; more while `live + bytes ≤ budget`, `live` counting every
@@ -629,12 +630,12 @@ impl Culler for SamplingCuller {
             // meanwhile, so the results do not depend on the threads.
             // Hemicubes are large (about 100 bytes per pixel): lanes take one from the pool
             // and give it back, so a level allocates one per thread, not one per lane, and
-            // GPU samplers only as many as GPU_SAMPLERS_BUDGET holds.
+            // GPU samplers only as many as the backend's sampler memory holds.
             let pool: Pool<Renderer> = match &gpu_scene {
                 None => Pool::new(0, u64::MAX, &self.gpu_bytes),
-                Some((_, scene)) => Pool::new(
+                Some((g, scene)) => Pool::new(
                     GpuSampler::device_bytes(scene, resolution),
-                    GPU_SAMPLERS_BUDGET,
+                    g.sampler_memory(),
                     &self.gpu_bytes,
                 ),
             };

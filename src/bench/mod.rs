@@ -135,6 +135,10 @@ pub struct BenchOptions {
     /// Only the occlusion sweep's maps read back rather than kept on the device
     /// ([`GpuBackend::set_keep_sweep_maps`](crate::backend::gpu::GpuBackend::set_keep_sweep_maps)).
     pub sweep_maps_on_cpu: bool,
+    /// Device memory the sampler's GPU samplers may take together; `None` for the backend's
+    /// default
+    /// ([`GpuBackend::set_sampler_memory`](crate::backend::gpu::GpuBackend::set_sampler_memory)).
+    pub gpu_sampler_memory: Option<u64>,
 }
 
 impl Default for BenchOptions {
@@ -165,6 +169,7 @@ impl Default for BenchOptions {
             rsf_on_gpu: false,
             tests_on_cpu: false,
             sweep_maps_on_cpu: false,
+            gpu_sampler_memory: None,
             checkpoint_dir: None,
             checkpoint_seconds: 60.0,
             progress: None,
@@ -732,6 +737,9 @@ pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError>
     g.set_rsf_on_gpu(args.rsf_on_gpu).map_err(BenchError::Gpu)?;
     g.set_tests_on_device(!args.tests_on_cpu);
     g.set_keep_sweep_maps(!args.sweep_maps_on_cpu);
+    if let Some(bytes) = args.gpu_sampler_memory {
+        g.set_sampler_memory(bytes);
+    }
     Ok(g)
 }
 

@@ -409,6 +409,9 @@ pub struct GpuBackend {
     rsf_pipelines: Option<rsf::RsfPipelines>,
     /// Ray space factorization's charts asked on the device ([`GpuBackend::set_rsf_on_gpu`]).
     rsf_wanted: bool,
+    /// Device memory the shrunk-occluder sampler's GPU samplers of a bake may take together
+    /// ([`GpuBackend::set_sampler_memory`]).
+    sampler_memory: u64,
     /// Submissions and polls one thread at a time, each poll blocking until its submission is
     /// done ([`GpuBackend::set_serial_polls`]); held around each of them when set.
     serial_polls: Option<Mutex<()>>,
@@ -649,6 +652,7 @@ impl GpuBackend {
             rsf_pipelines,
             rsf_wanted: false,
             serial_polls: None,
+            sampler_memory: sampler::DEFAULT_SAMPLER_MEMORY,
             rsf_pool: Mutex::default(),
             view_pipelines,
             hdm_pipelines,
@@ -716,6 +720,24 @@ impl GpuBackend {
     /// The same PVS either way.
     pub fn set_keep_sweep_maps(&mut self, on: bool) {
         self.keep_wanted = on;
+    }
+
+    /// Lets the shrunk-occluder sampler's GPU samplers of one bake take up to `bytes` of
+    /// device memory together (default [`sampler::DEFAULT_SAMPLER_MEMORY`], 4 GiB; CLI
+    /// `--gpu-sampler-memory`). Each sampler serves one thread's renders (about 0.7 GB at 512
+    /// pixels on the fine forest, 1.8 GB at 1,024: [`sampler::GpuSampler::device_bytes`]); a
+    /// level makes its first whatever the budget and more only while they fit, and its other
+    /// lanes wait for one. wgpu cannot tell how much memory a device has, so the default suits
+    /// a consumer GPU; on a large one more samplers keep more of a bake's threads rendering.
+    /// The PVS is the same whatever the budget.
+    pub fn set_sampler_memory(&mut self, bytes: u64) {
+        self.sampler_memory = bytes;
+    }
+
+    /// Device memory the sampler's GPU samplers may take together
+    /// ([`GpuBackend::set_sampler_memory`]).
+    pub fn sampler_memory(&self) -> u64 {
+        self.sampler_memory
     }
 
     /// How occluders' Projections are made ([`GpuBackend::set_projection`]).

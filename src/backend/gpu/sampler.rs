@@ -527,6 +527,11 @@ fn storage_buffer(
 /// Bytes of one polygon point in its storage binding (three `f64`): the scene's largest.
 const POINT_BYTES: u64 = 24;
 
+/// Device memory the GPU samplers of one bake may take together unless
+/// [`GpuBackend::set_sampler_memory`] says otherwise: 4 GiB, so that sixteen threads do not ask
+/// a consumer GPU for 28 GB.
+pub const DEFAULT_SAMPLER_MEMORY: u64 = 4 << 30;
+
 /// Bytes of one resident occludee triangle (nine `f32`: scene vertices are `f32`, so the
 /// shader's `f64` of them is the CPU's exactly).
 pub const TRIANGLE_BYTES: u64 = 36;
