@@ -26,7 +26,10 @@ fn main() {
     let scene = umbrasweep::scene::load(Path::new(&args[1])).expect("SCENE");
     let cells = umbrasweep::cells::load_json(Path::new(&args[2])).expect("CELLS");
     let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let threads: Vec<usize> = match args.get(3).filter(|a| a.as_bytes()[0].is_ascii_digit()) {
+    let threads: Vec<usize> = match args
+        .get(3)
+        .filter(|a| a.starts_with(|c: char| c.is_ascii_digit()))
+    {
         Some(list) => list
             .split(',')
             .map(|t| t.parse().expect("THREADS"))
