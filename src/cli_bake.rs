@@ -1027,6 +1027,9 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 .map(|d| format!(" ({d})"))
                 .unwrap_or_default()
         );
+        for note in &result.notes {
+            eprintln!("            {note}");
+        }
         if let Some(line) = backend.stats_summary(s.cells) {
             eprintln!("gpu         {line}");
         }

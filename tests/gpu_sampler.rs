@@ -584,6 +584,15 @@ fn sample_forest(backend: &dyn RasterBackend) -> (Vec<bool>, u64) {
 /// [`sample_forest`] with the sampler's whole account, with or without the tuck pass (which
 /// has no GPU twin: with it the GPU backend samples on the CPU).
 fn sample_forest_work(backend: &dyn RasterBackend, tuck: bool) -> (Vec<bool>, CullerWork) {
+    let (hidden, work, _) = sample_forest_noted(backend, tuck);
+    (hidden, work)
+}
+
+/// [`sample_forest_work`] with the culler's note on the bake ([`Culler::note`]).
+fn sample_forest_noted(
+    backend: &dyn RasterBackend,
+    tuck: bool,
+) -> (Vec<bool>, CullerWork, Option<String>) {
     let (scene, cell) = small_forest();
     let settings = BakeSettings {
         sampling: SweepChoice::On,
@@ -602,7 +611,8 @@ fn sample_forest_work(backend: &dyn RasterBackend, tuck: bool) -> (Vec<bool>, Cu
         hidden: vec![false; scene.objects.len()],
         known_visible: None,
     };
-    let work = SamplingCuller::default()
+    let culler = SamplingCuller::default();
+    let work = culler
         .cull(
             &prepared,
             &cell,
@@ -611,7 +621,7 @@ fn sample_forest_work(backend: &dyn RasterBackend, tuck: bool) -> (Vec<bool>, Cu
             &mut umbrasweep::bake::NoPlanes,
         )
         .unwrap();
-    (state.hidden, work)
+    (state.hidden, work, culler.note())
 }
 
 /// With the tuck pass (`--sampling-tuck`), which has no GPU twin, the GPU backend's sampler
@@ -695,11 +705,19 @@ fn the_sampler_culls_the_same_on_the_gpu_backend() {
         .num_threads(4)
         .build()
         .unwrap();
-    let (taking_turns, _) = pool.install(|| sample_forest(&one));
+    let (taking_turns, _, note) = pool.install(|| sample_forest_noted(&one, false));
     assert!(
         taking_turns == on_gpu,
         "one sampler at a time hid other objects"
     );
+    // The bake's summary says how much device memory the samplers took against the budget.
+    let note = note.expect("a note on the GPU samplers");
+    assert!(
+        note.starts_with("GPU samplers took at most 0.")
+            && note.contains("of the 0.00 GiB allowed"),
+        "{note}"
+    );
+    assert_eq!(sample_forest_noted(&CpuBackend::new(), false).2, None);
 }
 
 /// Rendering in rounds (`GpuSampler::set_culling`, on by default) sets up only the clusters

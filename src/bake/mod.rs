@@ -179,6 +179,10 @@ pub struct BakeResult {
     /// and why ([`crate::backend::gpu::sampler::GpuSamplerScene::refusal`]); otherwise `None`.
     #[serde(default)]
     pub sampling_device: Option<String>,
+    /// What the cullers shared over the whole bake, one line each ([`Culler::note`]: the
+    /// sampler's GPU memory and waits). Not written: it depends on the threads.
+    #[serde(skip)]
+    pub notes: Vec<String>,
     /// The names of the cullers every cell ran, in order (read back against
     /// [`CULLER_NAMES`]).
     #[serde(deserialize_with = "pipeline::culler_names")]
@@ -417,6 +421,7 @@ pub fn bake_cells(
         sampling: prepared.sampling,
         sampling_reason: prepared.sampling_reason.clone(),
         sampling_device: prepared.sampler_device(backend),
+        notes: prepared.culler_notes(),
         cullers: prepared.culler_names(),
     })
 }

@@ -148,6 +148,13 @@ pub trait Culler: Send + Sync {
         state: &mut CullState,
         observe: &mut dyn PlaneSink,
     ) -> Result<CullerWork, BakeError>;
+
+    /// A line for the bake's summary about what the culler shared over the whole bake (such as
+    /// the sampler's GPU memory), or `None`. Not in the PVS document: it depends on the
+    /// threads.
+    fn note(&self) -> Option<String> {
+        None
+    }
 }
 
 /// What a culler hands its rendered planes to: dumps and reports ([`super::Prepared::cell_observed`]).

@@ -395,6 +395,11 @@ impl<'a> Prepared<'a> {
         self.sampler.as_ref().map(|d| d.eps)
     }
 
+    /// The cullers' notes on the bake so far ([`super::Culler::note`]).
+    pub fn culler_notes(&self) -> Vec<String> {
+        self.cullers.iter().filter_map(|c| c.note()).collect()
+    }
+
     /// The names of the cullers every cell runs, in order.
     pub fn culler_names(&self) -> Vec<&'static str> {
         self.cullers.iter().map(|c| c.name()).collect()

@@ -153,9 +153,31 @@ pub struct SamplingCuller {
     /// With the GPU backend: the occluder polygons on its device, uploaded by the first cell
     /// and kept for the bake.
     gpu_scene: Mutex<Option<Arc<GpuSamplerScene>>>,
-    /// Device bytes of the GPU samplers alive in all levels of all cells
+    /// The GPU samplers' device memory over all levels of all cells
     /// ([`GpuBackend::sampler_memory`]).
-    gpu_bytes: AtomicU64,
+    gpu_use: DeviceUse,
+}
+
+/// The device memory a bake's GPU samplers take: now, at most, the budget, and how long lanes
+/// waited for a sampler because the budget held no more.
+#[derive(Debug, Default)]
+struct DeviceUse {
+    /// Bytes of the samplers alive.
+    live: AtomicU64,
+    /// Most bytes alive at once.
+    peak: AtomicU64,
+    /// The budget ([`GpuBackend::sampler_memory`]; 0 before a GPU level).
+    budget: AtomicU64,
+    /// Nanoseconds lanes waited for a sampler, summed over the lanes.
+    waited_ns: AtomicU64,
+}
+
+impl DeviceUse {
+    /// Adds `bytes` to the live ones (and the peak).
+    fn add(&self, bytes: u64) {
+        let now = self.live.fetch_add(bytes, Ordering::AcqRel) + bytes;
+        self.peak.fetch_max(now, Ordering::AcqRel);
+    }
 }
 
 /// Device memory the GPU samplers of a bake may take together by default
@@ -176,18 +198,18 @@ struct Pool<'l, T> {
     given: std::sync::Condvar,
     bytes: u64,
     budget: u64,
-    live: &'l AtomicU64,
+    used: &'l DeviceUse,
 }
 
 impl<'l, T> Pool<'l, T> {
-    /// A pool whose renderers take `bytes` each of a `budget` shared through `live`.
-    fn new(bytes: u64, budget: u64, live: &'l AtomicU64) -> Self {
+    /// A pool whose renderers take `bytes` each of a `budget` shared through `used`.
+    fn new(bytes: u64, budget: u64, used: &'l DeviceUse) -> Self {
         Pool {
             state: Mutex::new((Vec::new(), 0)),
             given: std::sync::Condvar::new(),
             bytes,
             budget,
-            live,
+            used,
         }
     }
 
@@ -199,11 +221,18 @@ impl<'l, T> Pool<'l, T> {
 
     /// Reserves one renderer's bytes when they fit the budget.
     fn reserve(&self) -> bool {
-        self.live
+        let reserved = self
+            .used
+            .live
             .fetch_update(Ordering::AcqRel, Ordering::Acquire, |l| {
                 (l.saturating_add(self.bytes) <= self.budget).then_some(l + self.bytes)
-            })
-            .is_ok()
+            });
+        if let Ok(before) = reserved {
+            self.used
+                .peak
+                .fetch_max(before + self.bytes, Ordering::AcqRel);
+        }
+        reserved.is_ok()
     }
 
     /// A renderer: a free one, a new one from `make` (`None` when it fails), or the next one
@@ -217,7 +246,7 @@ impl<'l, T> Pool<'l, T> {
             let first = st.1 == 0;
             if first || self.reserve() {
                 if first {
-                    self.live.fetch_add(self.bytes, Ordering::AcqRel);
+                    self.used.add(self.bytes);
                 }
                 st.1 += 1;
                 drop(st);
@@ -225,12 +254,16 @@ impl<'l, T> Pool<'l, T> {
                 if r.is_none() {
                     let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
                     st.1 -= 1;
-                    self.live.fetch_sub(self.bytes, Ordering::AcqRel);
+                    self.used.live.fetch_sub(self.bytes, Ordering::AcqRel);
                     self.given.notify_all();
                 }
                 return r;
             }
+            let t = Instant::now();
             st = self.given.wait(st).unwrap_or_else(|e| e.into_inner());
+            self.used
+                .waited_ns
+                .fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
         }
     }
 
@@ -248,7 +281,8 @@ impl<'l, T> Pool<'l, T> {
             let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
             let free = std::mem::take(&mut st.0);
             st.1 -= free.len();
-            self.live
+            self.used
+                .live
                 .fetch_sub(free.len() as u64 * self.bytes, Ordering::AcqRel);
             free
         };
@@ -259,7 +293,9 @@ impl<'l, T> Pool<'l, T> {
 impl<T> Drop for Pool<'_, T> {
     fn drop(&mut self) {
         let made = self.state.get_mut().map_or(0, |st| st.1) as u64;
-        self.live.fetch_sub(made * self.bytes, Ordering::AcqRel);
+        self.used
+            .live
+            .fetch_sub(made * self.bytes, Ordering::AcqRel);
     }
 }
 
@@ -409,6 +445,30 @@ struct Shared<'a> {
 impl Culler for SamplingCuller {
     fn name(&self) -> &'static str {
         Self::NAME
+    }
+
+    /// With GPU samplers: the most device memory they took at once against the budget, and
+    /// how long lanes waited for one (`--gpu-sampler-memory` lets more run at once).
+    fn note(&self) -> Option<String> {
+        let u = &self.gpu_use;
+        let budget = u.budget.load(Ordering::Relaxed);
+        if budget == 0 {
+            return None;
+        }
+        let gb = |b: u64| b as f64 / f64::from(1u32 << 30);
+        let waited = u.waited_ns.load(Ordering::Relaxed) as f64 * 1e-9;
+        Some(format!(
+            "GPU samplers took at most {:.2} GiB at once of the {:.2} GiB allowed{}",
+            gb(u.peak.load(Ordering::Relaxed)),
+            gb(budget),
+            if waited > 0.0 {
+                format!(
+                    "; threads waited {waited:.1} s in all for one (--gpu-sampler-memory allows more)"
+                )
+            } else {
+                String::new()
+            }
+        ))
     }
 
     fn cull(
@@ -632,12 +692,17 @@ impl Culler for SamplingCuller {
             // and give it back, so a level allocates one per thread, not one per lane, and
             // GPU samplers only as many as the backend's sampler memory holds.
             let pool: Pool<Renderer> = match &gpu_scene {
-                None => Pool::new(0, u64::MAX, &self.gpu_bytes),
-                Some((g, scene)) => Pool::new(
-                    GpuSampler::device_bytes(scene, resolution),
-                    g.sampler_memory(),
-                    &self.gpu_bytes,
-                ),
+                None => Pool::new(0, u64::MAX, &self.gpu_use),
+                Some((g, scene)) => {
+                    self.gpu_use
+                        .budget
+                        .store(g.sampler_memory(), Ordering::Relaxed);
+                    Pool::new(
+                        GpuSampler::device_bytes(scene, resolution),
+                        g.sampler_memory(),
+                        &self.gpu_use,
+                    )
+                }
             };
             // A GPU sampler the device cannot make at this level's resolution (textures
             // larger than it takes, or out of memory) is replaced by the CPU's hemicube, which
@@ -1610,11 +1675,12 @@ mod tests {
     /// gives its bytes back.
     #[test]
     fn the_pool_keeps_to_its_budget_and_every_lane_gets_a_renderer() {
-        let live = AtomicU64::new(0);
+        let used = DeviceUse::default();
+        let live = &used.live;
         // Another level holds 10 of the 35 bytes: two renderers of 10 fit, a third does not.
-        let other = Pool::<u32>::new(10, 35, &live);
+        let other = Pool::<u32>::new(10, 35, &used);
         assert_eq!(other.take(|| Some(0)), Some(0));
-        let pool = Pool::<u32>::new(10, 35, &live);
+        let pool = Pool::<u32>::new(10, 35, &used);
         let holding = std::sync::atomic::AtomicUsize::new(0);
         let most = std::sync::atomic::AtomicUsize::new(0);
         let lanes = std::sync::atomic::AtomicUsize::new(0);
@@ -1635,6 +1701,7 @@ mod tests {
         });
         assert_eq!(lanes.load(Ordering::SeqCst), 400);
         assert_eq!(pool.made(), 2, "two fit beside the other level's one");
+        assert_eq!(used.peak.load(Ordering::SeqCst), 30);
         assert!(most.load(Ordering::SeqCst) <= 2);
         assert_eq!(live.load(Ordering::SeqCst), 30);
         // Cleared (a pilot's turn), its renderers and their bytes are gone; the next take
@@ -1648,13 +1715,18 @@ mod tests {
         drop(pool);
         assert_eq!(live.load(Ordering::SeqCst), 10);
         // Over budget already: a new level still makes its first, and only that.
-        let big = Pool::<u32>::new(100, 35, &live);
+        let big = Pool::<u32>::new(100, 35, &used);
         assert_eq!(big.take(|| Some(1)), Some(1));
         big.give(1);
         assert_eq!(big.take(|| Some(2)), Some(1));
         assert_eq!(big.made(), 1);
+        assert_eq!(
+            used.peak.load(Ordering::SeqCst),
+            110,
+            "the other's 10 and the first 100"
+        );
         // A renderer that cannot be made is not counted.
-        let failing = Pool::<u32>::new(5, 35, &live);
+        let failing = Pool::<u32>::new(5, 35, &used);
         assert_eq!(failing.take(|| None), None);
         assert_eq!(failing.made(), 0);
         drop((big, failing, other));

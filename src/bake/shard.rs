@@ -294,6 +294,7 @@ mod tests {
             sampling: false,
             sampling_reason: "off".into(),
             sampling_device: None,
+            notes: Vec::new(),
             cullers: vec!["occlusion_sweep"],
         };
         let json = serde_json::to_string(&r).unwrap();
