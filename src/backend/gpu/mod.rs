@@ -691,8 +691,9 @@ impl GpuBackend {
     /// Runs ray space factorization's charts on the device (`on`), or the CPU's charts (the
     /// default: measured faster on every device so far, since each wave of a cell's traversal
     /// is a submission waited for: on an NVIDIA H200, 328 ms per city cell on the device against
-    /// 84 ms on the same machine's CPU, 402 against 56 for Munich; on lavapipe 729 against 58).
-    /// Both give the same charts (`tests/gpu.rs`).
+    /// 84 ms on the same machine's CPU, 402 against 56 for Munich, measured while a bake's
+    /// threads submitted one at a time, [`GpuBackend::set_serial_polls`]; on lavapipe 729
+    /// against 58). Both give the same charts (`tests/gpu.rs`).
     ///
     /// # Errors
     /// [`BackendError::MissingFeatures`] for `on` on a device without
