@@ -1,8 +1,8 @@
 //! Cells baked on the GPU backend from 1, 2, 4, … threads at once, with the threads' submissions
 //! and polls serial (each poll blocking, one thread at a time: `GpuBackend::set_serial_polls`,
 //! how every GPU path waited before December 2026) and concurrent (the default): wall time,
-//! cells per second and the device's counters per cell for each, and whether every bake gave
-//! the PVS of the first. On a real GPU the concurrent way should scale with the threads where
+//! cells per second and the device's counters per cell for each, whether every bake gave the
+//! PVS of the first, and per thread count the concurrent way's speed-up. On a real GPU the concurrent way should scale with the threads where
 //! the serial way cannot (its device idles between one thread's submission and the next); on
 //! lavapipe, whose queue runs one submission at a time on the same two cores, it cannot show.
 //!
@@ -46,6 +46,7 @@ fn main() {
         settings.sampling = SweepChoice::On;
     }
     let mut first = None;
+    let mut walls = Vec::new();
     for serial in [true, false] {
         let way = if serial { "serial" } else { "concurrent" };
         for &t in &threads {
@@ -80,6 +81,15 @@ fn main() {
                 n as f64 / wall,
                 gpu.stats_summary(n).unwrap_or_default(),
             );
+            walls.push(wall);
         }
+    }
+    // Cells per second of the concurrent way over the serial way's, per thread count.
+    let (serial, concurrent) = walls.split_at(threads.len());
+    for ((t, s), c) in threads.iter().zip(serial).zip(concurrent) {
+        println!(
+            "{t:>2} threads: concurrent {:.2}× the serial way's cells per second",
+            s / c
+        );
     }
 }
