@@ -2,9 +2,10 @@
 //! and polls serial (each poll blocking, one thread at a time: `GpuBackend::set_serial_polls`,
 //! how every GPU path waited before December 2026) and concurrent (the default): wall time,
 //! cells per second and the device's counters per cell for each, whether every bake gave the
-//! PVS of the first, and per thread count the concurrent way's speed-up. On a real GPU the concurrent way should scale with the threads where
-//! the serial way cannot (its device idles between one thread's submission and the next); on
-//! lavapipe, whose queue runs one submission at a time on the same two cores, it cannot show.
+//! PVS of the first, and per thread count the concurrent way's speed-up. On a real GPU the
+//! concurrent way should scale with the threads where the serial way cannot (its device idles
+//! between one thread's submission and the next); on lavapipe, whose queue runs one submission
+//! at a time on the same two cores, it cannot show.
 //!
 //! `cargo run --release --example gpu_threads -- SCENE CELLS [THREADS] [rsf] [sampling]`
 //! (`THREADS`: a comma-separated list, default `1,2,4,8,16` up to the machine's cores; `rsf`:
