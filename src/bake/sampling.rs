@@ -173,10 +173,19 @@ struct DeviceUse {
 }
 
 impl DeviceUse {
-    /// Adds `bytes` to the live ones (and the peak).
-    fn add(&self, bytes: u64) {
-        let now = self.live.fetch_add(bytes, Ordering::AcqRel) + bytes;
-        self.peak.fetch_max(now, Ordering::AcqRel);
+    /// Adds `bytes` to the live ones when they stay within `budget` (any `None`), raising the
+    /// peak; false, adding nothing, when they would not.
+    fn add(&self, bytes: u64, budget: Option<u64>) -> bool {
+        let added = self
+            .live
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |l| {
+                let now = l.saturating_add(bytes);
+                budget.is_none_or(|b| now <= b).then_some(now)
+            });
+        if let Ok(before) = added {
+            self.peak.fetch_max(before + bytes, Ordering::AcqRel);
+        }
+        added.is_ok()
     }
 }
 
@@ -221,18 +230,7 @@ impl<'l, T> Pool<'l, T> {
 
     /// Reserves one renderer's bytes when they fit the budget.
     fn reserve(&self) -> bool {
-        let reserved = self
-            .used
-            .live
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |l| {
-                (l.saturating_add(self.bytes) <= self.budget).then_some(l + self.bytes)
-            });
-        if let Ok(before) = reserved {
-            self.used
-                .peak
-                .fetch_max(before + self.bytes, Ordering::AcqRel);
-        }
-        reserved.is_ok()
+        self.used.add(self.bytes, Some(self.budget))
     }
 
     /// A renderer: a free one, a new one from `make` (`None` when it fails), or the next one
@@ -246,7 +244,7 @@ impl<'l, T> Pool<'l, T> {
             let first = st.1 == 0;
             if first || self.reserve() {
                 if first {
-                    self.used.add(self.bytes);
+                    self.used.add(self.bytes, None);
                 }
                 st.1 += 1;
                 drop(st);

@@ -53,6 +53,15 @@ const POLL_SPIN: Duration = Duration::from_micros(50);
 /// Shortest and longest pause between two polls of one wait; in between, an eighth of the time
 /// waited so far, so that a pause adds at most about an eighth to a long wait.
 const POLL_PAUSE: (Duration, Duration) = (Duration::from_micros(20), Duration::from_millis(1));
+/// Between two non-blocking polls of a wait that has lasted `waited`: a yield for the first
+/// [`POLL_SPIN`], then a sleep of an eighth of `waited` within [`POLL_PAUSE`].
+fn pause(waited: Duration) {
+    if waited < POLL_SPIN {
+        std::thread::yield_now();
+    } else {
+        std::thread::sleep((waited / 8).clamp(POLL_PAUSE.0, POLL_PAUSE.1));
+    }
+}
 /// How long one blocking poll of the serial way (`GpuBackend::set_serial_polls`) blocks before
 /// the device-lost flag and the deadline are checked again, and other threads may submit.
 const SERIAL_POLL_SLICE: Duration = Duration::from_millis(2);
@@ -1538,8 +1547,7 @@ impl GpuBackend {
     /// serialises them ([`Self::poll_until`] says why none is needed), unless
     /// [`GpuBackend::set_serial_polls`](super::GpuBackend::set_serial_polls) asked for it.
     pub(super) fn submit_commands(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
-        let _one =
-            (self.serial_polls.as_ref()).map(|m| m.lock().unwrap_or_else(|e| e.into_inner()));
+        let _turn = self.serial_turn();
         self.queue.submit([commands])
     }
 
@@ -1577,14 +1585,11 @@ impl GpuBackend {
         let start = Instant::now();
         loop {
             self.check_failure()?;
-            let polled = match &self.serial_polls {
-                Some(serial) => {
-                    let _one = serial.lock().unwrap_or_else(|e| e.into_inner());
-                    self.device.poll(wgpu::PollType::Wait {
-                        submission_index: Some(submission.clone()),
-                        timeout: Some(SERIAL_POLL_SLICE),
-                    })
-                }
+            let polled = match self.serial_turn() {
+                Some(_turn) => self.device.poll(wgpu::PollType::Wait {
+                    submission_index: Some(submission.clone()),
+                    timeout: Some(SERIAL_POLL_SLICE),
+                }),
                 None => self.device.poll(wgpu::PollType::Poll),
             };
             match polled {
@@ -1608,14 +1613,17 @@ impl GpuBackend {
                     deadline: DEADLINE,
                 });
             }
-            if self.serial_polls.is_some() {
-                // The blocking poll waited.
-            } else if waited < POLL_SPIN {
-                std::thread::yield_now();
-            } else {
-                std::thread::sleep((waited / 8).clamp(POLL_PAUSE.0, POLL_PAUSE.1));
+            // The serial way's poll blocked; a non-blocking one pauses before the next.
+            if self.serial_polls.is_none() {
+                pause(waited);
             }
         }
+    }
+
+    /// The serial way's turn ([`GpuBackend::set_serial_polls`](super::GpuBackend::set_serial_polls)):
+    /// its lock, held around one submission or poll; `None` in the default concurrent way.
+    fn serial_turn(&self) -> Option<std::sync::MutexGuard<'_, ()>> {
+        (self.serial_polls.as_ref()).map(|m| m.lock().unwrap_or_else(|e| e.into_inner()))
     }
 
     /// Makes `slot` a buffer of at least `size` bytes (grown to a power of two, never shrunk).
