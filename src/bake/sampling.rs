@@ -120,7 +120,12 @@ impl SamplerData {
         scene: &crate::scene::Scene,
         settings: &super::BakeSettings,
     ) -> Self {
+        // The sampler casts few rays (`--sampling-rays` per cell and a few per sample point),
+        // so its ray caster takes a fast build: on the paper-size forest 8 s instead of 32 s,
+        // for about 0.06 s more per cell at 100,000 rays (`SceneRays::with_build`). (Built
+        // beside the polygons' BVH, the two took 1.5 GB more at once for 7 s less.)
         let occluders = SampleOccluders::new(scene, prepared_occ, settings.alpha_occluders);
+        let rays = SceneRays::with_build(scene, obvhs::BvhBuildParams::fast_build());
         let s = settings.sampling_settings;
         let (eps, eps_reason) = match s.eps {
             Some(e) => (e, format!("--sampling-eps {e}")),
@@ -139,7 +144,7 @@ impl SamplerData {
         };
         SamplerData {
             occluders,
-            rays: SceneRays::new(scene),
+            rays,
             eps,
             eps_reason,
             settings: s,

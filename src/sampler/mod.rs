@@ -195,6 +195,7 @@ use crate::scene::alpha::Coverage;
 use crate::scene::{Scene, is_degenerate};
 use glam::{DVec2, DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// One convex planar occluder polygon of the sampler.
@@ -445,26 +446,49 @@ impl SampleOccluders {
         let mut bvh =
             obvhs::bvh2::builder::build_bvh2(&boxes, obvhs::BvhBuildParams::fast_build(), &mut t);
         // Store the polygons in the BVH's leaf order, so that a traversal reads them (and
-        // their points) from consecutive memory.
-        let mut points = Vec::with_capacity(self.points.len());
-        let mut polys = Vec::with_capacity(self.polys.len());
-        let mut bounds = Vec::with_capacity(self.bounds.len());
-        let mut card_of = Vec::new();
-        let any_card = !self.cards.is_empty();
-        for slot in bvh.primitive_indices.iter_mut() {
-            let p = self.polys[*slot as usize];
-            if any_card {
-                card_of.push(self.card_of.get(*slot as usize).copied().unwrap_or(NO_CARD));
-            }
-            let start = points.len() as u32;
-            points.extend_from_slice(&self.points[p.start as usize..p.end as usize]);
-            bounds.push(self.bounds[*slot as usize]);
-            *slot = polys.len() as u32;
-            polys.push(SamplePoly {
-                start,
-                end: points.len() as u32,
-                object: p.object,
-            });
+        // their points) from consecutive memory. (In parallel: the paper-size forest's 7.9 M
+        // polygons took 3.7 s on one thread.)
+        let order = &bvh.primitive_indices;
+        let old_polys = &self.polys;
+        let mut polys: Vec<SamplePoly> = order
+            .par_iter()
+            .map(|&slot| {
+                let p = old_polys[slot as usize];
+                SamplePoly {
+                    start: 0,
+                    end: p.end - p.start,
+                    object: p.object,
+                }
+            })
+            .collect();
+        let mut start = 0u32;
+        for p in &mut polys {
+            p.start = start;
+            start += p.end;
+            p.end = start;
+        }
+        let old_points = &self.points;
+        let points: Vec<DVec3> = order
+            .par_iter()
+            .flat_map_iter(|&slot| {
+                let p = old_polys[slot as usize];
+                old_points[p.start as usize..p.end as usize].iter().copied()
+            })
+            .collect();
+        let bounds: Vec<DAabb> = order
+            .par_iter()
+            .map(|&slot| self.bounds[slot as usize])
+            .collect();
+        let card_of: Vec<u32> = if self.cards.is_empty() {
+            Vec::new()
+        } else {
+            order
+                .iter()
+                .map(|&slot| self.card_of.get(slot as usize).copied().unwrap_or(NO_CARD))
+                .collect()
+        };
+        for (k, slot) in bvh.primitive_indices.iter_mut().enumerate() {
+            *slot = k as u32;
         }
         self.points = points;
         self.polys = polys;
