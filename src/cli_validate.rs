@@ -97,7 +97,10 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<i32> {
         hunt: args.hunt,
         confirm_rays: args.confirm_rays,
     };
-    let index = SceneRays::new(&scene);
+    // The rays it may cast, for the ray caster's build (a slow build pays only for many).
+    let confirm = if args.hunt { 0 } else { args.confirm_rays };
+    let planned = (doc.cells.len() as u64).saturating_mul(args.rays.saturating_add(confirm));
+    let index = SceneRays::for_rays(&scene, planned);
     let report = check_with(&index, &scene, &doc, &opts)?;
     let text = format!(
         "{}{} rays in {:.2} s ({:.2} M rays/s, {} threads)\n",

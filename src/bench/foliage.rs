@@ -520,7 +520,9 @@ fn check_rows(
     rows: &mut [FoliageRow],
     docs: &[(usize, crate::pvs::PvsDocument)],
 ) {
-    let index = SceneRays::new(scene);
+    let checks = args.hunt_rays.unwrap_or(0) + args.confirm_rays.unwrap_or(0);
+    let cells: u64 = docs.iter().map(|(_, d)| d.cells.len() as u64).sum();
+    let index = SceneRays::for_rays(scene, cells * checks);
     for (k, doc) in docs {
         let row = &mut rows[*k];
         let label = format!("foliage {study} [{}]", row.variant);
@@ -1000,7 +1002,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                 ids.len(),
                 plan.rays
             );
-            let index = SceneRays::new(&f.scene);
+            let index = SceneRays::for_rays(&f.scene, ids.len() as u64 * plan.rays);
             for i in ids {
                 f.truth[i] = Some(sample(
                     &index, &f.scene, f.cells[i], plan.rays, args.seed, i,

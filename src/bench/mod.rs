@@ -864,7 +864,10 @@ fn bench_scene(
     let seed = args.seed;
     let scene = &bs.scene;
     let mut out = Vec::new();
-    let index = SceneRays::new(scene);
+    // The rays it may cast: each cell's sample, and each backend's hunt and confirmation.
+    let checks = args.hunt_rays.unwrap_or(0) + args.confirm_rays.unwrap_or(0);
+    let per_cell = plan.rays + backends.len() as u64 * checks;
+    let index = SceneRays::for_rays(scene, bs.cells.len() as u64 * per_cell);
     // Sampled visible set and its time, per cell, shared by the backends.
     let mut samples: Vec<Option<Sampled>> = vec![None; bs.cells.len()];
     for &(backend, max_cells) in backends {
