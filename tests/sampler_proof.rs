@@ -41,7 +41,9 @@
 //! asserts that the check then finds unblocked segments; `shrink_matters` asserts that a box
 //! hidden from the eye alone but seen from a point of the ball is reported open (and hidden for
 //! a tiny ball) in many frames. On a violation the configuration is reduced (polygons removed
-//! while the box stays hidden) and printed in full. Counts are halved in debug builds.
+//! while the box stays hidden) and printed in full. Counts are halved in debug builds and
+//! multiplied by `UMBRASWEEP_SAMPLER_PROOF_SCALE` when it is set (longer campaigns reach new
+//! configurations).
 #![cfg(feature = "bake")]
 
 use glam::DVec3;
@@ -52,13 +54,20 @@ use umbrasweep::sampler::{BoxTest, Hemicube, SampleOccluders};
 /// Relative margin of the strict crossing test (about 450 units of rounding of `f64`).
 const TOL: f64 = 1e-13;
 
-/// Configurations per family: fewer in debug builds (`cargo test`).
+/// Configurations per family: fewer in debug builds (`cargo test`), and
+/// `UMBRASWEEP_SAMPLER_PROOF_SCALE` times as many (new ones: configurations are numbered)
+/// when it is set, for longer campaigns.
 fn count(release: usize) -> usize {
-    if cfg!(debug_assertions) {
-        release.div_ceil(2)
-    } else {
-        release
-    }
+    let scale: usize = std::env::var("UMBRASWEEP_SAMPLER_PROOF_SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    scale
+        * if cfg!(debug_assertions) {
+            release.div_ceil(2)
+        } else {
+            release
+        }
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -55,4 +55,4 @@ pub use confirm::CONFIRM_ROUNDS;
 pub use hunt::{HUNT_PHASE, rays_per_culled_object};
 pub use sample::{CHUNK, CellSample, Witness, sample_cell};
 pub(crate) use sample::{chunk_rng, sphere_direction, uniform_origin};
-pub use trace::{SceneRays, TraceHit};
+pub use trace::{SLOW_BUILD_RAYS_PER_TRIANGLE, SceneRays, TraceHit};
