@@ -410,20 +410,27 @@ fn split_lines(bytes: &[u8], size: usize) -> Vec<&[u8]> {
 /// The lines of a chunk and its vertex statements (`v`, well formed or not).
 fn count_lines(chunk: &[u8]) -> (usize, u64) {
     let (mut lines, mut verts) = (0usize, 0u64);
-    let mut pos = 0;
-    while pos < chunk.len() {
+    for line in lines_of(chunk) {
         lines += 1;
-        let end = find_newline(chunk, pos);
-        let mut t = Tokens {
-            s: &chunk[pos..end],
-            i: 0,
-        };
-        if t.next() == Some(b"v".as_slice()) {
+        if (Tokens { s: line, i: 0 }).next() == Some(b"v".as_slice()) {
             verts += 1;
         }
-        pos = end + 1;
     }
     (lines, verts)
+}
+
+/// The lines of `bytes` without their `\n` (a last line without one included, no empty line
+/// after a final `\n`).
+fn lines_of(bytes: &[u8]) -> impl Iterator<Item = &[u8]> {
+    let mut pos = 0;
+    std::iter::from_fn(move || {
+        (pos < bytes.len()).then(|| {
+            let end = find_newline(bytes, pos);
+            let line = &bytes[pos..end];
+            pos = end + 1;
+            line
+        })
+    })
 }
 
 /// A statement of a chunk that the replay applies in order ([`Parser::run`]).
@@ -459,15 +466,9 @@ impl Chunk {
     /// the face passing 2^32 triangles; 0 first).
     fn parse(chunk: &[u8], first_vertex: u64, first_triangle: u64) -> Chunk {
         let mut c = Chunk::default();
-        let mut line_no = 0usize;
-        let mut pos = 0;
-        while pos < chunk.len() {
-            line_no += 1;
-            let end = find_newline(chunk, pos);
-            let line = &chunk[pos..end];
-            pos = end + 1;
+        for (k, line) in lines_of(chunk).enumerate() {
             if let Err(message) = c.line(line, first_vertex, first_triangle) {
-                c.error = Some((line_no, message));
+                c.error = Some((k + 1, message));
                 break;
             }
         }
@@ -567,13 +568,8 @@ fn parse_mtl(
 ) {
     let mut current: Option<String> = None;
     let mut name = String::new();
-    let mut pos = 0;
-    let mut line_no = 0;
-    while pos < bytes.len() {
-        line_no += 1;
-        let end = find_newline(bytes, pos);
-        let line = &bytes[pos..end];
-        pos = end + 1;
+    for (k, line) in lines_of(bytes).enumerate() {
+        let line_no = k + 1;
         let mut t = Tokens { s: line, i: 0 };
         let Some(key) = t.next() else { continue };
         if key == b"newmtl" {
