@@ -464,7 +464,10 @@ fn floor_candidates(
     let size = column_size(opts, min, max, "the scene")?;
     let grid = Grid::centred(min, max, size)?;
     grid.record(stats);
-    let rays = SceneRays::new(scene);
+    // About `rays_per_side²` rays per column, each traced again below every floor it meets
+    // (taken as four): the ray caster's build for that many (the same hits whichever).
+    let planned = u64::from(grid.nx) * u64::from(grid.nz) * u64::from(opts.rays_per_side).pow(2);
+    let rays = SceneRays::for_rays(scene, planned.saturating_mul(4));
     let down = Down::new(scene, &rays, bounds, opts);
     let columns: Vec<(u32, u32)> = (0..grid.nz)
         .flat_map(|j| (0..grid.nx).map(move |i| (i, j)))
