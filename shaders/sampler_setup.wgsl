@@ -25,6 +25,10 @@
 const MAXP: u32 = 8u;
 const TILE: u32 = 8u;
 const SQRT_2: f64 = 1.4142135623730951lf;
+// `hemicube::ORIENT_TOL`: an edge's inner side is the centroid's only when the centroid lies
+// well beyond rounding from the edge's plane; nearer (a degenerate or sliver polygon) the
+// polygon is left out.
+const ORIENT_TOL: f64 = 1e-12lf;
 
 // f64 frame: eye (3), ε, the rectangle's half sides (2), the farthest box corner's distance.
 @group(0) @binding(0) var<storage, read> frame: array<f64>;
@@ -248,13 +252,16 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
     let c_ax = (axis + 2u) % 3u;
     var q: array<vec3<f64>, 8>;
     var centroid = vec3<f64>(0.0lf, 0.0lf, 0.0lf);
+    var far = 0.0lf;
     for (var k = 0u; k < n; k++) {
         let i = 3u * (pr.x + k);
         let r = vec3<f64>(points[i], points[i + 1u], points[i + 2u]) - eye;
         q[k] = r;
         centroid += r;
+        far = max(far, len3(r));
     }
     centroid /= f64(n);
+    far *= f64(n);
     var cr: array<vec3<f64>, 8>;
     var reach: array<f64, 8>;
     var normal = vec3<f64>(0.0lf, 0.0lf, 0.0lf);
@@ -302,7 +309,11 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
             return;
         }
         var mk = c / cl;
-        if dot3(mk, centroid) < 0.0lf {
+        let side = dot3(mk, centroid);
+        if !(abs(side) > ORIENT_TOL * (len3(centroid) * len3(a) * len3(b) / cl + far)) {
+            return;
+        }
+        if side < 0.0lf {
             mk = -mk;
         }
         let r = cl / el;

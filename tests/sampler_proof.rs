@@ -2044,6 +2044,69 @@ fn tucked_edges_keep_every_family_hidden_from_the_whole_ball() {
     }
 }
 
+/// Degenerate polygons hide nothing: three collinear points (up to rounding) give one plane
+/// through the eye for all their edges, and each edge's inner side, taken from the centroid
+/// that lies on that plane, is a rounding error; when all took the same side the polygon
+/// covered a half-space. Both configurations were found by `general_mix` and the tuck pass's
+/// run at `UMBRASWEEP_SAMPLER_PROOF_SCALE=15` (configurations 2013 and 2382), reduced to the
+/// one polygon: a box behind it was reported hidden.
+#[test]
+fn collinear_polygons_hide_nothing() {
+    let cases = [
+        (
+            DVec3::ZERO,
+            2,
+            0.17410962533824054,
+            128,
+            [
+                DVec3::new(
+                    -0.5266805093231313,
+                    0.3538602310320728,
+                    0.028887508872654413,
+                ),
+                DVec3::new(-0.923283336666411, 0.0009737328800148437, 0.876340939313109),
+                DVec3::new(-1.3198861640096906, -0.3519127652720431, 1.7237943697535634),
+            ],
+            [
+                DVec3::new(-1.5542766892113709, 0.8862477834275483, 1.7098270685302153),
+                DVec3::new(-1.479614685518126, 1.012939867168183, 1.80207016217637),
+            ],
+        ),
+        (
+            DVec3::new(0.0, 59.657479928000924, 0.0),
+            1,
+            0.010693101252246486,
+            16,
+            [
+                DVec3::new(-1.1308753902055357, 62.00704178253288, 2.6108153364893387),
+                DVec3::new(-1.4676555351803224, 61.075623968926045, 2.4728298646213718),
+                DVec3::new(-1.804435680155109, 60.14420615531921, 2.3348443927534044),
+            ],
+            [
+                DVec3::new(-3.202692535653777, 60.649006431904525, 5.70832291472243),
+                DVec3::new(-3.165481365665383, 60.696840963085414, 5.745955726239595),
+            ],
+        ),
+    ];
+    for (k, (eye, axis, eps, res, poly, [min, max])) in cases.into_iter().enumerate() {
+        let occ = SampleOccluders::from_polygons(&[(poly.to_vec(), 0)]);
+        let bx = DAabb { min, max };
+        for tuck in [false, true] {
+            let mut hc = Hemicube::new(res);
+            hc.set_subpixel(true);
+            hc.set_depth_bounded(true);
+            hc.set_tuck(tuck);
+            hc.begin(eye, axis, 1.0, eps, &[bx]);
+            hc.draw(&occ);
+            assert_ne!(
+                hc.test_box(&bx),
+                BoxTest::Hidden,
+                "case {k} (tuck {tuck}): a box hidden by a degenerate polygon"
+            );
+        }
+    }
+}
+
 /// The tuck pass hides more of the foliage family's boxes and triangles: with it, from the
 /// same configurations, more are hidden (these sparse clusters gain a few per cent, the fine
 /// forest's renders about a sixth, `docs/sampling.md`; the fine-foliage family's leaves of a few pixels,

@@ -22,6 +22,14 @@ const PIXEL_CHECK: usize = 64;
 /// Margin of the `f32` corner test (its rounding error is below 1e-6: unit normals,
 /// `|u|, |v| ≤ 1`, `√(u²+v²+1) ≤ √3`).
 const CORNER_MARGIN: f32 = 4e-6;
+/// A polygon's edge takes the side of its plane (through the eye) that holds the polygon's
+/// centroid only when the centroid is farther from that plane than this times
+/// `|centroid|·|a|·|b| / |a × b| + n·max|q|` (the edge `a b`, the `n` vertices `q`, all from
+/// the eye): about 4,500 times the `f64` rounding of the cross product, the centroid and the
+/// dot product, so that the side is never a rounding error. Nearer, the polygon is left out
+/// (its shrunk silhouette is empty anyway unless the ball is a point). The GPU's set-up
+/// (`ORIENT_TOL` in `shaders/sampler_setup.wgsl`) repeats the test.
+pub(crate) const ORIENT_TOL: f64 = 1e-12;
 
 /// The radius an edge is shrunk for when the render stands for a face rectangle with half
 /// sides `[h_b, h_c]` (along the face's axes `b_ax`, `c_ax`): the smaller of `cyl` (the
@@ -1110,12 +1118,15 @@ impl Hemicube {
         q.clear();
         edges.clear();
         let mut centroid = DVec3::ZERO;
+        let mut far = 0f64;
         for &pt in pts {
             let r = pt - self.eye;
             q.push(r);
             centroid += r;
+            far = far.max(r.length());
         }
         centroid /= n as f64;
+        far *= n as f64;
         // Per edge, the normal of the plane through the eye and the edge (their sum is the
         // Newell normal: the polygon is exactly planar) and the radius of the region sampled
         // seen along the edge (the ball: ε; the rectangle: its largest distance from the eye
@@ -1180,7 +1191,17 @@ impl Hemicube {
                 return None;
             }
             let mut m = cr / cl;
-            if m.dot(centroid) < 0.0 {
+            // The inner side is the centroid's. Where the centroid lies within rounding of
+            // the edge's plane (a degenerate or sliver polygon: three collinear points give
+            // one plane through the eye for all their edges) that side is a rounding error,
+            // and edges taking the same side of one plane covered a half-space: such a
+            // polygon is left out, which only uncovers (`ORIENT_TOL`).
+            let side = m.dot(centroid);
+            if !(side.abs() > ORIENT_TOL * (centroid.length() * a.length() * b.length() / cl + far))
+            {
+                return None;
+            }
+            if side < 0.0 {
                 m = -m;
             }
             let r = cl / el;
