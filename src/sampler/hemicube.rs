@@ -1197,8 +1197,9 @@ impl Hemicube {
             // and edges taking the same side of one plane covered a half-space: such a
             // polygon is left out, which only uncovers (`ORIENT_TOL`).
             let side = m.dot(centroid);
-            if !(side.abs() > ORIENT_TOL * (centroid.length() * a.length() * b.length() / cl + far))
-            {
+            let tol = ORIENT_TOL * (centroid.length() * a.length() * b.length() / cl + far);
+            // (NaN: left out too.)
+            if side.abs().partial_cmp(&tol) != Some(std::cmp::Ordering::Greater) {
                 return None;
             }
             if side < 0.0 {
