@@ -31,6 +31,13 @@
 //! `[0, π]`, so on that interval it is at least `min(sin φ_x, sin θ)`, and
 //! `r_e·sin φ ≥ min(dist(p, plane(L)), r_e·sin θ) ≥ ε`. ∎
 //!
+//! *In floating point,* the renderer takes `L`'s inside for `m_e` from the side of `e`'s plane
+//! that holds `L`'s vertex centroid, and leaves `L` out when the centroid lies within rounding
+//! of any edge's plane (`hemicube::ORIENT_TOL`; leaving a polygon out only uncovers): there the
+//! side is not known. Three collinear points (a degenerate triangle) give all their edges one
+//! plane through `p`; before this guard, when all three took the same side, the "polygon"
+//! covered a half-space (`tests/sampler_proof.rs`: `collinear_polygons_hide_nothing`).
+//!
 //! **Rectangles instead of balls** ([`Hemicube::begin_patch`]). Only the points of a face
 //! matter, and the sampler covers a face with rectangles, so the region `R` a render stands
 //! for is a rectangle of the face's plane centred on `p`. The proof above only uses, per edge,
