@@ -46,6 +46,8 @@
 //! configurations).
 #![cfg(feature = "bake")]
 
+mod common;
+
 use glam::DVec3;
 use std::f64::consts::{PI, TAU};
 use umbrasweep::geom::DAabb;
@@ -2052,42 +2054,7 @@ fn tucked_edges_keep_every_family_hidden_from_the_whole_ball() {
 /// one polygon: a box behind it was reported hidden.
 #[test]
 fn collinear_polygons_hide_nothing() {
-    let cases = [
-        (
-            DVec3::ZERO,
-            2,
-            0.17410962533824054,
-            128,
-            [
-                DVec3::new(
-                    -0.5266805093231313,
-                    0.3538602310320728,
-                    0.028887508872654413,
-                ),
-                DVec3::new(-0.923283336666411, 0.0009737328800148437, 0.876340939313109),
-                DVec3::new(-1.3198861640096906, -0.3519127652720431, 1.7237943697535634),
-            ],
-            [
-                DVec3::new(-1.5542766892113709, 0.8862477834275483, 1.7098270685302153),
-                DVec3::new(-1.479614685518126, 1.012939867168183, 1.80207016217637),
-            ],
-        ),
-        (
-            DVec3::new(0.0, 59.657479928000924, 0.0),
-            1,
-            0.010693101252246486,
-            16,
-            [
-                DVec3::new(-1.1308753902055357, 62.00704178253288, 2.6108153364893387),
-                DVec3::new(-1.4676555351803224, 61.075623968926045, 2.4728298646213718),
-                DVec3::new(-1.804435680155109, 60.14420615531921, 2.3348443927534044),
-            ],
-            [
-                DVec3::new(-3.202692535653777, 60.649006431904525, 5.70832291472243),
-                DVec3::new(-3.165481365665383, 60.696840963085414, 5.745955726239595),
-            ],
-        ),
-    ];
+    let cases = common::collinear_cases();
     for (k, (eye, axis, eps, res, poly, [min, max])) in cases.into_iter().enumerate() {
         let occ = SampleOccluders::from_polygons(&[(poly.to_vec(), 0)]);
         let bx = DAabb { min, max };

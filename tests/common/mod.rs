@@ -2,7 +2,7 @@
 //! `Scene::from_objects`, the unit cell and a one-cell bake that shows every plane, and a
 //! brute-force ray cast that names the first object a ray hits,
 //! to prove a visibility claim independently of the validator; a device made the way an engine
-//! makes its own, for the GPU tests.
+//! makes its own, for the GPU tests; the sampler's degenerate-polygon regressions.
 #![allow(
     dead_code,
     reason = "each test crate uses its own subset of these helpers, so what is dead differs per crate"
@@ -173,4 +173,52 @@ pub fn engine_device(
         ..Default::default()
     }));
     Some(device.expect("the engine's adapter creates a device"))
+}
+
+/// One of the sampler's degenerate-polygon regressions: the eye, the face axis (sign +1), ε,
+/// the resolution, the polygon (three collinear points, up to rounding) and the box it once
+/// reported hidden.
+pub type CollinearCase = (DVec3, usize, f64, u32, [DVec3; 3], [DVec3; 2]);
+
+/// The two configurations `tests/sampler_proof.rs` found (its `general` family at 15 times
+/// its configurations, 2013 and 2382), each reduced to its one polygon: all its edges share
+/// one plane through the eye, and when their sides (taken from the centroid, which lies on
+/// it) agreed, the polygon covered a half-space.
+pub fn collinear_cases() -> [CollinearCase; 2] {
+    [
+        (
+            DVec3::ZERO,
+            2,
+            0.17410962533824054,
+            128,
+            [
+                DVec3::new(
+                    -0.5266805093231313,
+                    0.3538602310320728,
+                    0.028887508872654413,
+                ),
+                DVec3::new(-0.923283336666411, 0.0009737328800148437, 0.876340939313109),
+                DVec3::new(-1.3198861640096906, -0.3519127652720431, 1.7237943697535634),
+            ],
+            [
+                DVec3::new(-1.5542766892113709, 0.8862477834275483, 1.7098270685302153),
+                DVec3::new(-1.479614685518126, 1.012939867168183, 1.80207016217637),
+            ],
+        ),
+        (
+            DVec3::new(0.0, 59.657479928000924, 0.0),
+            1,
+            0.010693101252246486,
+            16,
+            [
+                DVec3::new(-1.1308753902055357, 62.00704178253288, 2.6108153364893387),
+                DVec3::new(-1.4676555351803224, 61.075623968926045, 2.4728298646213718),
+                DVec3::new(-1.804435680155109, 60.14420615531921, 2.3348443927534044),
+            ],
+            [
+                DVec3::new(-3.202692535653777, 60.649006431904525, 5.70832291472243),
+                DVec3::new(-3.165481365665383, 60.696840963085414, 5.745955726239595),
+            ],
+        ),
+    ]
 }
