@@ -261,6 +261,7 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
         far = max(far, len3(r));
     }
     centroid /= f64(n);
+    let centroid_len = len3(centroid);
     far *= f64(n);
     var cr: array<vec3<f64>, 8>;
     var reach: array<f64, 8>;
@@ -293,7 +294,7 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
     }
     let nn = normal / nl;
     let plane_dist = abs(dot3(nn, centroid));
-    if !(plane_dist > most * (1.0lf + 1e-6lf) + 1e-12lf * len3(centroid)) {
+    if !(plane_dist > most * (1.0lf + 1e-6lf) + 1e-12lf * centroid_len) {
         return;
     }
     let near = plane_dist;
@@ -310,7 +311,7 @@ fn setup(@builtin(global_invocation_id) g: vec3<u32>, @builtin(num_workgroups) n
         }
         var mk = c / cl;
         let side = dot3(mk, centroid);
-        if !(abs(side) > ORIENT_TOL * (len3(centroid) * len3(a) * len3(b) / cl + far)) {
+        if !(abs(side) > ORIENT_TOL * (centroid_len * len3(a) * len3(b) / cl + far)) {
             return;
         }
         if side < 0.0lf {

@@ -1126,6 +1126,7 @@ impl Hemicube {
             far = far.max(r.length());
         }
         centroid /= n as f64;
+        let centroid_len = centroid.length();
         far *= n as f64;
         // Per edge, the normal of the plane through the eye and the edge (their sum is the
         // Newell normal: the polygon is exactly planar) and the radius of the region sampled
@@ -1154,7 +1155,7 @@ impl Hemicube {
             return None;
         }
         let plane_dist = (normal / nl).dot(centroid).abs();
-        if plane_dist.partial_cmp(&(most * (1.0 + 1e-6) + 1e-12 * centroid.length()))
+        if plane_dist.partial_cmp(&(most * (1.0 + 1e-6) + 1e-12 * centroid_len))
             != Some(std::cmp::Ordering::Greater)
         {
             return None;
@@ -1197,7 +1198,7 @@ impl Hemicube {
             // and edges taking the same side of one plane covered a half-space: such a
             // polygon is left out, which only uncovers (`ORIENT_TOL`).
             let side = m.dot(centroid);
-            let tol = ORIENT_TOL * (centroid.length() * a.length() * b.length() / cl + far);
+            let tol = ORIENT_TOL * (centroid_len * a.length() * b.length() / cl + far);
             // (NaN: left out too.)
             if side.abs().partial_cmp(&tol) != Some(std::cmp::Ordering::Greater) {
                 return None;
