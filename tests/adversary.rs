@@ -11,7 +11,11 @@
 //! planes forced and (every fourth case) with the shrunk-occluder sampler after the sweep, on
 //! the CPU backend; the first cases also on the GPU backend (lavapipe here;
 //! without an adapter it prints why and skips, except under `CI`, where it fails).
-//! `UMBRASWEEP_ADVERSARY_CASES` overrides the number of cases (default 48).
+//! A second campaign adds degenerate triangles to the same cases: slivers welded to the
+//! occluder's edges, needles, triangles seen edge-on from a corner of the cell, collinear
+//! fans and folded quads.
+//! `UMBRASWEEP_ADVERSARY_CASES` overrides the number of cases (default 48);
+//! `UMBRASWEEP_ADVERSARY_TRACE` prints each bake before it starts (to find one that hangs).
 #![cfg(feature = "bake")]
 
 mod common;
@@ -325,8 +329,95 @@ fn gpu() -> Option<GpuBackend> {
     }
 }
 
-#[test]
-fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
+/// Degenerate occluders added to case `seed` (a separate stream, so the case is the same):
+/// slivers along the occluder's own edges (inside the edge, beyond it, folded back; welded to
+/// the occluder's corners, so the merge meets them), needles (two corners a hair apart),
+/// triangles whose plane passes through a corner of the cell (seen edge-on from it), fans of
+/// collinear points, and zero-area quads. Each is exactly or nearly degenerate once rounded to
+/// `f32`; none may make a culler hide what the rest of the scene does not.
+fn add_degenerates(c: &mut Case, seed: u64) {
+    let mut r = Rng(seed.wrapping_mul(0x2545f4914f6cdd1d) ^ 0xde9e);
+    let (cmin, cmax) = c.cell;
+    let n = c.objects[1]
+        .1
+        .iter()
+        .flatten()
+        .map(|p| p.z)
+        .fold(f64::INFINITY, f64::min);
+    let s = (cmax - cmin).truncate().max_element();
+    let ring: Vec<DVec3> = {
+        // The occluder's corners in order (its fan shares ring[0]).
+        let occ = &c.objects[0].1;
+        let mut v = vec![occ[0][0], occ[0][1]];
+        v.extend(occ.iter().map(|t| t[2]));
+        v
+    };
+    let m = ring.len();
+    let mut slivers = Vec::new();
+    for _ in 0..1 + r.pick(4) {
+        let i = r.pick(m);
+        let (p, q) = (ring[i], ring[(i + 1) % m]);
+        let t = [r.f(0.1, 0.9), r.f(1.05, 3.0), r.f(-2.0, -0.05)][r.pick(3)];
+        // Off the edge's line by nothing, a hair outward or a hair inward (in the plane).
+        let out = (q - p).cross(DVec3::Z).normalize_or_zero();
+        let off = [0.0, 1e-9, -1e-9, 1e-6][r.pick(4)] * s;
+        let x = p + (q - p) * t + out * off;
+        // The reversed edge, so that the sliver is edge-adjacent to the occluder.
+        slivers.push([q, p, x]);
+    }
+    c.objects[0].1.extend(slivers);
+    let z = |r: &mut Rng| n * r.f(0.2, 0.95);
+    let xy = |r: &mut Rng| DVec2::new(r.f(-1.5, 1.5) * s, r.f(-1.5, 1.5) * s);
+    for k in 0..2 + r.pick(6) {
+        let tris = match r.pick(4) {
+            // A needle: two corners a hair apart.
+            0 => {
+                let a = xy(&mut r).extend(z(&mut r));
+                let b = xy(&mut r).extend(z(&mut r));
+                let h = DVec3::new(r.f(-1.0, 1.0), r.f(-1.0, 1.0), r.f(-1.0, 1.0));
+                vec![[a, b, a + h * s * [1e-5, 1e-7, 1e-9][r.pick(3)]]]
+            }
+            // In a plane through a corner of the cell: edge-on from that corner.
+            1 => {
+                let corner = DVec3::new(
+                    if r.f(0.0, 1.0) < 0.5 { cmin.x } else { cmax.x },
+                    if r.f(0.0, 1.0) < 0.5 { cmin.y } else { cmax.y },
+                    if r.f(0.0, 1.0) < 0.5 { cmin.z } else { cmax.z },
+                );
+                let a = xy(&mut r).extend(z(&mut r));
+                let b = xy(&mut r).extend(z(&mut r));
+                let (u, v) = (r.f(0.0, 1.0), r.f(-0.5, 0.5));
+                let cc = a + (b - a) * u + (corner - a) * v;
+                vec![
+                    [a, b, cc],
+                    [b, a, a + (b - a) * r.f(0.0, 1.0) - (corner - a) * v],
+                ]
+            }
+            // A fan of collinear points.
+            2 => {
+                let a = xy(&mut r).extend(z(&mut r));
+                let d = DVec3::new(r.f(-1.0, 1.0), r.f(-1.0, 1.0), r.f(-0.2, 0.2)) * s;
+                let ts: Vec<f64> = (0..5).map(|_| r.f(-1.0, 1.0)).collect();
+                (1..4)
+                    .map(|j| [a + d * ts[0], a + d * ts[j], a + d * ts[j + 1]])
+                    .collect()
+            }
+            // A quad folded flat: two triangles on one edge, the second on top of the first.
+            _ => {
+                let a = xy(&mut r).extend(z(&mut r));
+                let b = xy(&mut r).extend(z(&mut r));
+                let cc = xy(&mut r).extend(z(&mut r));
+                let back = a + (b - a) * r.f(0.2, 0.8) + (cc - a) * r.f(0.0, 0.3);
+                vec![[a, b, cc], [b, a, back]]
+            }
+        };
+        c.objects.push((format!("degenerate{k}"), tris));
+    }
+}
+
+/// Bakes every case with every setting and attacks what each culled; panics on a false cull.
+/// `degenerate` adds [`add_degenerates`] to each case.
+fn campaign(degenerate: bool) {
     let cpu = CpuBackend::new();
     let gpu = gpu();
     let settings = [
@@ -362,8 +453,13 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
     ];
     let mut problems = Vec::new();
     let (mut culled, mut targets_culled) = (0usize, 0usize);
+    // Degenerate triangles the scene keeps (`is_degenerate` drops only exact zeros).
+    let mut kept_degenerates = 0usize;
     for seed in 0..cases() {
-        let c = case(seed);
+        let mut c = case(seed);
+        if degenerate {
+            add_degenerates(&mut c, seed);
+        }
         let pl = placement(seed);
         let objects: Vec<(String, Vec<[Vec3; 3]>)> = c
             .objects
@@ -377,6 +473,15 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
                 .map(|(n, t)| (n.clone(), t.clone(), true))
                 .collect(),
         );
+        if degenerate {
+            let added = c.objects[0].1.len() - case(seed).objects[0].1.len();
+            let sliver_tris = objects[0].1.iter().rev().take(added);
+            let others = objects.iter().filter(|(n, _)| n.starts_with("degenerate"));
+            kept_degenerates += sliver_tris
+                .chain(others.flat_map(|(_, t)| t))
+                .filter(|&&t| !umbrasweep::scene::is_degenerate(t))
+                .count();
+        }
         let cell = pl.aabb(c.cell.0, c.cell.1);
         let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
         if seed < 4
@@ -386,6 +491,9 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
         }
         for backend in backends {
             for (label, s) in &settings {
+                if std::env::var_os("UMBRASWEEP_ADVERSARY_TRACE").is_some() {
+                    eprintln!("adversary: case {seed}, {label}, {}", backend.name());
+                }
                 // The sampler (CPU only) on every fourth case: it is slow in debug builds.
                 if s.sampling == SweepChoice::On && (seed % 4 != 0 || backend.name() != "cpu") {
                     continue;
@@ -396,7 +504,8 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
                 targets_culled += usize::from(vis.binary_search(&1).is_err());
                 for p in attack(&objects, &cell, vis, 4000, seed) {
                     problems.push(format!(
-                        "FALSE CULL case {seed} [{}, {label}] cell {cell:?}: {p}",
+                        "FALSE CULL case {seed}{} [{}, {label}] cell {cell:?}: {p}",
+                        if degenerate { " (degenerate)" } else { "" },
                         backend.name()
                     ));
                 }
@@ -404,13 +513,35 @@ fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
         }
     }
     eprintln!(
-        "adversary: {} cases, {culled} objects culled over all bakes, the target in \
+        "adversary: {} cases{}, {culled} objects culled over all bakes, the target in \
          {targets_culled} bakes",
-        cases()
+        cases(),
+        if degenerate {
+            format!(" with degenerate occluders ({kept_degenerates} of their triangles kept)")
+        } else {
+            String::new()
+        }
+    );
+    assert!(
+        !degenerate || kept_degenerates > 0,
+        "every degenerate triangle was dropped at load: the campaign tests nothing"
     );
     assert!(problems.is_empty(), "\n{}", problems.join("\n"));
     // The scenes must give the culler something to decide, or the test proves nothing.
     assert!(targets_culled > 0, "no bake culled any target");
+}
+
+#[test]
+fn no_bake_culls_what_rays_from_the_cell_see_on_adversarial_occluders() {
+    campaign(false);
+}
+
+/// The same cases with degenerate triangles added ([`add_degenerates`]): slivers welded to the
+/// occluder's edges, needles, triangles seen edge-on from a corner of the cell, collinear fans
+/// and folded quads.
+#[test]
+fn degenerate_occluders_hide_nothing_more() {
+    campaign(true);
 }
 
 /// A wall with a window, its triangles meeting at T-junctions (zdm2's `slot1495`, moved to

@@ -388,6 +388,83 @@ fn a_budget_that_runs_out_keeps_what_the_coarse_levels_proved() {
     brute_force_hidden(&scene, &cell, id("target") as u32);
 }
 
+/// A tiny finest ε (here 0.001 on a unit cell, about three million rectangles at the top level
+/// if it were laid out whole) must not lay more top-level rectangles than the budget can render:
+/// the sampler starts coarser, so a wall still hides the target behind it within 200 points
+/// (once, the top level took the budget and every object stayed visible; with a smaller ε
+/// still, it ran out of memory).
+#[test]
+fn a_tiny_eps_starts_coarse_enough_for_the_budget() {
+    let (mut obj, mut nv) = walled_target(DVec3::new(-5.0, -0.4, -0.4), DVec3::new(-4.0, 0.4, 0.4));
+    wall(&mut obj, &mut nv, |u, v| DVec3::new(-2.0, u, v));
+    let scene = load_obj("tiny-eps", &obj);
+    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    let s = BakeSettings {
+        sampling: SweepChoice::On,
+        sampling_settings: SamplingSettings {
+            eps: Some(1e-3),
+            levels: 0,
+            resolution: Some(32),
+            rays: 0,
+            budget_points: 200,
+            probe: 0.0,
+            ..SamplingSettings::default()
+        },
+        ..BakeSettings::default()
+    };
+    let (hidden, work) = run_sampler(&scene, &cell, &s);
+    assert!(work.points <= 200, "{} points", work.points);
+    let first = work.levels.first().expect("a level was sampled");
+    assert!(first.eps > 0.05, "the top level's ε {}", first.eps);
+    assert!(hidden[0], "the wall hides the target from the coarse balls");
+    assert!(!hidden[1], "the wall is visible");
+    brute_force_hidden(&scene, &cell, 0);
+}
+
+/// Slivers (welded seams, needles: inradius under a thousandth of the longest edge) do not
+/// choose the default ε: 4,000 of them beside the 3,000 leaves leave it where the leaves put
+/// it (once it was the slivers' median, about 1e-5 here).
+#[test]
+fn slivers_do_not_choose_the_default_eps() {
+    let reason = |slivers: bool| {
+        let (mut obj, mut nv) = (String::new(), 0);
+        cube(
+            &mut obj,
+            &mut nv,
+            "target",
+            DVec3::new(-0.5, -0.5, 8.0),
+            DVec3::new(0.5, 0.5, 9.0),
+        );
+        leaf_layer(&mut obj, &mut nv, None);
+        if slivers {
+            writeln!(obj, "o seams").unwrap();
+            for k in 0..4000 {
+                let (x, y) = ((k % 64) as f64 * 0.5, (k / 64) as f64 * 0.5);
+                for p in [
+                    [x, y, -50.0],
+                    [x + 1.0, y, -50.0],
+                    [x + 0.5, y + 2e-5, -50.0],
+                ] {
+                    writeln!(obj, "v {} {} {}", p[0], p[1], p[2]).unwrap();
+                }
+                writeln!(obj, "f {} {} {}", nv + 1, nv + 2, nv + 3).unwrap();
+                nv += 3;
+            }
+        }
+        let scene = load_obj(&format!("slivers-{slivers}"), &obj);
+        let mut s = settings();
+        s.sampling_settings.eps = None;
+        let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+        let p = Prepared::new(&scene, &s, &[cell]).unwrap();
+        let r = p.sampling_reason.clone();
+        let at = r.find("finest ε").expect("the reason names the finest ε");
+        r[at..].split(';').next().unwrap().to_string()
+    };
+    let (leaves, with_slivers) = (reason(false), reason(true));
+    assert!(leaves.contains("median inradius"), "{leaves}");
+    assert_eq!(leaves, with_slivers);
+}
+
 /// `BakeHooks::sampler_progress` counts the sampler's points as it renders them (the bake's
 /// progress bar shows them inside long cells): at the end it holds every cell's points; and
 /// it counts the face rectangles, every one begun also finished, at least one per point.

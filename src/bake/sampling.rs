@@ -580,7 +580,7 @@ impl Culler for SamplingCuller {
             }
             _ => None,
         };
-        let eps0 = finest_eps * f64::from(1u32 << s.levels.min(20));
+        let eps0 = top_eps(&cb, finest_eps, s.levels, s.budget_points);
         let shared = Shared {
             data,
             prepared,
@@ -1057,6 +1057,26 @@ fn face_grid(wb: f64, wc: f64, eps0: f64) -> (usize, usize) {
     )
 }
 
+/// The top level's ε for a cell whose finest is `eps`: `levels` doublings above it, and more
+/// while the six faces' top-level rectangles would outnumber `budget` sample points. A tiny ε
+/// (given, or chosen from occluders that are mostly slivers) would otherwise lay millions of
+/// rectangles at once, more than the budget can ever render and more memory than the machine
+/// has; the coarser levels above it are split only where objects stay undecided.
+pub fn top_eps(cell: &DAabb, eps: f64, levels: u32, budget: u64) -> f64 {
+    let mut eps0 = eps * f64::from(1u32 << levels.min(20));
+    let top = |e: f64| {
+        (0..3).fold(0u64, |sum, axis| {
+            let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+            let (nb, nc) = face_grid(cell.max[b] - cell.min[b], cell.max[c] - cell.min[c], e);
+            sum.saturating_add((nb as u64).saturating_mul(nc as u64).saturating_mul(2))
+        })
+    };
+    while top(eps0) > budget.max(6) {
+        eps0 *= 2.0;
+    }
+    eps0
+}
+
 /// The rectangles of `cell`'s finest level if every one were refined down to it (finest ε
 /// `eps`, `levels` levels above it): the most points the sampler can render for the cell,
 /// about its boundary's area / (2ε²). Shown by `bake` so that a slow sampler is expected.
@@ -1074,7 +1094,11 @@ pub fn finest_rectangles(cell: &DAabb, eps: f64, levels: u32) -> u64 {
             half *= 0.5;
             per_top *= 4;
         }
-        total = total.saturating_add(2 * (nb * nc) as u64 * per_top);
+        total = total.saturating_add(
+            (nb as u64)
+                .saturating_mul(nc as u64)
+                .saturating_mul(2 * per_top),
+        );
     }
     total
 }

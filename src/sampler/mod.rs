@@ -302,6 +302,19 @@ impl std::fmt::Debug for SampleOccluders {
     }
 }
 
+/// A polygon whose inradius is under this fraction of its longest edge is a sliver and does
+/// not count for the default ε (a leaf triangle's is about 0.2, a 1:100 strip's 0.005).
+pub const SLIVER_RATIO: f64 = 1e-3;
+
+/// Whether a polygon with these points and inradius `r` is a sliver: its inradius under
+/// [`SLIVER_RATIO`] of its longest edge.
+fn is_sliver(pts: &[DVec3], r: f64) -> bool {
+    let longest = (0..pts.len())
+        .map(|k| pts[k].distance(pts[(k + 1) % pts.len()]))
+        .fold(0.0, f64::max);
+    !(r >= SLIVER_RATIO * longest)
+}
+
 struct PolyBox(obvhs::aabb::Aabb);
 impl obvhs::Boundable for PolyBox {
     fn aabb(&self) -> obvhs::aabb::Aabb {
@@ -329,8 +342,11 @@ impl SampleOccluders {
             if (raw[p.object as usize] && !p.card) || !matches!(p.kind, PartKind::Polygon { .. }) {
                 continue;
             }
+            let before = out.polys.len();
             out.push(occ.part_points(k), p.object);
-            inradii.push(p.inradius);
+            if out.polys.len() > before {
+                inradii.push(p.inradius);
+            }
         }
         for (o, obj) in scene.objects.iter().enumerate() {
             if !raw[o] {
@@ -375,6 +391,18 @@ impl SampleOccluders {
             inradii = (0..out.polys.len())
                 .map(|i| polygon_inradius(out.poly_points(i)))
                 .collect();
+        }
+        // Slivers (degenerate or nearly: welded CAD seams, needles) occlude next to nothing
+        // but would set a tiny ε, and with it millions of sample points: the median is taken
+        // over the polygons that are not slivers, when there are any.
+        let fat: Vec<f64> = inradii
+            .iter()
+            .enumerate()
+            .filter(|&(i, &r)| !is_sliver(out.poly_points(i), r))
+            .map(|(_, &r)| r)
+            .collect();
+        if !fat.is_empty() {
+            inradii = fat;
         }
         if !inradii.is_empty() {
             let m = inradii.len() / 2;
