@@ -246,7 +246,8 @@ pub struct BakeArgs {
     pub no_sampling: bool,
     /// The sampler's finest ε (scene units): the radius of the ball each sample point stands
     /// for. Smaller culls more and costs about 1/ε² points. Default: 0.35 × the occluder
-    /// polygons' median inradius (0.05 for leaves 0.5 across: 1/10 of the leaf), and 1/√2 of
+    /// polygons' median inradius (0.05 for leaves 0.5 across: 1/10 of the leaf; slivers, whose
+    /// inradius is under 1/1000 of their longest edge, left out), and 1/√2 of
     /// that on cells where the automatic resolution would render the finest level at 1,024
     /// px: those render at 512 px instead (see --sampling-resolution).
     #[arg(long, value_name = "E")]
@@ -257,7 +258,8 @@ pub struct BakeArgs {
     #[arg(long, value_name = "N|Ts", value_delimiter = ',')]
     pub sampling_budget: Option<Vec<String>>,
     /// Refinement levels of the sampler: faces are first sampled with balls 2^LEVELS × the
-    /// finest ε, and a ball is split in four only where objects are still undecided. On
+    /// finest ε (larger still while the first level's balls would outnumber the budget's
+    /// points), and a ball is split in four only where objects are still undecided. On
     /// coarse foliage the coarse levels prune the finer levels' lists and pay; on fine
     /// foliage they stop at their probe or pilot (--sampling-probe-pay), and 0 saves those
     /// probes (about a minute on a 4×2×4 cell).

@@ -187,11 +187,13 @@ pub type SamplingChoice = SweepChoice;
 pub struct SamplingSettings {
     /// The finest ε: the radius of the balls that sample points stand for. `None` (the
     /// default) chooses it from the occluders: [`SamplingSettings::EPS_PER_INRADIUS`] × the
-    /// median in-plane inradius of the occluder polygons.
+    /// median in-plane inradius of the occluder polygons that are not slivers
+    /// ([`crate::sampler::SLIVER_RATIO`]).
     #[serde(rename = "sampling_eps")]
     pub eps: Option<f64>,
     /// Refinement levels: faces are first sampled with balls `2^levels` times the finest ε
-    /// and a ball is split in four only where some object is still undecided. Default 2.
+    /// (or larger: see `bake::sampling::top_eps`) and a ball is split in four only where some
+    /// object is still undecided. Default 2.
     #[serde(rename = "sampling_levels")]
     pub levels: u32,
     /// The coarsest ε that is sampled: a level whose balls are larger is not rendered, its

@@ -63,6 +63,12 @@ pub enum BakeError {
     /// The sampler's checkpoint inside a cell could not be written (`--sampling-checkpoint`).
     #[error("the sampler's checkpoint: {0}")]
     Checkpoint(crate::util::WriteError),
+    /// The occluders have more corners than the occluder tables' `u32` indices reach.
+    #[error(
+        "the occluders have {0} corners, more than the 4,294,967,295 the occluder tables can \
+         index: choose fewer occluders with --occluders PATTERN, or bake the scene in parts"
+    )]
+    TooManyOccluderCorners(u64),
     /// The sampler stopped right after a checkpoint, as a test asked
     /// ([`SamplerCheckpoints::stop_after_writes`]).
     #[error("the sampler stopped after its checkpoint, as asked")]

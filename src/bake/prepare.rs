@@ -184,11 +184,23 @@ impl obvhs::Boundable for ObjBox {
     }
 }
 
+/// Whether `corners` occluder corners fit the occluder tables' `u32` indices.
+///
+/// # Errors
+/// [`BakeError::TooManyOccluderCorners`] past `u32::MAX`.
+fn check_occluder_corners(corners: u64) -> Result<(), BakeError> {
+    if corners > u64::from(u32::MAX) {
+        return Err(BakeError::TooManyOccluderCorners(corners));
+    }
+    Ok(())
+}
+
 impl<'a> Prepared<'a> {
     /// Prepares a scene for baking with `settings`.
     ///
     /// # Errors
-    /// Invalid settings or an occluder pattern that is not a valid glob.
+    /// Invalid settings, an occluder pattern that is not a valid glob, or occluders with more
+    /// than `u32::MAX` corners.
     /// [`SweepChoice::Auto`] is decided here with [`choose_sweep`] on `cells`.
     pub fn new(
         scene: &'a Scene,
@@ -222,8 +234,19 @@ impl<'a> Prepared<'a> {
                 min_share: crate::scene::alpha::MIN_POLYGON_SHARE,
             }
         });
+        // The occluder tables index their points with `u32`: a bound before the preparation
+        // (a part has at most its triangles' corners) and the count after it (cards add points).
+        let corners: u64 = scene
+            .objects
+            .iter()
+            .zip(&is_occluder)
+            .filter(|&(_, &o)| o)
+            .map(|(ob, _)| 3 * u64::from(ob.triangles.end - ob.triangles.start))
+            .sum();
+        check_occluder_corners(corners)?;
         let occluders =
             occluders::prepare_with(scene, &is_occluder, settings.alpha_occluders, cards);
+        check_occluder_corners(occluders.points.len() as u64)?;
         let sliceable = Sliceable::new(scene, &is_occluder, settings.alpha_occluders);
         let boxes: Vec<ObjBox> = scene
             .objects
@@ -580,4 +603,20 @@ pub fn split_cell(cell: &Aabb, size: f64) -> Vec<Aabb> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn occluders_past_the_u32_tables_are_an_error_that_says_what_to_do() {
+        assert!(check_occluder_corners(u64::from(u32::MAX)).is_ok());
+        let e = check_occluder_corners(u64::from(u32::MAX) + 1).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("4294967296") && msg.contains("--occluders"),
+            "{msg}"
+        );
+    }
 }

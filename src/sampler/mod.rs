@@ -312,7 +312,7 @@ fn is_sliver(pts: &[DVec3], r: f64) -> bool {
     let longest = (0..pts.len())
         .map(|k| pts[k].distance(pts[(k + 1) % pts.len()]))
         .fold(0.0, f64::max);
-    !(r >= SLIVER_RATIO * longest)
+    r.is_nan() || r < SLIVER_RATIO * longest
 }
 
 struct PolyBox(obvhs::aabb::Aabb);
