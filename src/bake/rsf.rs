@@ -230,10 +230,12 @@ fn insert_parts(
                     }
                 }
             }
-            PartKind::Solid { hull } if !hull.overlaps(cell) => out.push(RsfOccluder {
-                points: Cow::Borrowed(occ.part_points(p)),
-                hull_edges: Some(&prepared.rsf_edges[p]),
-            }),
+            PartKind::Solid { hull } if !occ.hulls[hull as usize].overlaps(cell) => {
+                out.push(RsfOccluder {
+                    points: Cow::Borrowed(occ.part_points(p)),
+                    hull_edges: Some(&prepared.rsf_edges[p]),
+                })
+            }
             PartKind::Solid { .. } => {}
         }
     }

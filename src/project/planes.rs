@@ -922,9 +922,7 @@ fn summarize(
             continue;
         }
         // A solid the cell may be inside hides nothing for sure from there.
-        if let PartKind::Solid { hull } = part.kind
-            && hull.overlaps(cell)
-        {
+        if occ.solid_hull(part).is_some_and(|h| h.overlaps(cell)) {
             continue;
         }
         let extent = (b.max[u] - b.min[u]).max(b.max[v] - b.min[v]);
@@ -1245,9 +1243,7 @@ pub fn gather_slab(
         {
             continue;
         }
-        if let PartKind::Solid { hull } = part.kind
-            && hull.overlaps(cell)
-        {
+        if occ.solid_hull(part).is_some_and(|h| h.overlaps(cell)) {
             continue;
         }
         let (near, far) = plan.distances_of(b);
