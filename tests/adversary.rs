@@ -14,7 +14,8 @@
 //! A second campaign adds degenerate triangles to the same cases: slivers welded to the
 //! occluder's edges, needles, triangles seen edge-on from a corner of the cell, collinear
 //! fans and folded quads.
-//! `UMBRASWEEP_ADVERSARY_CASES` overrides the number of cases (default 48);
+//! `UMBRASWEEP_ADVERSARY_CASES` overrides the number of cases (default 48),
+//! `UMBRASWEEP_ADVERSARY_GPU_CASES` the number of them also baked on the GPU (default 4);
 //! `UMBRASWEEP_ADVERSARY_TRACE` prints each bake before it starts (to find one that hangs).
 #![cfg(feature = "bake")]
 
@@ -233,7 +234,7 @@ fn placement(seed: u64) -> Place {
     let (scale, offset) = match seed % 4 {
         0 => (1.0, 0.0),
         1 => (1e-3, 0.0),
-        2 => (1.0, 1e4),
+        2 => (1.0, [1e4, 1e5, 1e6][r.pick(3)]),
         _ => (r.f(0.1, 10.0), r.f(-100.0, 100.0)),
     };
     Place {
@@ -313,6 +314,14 @@ fn cases() -> u64 {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(48)
+}
+
+/// The cases also baked on the GPU backend: `UMBRASWEEP_ADVERSARY_GPU_CASES`, default 4.
+fn gpu_cases() -> u64 {
+    std::env::var("UMBRASWEEP_ADVERSARY_GPU_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(4)
 }
 
 fn gpu() -> Option<GpuBackend> {
@@ -484,7 +493,7 @@ fn campaign(degenerate: bool) {
         }
         let cell = pl.aabb(c.cell.0, c.cell.1);
         let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
-        if seed < 4
+        if seed < gpu_cases()
             && let Some(g) = &gpu
         {
             backends.push(g);

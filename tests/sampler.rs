@@ -419,6 +419,14 @@ fn a_tiny_eps_starts_coarse_enough_for_the_budget() {
     assert!(hidden[0], "the wall hides the target from the coarse balls");
     assert!(!hidden[1], "the wall is visible");
     brute_force_hidden(&scene, &cell, 0);
+    // Coarser levels split unsampled (`--sampling-max-eps` at the finest ε) would lay out the
+    // whole finest level, which the budget cannot render: the sampler stops before it, with
+    // everything visible, instead of spending its points where they can prove nothing.
+    let mut s = s;
+    s.sampling_settings.max_eps = Some(1e-3);
+    let (hidden, work) = run_sampler(&scene, &cell, &s);
+    assert_eq!(work.points, 0);
+    assert!(!hidden.contains(&true), "nothing sampled, nothing hidden");
 }
 
 /// Slivers (welded seams, needles: inradius under a thousandth of the longest edge) do not
@@ -1264,12 +1272,15 @@ fn a_large_cell_in_fine_leaves_trades_pixels_for_points() {
         n += 1;
     }
     let scene = load_obj("trade", &obj);
-    let cell = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+    // A small cell, so that its finest level fits the budget (a budget smaller than the top
+    // level starts coarser: `a_tiny_eps_starts_coarse_enough_for_the_budget`): at ε about
+    // 0.0124 traded, 4 × 4 rectangles a face.
+    let cell = Aabb::new(Vec3::splat(-0.03), Vec3::splat(0.03));
     let mut s = settings();
     s.sampling_settings.eps = None;
     s.sampling_settings.resolution = None;
     s.sampling_settings.levels = 0;
-    s.sampling_settings.budget_points = 6;
+    s.sampling_settings.budget_points = 200;
     let auto_eps = Prepared::new(&scene, &s, &[cell])
         .unwrap()
         .sampling_eps()

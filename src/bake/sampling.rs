@@ -670,7 +670,19 @@ impl Culler for SamplingCuller {
                 .fold(0.0, f64::max);
             if s.max_eps.is_some_and(|m| level_eps > m) && level_eps > finest_eps * (1.0 + 1e-6) {
                 // Coarser than `--sampling-max-eps`: split without sampling (the quadrants
-                // cover each rectangle exactly, so the faces stay covered).
+                // cover each rectangle exactly, so the faces stay covered) — unless the split
+                // holds more rectangles than the budget has points left: then no level below
+                // can be sampled whole, and what it would test stays visible (a tiny ε below
+                // a larger maximum would otherwise lay out its whole finest level at once).
+                let left = s
+                    .budget_points
+                    .saturating_sub(shared.points.load(Ordering::Relaxed));
+                if (level.len() as u64).saturating_mul(4) > left {
+                    for (_, l) in &level {
+                        shared.mark_visible(l);
+                    }
+                    break;
+                }
                 level = level
                     .into_iter()
                     .flat_map(|(patch, list)| patch.quadrants().map(move |q| (q, list.clone())))

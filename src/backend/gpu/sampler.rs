@@ -631,7 +631,8 @@ impl GpuSamplerScene {
         let n = occ.polys.len();
         // The polygons in Morton order of their boxes' centres, cut into clusters of
         // `CLUSTER` (the rounds' unit of culling).
-        let order = morton_order(&occ.bounds);
+        let bounds: Vec<DAabb> = (0..n).map(|k| occ.poly_bounds(k)).collect();
+        let order = morton_order(&bounds);
         let mut poly_words: Vec<[u32; 4]> = Vec::with_capacity(n);
         for &k in &order {
             let p = &occ.polys[k];
@@ -642,8 +643,8 @@ impl GpuSamplerScene {
             .map(|ks| {
                 let mut b = DAabb::EMPTY;
                 for &k in ks {
-                    b.grow(occ.bounds[k].min);
-                    b.grow(occ.bounds[k].max);
+                    b.grow(bounds[k].min);
+                    b.grow(bounds[k].max);
                 }
                 b
             })
