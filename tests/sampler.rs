@@ -59,6 +59,13 @@ fn cube(obj: &mut String, nv: &mut usize, name: &str, min: DVec3, max: DVec3) {
 /// x, y ∈ [-3, 3] (with a hole of radius `hole` around the z axis when given), a target cube
 /// behind it, a cube in the open beside the cell.
 fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
+    let (obj, _) = scene_obj(hole);
+    let scene = load_obj(&format!("leaves-{}", hole.is_some()), &obj);
+    (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
+}
+
+/// The OBJ text of [`scene`] and its vertex count.
+fn scene_obj(hole: Option<f64>) -> (String, usize) {
     let mut obj = String::new();
     let mut nv = 0;
     cube(
@@ -76,8 +83,7 @@ fn scene(hole: Option<f64>) -> (umbrasweep::Scene, Aabb) {
         DVec3::new(9.0, 0.5, 0.5),
     );
     leaf_layer(&mut obj, &mut nv, hole);
-    let scene = load_obj(&format!("leaves-{}", hole.is_some()), &obj);
-    (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
+    (obj, nv)
 }
 
 /// The object `leaves`: 3,000 leaves (~1 across) at z ∈ [3, 3.4] over x, y ∈ [-3, 3], with a
@@ -430,20 +436,12 @@ fn a_tiny_eps_starts_coarse_enough_for_the_budget() {
 }
 
 /// Slivers (welded seams, needles: inradius under a thousandth of the longest edge) do not
-/// choose the default ε: 4,000 of them beside the 3,000 leaves leave it where the leaves put
-/// it (once it was the slivers' median, about 1e-5 here).
+/// choose the default ε: 4,000 of them beside [`scene`]'s 3,000 leaves leave it where the
+/// leaves put it (once it was the slivers' median, about 1e-5 here).
 #[test]
 fn slivers_do_not_choose_the_default_eps() {
     let reason = |slivers: bool| {
-        let (mut obj, mut nv) = (String::new(), 0);
-        cube(
-            &mut obj,
-            &mut nv,
-            "target",
-            DVec3::new(-0.5, -0.5, 8.0),
-            DVec3::new(0.5, 0.5, 9.0),
-        );
-        leaf_layer(&mut obj, &mut nv, None);
+        let (mut obj, mut nv) = scene_obj(None);
         if slivers {
             writeln!(obj, "o seams").unwrap();
             for k in 0..4000 {
