@@ -343,8 +343,9 @@ fn gpu() -> Option<GpuBackend> {
 /// the occluder's corners, so the merge meets them), needles (two corners a hair apart),
 /// triangles whose plane passes through a corner of the cell (seen edge-on from it), fans of
 /// collinear points, and zero-area quads. Each is exactly or nearly degenerate once rounded to
-/// `f32`; none may make a culler hide what the rest of the scene does not.
-fn add_degenerates(c: &mut Case, seed: u64) {
+/// `f32`; none may make a culler hide what the rest of the scene does not. Returns how many
+/// slivers it appended to the occluder's triangles.
+fn add_degenerates(c: &mut Case, seed: u64) -> usize {
     let mut r = Rng(seed.wrapping_mul(0x2545f4914f6cdd1d) ^ 0xde9e);
     let (cmin, cmax) = c.cell;
     let n = c.objects[1]
@@ -374,6 +375,7 @@ fn add_degenerates(c: &mut Case, seed: u64) {
         // The reversed edge, so that the sliver is edge-adjacent to the occluder.
         slivers.push([q, p, x]);
     }
+    let added = slivers.len();
     c.objects[0].1.extend(slivers);
     let z = |r: &mut Rng| n * r.f(0.2, 0.95);
     let xy = |r: &mut Rng| DVec2::new(r.f(-1.5, 1.5) * s, r.f(-1.5, 1.5) * s);
@@ -422,6 +424,7 @@ fn add_degenerates(c: &mut Case, seed: u64) {
         };
         c.objects.push((format!("degenerate{k}"), tris));
     }
+    added
 }
 
 /// Bakes every case with every setting and attacks what each culled; panics on a false cull.
@@ -466,9 +469,11 @@ fn campaign(degenerate: bool) {
     let mut kept_degenerates = 0usize;
     for seed in 0..cases() {
         let mut c = case(seed);
-        if degenerate {
-            add_degenerates(&mut c, seed);
-        }
+        let added = if degenerate {
+            add_degenerates(&mut c, seed)
+        } else {
+            0
+        };
         let pl = placement(seed);
         let objects: Vec<(String, Vec<[Vec3; 3]>)> = c
             .objects
@@ -483,7 +488,6 @@ fn campaign(degenerate: bool) {
                 .collect(),
         );
         if degenerate {
-            let added = c.objects[0].1.len() - case(seed).objects[0].1.len();
             let sliver_tris = objects[0].1.iter().rev().take(added);
             let others = objects.iter().filter(|(n, _)| n.starts_with("degenerate"));
             kept_degenerates += sliver_tris

@@ -487,8 +487,6 @@ fn an_empty_render_hides_nothing_and_a_wall_hides_what_is_behind_it() {
     );
 }
 
-/// A backend on the engine's adapter whose largest storage binding is 64 KiB (`None`, after
-/// printing why, when there is no adapter outside CI).
 /// Degenerate polygons hide nothing on the device either (the cases of
 /// `tests/sampler_proof.rs`' `collinear_polygons_hide_nothing`: three collinear points whose
 /// edges took the same side of their one plane, a half-space).
@@ -510,6 +508,8 @@ fn collinear_polygons_hide_nothing_on_the_gpu() {
     }
 }
 
+/// A backend on the engine's adapter whose largest storage binding is 64 KiB (`None`, after
+/// printing why, when there is no adapter outside CI).
 fn small_binding_backend() -> Option<GpuBackend> {
     let limits = wgpu::Limits {
         max_storage_buffer_binding_size: 64 << 10,

@@ -230,7 +230,7 @@ fn insert_parts(
                     }
                 }
             }
-            PartKind::Solid { hull } if !occ.hulls[hull as usize].overlaps(cell) => {
+            PartKind::Solid { .. } if occ.solid_hull(part).is_some_and(|h| !h.overlaps(cell)) => {
                 out.push(RsfOccluder {
                     points: Cow::Borrowed(occ.part_points(p)),
                     hull_edges: Some(&prepared.rsf_edges[p]),
