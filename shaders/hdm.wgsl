@@ -94,6 +94,7 @@ const PARTIAL: u32 = 0u;
 const HIDDEN: u32 = 1u;
 const EMPTY: u32 = 2u;
 const INF: u32 = 0x7f800000u;
+const NO_PLANE: u32 = 0xffffffffu;
 const MAX_LEVELS: u32 = 16u;
 const STACK: u32 = 64u;
 
@@ -111,6 +112,11 @@ fn answer(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let q = queries[n];
+    // A slot a box test left unasked (`boxes.wgsl`).
+    if q.plane == NO_PLANE {
+        answers[n] = PARTIAL;
+        return;
+    }
     let p = planes[q.plane];
     // Offsets of each level's max and min.
     var omax: array<u32, MAX_LEVELS>;

@@ -130,6 +130,12 @@ pub struct BakeArgs {
     /// comparisons. Ignored on the CPU backend.
     #[arg(long)]
     pub sweep_maps_on_cpu: bool,
+    /// On the GPU backend, ask the device a plane's occludee tests only while they number at
+    /// most one per N pixels of its map (default 64, measured on lavapipe); past that the map
+    /// comes back and the CPU tests. Smaller N keeps more planes on the device for more CPU
+    /// time recording their tests. The same PVS at any N; ignored on the CPU backend.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub pixels_per_device_test: Option<u32>,
     /// Device memory the shrunk-occluder sampler's GPU samplers may take together (e.g. 16G;
     /// default 4G, which suits a consumer GPU). Each serves one thread's renders (about 0.7 GB
     /// at 512 pixels on a fine forest, 1.8 GB at 1,024); beyond the budget a level's other
@@ -536,7 +542,7 @@ pub fn make_backend(
     choice: BackendChoice,
     projection: GpuProjection,
     rsf_on_gpu: bool,
-    (tests_on_cpu, sweep_maps_on_cpu): (bool, bool),
+    (tests_on_cpu, sweep_maps_on_cpu, pixels_per_test): (bool, bool, Option<u32>),
     sampler_memory: Option<u64>,
 ) -> anyhow::Result<Box<dyn RasterBackend>> {
     use umbrasweep::backend::gpu::{GpuBackend, hardware_adapter_available};
@@ -556,6 +562,9 @@ pub fn make_backend(
                 }
                 b.set_tests_on_device(!tests_on_cpu);
                 b.set_keep_sweep_maps(!sweep_maps_on_cpu);
+                if let Some(n) = pixels_per_test {
+                    b.set_pixels_per_device_test(n as usize);
+                }
                 if let Some(bytes) = sampler_memory {
                     b.set_sampler_memory(bytes);
                 }
@@ -728,7 +737,11 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         a.backend,
         a.gpu_projection,
         a.rsf_on_gpu,
-        (a.tests_on_cpu, a.sweep_maps_on_cpu),
+        (
+            a.tests_on_cpu,
+            a.sweep_maps_on_cpu,
+            a.pixels_per_device_test,
+        ),
         a.gpu_sampler_memory,
     )?;
     let backend = backend.as_ref();

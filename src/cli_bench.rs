@@ -77,6 +77,10 @@ pub struct BenchArgs {
     /// (the default): the same PVS, to compare the two.
     #[arg(long)]
     pub sweep_maps_on_cpu: bool,
+    /// Pixels per occludee test asked of the GPU backend's device, as `bake
+    /// --pixels-per-device-test` (default 64).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub pixels_per_device_test: Option<u32>,
     /// Device memory the shrunk-occluder sampler's GPU samplers may take together (e.g. 16G;
     /// default 4G), as `bake --gpu-sampler-memory`.
     #[arg(long, value_name = "SIZE", value_parser = crate::cli_bake::parse_size)]
@@ -212,6 +216,7 @@ impl From<&BenchArgs> for BenchOptions {
             rsf_on_gpu: a.rsf_on_gpu,
             tests_on_cpu: a.tests_on_cpu,
             sweep_maps_on_cpu: a.sweep_maps_on_cpu,
+            pixels_per_device_test: a.pixels_per_device_test.map(|n| n as usize),
             gpu_sampler_memory: a.gpu_sampler_memory,
             shared: a.shared.clone(),
             scenes: a.scenes.clone(),

@@ -26,8 +26,10 @@ use umbrasweep::generate::{self, CityOptions};
 use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::hdm::Hdm;
 use umbrasweep::plane::{
-    DepthMap, OccluderSet, PlaneFrame, PlaneJob, PlaneResult, RectQuery, Reprojection, depth_up,
+    Coverage, DepthMap, OccluderSet, PlaneFrame, PlaneJob, PlaneQueries, PlaneResult, RectQuery,
+    Reprojection, depth_up,
 };
+use umbrasweep::project::occludee::box_coverage;
 use umbrasweep::scene::Scene;
 
 // ---------------------------------------------------------------------------------------------
@@ -39,8 +41,8 @@ fn shaders_validate_with_naga() {
     for &(path, source) in gpu::SHADERS {
         let module = naga::front::wgsl::parse_str(source)
             .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(source, path)));
-        // Ray space factorization's charts, the occluders' views and their shared rounding
-        // compute in f64 (`SHADER_F64`); the other passes
+        // Ray space factorization's charts, the occluders' views, the sampler, the box tests
+        // and their shared rounding compute in f64 (`SHADER_F64`); the other passes
         // need nothing beyond the defaults.
         let caps = if [
             "rsf",
@@ -50,6 +52,7 @@ fn shaders_validate_with_naga() {
             "sampler_setup",
             "sampler_views",
             "sampler_blend",
+            "boxes",
         ]
         .map(|n| format!("shaders/{n}.wgsl"))
         .contains(&path.to_string())
@@ -490,12 +493,12 @@ fn queries_beyond_a_storage_binding_bring_the_map_back() {
         rect: [0, 0, w / 2, w / 3],
         depth: 5.0,
     };
-    let queries: Vec<Option<Vec<RectQuery>>> = jobs
+    let queries: Vec<Option<PlaneQueries>> = jobs
         .iter()
         .enumerate()
         .map(|(k, j)| {
             let n = if k == 1 { 5000 } else { 100 };
-            Some(vec![few(j.frame.width); n])
+            Some(PlaneQueries::rects(vec![few(j.frame.width); n]))
         })
         .collect();
     let maps = engine.render(&jobs).unwrap();
@@ -951,7 +954,7 @@ fn occludee_tests_on_the_device_match_the_pyramid() {
     jobs.extend(slice_jobs());
     let maps = b.render(&jobs).unwrap();
     let mut rng = Pcg64::seed_from_u64(12);
-    let queries: Vec<Option<Vec<RectQuery>>> = jobs
+    let queries: Vec<Option<PlaneQueries>> = jobs
         .iter()
         .zip(&maps)
         .enumerate()
@@ -983,7 +986,7 @@ fn occludee_tests_on_the_device_match_the_pyramid() {
                     depth,
                 });
             }
-            Some(q)
+            Some(PlaneQueries::rects(q))
         })
         .collect();
     let results = b.render_tested(&jobs, &queries).unwrap();
@@ -1009,7 +1012,7 @@ fn occludee_tests_on_the_device_match_the_pyramid() {
             (PlaneResult::Answers(a), Some(q)) => {
                 assert_eq!(a.len(), q.len(), "job {k}");
                 let hdm = Hdm::build(map);
-                for (n, (got, q)) in a.iter().zip(q).enumerate() {
+                for (n, (got, q)) in a.iter().zip(&q.rects).enumerate() {
                     assert_eq!(*got, hdm.answer(q), "job {k} query {n}: {q:?}");
                     counts[*got as usize] += 1;
                 }
@@ -1022,7 +1025,7 @@ fn occludee_tests_on_the_device_match_the_pyramid() {
                     PlaneResult::Answers(_) => "answers",
                     PlaneResult::Kept(_) => "a kept map",
                 },
-                q.as_ref().map_or(0, Vec::len)
+                q.as_ref().map_or(0, PlaneQueries::len)
             ),
         }
     }
@@ -1035,6 +1038,144 @@ fn occludee_tests_on_the_device_match_the_pyramid() {
     assert_eq!(
         stats.bytes_read_back, read_back,
         "only the answers of tested jobs come back"
+    );
+}
+
+/// A random occludee box for box tests on `f`'s plane (kind `kind % 7`): touching the cell,
+/// straddling its face, between the face and the plane (where the improved Projections
+/// apply), beyond the plane, sticking out of the plane's rectangle, wholly beside it, or
+/// starting on the plane with its standard Projection's low `u` side exactly on a pixel
+/// boundary (only the rule's outward padding then takes in the pixel before it).
+fn random_box(rng: &mut Pcg64, f: &PlaneFrame, kind: u32) -> DAabb {
+    let half = (f.cell.max.x - f.cell.min.x) / 2.0;
+    if kind % 7 == 6 {
+        // Beside the cell on the low `u` side, its near face on the plane (`t = 1` there, so
+        // the rectangle's low `u` is the box's own).
+        let ps = (f.rect_max.x - f.rect_min.x) / f64::from(f.width);
+        let i = rng.random_range(1..(f.width / 4).max(2));
+        let u0 = f.rect_min.x + f64::from(i) * ps;
+        let v = rng.random_range(-6.0..6.0);
+        let a = point(f, u0, v - 0.5, 10.0);
+        let b = point(
+            f,
+            u0 + rng.random_range(0.05..2.0),
+            v + 0.5,
+            10.0 + rng.random_range(0.1..3.0),
+        );
+        return DAabb {
+            min: a.min(b),
+            max: a.max(b),
+        };
+    }
+    // The plane lies 10 beyond the face (`frame`).
+    let (d0, depth) = match kind % 7 {
+        0 => (
+            -half * rng.random_range(0.2..1.8),
+            rng.random_range(0.01..1.0),
+        ),
+        1 => (-rng.random_range(0.01..0.5), rng.random_range(0.6..3.0)),
+        2 => (rng.random_range(0.05..8.0), rng.random_range(0.01..1.5)),
+        _ => (rng.random_range(0.2..25.0), rng.random_range(0.01..4.0)),
+    };
+    let (u, v) = match kind % 7 {
+        0 => (rng.random_range(-half..half), rng.random_range(-half..half)),
+        4 => (rng.random_range(6.0..11.0), rng.random_range(-9.0..9.0)),
+        5 => (rng.random_range(-40.0..-20.0), rng.random_range(-9.0..9.0)),
+        _ => (rng.random_range(-8.0..8.0), rng.random_range(-8.0..8.0)),
+    };
+    let size = [0.02, 0.3, 1.0, 4.0][rng.random_range(0..4usize)];
+    let (su, sv) = (
+        size * rng.random_range(0.2..1.0),
+        size * rng.random_range(0.2..1.0),
+    );
+    let a = point(f, u - su, v - sv, d0);
+    let b = point(f, u + su, v + sv, d0 + depth);
+    DAabb {
+        min: a.min(b),
+        max: a.max(b),
+    }
+}
+
+/// Box tests answered on the device (`PlaneQueries::boxes`: each box's rectangles computed
+/// there, in `f64`, from the box and the plane's frame, `shaders/boxes.wgsl`) give exactly what
+/// the CPU's rule, `occludee::box_coverage`, gives on the same map: random boxes touching the
+/// cell, straddling its face, between the face and the plane, beyond it, sticking out of its
+/// rectangle and wholly beside it, on square and stretched maps, with and without the
+/// improved Projections, beside a rectangle test whose answer stays the pyramid's.
+#[test]
+fn box_tests_on_the_device_follow_the_cpu_rule() {
+    let Some(b) = backend() else { return };
+    let mut jobs = random_jobs(21, Shape::Quad, 60, &[16, 64, 256]);
+    jobs.extend(stretched_jobs());
+    let maps = b.render(&jobs).unwrap();
+    let hdms: Vec<Hdm> = maps.iter().map(Hdm::build).collect();
+    let mut rng = Pcg64::seed_from_u64(22);
+    // [improved][hidden, empty, partial]
+    let mut counts = [[0usize; 3]; 2];
+    let (mut improved_hid, mut answered) = (0, 0);
+    for improved in [false, true] {
+        let queries: Vec<Option<PlaneQueries>> = jobs
+            .iter()
+            .map(|job| {
+                let f = &job.frame;
+                let rect = RectQuery {
+                    rect: [0, 0, f.width - 1, f.height - 1],
+                    depth: f32::INFINITY,
+                };
+                Some(PlaneQueries {
+                    rects: vec![rect],
+                    boxes: (0..600).map(|k| random_box(&mut rng, f, k)).collect(),
+                    improved,
+                })
+            })
+            .collect();
+        let results = b.render_tested(&jobs, &queries).unwrap();
+        for (k, (r, q)) in results.iter().zip(&queries).enumerate() {
+            let q = q.as_ref().unwrap();
+            let PlaneResult::Answers(a) = r else {
+                // A job with nothing for the device to draw comes back as its map.
+                assert!(matches!(r, PlaneResult::Map(m) if *m == maps[k]), "job {k}");
+                continue;
+            };
+            answered += 1;
+            assert_eq!(a.len(), q.len(), "job {k}");
+            assert_eq!(
+                a[0],
+                hdms[k].answer(&q.rects[0]),
+                "job {k}: the rectangle test"
+            );
+            let f = &jobs[k].frame;
+            for (n, bx) in q.boxes.iter().enumerate() {
+                let want = box_coverage(f, bx, improved, |r| hdms[k].answer(r));
+                assert_eq!(
+                    a[1 + n],
+                    want,
+                    "job {k} box {n} {bx:?}, improved {improved}"
+                );
+                counts[usize::from(improved)][want as usize] += 1;
+                if want == Coverage::Hidden
+                    && box_coverage(f, bx, false, |r| hdms[k].answer(r)) != Coverage::Hidden
+                {
+                    improved_hid += 1;
+                }
+            }
+        }
+    }
+    eprintln!(
+        "[hidden, empty, partial] without and with the improved Projections: {counts:?}; {improved_hid} hidden only by them; {answered} jobs answered"
+    );
+    assert!(
+        answered >= jobs.len(),
+        "{answered} of {} jobs answered twice",
+        jobs.len()
+    );
+    assert!(
+        counts.iter().flatten().all(|&c| c > 100),
+        "every answer is exercised: {counts:?}"
+    );
+    assert!(
+        improved_hid > 10,
+        "the improved Projections hide some boxes: {improved_hid}"
     );
 }
 
@@ -1431,7 +1572,7 @@ fn kept_maps_reproject_as_the_maps_they_stand_for() {
                     let result = b
                         .render_kept(
                             std::slice::from_ref(&kept_job),
-                            &[Some(queries.clone())],
+                            &[Some(PlaneQueries::rects(queries.clone()))],
                             &[true],
                         )
                         .unwrap()
@@ -1910,7 +2051,7 @@ fn bake_pvs_is_identical_with_the_sweep() {
     let stats = b.total_stats();
     eprintln!("sweep bake of a forest: {stats:?}");
     // The sweep's maps stay on the device (`render_kept`) where their tests are few enough
-    // (`PIXELS_PER_RECORDED_TEST`); the others come back: both kinds in one sweep.
+    // (`PIXELS_PER_DEVICE_TEST`); the others come back: both kinds in one sweep.
     assert!(stats.kept_maps * 4 >= stats.gpu_planes, "{stats:?}");
     assert!(stats.maps_read_back > 0, "{stats:?}");
     // Read back instead, the same PVS.

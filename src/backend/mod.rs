@@ -346,6 +346,18 @@ impl BackendCounters {
     }
 }
 
+/// A bake asks a plane's occludee tests of a backend's device (and an occlusion sweep's
+/// plane stays there) only while its box tests number at most one per this many pixels of its
+/// map; past that the map comes back instead
+/// ([`RasterBackend::pixels_per_device_test`]). Recording a box test costs the CPU about
+/// 0.12 µs (the walk that lists the boxes; the device computes their rectangles), reading a map
+/// back and building its pyramid 2–5 ns per pixel (`Hdm::build` of a 256 × 256 map 0.11 ms);
+/// on lavapipe, whose compute passes run on the same CPU, the paper-size forest's middle cell
+/// (`bake … --sweep --backend gpu`) took 1,170, 1,228 and 1,532 ms at one test per 64, 16 and
+/// 4 pixels (medians of three runs), so 64 stays the default; a real GPU answers the tests
+/// in microseconds and may want fewer pixels per test (`--pixels-per-device-test`).
+pub const PIXELS_PER_DEVICE_TEST: usize = 64;
+
 /// The raster work of a bake.
 pub trait RasterBackend: Send + Sync {
     /// Short name for summaries: `cpu` or `gpu`.
@@ -371,17 +383,18 @@ pub trait RasterBackend: Send + Sync {
     /// [`BackendError`] when the device fails; never a partial result.
     fn render(&self, jobs: &[plane::PlaneJob]) -> Result<Vec<plane::DepthMap>, BackendError>;
     /// Renders `jobs` as [`Self::render`] does, with occludee tests: `queries[k]` holds job
-    /// `k`'s rectangle queries (`None`: its map is wanted). A backend answers a job's queries
-    /// on the device where it can ([`plane::PlaneResult::Answers`], in order, each exactly as
-    /// [`crate::hdm::Hdm::test`] answers it on the job's map) and gives back its map
-    /// otherwise. The default gives back every map.
+    /// `k`'s rectangle and box tests (`None`: its map is wanted). A backend answers a job's
+    /// queries on the device where it can ([`plane::PlaneResult::Answers`], in the order of
+    /// [`plane::PlaneQueries`], each exactly as [`crate::hdm::Hdm::answer`] or
+    /// [`crate::project::occludee::box_coverage`] answers it on the job's map) and gives back
+    /// its map otherwise. The default gives back every map.
     ///
     /// # Errors
     /// As [`Self::render`].
     fn render_tested(
         &self,
         jobs: &[plane::PlaneJob],
-        queries: &[Option<Vec<plane::RectQuery>>],
+        queries: &[Option<plane::PlaneQueries>],
     ) -> Result<Vec<plane::PlaneResult>, BackendError> {
         debug_assert_eq!(jobs.len(), queries.len());
         Ok(self
@@ -394,6 +407,12 @@ pub trait RasterBackend: Send + Sync {
     /// worth making them (the default, and the CPU backend, give maps back).
     fn tests_on_device(&self) -> bool {
         false
+    }
+    /// How many pixels of a plane's map each box test asked of the device should stand for:
+    /// a bake asks a plane's tests of the device only while they number at most one per this
+    /// many pixels, and takes the map back past that ([`PIXELS_PER_DEVICE_TEST`] unless set).
+    fn pixels_per_device_test(&self) -> usize {
+        PIXELS_PER_DEVICE_TEST
     }
     /// [`Self::render_tested`], where `keep[k]` asks to keep job `k`'s map on the device for
     /// later reprojections (an occlusion sweep's plane): the backend then gives back
@@ -408,7 +427,7 @@ pub trait RasterBackend: Send + Sync {
     fn render_kept(
         &self,
         jobs: &[plane::PlaneJob],
-        queries: &[Option<Vec<plane::RectQuery>>],
+        queries: &[Option<plane::PlaneQueries>],
         keep: &[bool],
     ) -> Result<Vec<plane::PlaneResult>, BackendError> {
         debug_assert_eq!(jobs.len(), keep.len());

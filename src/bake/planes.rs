@@ -17,13 +17,17 @@
 //! # Tests on the device
 //! On a backend that answers occludee tests itself ([`RasterBackend::tests_on_device`]), when
 //! nothing wants the maps ([`super::NoPlanes`]), each separate plane's walk is run twice: first
-//! over every node, object and piece not yet decided, recording each pixel rectangle and Depth
-//! it tests (`Prepared::record_queries`, every test answered "partly covered" so that a
-//! box's later tests are recorded too), then, after the backend has answered them all with
-//! its own pyramid of the map ([`RasterBackend::render_tested`]), for real, reading the
-//! answers. The real walk asks only recorded tests (it skips more as it marks, never less),
-//! and each answer is the one [`Hdm::test`] gives on that map, so the result is the walk's
-//! on the CPU; a test it did not record would stay open (a debug assertion catches it).
+//! over every node, object and piece not yet decided, recording each box it tests
+//! (`Prepared::record_queries`, each answered "partly covered" so that the walk goes on below
+//! it — but for boxes answered without the map, [`answer_without_test`]: those touching the
+//! cell or not beyond its face are open, and those whose Projection lies beside the plane
+//! `Empty`, which prunes the walk there as it will prune the real walk), then, after the
+//! backend has answered the boxes with its own pyramid of the map
+//! ([`RasterBackend::render_tested`]: the device computes each box's rectangles itself,
+//! `shaders/boxes.wgsl`), for real, reading each box's answer by its [`BoxId`]. The real walk
+//! asks only recorded boxes (it skips more as it marks, never less), and each answer is the
+//! one [`box_coverage`] gives on that map, so the result is the walk's on the CPU; a box it
+//! did not record would stay open (a debug assertion catches it).
 //!
 //! # Sweep planes kept on the device
 //! On a backend that also keeps maps ([`RasterBackend::keeps_maps`]) a sweep plane's map stays
@@ -36,10 +40,10 @@
 //! box and whether the umbra covers the whole plane come back as numbers, and later planes
 //! reproject from the map where it lies. A plane that turns out to end its direction tests
 //! every box behind it, not only those within reach: it is rendered again with those tests
-//! (`Prepared::retest_ending`). Past a test per [`PIXELS_PER_RECORDED_TEST`] pixels the map
-//! comes back as before: recording costs the CPU more than the map then. So
-//! every answer is the one the map's pyramid gives on the CPU, and the PVS is the CPU
-//! backend's.
+//! (`Prepared::retest_ending`). Past a box test per
+//! [`RasterBackend::pixels_per_device_test`] pixels the map comes back as before
+//! ([`crate::backend::PIXELS_PER_DEVICE_TEST`]). So every answer is the one the map's
+//! pyramid gives on the CPU, and the PVS is the CPU backend's.
 
 use super::BakeError;
 use super::pipeline::{CullState, Culler, CullerWork, PlaneSink};
@@ -48,9 +52,9 @@ use crate::backend::RasterBackend;
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
 use crate::plane::{
-    DepthMap, OpenSides, PlaneFrame, PlaneJob, PlaneResult, RectQuery, Reprojection, depth_down,
+    DepthMap, OpenSides, PlaneFrame, PlaneJob, PlaneQueries, PlaneResult, Reprojection,
 };
-use crate::project::occludee::{improved_rects, pixel_rect, span, standard_rect};
+use crate::project::occludee::{BoxId, answer_without_test, box_coverage};
 use crate::project::planes::{
     DirectionPlan, LeaveOut, PlaneSettings, SweepInputs, plan_directions, plane_job,
 };
@@ -86,21 +90,10 @@ impl Culler for PlaneCuller {
     }
 }
 
-/// A plane's occludee tests go to the device (and a sweep plane's map stays there) only while
-/// its recorded tests number at most one per this many pixels of its map; past that the map
-/// comes back instead. Recording is the CPU's cost of the device's tests: every box not yet
-/// decided within the plane's reach is tested in advance, where the walk on a pyramid prunes
-/// at hidden and empty nodes. Measured (CPU, release build): recording costs about 0.5 µs per
-/// test (the paper-size forest's middle cell: 1.46 M tests over its 129 sweep planes, 0.7 s),
-/// while reading a map back, building its pyramid and its umbra box costs 2–5 ns per pixel
-/// (`Hdm::build` of a 256 × 256 map 0.11 ms, of a 1,024 × 1,024 one 5.4 ms), so the two
-/// break even near one test per 100 pixels; at one per 64 the device's share (the bytes not
-/// copied, the tables not uploaded) tips it.
-pub const PIXELS_PER_RECORDED_TEST: usize = 64;
-
-/// The most tests a plane's recording may hold ([`PIXELS_PER_RECORDED_TEST`]).
-fn max_recorded(frame: &PlaneFrame) -> usize {
-    (frame.width as usize * frame.height as usize / PIXELS_PER_RECORDED_TEST).max(16)
+/// The most box tests a plane's recording may hold: one per
+/// [`RasterBackend::pixels_per_device_test`] pixels of its map (at least 16).
+fn max_recorded(frame: &PlaneFrame, share: usize) -> usize {
+    (frame.width as usize * frame.height as usize / share.max(1)).max(16)
 }
 
 /// In a sweep, a plane at distance `t` beyond the face tests only boxes starting within
@@ -153,6 +146,7 @@ impl Prepared<'_> {
                 plans: &plans,
                 settings: &ps,
                 cell: &cell64,
+                share: backend.pixels_per_device_test(),
             };
             let planned = self.plan_round(&round, &dirs, &hidden, &node_done);
             if planned.is_empty() {
@@ -163,7 +157,7 @@ impl Prepared<'_> {
             // there with every test the next plane's planning may ask of it.
             let on_device = backend.tests_on_device() && !observe.wants_maps();
             let keep_maps = on_device && backend.keeps_maps();
-            let queries: Vec<Option<Vec<RectQuery>>> = if on_device {
+            let queries: Vec<Option<Queries>> = if on_device {
                 planned
                     .par_iter()
                     .map(|p| {
@@ -173,6 +167,7 @@ impl Prepared<'_> {
                         }
                         let q = self.record_queries(
                             &p.job,
+                            round.share,
                             &cell64,
                             round.range(p.dir, false),
                             &hidden,
@@ -180,21 +175,21 @@ impl Prepared<'_> {
                             &piece_hidden,
                             &skip_test,
                         )?;
-                        let q = if sweep {
-                            self.record_leave_out(&round, p, &hidden, &node_done, q)?
+                        if sweep {
+                            self.record_leave_out(&round, p, &hidden, &node_done, q)
                         } else {
-                            q
-                        };
-                        Some(q.list)
+                            Some(q)
+                        }
                     })
                     .collect()
             } else {
-                vec![None; planned.len()]
+                planned.iter().map(|_| None).collect()
             };
             let keep: Vec<bool> = (planned.iter().zip(&queries))
                 .map(|(p, q)| q.is_some() && plans[p.dir].is_sweep())
                 .collect();
-            let mut rendered = render_round(&round, backend, planned, queries, &keep)?;
+            let (queries, index) = split_queries(queries, self.settings.improved_projection);
+            let mut rendered = render_round(&round, backend, planned, (queries, index), &keep)?;
             self.retest_ending(
                 &round,
                 backend,
@@ -259,12 +254,13 @@ impl Prepared<'_> {
                     object: &|o| hidden[o as usize],
                     // Occluders the previous plane already proves hidden add nothing (only the
                     // plane just in front: what a kept map answers was recorded for it).
-                    hidden: &|b| {
+                    hidden: &|id, b| {
                         dir.prev.as_ref().is_some_and(|prev| {
                             prev.index + 1 == k
                                 && self.test_box(
                                     &prev.frame,
                                     &prev.tested.tests(),
+                                    id,
                                     b,
                                     round.cell,
                                     (0.0, f64::INFINITY),
@@ -337,7 +333,7 @@ impl Prepared<'_> {
                 if !plan.slab_may_hold(k, &b) {
                     continue;
                 }
-                if plan.distances_of(&b).0 > start && (leave_out.hidden)(&b) {
+                if plan.distances_of(&b).0 > start && (leave_out.hidden)(BoxId::Node(ni), &b) {
                     continue;
                 }
                 if node.is_leaf() {
@@ -384,7 +380,7 @@ impl Prepared<'_> {
                 min: glam::Vec3::from(node.aabb.min).as_dvec3(),
                 max: glam::Vec3::from(node.aabb.max).as_dvec3(),
             };
-            match self.test_box(&job.frame, tests, &b, cell, after) {
+            match self.test_box(&job.frame, tests, BoxId::Node(ni), &b, cell, after) {
                 Coverage::Hidden => {
                     mark_hidden(bvh, ni, hidden, node_hidden);
                     continue;
@@ -399,7 +395,8 @@ impl Prepared<'_> {
                         continue;
                     }
                     let ob = self.scene.objects[o].bounds.to_f64();
-                    match self.test_box(&job.frame, tests, &ob, cell, after) {
+                    let id = BoxId::Object(o as u32);
+                    match self.test_box(&job.frame, tests, id, &ob, cell, after) {
                         Coverage::Hidden => hidden[o] = true,
                         Coverage::Empty => {}
                         Coverage::Partial => {
@@ -415,6 +412,7 @@ impl Prepared<'_> {
                                     piece_hidden[pi] = self.test_box(
                                         &job.frame,
                                         tests,
+                                        BoxId::Piece(pi as u32),
                                         &self.piece_boxes[pi],
                                         cell,
                                         after,
@@ -446,13 +444,12 @@ impl Prepared<'_> {
         }
     }
 
-    /// Every rectangle query [`Self::traverse`] may ask on the plane of `job` from this state
-    /// on: those of every node not done, every object of theirs still to test and every piece
-    /// of those not yet hidden — what the traversal reaches is a subset, as it only skips more
-    /// while it marks. For a backend to answer on its device ([`RasterBackend::render_tested`]).
-    /// `None` as soon as it records more tests than the plane's share
-    /// ([`PIXELS_PER_RECORDED_TEST`]): they would cost the CPU more than the map, which then
-    /// comes back instead.
+    /// Every box [`Self::traverse`] may test on the plane of `job` from this state on: every
+    /// node not done, every object of theirs still to test and every piece of those not yet
+    /// hidden, except below boxes known `Empty` without the map — what the traversal reaches
+    /// is a subset, as it only skips more while it marks. For a backend to answer on its
+    /// device ([`RasterBackend::render_tested`]). `None` as soon as it records more box tests
+    /// than one per `share` pixels of the plane's map (the map then comes back instead).
     #[expect(
         clippy::too_many_arguments,
         reason = "the traversal's own inputs, read-only here"
@@ -460,6 +457,7 @@ impl Prepared<'_> {
     fn record_queries(
         &self,
         job: &PlaneJob,
+        share: usize,
         cell: &DAabb,
         after: (f64, f64),
         hidden: &[bool],
@@ -467,11 +465,11 @@ impl Prepared<'_> {
         piece_hidden: &[bool],
         skip_test: &(dyn Fn(usize, &[bool]) -> bool + Sync),
     ) -> Option<Queries> {
-        let max = max_recorded(&job.frame);
-        let queries = RefCell::new(Queries::default());
+        let max = max_recorded(&job.frame, share);
+        let queries = RefCell::new(Queries::new(self.box_counts()));
         let tests = Tests::Record(&queries);
         let Some(bvh) = &self.bvh else {
-            return Some(Queries::default());
+            return Some(Queries::new(self.box_counts()));
         };
         // The traversal's order does not matter here, but its pruning by reach does: a box
         // out of reach is answered `Empty` without a test, so the walk asks nothing below it
@@ -490,9 +488,13 @@ impl Prepared<'_> {
             if !in_reach(frame, &b, after) {
                 continue;
             }
-            self.test_box(frame, &tests, &b, cell, after);
-            if queries.borrow().list.len() > max {
+            let c = self.test_box(frame, &tests, BoxId::Node(ni), &b, cell, after);
+            if queries.borrow().boxes.len() > max {
                 return None;
+            }
+            if c == Coverage::Empty {
+                // Beside the plane: so is everything below it, and the walk stops here too.
+                continue;
             }
             if !node.is_leaf() {
                 stack.push(node.first_index);
@@ -508,14 +510,18 @@ impl Prepared<'_> {
                 if !in_reach(frame, &ob, after) {
                     continue;
                 }
-                self.test_box(frame, &tests, &ob, cell, after);
+                let c = self.test_box(frame, &tests, BoxId::Object(o as u32), &ob, cell, after);
+                if c == Coverage::Empty {
+                    continue;
+                }
                 for pi in self.pieces[o].clone() {
                     let pi = pi as usize;
                     if !piece_hidden[pi] {
-                        self.test_box(frame, &tests, &self.piece_boxes[pi], cell, after);
+                        let id = BoxId::Piece(pi as u32);
+                        self.test_box(frame, &tests, id, &self.piece_boxes[pi], cell, after);
                     }
                 }
-                if queries.borrow().list.len() > max {
+                if queries.borrow().boxes.len() > max {
                     return None;
                 }
             }
@@ -529,7 +535,7 @@ impl Prepared<'_> {
     /// (so it descends everywhere the real walk may) and every test recorded. The real walk
     /// starts from a state with at least as many objects hidden and nodes done, so it asks a
     /// subset. `None` when the tests, with `queries`, would be more than the plane's share
-    /// ([`PIXELS_PER_RECORDED_TEST`]; the map then comes back).
+    /// ([`Round::share`]; the map then comes back).
     fn record_leave_out(
         &self,
         round: &Round,
@@ -543,17 +549,18 @@ impl Prepared<'_> {
         if next >= plan.distances.len() {
             return Some(queries);
         }
-        let max = max_recorded(&planned.job.frame);
+        let max = max_recorded(&planned.job.frame, round.share);
         let recorded = RefCell::new(queries);
         let tests = Tests::Record(&recorded);
         let leave_out = LeaveOut {
             object: &|o| hidden[o as usize],
-            hidden: &|b| {
+            hidden: &|id, b| {
                 // (Past the share the walk goes on, as planning will, recording nothing.)
-                if recorded.borrow().list.len() <= max {
+                if recorded.borrow().boxes.len() <= max {
                     self.test_box(
                         &planned.job.frame,
                         &tests,
+                        id,
                         b,
                         round.cell,
                         (0.0, f64::INFINITY),
@@ -564,7 +571,7 @@ impl Prepared<'_> {
         };
         self.gather_slab(plan, next, &leave_out, hidden, node_done);
         let recorded = recorded.into_inner();
-        (recorded.list.len() <= max).then_some(recorded)
+        (recorded.boxes.len() <= max).then_some(recorded)
     }
 
     /// A kept sweep plane that turns out to end its direction ([`ends_sweep`]) tests every box
@@ -594,12 +601,13 @@ impl Prepared<'_> {
         if again.is_empty() {
             return Ok(());
         }
-        let queries: Vec<Option<Vec<RectQuery>>> = again
+        let queries: Vec<Option<Queries>> = again
             .par_iter()
             .map(|&i| {
                 let r = &rendered[i];
                 self.record_queries(
                     &r.job,
+                    round.share,
                     round.cell,
                     round.range(r.dir, true),
                     hidden,
@@ -607,13 +615,13 @@ impl Prepared<'_> {
                     piece_hidden,
                     skip_test,
                 )
-                .map(|q| q.list)
             })
             .collect();
         let jobs: Vec<PlaneJob> = again.iter().map(|&i| rendered[i].job.clone()).collect();
+        let (queries, index) = split_queries(queries, self.settings.improved_projection);
         let results = backend.render_tested(&jobs, &queries)?;
-        for ((&i, result), q) in again.iter().zip(results).zip(queries) {
-            rendered[i].tested = Tested::of(result, q);
+        for ((&i, result), x) in again.iter().zip(results).zip(index) {
+            rendered[i].tested = Tested::of(result, x);
         }
         Ok(())
     }
@@ -631,52 +639,36 @@ impl Prepared<'_> {
         &self,
         frame: &PlaneFrame,
         tests: &Tests,
+        id: BoxId,
         b: &DAabb,
         cell: &DAabb,
         range: (f64, f64),
     ) -> Coverage {
+        debug_assert_eq!(&frame.cell, cell, "a plane's frame holds its cell");
         if !in_reach(frame, b, range) {
             return Coverage::Empty;
         }
-        if b.overlaps(cell) {
-            return Coverage::Partial;
-        }
-        let Some(sp) = span(frame, b) else {
-            return Coverage::Partial;
-        };
-        let depth = depth_down(sp.depth);
-        let (lo, hi) = standard_rect(frame, b);
-        let standard = match pixel_rect(frame, lo, hi) {
-            Some([i0, j0, i1, j1]) => tests.test(i0, j0, i1, j1, depth),
-            None => {
-                // Partly outside the plane: only the part inside can hold a descendant.
-                let (clo, chi) = (lo.max(frame.rect_min), hi.min(frame.rect_max));
-                if !(clo.x <= chi.x && clo.y <= chi.y) {
-                    return Coverage::Empty;
-                }
-                match pixel_rect(frame, clo, chi) {
-                    Some([i0, j0, i1, j1])
-                        if tests.test(i0, j0, i1, j1, f32::INFINITY) == Coverage::Empty =>
-                    {
-                        Coverage::Empty
-                    }
-                    _ => Coverage::Partial,
-                }
+        match tests {
+            Tests::Hdm(h) => {
+                box_coverage(frame, b, self.settings.improved_projection, |q| h.answer(q))
             }
-        };
-        if standard != Coverage::Partial || !(sp.in_front && self.settings.improved_projection) {
-            return standard;
+            Tests::Answers(a) => a.coverage(id),
+            Tests::Record(r) => {
+                // Answers known without the map are kept here (and an `Empty` one prunes the
+                // walk, as it will the real walk); the others go to the device.
+                let known = answer_without_test(frame, b);
+                r.borrow_mut().record(id, b, known);
+                known.unwrap_or(Coverage::Partial)
+            }
         }
-        // Either improved Projection, covered, proves the box hidden (each is sound alone).
-        let hidden = improved_rects(frame, b).any(|(lo, hi)| {
-            pixel_rect(frame, lo, hi).is_some_and(|[i0, j0, i1, j1]| {
-                tests.test(i0, j0, i1, j1, depth) == Coverage::Hidden
-            })
-        });
-        if hidden {
-            Coverage::Hidden
-        } else {
-            Coverage::Partial
+    }
+
+    /// The boxes a walk names ([`BoxId`]).
+    fn box_counts(&self) -> BoxCounts {
+        BoxCounts {
+            nodes: self.bvh.as_ref().map_or(0, |b| b.nodes.len()),
+            objects: self.scene.objects.len(),
+            pieces: self.piece_boxes.len(),
         }
     }
 }
@@ -723,6 +715,8 @@ struct Round<'a> {
     plans: &'a [DirectionPlan],
     settings: &'a PlaneSettings,
     cell: &'a DAabb,
+    /// Pixels per box test the device answers ([`RasterBackend::pixels_per_device_test`]).
+    share: usize,
 }
 
 impl Round<'_> {
@@ -788,12 +782,12 @@ enum Tested {
     /// Its Depth Map and Hierarchical Depth Map, on the CPU.
     Map { map: Arc<DepthMap>, hdm: Hdm },
     /// The device's answers to its queries ([`Prepared::record_queries`]), by query.
-    Answers(AnswerMap),
+    Answers(Answers),
     /// The device's answers, and its map kept there ([`RasterBackend::render_kept`]): the
     /// map's stand-in (a later reprojection's source), its umbra's pixel box and whether
     /// the umbra covers every pixel.
     Kept {
-        answers: AnswerMap,
+        answers: Answers,
         source: Arc<DepthMap>,
         umbra: Option<[u32; 4]>,
         all_umbra: bool,
@@ -808,15 +802,14 @@ impl Tested {
         }
     }
 
-    /// A backend's result for a plane asked `queries` (`None`: none asked), with the
-    /// pyramid of a map that came back built here.
-    fn of(result: PlaneResult, queries: Option<Vec<RectQuery>>) -> Tested {
-        let keyed = |answers: Vec<Coverage>| -> AnswerMap {
-            let q = queries.as_ref().expect("answers come only for queries");
-            debug_assert_eq!(answers.len(), q.len());
-            (q.iter().map(|q| (q.rect, q.depth.to_bits())))
-                .zip(answers)
-                .collect()
+    /// A backend's result for a plane whose box tests lie as `index` says (`None`: none
+    /// asked), with the pyramid of a map that came back built here.
+    fn of(result: PlaneResult, index: Option<BoxIndex>) -> Tested {
+        let keyed = |answers: Vec<Coverage>| -> Answers {
+            Answers {
+                answers,
+                index: index.expect("answers come only for queries"),
+            }
         };
         match result {
             PlaneResult::Map(map) => Tested::Map {
@@ -834,54 +827,158 @@ impl Tested {
     }
 }
 
-/// A rectangle query's key: its pixels and its Depth's bits.
-type QueryKey = ([u32; 4], u32);
-
-/// The device's answers to a plane's queries, by key (a fast hash: a large scene's plane asks
-/// thousands).
-type AnswerMap = foldhash::HashMap<QueryKey, Coverage>;
-
-/// The queries a plane's traversal may ask, each once, in the order first asked.
-#[derive(Default)]
-struct Queries {
-    index: foldhash::HashMap<QueryKey, usize>,
-    list: Vec<RectQuery>,
+/// How many boxes of each kind a walk names ([`BoxId`]): nodes, objects and pieces have a
+/// slot each in a plane's [`BoxIndex`].
+#[derive(Clone, Copy, Debug)]
+struct BoxCounts {
+    nodes: usize,
+    objects: usize,
+    pieces: usize,
 }
 
-/// Where [`Prepared::test_box`] tests a plane's pixel rectangles.
+/// Where each box a plane's walk recorded lies among its box tests: nodes, objects and pieces
+/// through a slot per box (a plane records thousands; an array is much cheaper than hashing
+/// them, and zeroed pages the walk does not touch cost nothing), occluder parts (the leave-out
+/// walk's, few out of millions) through a hash map.
+struct BoxIndex {
+    counts: BoxCounts,
+    /// Per node, then object, then piece: its test's index + 1, 0 for none, [`OPEN`] or
+    /// [`EMPTY`] for a box answered without a test.
+    slots: Vec<u32>,
+    parts: foldhash::HashMap<u32, u32>,
+}
+
+impl BoxIndex {
+    fn new(counts: BoxCounts) -> Self {
+        BoxIndex {
+            counts,
+            slots: vec![0; counts.nodes + counts.objects + counts.pieces],
+            parts: Default::default(),
+        }
+    }
+
+    /// Box `id`'s slot, or `None` for a part.
+    fn slot(&self, id: BoxId) -> Option<usize> {
+        let c = &self.counts;
+        match id {
+            BoxId::Node(i) => Some(i as usize),
+            BoxId::Object(i) => Some(c.nodes + i as usize),
+            BoxId::Piece(i) => Some(c.nodes + c.objects + i as usize),
+            BoxId::Part(_) => None,
+        }
+    }
+
+    /// Box `id`'s entry: its test's index + 1, 0 if not recorded, [`OPEN`] or [`EMPTY`].
+    fn get(&self, id: BoxId) -> u32 {
+        match (self.slot(id), id) {
+            (Some(s), _) => self.slots[s],
+            (None, BoxId::Part(i)) => self.parts.get(&i).copied().unwrap_or(0),
+            (None, _) => 0,
+        }
+    }
+
+    /// Records box `id`'s entry (see [`Self::get`]).
+    fn insert(&mut self, id: BoxId, k: u32) {
+        match (self.slot(id), id) {
+            (Some(s), _) => self.slots[s] = k,
+            (None, BoxId::Part(i)) => {
+                self.parts.insert(i, k);
+            }
+            (None, _) => {}
+        }
+    }
+}
+
+/// [`BoxIndex`] entries of boxes answered without a test ([`answer_without_test`]): `Partial`
+/// and `Empty`.
+const OPEN: u32 = u32::MAX;
+const EMPTY: u32 = u32::MAX - 1;
+
+/// The box tests a plane's walks may ask, each box once, in the order first asked.
+struct Queries {
+    boxes: Vec<DAabb>,
+    index: BoxIndex,
+}
+
+impl Queries {
+    fn new(counts: BoxCounts) -> Self {
+        Queries {
+            boxes: Vec::new(),
+            index: BoxIndex::new(counts),
+        }
+    }
+
+    /// Records box `id` (a box recorded twice, by the walk and the next plane's leave-out
+    /// walk, is the same box); one whose answer is `known` without a test
+    /// ([`answer_without_test`]) is only noted, not sent.
+    fn record(&mut self, id: BoxId, b: &DAabb, known: Option<Coverage>) {
+        if self.index.get(id) == 0 {
+            let k = match known {
+                Some(Coverage::Empty) => EMPTY,
+                Some(_) => OPEN,
+                None => {
+                    self.boxes.push(*b);
+                    self.boxes.len() as u32
+                }
+            };
+            self.index.insert(id, k);
+        }
+    }
+}
+
+/// The device's answers to a plane's box tests, in order, with where each box's lies.
+struct Answers {
+    answers: Vec<Coverage>,
+    index: BoxIndex,
+}
+
+impl Answers {
+    /// Box `id`'s answer. A box that was not recorded stays open (never a cull; a debug
+    /// assertion catches it).
+    fn coverage(&self, id: BoxId) -> Coverage {
+        match self.index.get(id) {
+            OPEN => Coverage::Partial,
+            EMPTY => Coverage::Empty,
+            0 => {
+                debug_assert!(false, "box {id:?} was not recorded");
+                Coverage::Partial
+            }
+            k => self.answers[k as usize - 1],
+        }
+    }
+}
+
+/// Where [`Prepared::test_box`] tests a plane's boxes.
 enum Tests<'a> {
     /// The plane's Hierarchical Depth Map.
     Hdm(&'a Hdm),
     /// The device's answers ([`RasterBackend::render_tested`]).
-    Answers(&'a AnswerMap),
-    /// Recording every query asked, each answered `Partial` so that a box's every later
-    /// query is asked too ([`Prepared::record_queries`]).
+    Answers(&'a Answers),
+    /// Recording every box tested, each answered `Partial` so that the walk goes on below
+    /// it ([`Prepared::record_queries`]).
     Record(&'a RefCell<Queries>),
 }
 
-impl Tests<'_> {
-    /// The pixels `[i0, i1] × [j0, j1]` against an occludee Depth (as [`Hdm::test`]).
-    fn test(&self, i0: u32, j0: u32, i1: u32, j1: u32, depth: f32) -> Coverage {
-        let key = ([i0, j0, i1, j1], depth.to_bits());
-        match self {
-            Tests::Hdm(h) => h.test(i0, j0, i1, j1, depth),
-            Tests::Answers(a) => {
-                let found = a.get(&key).copied();
-                debug_assert!(found.is_some(), "query {key:?} was not recorded");
-                // (Unrecorded, it would stay open: never a cull.)
-                found.unwrap_or(Coverage::Partial)
-            }
-            Tests::Record(r) => {
-                let mut q = r.borrow_mut();
-                if !q.index.contains_key(&key) {
-                    let n = q.list.len();
-                    q.index.insert(key, n);
-                    q.list.push(RectQuery { rect: key.0, depth });
-                }
-                Coverage::Partial
-            }
-        }
-    }
+/// Each plane's box tests for the backend ([`PlaneQueries`]), apart from where each box's
+/// answer will lie.
+fn split_queries(
+    queries: Vec<Option<Queries>>,
+    improved: bool,
+) -> (Vec<Option<PlaneQueries>>, Vec<Option<BoxIndex>>) {
+    queries
+        .into_iter()
+        .map(|q| match q {
+            Some(q) => (
+                Some(PlaneQueries {
+                    rects: Vec::new(),
+                    boxes: q.boxes,
+                    improved,
+                }),
+                Some(q.index),
+            ),
+            None => (None, None),
+        })
+        .unzip()
 }
 
 /// A rendered sweep plane kept for later reprojections.
@@ -908,7 +1005,7 @@ fn render_round(
     round: &Round,
     backend: &dyn RasterBackend,
     planned: Vec<PlannedPlane>,
-    queries: Vec<Option<Vec<RectQuery>>>,
+    (queries, index): (Vec<Option<PlaneQueries>>, Vec<Option<BoxIndex>>),
     keep: &[bool],
 ) -> Result<Vec<RenderedPlane>, BakeError> {
     let (jobs, meta): (Vec<PlaneJob>, Vec<(usize, Rect)>) = planned
@@ -922,8 +1019,8 @@ fn render_round(
     };
     let tested: Vec<Tested> = results
         .into_par_iter()
-        .zip(queries)
-        .map(|(r, q)| Tested::of(r, q))
+        .zip(index)
+        .map(|(r, x)| Tested::of(r, x))
         .collect();
     Ok((jobs.into_iter().zip(meta).zip(tested))
         .map(|((job, (dir, relevant)), tested)| {

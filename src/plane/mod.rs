@@ -276,6 +276,42 @@ pub struct RectQuery {
     pub depth: f32,
 }
 
+/// A plane's occludee tests for a backend to answer on its device
+/// ([`RasterBackend::render_tested`](crate::backend::RasterBackend::render_tested)): pixel
+/// rectangles, each answered as [`crate::hdm::Hdm::answer`] answers it, and boxes, each
+/// answered as [`crate::project::occludee::box_coverage`] answers it with `improved` (the
+/// rule's rectangles computed on the device, in `f64`, from the box and the plane's frame).
+/// The answers come back in that order: the rectangles', then the boxes'.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlaneQueries {
+    /// Pixel rectangle tests.
+    pub rects: Vec<RectQuery>,
+    /// Box tests.
+    pub boxes: Vec<DAabb>,
+    /// Whether the box tests try the improved Projections.
+    pub improved: bool,
+}
+
+impl PlaneQueries {
+    /// Only rectangle tests.
+    pub fn rects(rects: Vec<RectQuery>) -> Self {
+        PlaneQueries {
+            rects,
+            ..Default::default()
+        }
+    }
+
+    /// The number of answers: one per rectangle and per box.
+    pub fn len(&self) -> usize {
+        self.rects.len() + self.boxes.len()
+    }
+
+    /// True when nothing is asked.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
 /// A rendered plane as a backend gives it back from
 /// [`RasterBackend::render_tested`](crate::backend::RasterBackend::render_tested): its Depth
 /// Map, or only the answers to its queries (in their order) when the device answered them,

@@ -3,8 +3,108 @@
 //! boxes lying between the cell and the plane.
 
 use crate::geom::DAabb;
-use crate::plane::PlaneFrame;
+use crate::plane::{Coverage, PlaneFrame, RectQuery, depth_down};
 use glam::DVec2;
+
+/// Which box of a walk an occludee test is about: a node of the object hierarchy, an object,
+/// a piece of an object, or an occluder part (the sweep's leave-out test). A plane's box tests
+/// answered on a device are read back by it (`bake::planes`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BoxId {
+    /// A node of the object hierarchy, by its index.
+    Node(u32),
+    /// An object, by its index in the scene.
+    Object(u32),
+    /// A piece of a large object (a box around some of its triangles), by its index.
+    Piece(u32),
+    /// An occluder part, by its index in the occluder table.
+    Part(u32),
+}
+
+/// True when [`box_coverage`] answers `Partial` for `b` on `frame` before any test: the box
+/// touches the cell or does not lie strictly beyond its face (some ray from the cell to it
+/// does not travel toward the plane).
+pub fn open_without_test(frame: &PlaneFrame, b: &DAabb) -> bool {
+    b.overlaps(&frame.cell) || span(frame, b).is_none()
+}
+
+/// [`box_coverage`]'s answer where it needs no test of the map: `Partial` for a box
+/// [`open_without_test`], `Empty` for one whose standard Projection lies wholly beside the
+/// plane's rectangle; `None` otherwise.
+pub fn answer_without_test(frame: &PlaneFrame, b: &DAabb) -> Option<Coverage> {
+    if open_without_test(frame, b) {
+        return Some(Coverage::Partial);
+    }
+    let (lo, hi) = standard_rect(frame, b);
+    (pixel_rect(frame, lo, hi).is_none() && beside(frame, lo, hi)).then_some(Coverage::Empty)
+}
+
+/// True when the world rectangle `[lo, hi]` does not meet the plane's rectangle.
+fn beside(frame: &PlaneFrame, lo: DVec2, hi: DVec2) -> bool {
+    let (clo, chi) = (lo.max(frame.rect_min), hi.min(frame.rect_max));
+    !(clo.x <= chi.x && clo.y <= chi.y)
+}
+
+/// The occlusion test of one box (lying within the plane's reach) on one plane, given a way
+/// to answer pixel rectangle tests (`test`, e.g. [`crate::hdm::Hdm::answer`]): `Hidden`;
+/// `Empty` when nothing inside the box can be hidden on this plane (its Projection misses the
+/// plane's rectangle, or covers no occluded pixel of it — a child's Projection lies inside
+/// its parent's); `Partial` otherwise, including boxes touching the cell (`frame.cell`) or
+/// not strictly beyond its face. `improved`: also try the improved Projections
+/// ([`improved_rects`]) of a box between the face and the plane whose standard Projection is
+/// not decisive.
+///
+/// The one statement of the rule: the CPU's walk asks it of a pyramid, and a device answering
+/// box tests (`shaders/boxes.wgsl`) repeats it step for step.
+pub fn box_coverage(
+    frame: &PlaneFrame,
+    b: &DAabb,
+    improved: bool,
+    mut test: impl FnMut(&RectQuery) -> Coverage,
+) -> Coverage {
+    if open_without_test(frame, b) {
+        return Coverage::Partial;
+    }
+    let Some(sp) = span(frame, b) else {
+        return Coverage::Partial; // (not reached: `open_without_test`)
+    };
+    let depth = depth_down(sp.depth);
+    let (lo, hi) = standard_rect(frame, b);
+    let standard = match pixel_rect(frame, lo, hi) {
+        Some(rect) => test(&RectQuery { rect, depth }),
+        None => {
+            // Partly outside the plane: only the part inside can hold a descendant.
+            if beside(frame, lo, hi) {
+                return Coverage::Empty;
+            }
+            let (clo, chi) = (lo.max(frame.rect_min), hi.min(frame.rect_max));
+            match pixel_rect(frame, clo, chi) {
+                Some(rect)
+                    if test(&RectQuery {
+                        rect,
+                        depth: f32::INFINITY,
+                    }) == Coverage::Empty =>
+                {
+                    Coverage::Empty
+                }
+                _ => Coverage::Partial,
+            }
+        }
+    };
+    if standard != Coverage::Partial || !(sp.in_front && improved) {
+        return standard;
+    }
+    // Either improved Projection, covered, proves the box hidden (each is sound alone).
+    let hidden = improved_rects(frame, b).any(|(lo, hi)| {
+        pixel_rect(frame, lo, hi)
+            .is_some_and(|rect| test(&RectQuery { rect, depth }) == Coverage::Hidden)
+    });
+    if hidden {
+        Coverage::Hidden
+    } else {
+        Coverage::Partial
+    }
+}
 
 /// Where an occludee box lies relative to a plane.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -422,8 +422,9 @@ pub struct SweepInputs<'a> {
 pub struct LeaveOut<'a> {
     /// Objects already proven hidden: they add no occlusion.
     pub object: &'a dyn Fn(u32) -> bool,
-    /// In a sweep, parts whose bounds the previous plane proves hidden.
-    pub hidden: &'a dyn Fn(&DAabb) -> bool,
+    /// In a sweep, boxes the previous plane proves hidden: object hierarchy nodes and parts'
+    /// bounds, each named ([`crate::project::occludee::BoxId`]).
+    pub hidden: &'a dyn Fn(crate::project::occludee::BoxId, &DAabb) -> bool,
 }
 
 /// The job of plane `k` of a direction, leaving out occluders (and slices) of objects for
@@ -1247,7 +1248,7 @@ pub fn gather_slab(
             continue;
         }
         let (near, far) = plan.distances_of(b);
-        if near > start && (leave_out.hidden)(b) {
+        if near > start && (leave_out.hidden)(crate::project::occludee::BoxId::Part(pi), b) {
             continue;
         }
         if !beyond_face(

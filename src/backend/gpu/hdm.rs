@@ -294,6 +294,127 @@ impl HdmPipelines {
     }
 }
 
+/// Query slots a box test takes (`boxes.wgsl`): its standard (or clipped) Projection's, then
+/// its two improved Projections'.
+pub(super) const BOX_SLOTS: u32 = 3;
+/// Bytes of one box (six `f64`).
+pub(super) const BOX_BYTES: u64 = 48;
+/// `f64`s of one tested plane's frame for the box tests (`frames_f` in `boxes.wgsl`).
+pub(super) const BOX_FRAME_F64S: usize = 12;
+
+/// The two compute pipelines of `shaders/boxes.wgsl` (box tests' rectangles, then their
+/// answers from the rectangles' answers) and their bind group layout; they need
+/// `SHADER_F64`.
+#[derive(Debug)]
+pub(super) struct BoxPipelines {
+    pub plan: wgpu::ComputePipeline,
+    pub decide: wgpu::ComputePipeline,
+    /// Group 0: boxes, their planes and slots, the planes' frames (`f64`, `u32`), the
+    /// queries, the shapes, the answers, the count.
+    pub layout: wgpu::BindGroupLayout,
+}
+
+impl BoxPipelines {
+    /// Compiles `source` (`shaders/boxes.wgsl` after `shaders/rounding.wgsl`) and creates its
+    /// pipelines on `device`, every object labelled.
+    pub fn new(device: &wgpu::Device, source: &str) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("boxes.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let storage = |binding: u32, read_only: bool, size: u64| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: cs,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: NonZeroU64::new(size),
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("box tests bind group layout"),
+            entries: &[
+                storage(0, true, BOX_BYTES),
+                storage(1, true, 8),
+                storage(2, true, BOX_FRAME_F64S as u64 * 8),
+                storage(3, true, 16),
+                storage(4, false, QUERY_BYTES),
+                storage(5, false, 4),
+                storage(6, true, 4),
+                storage(8, false, 4),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 7,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: NonZeroU64::new(16),
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("box tests pipeline layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |name: &str, entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(&format!("box tests {name} pipeline")),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        BoxPipelines {
+            plan: pipeline("plan", "box_plan"),
+            decide: pipeline("decide", "box_decide"),
+            layout,
+        }
+    }
+}
+
+/// Workgroups of a box pass over `boxes` boxes.
+pub(super) fn box_groups(boxes: u32) -> u32 {
+    boxes.div_ceil(ANSWER_WORKGROUP)
+}
+
+/// A tested plane's frame for the box tests: its `f64`s (`frames_f` in `boxes.wgsl`) and its
+/// words (`frames_u`).
+pub(super) fn box_frame(
+    f: &crate::plane::PlaneFrame,
+    improved: bool,
+) -> ([f64; BOX_FRAME_F64S], [u32; 4]) {
+    let c = &f.cell;
+    (
+        [
+            c.min.x,
+            c.min.y,
+            c.min.z,
+            c.max.x,
+            c.max.y,
+            c.max.z,
+            f.position,
+            f.rect_min.x,
+            f.rect_min.y,
+            f.rect_max.x,
+            f.rect_max.y,
+            0.0,
+        ],
+        [
+            f.axis as u32,
+            u32::from(f.positive) | u32::from(improved) << 1,
+            f.width,
+            f.height,
+        ],
+    )
+}
+
 /// The buffers of a submission's occludee tests, grown as needed and kept in the pool.
 #[derive(Default)]
 pub(super) struct TestBuffers {
@@ -311,6 +432,16 @@ pub(super) struct TestBuffers {
     pub tables: Option<wgpu::Buffer>,
     pub summary: Option<wgpu::Buffer>,
     pub summary_staging: Option<wgpu::Buffer>,
+    /// Box tests: the boxes, their planes and slots, the planes' frames, their shapes, the
+    /// count.
+    pub boxes: Option<wgpu::Buffer>,
+    pub box_meta: Option<wgpu::Buffer>,
+    pub frames_f: Option<wgpu::Buffer>,
+    pub frames_u: Option<wgpu::Buffer>,
+    pub shapes: Option<wgpu::Buffer>,
+    pub box_count: Option<wgpu::Buffer>,
+    /// The box tests' answers, read back after the rectangle tests'.
+    pub box_out: Option<wgpu::Buffer>,
 }
 
 /// Where one tested plane lies in a submission's test buffers.
@@ -318,8 +449,11 @@ pub(super) struct TestBuffers {
 pub(super) struct TestedPlane {
     /// Its index among the submission's tested planes (`planes` in `shaders/hdm.wgsl`).
     pub index: u32,
-    /// Its first query in the submission's query buffer, and how many.
-    pub queries: (u32, u32),
+    /// Its first rectangle test in the submission's query buffer, and how many (the
+    /// submission's rectangle tests come first, then [`BOX_SLOTS`] query slots per box test).
+    pub rects: (u32, u32),
+    /// Its first box test among the submission's, and how many.
+    pub boxes: (u32, u32),
     /// Its pyramid's levels (the first copies the map).
     pub levels: Vec<LevelParams>,
     /// Its slice mask's first word in the masks buffer, when the job has slices.

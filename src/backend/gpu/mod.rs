@@ -239,7 +239,7 @@ mod wave;
 pub use device::hardware_adapter_available;
 
 use super::{BackendError, RasterBackend};
-use crate::plane::{DepthMap, PlaneJob, PlaneResult, RectQuery};
+use crate::plane::{DepthMap, PlaneJob, PlaneQueries, PlaneResult};
 use device::{DeviceLimits, Failure};
 use pipelines::Pipelines;
 use prepare::{Prepared, merge_mask, prepare};
@@ -311,6 +311,13 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shaders/hdm.wgsl",
         include_str!("../../../shaders/hdm.wgsl"),
     ),
+    (
+        "shaders/boxes.wgsl",
+        concat!(
+            include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/boxes.wgsl")
+        ),
+    ),
     // The render fill's depths, validated within `shaders/sampler.wgsl` (this is that module).
     (
         "shaders/sampler_blend.wgsl",
@@ -328,6 +335,7 @@ const REPROJECT_WGSL: &str = SHADERS[1].1;
 const RSF_WGSL: &str = SHADERS[2].1;
 const VIEWS_WGSL: &str = SHADERS[3].1;
 const SAMPLER_WGSL: &str = SHADERS[5].1;
+const BOXES_WGSL: &str = SHADERS[10].1;
 const SAMPLER_SETUP_WGSL: &str = SHADERS[6].1;
 const SAMPLER_FILL_WGSL: &str = SHADERS[8].1;
 const HDM_WGSL: &str = SHADERS[9].1;
@@ -421,10 +429,16 @@ pub struct GpuBackend {
     view_pipelines: Option<pipelines::ViewPipelines>,
     /// The pyramid and occludee tests of the planes whose tests the device answers.
     hdm_pipelines: hdm::HdmPipelines,
+    /// Box tests' rectangles and answers (`shaders/boxes.wgsl`), where the device has
+    /// `SHADER_F64`: without them the device answers rectangle tests alone, and
+    /// [`RasterBackend::tests_on_device`] is false (the bake asks box tests).
+    box_pipelines: Option<hdm::BoxPipelines>,
     /// Occludee tests answered on the device ([`GpuBackend::set_tests_on_device`]).
     tests_wanted: bool,
     /// Keep sweeps' maps on the device ([`GpuBackend::set_keep_sweep_maps`]).
     keep_wanted: bool,
+    /// Pixels per box test asked of the device ([`GpuBackend::set_pixels_per_device_test`]).
+    pixels_per_test: usize,
     /// How occluders' Projections are made ([`GpuBackend::set_projection`]).
     projection: GpuProjection,
     /// Reprojection sources' summed-area tables kept on the device across calls.
@@ -638,6 +652,14 @@ impl GpuBackend {
         } else {
             None
         };
+        let box_pipelines = if f64_ok {
+            let scope = device::ErrorScopes::push(&device);
+            let p = hdm::BoxPipelines::new(&device, BOXES_WGSL);
+            scope.check()?;
+            Some(p)
+        } else {
+            None
+        };
         Ok(GpuBackend {
             adapter_name,
             device,
@@ -656,8 +678,10 @@ impl GpuBackend {
             rsf_pool: Mutex::default(),
             view_pipelines,
             hdm_pipelines,
+            box_pipelines,
             tests_wanted: true,
             keep_wanted: true,
+            pixels_per_test: crate::backend::PIXELS_PER_DEVICE_TEST,
             projection: GpuProjection::default(),
             tables: tables::TableCache::default(),
         })
@@ -714,6 +738,15 @@ impl GpuBackend {
     /// every map back for the CPU's pyramid (for comparisons). The same PVS either way.
     pub fn set_tests_on_device(&mut self, on: bool) {
         self.tests_wanted = on;
+    }
+
+    /// How many pixels of a plane's map each occludee test asked of the device should stand
+    /// for ([`RasterBackend::pixels_per_device_test`]; default
+    /// [`crate::backend::PIXELS_PER_DEVICE_TEST`], at least 1): fewer asks the device more
+    /// planes' tests and reads fewer maps back, for more of the CPU's recording. The same PVS
+    /// at any value.
+    pub fn set_pixels_per_device_test(&mut self, pixels: usize) {
+        self.pixels_per_test = pixels.max(1);
     }
 
     /// Keeps occlusion sweeps' maps on the device (`on`, the default, with the tests there
@@ -986,13 +1019,17 @@ impl RasterBackend for GpuBackend {
     }
 
     fn tests_on_device(&self) -> bool {
-        self.tests_wanted
+        self.tests_wanted && self.box_pipelines.is_some()
+    }
+
+    fn pixels_per_device_test(&self) -> usize {
+        self.pixels_per_test
     }
 
     fn render_tested(
         &self,
         jobs: &[PlaneJob],
-        queries: &[Option<Vec<RectQuery>>],
+        queries: &[Option<PlaneQueries>],
     ) -> Result<Vec<PlaneResult>, BackendError> {
         self.render_kept(jobs, queries, &vec![false; jobs.len()])
     }
@@ -1004,7 +1041,7 @@ impl RasterBackend for GpuBackend {
     fn render_kept(
         &self,
         jobs: &[PlaneJob],
-        queries: &[Option<Vec<RectQuery>>],
+        queries: &[Option<PlaneQueries>],
         keep: &[bool],
     ) -> Result<Vec<PlaneResult>, BackendError> {
         assert_eq!(

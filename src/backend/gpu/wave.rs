@@ -33,7 +33,7 @@ use super::setup::Vertex;
 use super::tables::{Cached, SweepTable};
 use super::{GpuBackend, RenderStats, UNIFORM_STRIDE};
 use crate::backend::BackendError;
-use crate::plane::{Coverage, DepthMap, KeptMap, PlaneJob, PlaneResult, RectQuery};
+use crate::plane::{Coverage, DepthMap, KeptMap, PlaneJob, PlaneQueries, PlaneResult};
 use std::collections::HashMap;
 use std::num::NonZeroU64;
 use std::sync::Arc;
@@ -282,6 +282,10 @@ struct WaveLayout {
     /// size of that level.
     tested: u32,
     queries: u32,
+    /// Rectangle tests of the wave (its first query slots) and box tests (then
+    /// [`hdm::BOX_SLOTS`] query slots each); `queries` counts the slots.
+    rects: u32,
+    boxes: u32,
     pyramid_floats: u64,
     mask_words: u32,
     reduce: Vec<(u32, u32)>,
@@ -302,9 +306,10 @@ impl WaveLayout {
         todo: &[usize],
         jobs: &[PlaneJob],
         prepared: &[Prepared],
-        queries: &[Option<Vec<RectQuery>>],
+        queries: &[Option<PlaneQueries>],
         keep: &[bool],
         limits: &DeviceLimits,
+        boxes_ok: bool,
     ) -> Self {
         let storage_align = limits.storage_align;
         // The tests' largest buffers (queries, pyramids) are each one storage binding.
@@ -319,6 +324,7 @@ impl WaveLayout {
         let mut planes = Vec::with_capacity(todo.len());
         let (mut counted, mut counted_f64s, mut counted_words) = (0usize, 0usize, 0usize);
         let (mut tested, mut n_queries, mut pyramid_floats) = (0u32, 0u32, 0u64);
+        let (mut n_boxes, mut n_rects) = (0u32, 0u32);
         // Per reduction level k ≥ 1, the largest level-k size over the tested planes.
         let mut reduce: Vec<(u32, u32)> = Vec::new();
         let mut mask_words = 0u32;
@@ -345,12 +351,17 @@ impl WaveLayout {
             // The device answers a plane's queries when asked (its slices' mask goes up as
             // bits and is merged there), and keeps its map when asked and its table fits.
             let table = u64::from(hdm::table_stride(f.width)) * u64::from(f.height);
-            let fits = |q: &[RectQuery]| {
+            let slots = |q: &PlaneQueries| {
+                q.rects.len() as u64 + q.boxes.len() as u64 * u64::from(hdm::BOX_SLOTS)
+            };
+            let fits = |q: &PlaneQueries| {
                 let mask = p
                     .mask
                     .as_ref()
                     .map_or(0, |m| m.depth.len().div_ceil(32) as u64);
-                (u64::from(n_queries) + q.len() as u64) * hdm::QUERY_BYTES <= test_cap
+                (q.boxes.is_empty() || boxes_ok)
+                    && (u64::from(n_queries) + slots(q)) * hdm::QUERY_BYTES <= test_cap
+                    && (u64::from(n_boxes) + q.boxes.len() as u64) * hdm::BOX_BYTES <= test_cap
                     && (pyramid_floats + hdm::pyramid_floats(f.width, f.height)) * 4 <= test_cap
                     && (u64::from(mask_words) + mask) * 4 <= test_cap
                     && f.width.max(f.height) <= hdm::MAX_SIDE
@@ -366,12 +377,15 @@ impl WaveLayout {
                     let levels = hdm::level_params(f.width, f.height, pyramid_floats as u32, mask);
                     let t = TestedPlane {
                         index: tested,
-                        queries: (n_queries, q.len() as u32),
+                        rects: (n_rects, q.rects.len() as u32),
+                        boxes: (n_boxes, q.boxes.len() as u32),
                         levels,
                         mask,
                     };
                     tested += 1;
-                    n_queries += q.len() as u32;
+                    n_queries += slots(q) as u32;
+                    n_rects += q.rects.len() as u32;
+                    n_boxes += q.boxes.len() as u32;
                     pyramid_floats += hdm::pyramid_floats(f.width, f.height);
                     for (k, l) in t.levels.iter().enumerate().skip(1) {
                         if reduce.len() < k {
@@ -418,6 +432,8 @@ impl WaveLayout {
             counted_words,
             tested,
             queries: n_queries,
+            rects: n_rects,
+            boxes: n_boxes,
             pyramid_floats,
             mask_words,
             reduce,
@@ -425,6 +441,16 @@ impl WaveLayout {
             table_words,
             kept_max,
         }
+    }
+
+    /// Answers read back: the rectangle tests', then the box tests'.
+    fn answers(&self) -> u32 {
+        self.rects + self.boxes
+    }
+
+    /// The query slot of box test `k` of the wave (its first of [`hdm::BOX_SLOTS`]).
+    fn box_slot(&self, k: u32) -> u32 {
+        self.rects + k * hdm::BOX_SLOTS
     }
 
     /// Slots of the params buffer: each tested plane's `base` dispatch, then each reduction
@@ -492,13 +518,18 @@ impl WaveLayout {
             }
         }
         if self.tested > 0 {
-            stats.bytes_uploaded += u64::from(self.queries) * hdm::QUERY_BYTES
+            stats.bytes_uploaded += u64::from(self.rects) * hdm::QUERY_BYTES
                 + u64::from(self.tested) * hdm::PLANE_BYTES
                 + u64::from(self.params()) * UNIFORM_STRIDE
                 + u64::from(self.tested) * hdm::MAX_LEVELS as u64 * hdm::LEVEL_BYTES
                 + u64::from(self.mask_words) * 4
                 + 16;
-            stats.bytes_read_back += u64::from(self.queries) * 4;
+            stats.bytes_read_back += u64::from(self.answers()) * 4;
+            if self.boxes > 0 {
+                stats.bytes_uploaded += u64::from(self.boxes) * (hdm::BOX_BYTES + 8)
+                    + u64::from(self.tested) * (hdm::BOX_FRAME_F64S as u64 * 8 + 16)
+                    + 16;
+            }
         }
         let kept = u64::from(self.kept);
         stats.bytes_uploaded += kept * (hdm::KEPT_BYTES + hdm::SUMMARY_WORDS * 4);
@@ -559,18 +590,26 @@ impl GpuBackend {
         pool: &mut Pool,
         jobs: &[PlaneJob],
         prepared: &[Prepared],
-        (queries, keep): (&[Option<Vec<RectQuery>>], &[bool]),
+        (queries, keep): (&[Option<PlaneQueries>], &[bool]),
         todo: &[usize],
         out: &mut [Option<PlaneResult>],
         stats: &mut RenderStats,
     ) -> Result<(), BackendError> {
         let scope = ErrorScopes::push(&self.device);
-        let layout = WaveLayout::new(todo, jobs, prepared, queries, keep, &self.limits);
+        let layout = WaveLayout::new(
+            todo,
+            jobs,
+            prepared,
+            queries,
+            keep,
+            &self.limits,
+            self.box_pipelines.is_some(),
+        );
         let tables = self.allocate(pool, &layout, prepared)?;
         let pool = &*pool;
         let buffers = WaveBuffers::of(pool, tables);
         self.upload(&buffers, &layout, jobs, prepared);
-        self.upload_tests(pool, &layout, prepared, queries);
+        self.upload_tests(pool, &layout, jobs, prepared, queries);
         layout.count(jobs, prepared, stats);
         let timestamps = self.timestamp_period.map(|period| Timestamps {
             sets: &pool.timestamps[..timestamp_sets(layout.timed_passes())],
@@ -701,9 +740,51 @@ impl GpuBackend {
             )?;
             self.ensure_buffer(
                 &mut t.staging,
-                q * 4,
+                u64::from(layout.answers()).max(1) * 4,
                 wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 "occludee answers read-back",
+            )?;
+        }
+        if layout.boxes > 0 {
+            let t = pool.tests.get_or_insert_with(TestBuffers::default);
+            let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+            let n = u64::from(layout.boxes);
+            self.ensure_buffer(&mut t.boxes, n * hdm::BOX_BYTES, storage, "occludee boxes")?;
+            self.ensure_buffer(
+                &mut t.box_meta,
+                n * 8,
+                storage,
+                "occludee boxes' planes and slots",
+            )?;
+            self.ensure_buffer(
+                &mut t.frames_f,
+                u64::from(layout.tested) * hdm::BOX_FRAME_F64S as u64 * 8,
+                storage,
+                "box-tested plane frames (f64)",
+            )?;
+            self.ensure_buffer(
+                &mut t.frames_u,
+                u64::from(layout.tested) * 16,
+                storage,
+                "box-tested plane frames (u32)",
+            )?;
+            self.ensure_buffer(
+                &mut t.shapes,
+                n * 4,
+                wgpu::BufferUsages::STORAGE,
+                "occludee boxes' shapes",
+            )?;
+            self.ensure_buffer(
+                &mut t.box_count,
+                16,
+                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                "occludee box count",
+            )?;
+            self.ensure_buffer(
+                &mut t.box_out,
+                n * 4,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                "occludee boxes' answers",
             )?;
         }
         if layout.kept > 0 {
@@ -886,8 +967,9 @@ impl GpuBackend {
         &self,
         pool: &Pool,
         layout: &WaveLayout,
+        jobs: &[PlaneJob],
         prepared: &[Prepared],
-        queries: &[Option<Vec<RectQuery>>],
+        queries: &[Option<PlaneQueries>],
     ) {
         let Some(t) = pool.tests.as_ref().filter(|_| layout.tested > 0) else {
             return;
@@ -910,7 +992,11 @@ impl GpuBackend {
             put(layout.tested + k - 1, &hdm::reduce_slot(k));
         }
         let mut plane_words: Vec<u32> = Vec::with_capacity(layout.tested as usize * 4);
-        let mut query_words: Vec<u32> = Vec::with_capacity(layout.queries as usize * 4);
+        let mut query_words: Vec<u32> = Vec::with_capacity(layout.rects as usize * 4);
+        let mut box_f64s: Vec<f64> = Vec::with_capacity(layout.boxes as usize * 6);
+        let mut box_words: Vec<u32> = Vec::with_capacity(layout.boxes as usize * 2);
+        let mut frame_f64s: Vec<f64> = Vec::new();
+        let mut frame_words: Vec<u32> = Vec::new();
         for plane in &layout.planes {
             let Some(tp) = &plane.tested else { continue };
             put(tp.index, &tp.levels[0]);
@@ -921,7 +1007,10 @@ impl GpuBackend {
                 debug_assert_eq!(tp.mask, Some(mask_words.len() as u32));
                 mask_words.extend(hdm::mask_bits(m));
             }
-            for q in queries[plane.job].iter().flatten() {
+            let q = queries[plane.job]
+                .as_ref()
+                .expect("a tested plane has queries");
+            for q in &q.rects {
                 let [i0, j0, i1, j1] = q.rect;
                 query_words.extend_from_slice(&[
                     tp.index,
@@ -930,6 +1019,40 @@ impl GpuBackend {
                     q.depth.to_bits(),
                 ]);
             }
+            // (The box tests' slots, after every rectangle test, are filled on the device by
+            // `box_plan`.)
+            if layout.boxes > 0 {
+                let (ff, fu) = hdm::box_frame(&jobs[plane.job].frame, q.improved);
+                frame_f64s.extend_from_slice(&ff);
+                frame_words.extend_from_slice(&fu);
+                for (k, b) in q.boxes.iter().enumerate() {
+                    box_f64s
+                        .extend_from_slice(&[b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]);
+                    let slot = layout.box_slot(tp.boxes.0 + k as u32);
+                    box_words.extend_from_slice(&[tp.index, slot]);
+                }
+            }
+        }
+        if layout.boxes > 0 {
+            let (Some(bx), Some(meta), Some(ff), Some(fu), Some(bc)) = (
+                &t.boxes,
+                &t.box_meta,
+                &t.frames_f,
+                &t.frames_u,
+                &t.box_count,
+            ) else {
+                unreachable!("box buffers were just ensured");
+            };
+            self.queue
+                .write_buffer(bx, 0, bytemuck::cast_slice(&box_f64s));
+            self.queue
+                .write_buffer(meta, 0, bytemuck::cast_slice(&box_words));
+            self.queue
+                .write_buffer(ff, 0, bytemuck::cast_slice(&frame_f64s));
+            self.queue
+                .write_buffer(fu, 0, bytemuck::cast_slice(&frame_words));
+            self.queue
+                .write_buffer(bc, 0, bytemuck::cast_slice(&[layout.boxes, 0, 0, 0]));
         }
         self.queue.write_buffer(params, 0, &param_bytes);
         self.queue
@@ -1085,10 +1208,21 @@ impl GpuBackend {
                 let (x, y) = hdm::level_groups(size);
                 pass.dispatch_workgroups(x, y, layout.tested);
             }
+            let box_group = (layout.boxes > 0).then(|| self.box_bind_group(t, layout));
+            if let (Some(g), Some(bp)) = (&box_group, &self.box_pipelines) {
+                pass.set_pipeline(&bp.plan);
+                pass.set_bind_group(0, g, &[]);
+                pass.dispatch_workgroups(hdm::box_groups(layout.boxes), 1, 1);
+            }
             if layout.queries > 0 {
                 pass.set_pipeline(&p.answer);
                 pass.set_bind_group(0, &answer_group, &[]);
                 pass.dispatch_workgroups(hdm::answer_groups(layout.queries), 1, 1);
+            }
+            if let (Some(g), Some(bp)) = (&box_group, &self.box_pipelines) {
+                pass.set_pipeline(&bp.decide);
+                pass.set_bind_group(0, g, &[]);
+                pass.dispatch_workgroups(hdm::box_groups(layout.boxes), 1, 1);
             }
             if layout.kept > 0 {
                 let sat_group = self.sat_bind_group(t, layout);
@@ -1099,12 +1233,69 @@ impl GpuBackend {
                 pass.dispatch_workgroups(hdm::sat_groups(layout.kept_max.0), 1, layout.kept);
             }
         }
-        if layout.queries > 0 {
-            encoder.copy_buffer_to_buffer(answers, 0, staging, 0, u64::from(layout.queries) * 4);
+        if layout.rects > 0 {
+            encoder.copy_buffer_to_buffer(answers, 0, staging, 0, u64::from(layout.rects) * 4);
+        }
+        if let Some(box_out) = t.box_out.as_ref().filter(|_| layout.boxes > 0) {
+            let at = u64::from(layout.rects) * 4;
+            encoder.copy_buffer_to_buffer(box_out, 0, staging, at, u64::from(layout.boxes) * 4);
         }
         if layout.kept > 0 {
             self.encode_kept_copies(encoder, t, buffers, layout);
         }
+    }
+
+    /// The bind group of the box tests' passes (`box_plan`, `box_decide`).
+    fn box_bind_group(&self, t: &TestBuffers, layout: &WaveLayout) -> wgpu::BindGroup {
+        let (Some(bx), Some(meta), Some(ff), Some(fu), Some(shapes), Some(bc), Some(box_out)) = (
+            &t.boxes,
+            &t.box_meta,
+            &t.frames_f,
+            &t.frames_u,
+            &t.shapes,
+            &t.box_count,
+            &t.box_out,
+        ) else {
+            unreachable!("box buffers were just ensured");
+        };
+        let (Some(queries), Some(answers)) = (&t.queries, &t.answers) else {
+            unreachable!("test buffers were just ensured");
+        };
+        let bp = self
+            .box_pipelines
+            .as_ref()
+            .expect("box tests are laid out only with their pipelines");
+        let n = u64::from(layout.boxes);
+        let q = u64::from(layout.queries);
+        fn entry(binding: u32, buffer: &wgpu::Buffer, bytes: u64) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset: 0,
+                    size: NonZeroU64::new(bytes.max(16)),
+                }),
+            }
+        }
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("box tests bind group"),
+            layout: &bp.layout,
+            entries: &[
+                entry(0, bx, n * hdm::BOX_BYTES),
+                entry(1, meta, n * 8),
+                entry(
+                    2,
+                    ff,
+                    u64::from(layout.tested) * hdm::BOX_FRAME_F64S as u64 * 8,
+                ),
+                entry(3, fu, u64::from(layout.tested) * 16),
+                entry(4, queries, q * hdm::QUERY_BYTES),
+                entry(5, shapes, n * 4),
+                entry(6, answers, q * 4),
+                entry(7, bc, 16),
+                entry(8, box_out, n * 4),
+            ],
+        })
     }
 
     /// The bind group of the kept planes' table passes (`sat_rows`, `sat_cols`).
@@ -1505,7 +1696,7 @@ impl GpuBackend {
         if let Some(staging) = tests.and_then(|t| t.staging.as_ref())
             && layout.tested > 0
         {
-            map(staging, (u64::from(layout.queries) * 4).max(4));
+            map(staging, (u64::from(layout.answers()) * 4).max(4));
         }
         if let Some(staging) = tests.and_then(|t| t.summary_staging.as_ref())
             && layout.kept > 0
@@ -1948,14 +2139,16 @@ fn read_answers(
     else {
         return Ok(());
     };
-    let bytes = (u64::from(layout.queries) * 4).max(4);
+    let bytes = (u64::from(layout.answers()) * 4).max(4);
     let mut codes = mapped_words(staging, bytes, "answers mapping")?;
-    codes.truncate(layout.queries as usize);
+    codes.truncate(layout.answers() as usize);
     for plane in &layout.planes {
         let Some(tp) = &plane.tested else { continue };
-        let (first, n) = (tp.queries.0 as usize, tp.queries.1 as usize);
-        let answers = codes[first..first + n]
+        let (first, rects) = (tp.rects.0 as usize, tp.rects.1 as usize);
+        let first_box = (layout.rects + tp.boxes.0) as usize;
+        let answers = codes[first..first + rects]
             .iter()
+            .chain(&codes[first_box..first_box + tp.boxes.1 as usize])
             .map(|&c| match c {
                 0 => Ok(Coverage::Partial),
                 1 => Ok(Coverage::Hidden),
