@@ -2039,6 +2039,42 @@ fn sweep_forest_bakes(b: &GpuBackend) -> (Scene, BakeResult, BakeResult) {
     (scene, c, g)
 }
 
+/// One box test per pixel sent to the device (`set_pixels_per_device_test(1)`) instead of one
+/// per 64 keeps more of a sweep's maps on the device and reads fewer back, with the PVS of the
+/// CPU backend.
+#[test]
+fn a_smaller_share_keeps_more_maps_with_the_same_pvs() {
+    if backend().is_none() {
+        return;
+    }
+    let default = GpuBackend::new().expect("a second device");
+    let (_, c, g64) = sweep_forest_bakes(&default);
+    let mut one = GpuBackend::new().expect("a third device");
+    one.set_pixels_per_device_test(1);
+    let (_, _, g1) = sweep_forest_bakes(&one);
+    let (s64, s1) = (default.total_stats(), one.total_stats());
+    eprintln!("one per 64 pixels: {s64:?}\none per pixel: {s1:?}");
+    assert!(s1.kept_maps > s64.kept_maps, "{s1:?} against {s64:?}");
+    assert!(
+        s1.maps_read_back < s64.maps_read_back,
+        "{s1:?} against {s64:?}"
+    );
+    assert!(
+        s1.bytes_read_back < s64.bytes_read_back,
+        "{s1:?} against {s64:?}"
+    );
+    for (k, ((a, b), c)) in g1.cells.iter().zip(&g64.cells).zip(&c.cells).enumerate() {
+        assert_eq!(
+            a.visible, c.visible,
+            "cell {k}: one box per pixel against the CPU"
+        );
+        assert_eq!(
+            b.visible, c.visible,
+            "cell {k}: one box per 64 pixels against the CPU"
+        );
+    }
+}
+
 /// A whole bake with the occlusion sweep on a small forest, on a backend of its own: planes
 /// carry several reprojections (the skip list), and the PVS is the same as the CPU's.
 #[test]
