@@ -11,6 +11,11 @@
 // (one invocation per box) combines the three answers as the CPU's rule does and writes the
 // box's answer, the only word of it read back.
 //
+// Why the answers are the CPU's: the expressions are `occludee.rs`'s, in the same order, in
+// f64. A driver fusing a multiply and an add moves a value by an ulp, far inside the
+// rectangles' outward padding (1e-12 of their coordinates): the rectangle still holds the
+// exact one, and differs from the CPU's only where a pixel boundary falls within that ulp.
+//
 // `rounding.wgsl` (f32_down, …) is prepended to this file.
 
 // The answers, as `plane::Coverage` codes (`hdm.wgsl`).

@@ -13,6 +13,18 @@
 //! per level (64 for up to 20 levels); were it ever full the answer would be `Partial`, which
 //! culls nothing.
 //!
+//! # Box tests
+//! Where the device has `SHADER_F64` ([`BoxPipelines`]), a plane's queries may also be boxes
+//! ([`crate::plane::PlaneQueries`]): `box_plan` (`shaders/boxes.wgsl`) computes each box's
+//! rectangle tests from the box and the plane's frame with the CPU's `f64` expressions
+//! ([`crate::project::occludee::box_coverage`]) into [`BOX_SLOTS`] query slots after the
+//! submission's rectangle tests, `answer` answers them with the rest, and `box_decide`
+//! combines them as the rule does into one answer per box, the only word read back. IEEE `f64`
+//! arithmetic gives the CPU's values; a driver that fuses a multiply and an add moves one by an
+//! ulp, a ten-thousandth of the rectangles' outward padding (`1e-12` of their coordinates), so
+//! a rectangle still holds the exact one (conservative) and differs from the CPU's only where
+//! a pixel boundary falls within that ulp.
+//!
 //! # Kept sweep planes
 //! A plane whose map the caller asks to keep ([`RasterBackend::render_kept`]: an occlusion
 //! sweep's) is also a reprojection source for later planes. The same pass builds its
@@ -172,6 +184,20 @@ pub(super) fn level_params(w: u32, h: u32, base: u32, mask: Option<u32>) -> Vec<
     out
 }
 
+/// A compute pass's storage buffer binding of at least `size` bytes.
+fn storage_entry(binding: u32, read_only: bool, size: u64) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: NonZeroU64::new(size),
+        },
+        count: None,
+    }
+}
+
 /// The three compute pipelines of `shaders/hdm.wgsl` and their bind group layouts.
 #[derive(Debug)]
 pub(super) struct HdmPipelines {
@@ -204,16 +230,7 @@ impl HdmPipelines {
             source: wgpu::ShaderSource::Wgsl(super::HDM_WGSL.into()),
         });
         let cs = wgpu::ShaderStages::COMPUTE;
-        let storage = |binding: u32, read_only: bool, size: u64| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: cs,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: NonZeroU64::new(size),
-            },
-            count: None,
-        };
+        let storage = storage_entry;
         let uniform = |binding: u32, dynamic: bool, size: u64| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: cs,
@@ -323,16 +340,7 @@ impl BoxPipelines {
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
         let cs = wgpu::ShaderStages::COMPUTE;
-        let storage = |binding: u32, read_only: bool, size: u64| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: cs,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: NonZeroU64::new(size),
-            },
-            count: None,
-        };
+        let storage = storage_entry;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("box tests bind group layout"),
             entries: &[

@@ -1267,16 +1267,7 @@ impl GpuBackend {
             .expect("box tests are laid out only with their pipelines");
         let n = u64::from(layout.boxes);
         let q = u64::from(layout.queries);
-        fn entry(binding: u32, buffer: &wgpu::Buffer, bytes: u64) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry {
-                binding,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer,
-                    offset: 0,
-                    size: NonZeroU64::new(bytes.max(16)),
-                }),
-            }
-        }
+        let entry = buffer_entry;
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("box tests bind group"),
             layout: &bp.layout,
@@ -1305,16 +1296,7 @@ impl GpuBackend {
         else {
             unreachable!("kept planes' buffers were just ensured");
         };
-        fn part(binding: u32, buffer: &wgpu::Buffer, bytes: u64) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry {
-                binding,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer,
-                    offset: 0,
-                    size: NonZeroU64::new(bytes.max(16)),
-                }),
-            }
-        }
+        let part = buffer_entry;
         let n = u64::from(layout.kept);
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("hdm summed-area table bind group"),
@@ -2119,6 +2101,20 @@ fn mapped_words(
     };
     staging.unmap();
     Ok(words)
+}
+
+/// A bind group entry for the first `bytes` of `buffer` (at least 16: the buffers grow in
+/// powers of two, past what a device's largest binding may be, so each binding is just the
+/// wave's part).
+fn buffer_entry(binding: u32, buffer: &wgpu::Buffer, bytes: u64) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer,
+            offset: 0,
+            size: NonZeroU64::new(bytes.max(16)),
+        }),
+    }
 }
 
 /// Read-back step of the occludee tests: each tested plane's answers (`shaders/hdm.wgsl`'s
