@@ -105,12 +105,13 @@ pub struct BakeArgs {
     #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
     pub backend: BackendChoice,
     /// How the GPU backend makes occluders' Projections: `clipped` (each occluder's 8 views
-    /// intersected on the CPU, the GPU tests the few edges left; the default) or `counting`
-    /// (the points go up as they are; a compute pass projects the views from the cell's
-    /// corners and one instanced draw per plane counts them per pixel; needs SHADER_F64). Same
-    /// PVS either way; ignored on the CPU backend.
-    #[arg(long, value_name = "clipped|counting", default_value_t = GpuProjection::Clipped)]
-    pub gpu_projection: GpuProjection,
+    /// intersected on the CPU, the GPU tests the few edges left) or `counting` (the points go
+    /// up as they are; a compute pass projects the views from the cell's corners and one
+    /// instanced draw per plane counts them per pixel; needs SHADER_F64). Default: counting on
+    /// a hardware GPU with SHADER_F64, clipped on a software one (lavapipe). Same PVS either
+    /// way; ignored on the CPU backend.
+    #[arg(long, value_name = "clipped|counting")]
+    pub gpu_projection: Option<GpuProjection>,
     /// Run ray space factorization's charts on the GPU backend's device (needs SHADER_F64)
     /// instead of the CPU. Same charts; the default keeps them on the CPU, which was faster
     /// on every device measured (each wave of a cell's traversal waits for its submission: on
@@ -540,7 +541,7 @@ fn read_cells(a: &BakeArgs, scene: &scene::Scene) -> anyhow::Result<Vec<Aabb>> {
 /// projection and ray space factorization's charts asked for.
 pub fn make_backend(
     choice: BackendChoice,
-    projection: GpuProjection,
+    projection: Option<GpuProjection>,
     rsf_on_gpu: bool,
     (tests_on_cpu, sweep_maps_on_cpu, pixels_per_test): (bool, bool, Option<u32>),
     sampler_memory: Option<u64>,
@@ -551,7 +552,9 @@ pub fn make_backend(
         BackendChoice::Auto if !hardware_adapter_available() => Ok(Box::new(CpuBackend::new())),
         BackendChoice::Auto | BackendChoice::Gpu => match GpuBackend::new() {
             Ok(mut b) => {
-                if let Err(e) = b.set_projection(projection) {
+                if let Some(projection) = projection
+                    && let Err(e) = b.set_projection(projection)
+                {
                     bail!(
                         "--gpu-projection {projection}: {e} (use --gpu-projection clipped, or \
                          --backend cpu)"
@@ -967,7 +970,8 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                 .map(|x| format!(" ({x})"))
                 .unwrap_or_default(),
             if s.backend == "gpu" {
-                format!(", {} projections", a.gpu_projection)
+                let p = backend.as_gpu().map(|g| g.projection());
+                format!(", {} projections", p.unwrap_or_default())
             } else {
                 String::new()
             }

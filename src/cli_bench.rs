@@ -60,10 +60,10 @@ pub struct BenchArgs {
     #[arg(long, value_enum, default_value_t = BenchBackend::All)]
     pub backend: BenchBackend,
     /// How the GPU backend makes occluders' Projections: `clipped` (views intersected on the
-    /// CPU, the default) or `counting` (views projected, hulled and counted per fragment on
-    /// the GPU; needs SHADER_F64).
-    #[arg(long, value_name = "clipped|counting", default_value_t = GpuProjection::Clipped)]
-    pub gpu_projection: GpuProjection,
+    /// CPU) or `counting` (views projected, hulled and counted per fragment on the GPU; needs
+    /// SHADER_F64). Default: the backend's choice, as `bake --gpu-projection`.
+    #[arg(long, value_name = "clipped|counting")]
+    pub gpu_projection: Option<GpuProjection>,
     /// Run ray space factorization's charts on the GPU backend's device (needs SHADER_F64)
     /// instead of the CPU: the same charts, slower on every device measured so far.
     #[arg(long)]

@@ -2039,6 +2039,26 @@ fn sweep_forest_bakes(b: &GpuBackend) -> (Scene, BakeResult, BakeResult) {
     (scene, c, g)
 }
 
+/// The backend picks counting Projections on a hardware adapter (the rule: not slower
+/// on the H200 measured) and clipped ones on a software adapter such as lavapipe (where the
+/// counting compute pass runs on the CPU and was slower); `set_projection` overrides it.
+#[test]
+fn the_default_projection_follows_the_adapter() {
+    if backend().is_none() {
+        return;
+    }
+    let mut b = GpuBackend::new().expect("a device");
+    let hardware = b.adapter_info().device_type != wgpu::DeviceType::Cpu;
+    let want = if hardware {
+        GpuProjection::Counting
+    } else {
+        GpuProjection::Clipped
+    };
+    assert_eq!(b.projection(), want, "{:?}", b.adapter_info());
+    b.set_projection(GpuProjection::Counting).unwrap();
+    assert_eq!(b.projection(), GpuProjection::Counting);
+}
+
 /// One box test per pixel sent to the device (`set_pixels_per_device_test(1)`) instead of one
 /// per 64 keeps more of a sweep's maps on the device and reads fewer back, with the PVS of the
 /// CPU backend.

@@ -1080,7 +1080,7 @@ pub fn collect(args: &BenchOptions) -> Result<FoliageBench, BenchError> {
                         args.progress,
                     );
                     if row.backend == "gpu" {
-                        row.gpu_projection = Some(args.gpu_projection.to_string());
+                        row.gpu_projection = backend.as_gpu().map(|g| g.projection().to_string());
                     }
                     row.device = device;
                     let curve = cost_curve(&r, f.scene.objects.len(), row.objects_culled_percent);

@@ -125,7 +125,7 @@ pub struct BenchOptions {
     pub rsf: crate::settings::SweepChoice,
     /// How the GPU backend makes occluders' Projections
     /// ([`GpuProjection`](crate::backend::gpu::GpuProjection)).
-    pub gpu_projection: crate::backend::gpu::GpuProjection,
+    pub gpu_projection: Option<crate::backend::gpu::GpuProjection>,
     /// Ray space factorization's charts on the GPU backend's device rather than the CPU
     /// ([`GpuBackend::set_rsf_on_gpu`](crate::backend::gpu::GpuBackend::set_rsf_on_gpu)).
     pub rsf_on_gpu: bool,
@@ -168,7 +168,7 @@ impl Default for BenchOptions {
             foliage_sampling_levels: None,
             hunt_rays: None,
             confirm_rays: None,
-            gpu_projection: crate::backend::gpu::GpuProjection::default(),
+            gpu_projection: None,
             rsf_on_gpu: false,
             tests_on_cpu: false,
             sweep_maps_on_cpu: false,
@@ -736,8 +736,9 @@ fn build(
 /// [`BenchError::Gpu`] without an adapter, or for a projection the device cannot run.
 pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError> {
     let mut g = GpuBackend::new().map_err(BenchError::Gpu)?;
-    g.set_projection(args.gpu_projection)
-        .map_err(BenchError::Gpu)?;
+    if let Some(p) = args.gpu_projection {
+        g.set_projection(p).map_err(BenchError::Gpu)?;
+    }
     g.set_rsf_on_gpu(args.rsf_on_gpu).map_err(BenchError::Gpu)?;
     g.set_tests_on_device(!args.tests_on_cpu);
     g.set_keep_sweep_maps(!args.sweep_maps_on_cpu);
@@ -932,7 +933,7 @@ fn bench_scene(
         row.peak_mib = peak;
         row.device = device;
         if row.backend == "gpu" {
-            row.gpu_projection = Some(args.gpu_projection.to_string());
+            row.gpu_projection = backend.as_gpu().map(|g| g.projection().to_string());
         }
         if args.hunt_rays.is_some() || args.confirm_rays.is_some() {
             let doc = crate::bake::to_document(scene, cells, &result, settings);

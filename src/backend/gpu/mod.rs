@@ -347,6 +347,7 @@ const HDM_WGSL: &str = SHADERS[9].1;
 /// ```
 /// use umbrasweep::backend::gpu::GpuProjection;
 /// assert_eq!("counting".parse::<GpuProjection>(), Ok(GpuProjection::Counting));
+/// // (A `GpuBackend` picks its own default: `GpuBackend::set_projection`.)
 /// assert_eq!(GpuProjection::default(), GpuProjection::Clipped);
 /// assert!("stencil".parse::<GpuProjection>().is_err());
 /// ```
@@ -354,7 +355,8 @@ const HDM_WGSL: &str = SHADERS[9].1;
 pub enum GpuProjection {
     /// The CPU intersects the 8 views of every occluder in `f64` (the CPU backend's own
     /// kernel), erodes the polygon's edges and uploads them; the GPU tests pixel centres
-    /// against those few edges (`shaders/projection.wgsl`). The default.
+    /// against those few edges (`shaders/projection.wgsl`). The default on software adapters
+    /// and devices without [`wgpu::Features::SHADER_F64`].
     #[default]
     Clipped,
     /// The occluders' points go up as they are; a compute pass projects every occluder's views
@@ -362,7 +364,8 @@ pub enum GpuProjection {
     /// (`shaders/views.wgsl`), and one instanced draw per plane counts them per fragment: a
     /// pixel is covered when its centre passes every eroded edge of all 8 views of one
     /// occluder (`vs_counted` in `shaders/projection.wgsl`). Occluders of more than 8 points are set up on the
-    /// CPU as with [`Clipped`](Self::Clipped). Needs [`wgpu::Features::SHADER_F64`].
+    /// CPU as with [`Clipped`](Self::Clipped). Needs [`wgpu::Features::SHADER_F64`]; the
+    /// default on hardware adapters that have it.
     Counting,
 }
 
@@ -660,6 +663,15 @@ impl GpuBackend {
         } else {
             None
         };
+        // The issue's rule (#18): counting is the default where it is not slower — on the
+        // NVIDIA H200 measured (README) — and clipped on software adapters, where counting's
+        // compute pass runs on the CPU and was slower (lavapipe).
+        let hardware = device.adapter_info().device_type != wgpu::DeviceType::Cpu;
+        let projection = if hardware && view_pipelines.is_some() {
+            GpuProjection::Counting
+        } else {
+            GpuProjection::Clipped
+        };
         Ok(GpuBackend {
             adapter_name,
             device,
@@ -682,12 +694,15 @@ impl GpuBackend {
             tests_wanted: true,
             keep_wanted: true,
             pixels_per_test: crate::backend::PIXELS_PER_DEVICE_TEST,
-            projection: GpuProjection::default(),
+            projection,
             tables: tables::TableCache::default(),
         })
     }
 
-    /// Chooses how occluders' Projections are made (default [`GpuProjection::Clipped`]).
+    /// Chooses how occluders' Projections are made. The default is the backend's own choice:
+    /// [`GpuProjection::Counting`] on a hardware adapter with
+    /// [`wgpu::Features::SHADER_F64`], [`GpuProjection::Clipped`] on a software one (such as
+    /// lavapipe) or without `SHADER_F64`. Both give the same PVS.
     ///
     /// # Errors
     /// [`BackendError::MissingFeatures`] for [`GpuProjection::Counting`] on a device without
