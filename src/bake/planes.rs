@@ -955,7 +955,8 @@ enum Tests<'a> {
     /// The device's answers ([`RasterBackend::render_tested`]).
     Answers(&'a Answers),
     /// Recording every box tested, each answered `Partial` so that the walk goes on below
-    /// it ([`Prepared::record_queries`]).
+    /// it, but for the answers known without the map ([`answer_without_test`])
+    /// ([`Prepared::record_queries`]).
     Record(&'a RefCell<Queries>),
 }
 

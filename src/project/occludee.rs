@@ -62,11 +62,10 @@ pub fn box_coverage(
     improved: bool,
     mut test: impl FnMut(&RectQuery) -> Coverage,
 ) -> Coverage {
-    if open_without_test(frame, b) {
-        return Coverage::Partial;
-    }
-    let Some(sp) = span(frame, b) else {
-        return Coverage::Partial; // (not reached: `open_without_test`)
+    // Open without a test (`open_without_test`).
+    let sp = match span(frame, b) {
+        Some(sp) if !b.overlaps(&frame.cell) => sp,
+        _ => return Coverage::Partial,
     };
     let depth = depth_down(sp.depth);
     let (lo, hi) = standard_rect(frame, b);
