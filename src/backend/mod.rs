@@ -350,7 +350,8 @@ impl BackendCounters {
 /// plane stays there) only while its box tests number at most one per this many pixels of its
 /// map; past that the map comes back instead
 /// ([`RasterBackend::pixels_per_device_test`]). Recording a box test costs the CPU about
-/// 0.12 µs (the walk that lists the boxes; the device computes their rectangles), reading a map
+/// 0.25 µs (the walk that lists the boxes, and their standard Projections' extents to leave
+/// out those beside the plane; the device computes the rectangles it tests), reading a map
 /// back and building its pyramid 2–5 ns per pixel (`Hdm::build` of a 256 × 256 map 0.11 ms);
 /// on lavapipe, whose compute passes run on the same CPU, the paper-size forest's middle cell
 /// (`bake … --sweep --backend gpu`) took 1,170, 1,228 and 1,532 ms at one test per 64, 16 and
