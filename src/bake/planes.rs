@@ -145,7 +145,6 @@ impl Prepared<'_> {
                 k,
                 plans: &plans,
                 settings: &ps,
-                cell: &cell64,
                 share: backend.pixels_per_device_test(),
             };
             let planned = self.plan_round(&round, &dirs, &hidden, &node_done);
@@ -168,7 +167,6 @@ impl Prepared<'_> {
                         let q = self.record_queries(
                             &p.job,
                             round.share,
-                            &cell64,
                             round.range(p.dir, false),
                             &hidden,
                             &node_done,
@@ -205,7 +203,6 @@ impl Prepared<'_> {
                 self.traverse(
                     &r.job,
                     &r.tested.tests(),
-                    &cell64,
                     after,
                     &mut hidden,
                     &mut node_done,
@@ -262,7 +259,6 @@ impl Prepared<'_> {
                                     &prev.tested.tests(),
                                     id,
                                     b,
-                                    round.cell,
                                     (0.0, f64::INFINITY),
                                 ) == Coverage::Hidden
                         })
@@ -356,13 +352,12 @@ impl Prepared<'_> {
     /// subtree is hidden (skipped on the following planes).
     #[expect(
         clippy::too_many_arguments,
-        reason = "the BVH walk needs the plane job, HDM, cell, slab range and three output masks; bundling them into a struct would only move the list"
+        reason = "the BVH walk needs the plane job, its tests, the slab range and three output masks; bundling them into a struct would only move the list"
     )]
     fn traverse(
         &self,
         job: &PlaneJob,
         tests: &Tests,
-        cell: &DAabb,
         after: (f64, f64),
         hidden: &mut [bool],
         node_hidden: &mut [bool],
@@ -380,7 +375,7 @@ impl Prepared<'_> {
                 min: glam::Vec3::from(node.aabb.min).as_dvec3(),
                 max: glam::Vec3::from(node.aabb.max).as_dvec3(),
             };
-            match self.test_box(&job.frame, tests, BoxId::Node(ni), &b, cell, after) {
+            match self.test_box(&job.frame, tests, BoxId::Node(ni), &b, after) {
                 Coverage::Hidden => {
                     mark_hidden(bvh, ni, hidden, node_hidden);
                     continue;
@@ -396,7 +391,7 @@ impl Prepared<'_> {
                     }
                     let ob = self.scene.objects[o].bounds.to_f64();
                     let id = BoxId::Object(o as u32);
-                    match self.test_box(&job.frame, tests, id, &ob, cell, after) {
+                    match self.test_box(&job.frame, tests, id, &ob, after) {
                         Coverage::Hidden => hidden[o] = true,
                         Coverage::Empty => {}
                         Coverage::Partial => {
@@ -414,7 +409,6 @@ impl Prepared<'_> {
                                         tests,
                                         BoxId::Piece(pi as u32),
                                         &self.piece_boxes[pi],
-                                        cell,
                                         after,
                                     ) == Coverage::Hidden;
                                 }
@@ -458,7 +452,6 @@ impl Prepared<'_> {
         &self,
         job: &PlaneJob,
         share: usize,
-        cell: &DAabb,
         after: (f64, f64),
         hidden: &[bool],
         node_done: &[bool],
@@ -488,7 +481,7 @@ impl Prepared<'_> {
             if !in_reach(frame, &b, after) {
                 continue;
             }
-            let c = self.test_box(frame, &tests, BoxId::Node(ni), &b, cell, after);
+            let c = self.test_box(frame, &tests, BoxId::Node(ni), &b, after);
             if queries.borrow().boxes.len() > max {
                 return None;
             }
@@ -510,7 +503,7 @@ impl Prepared<'_> {
                 if !in_reach(frame, &ob, after) {
                     continue;
                 }
-                let c = self.test_box(frame, &tests, BoxId::Object(o as u32), &ob, cell, after);
+                let c = self.test_box(frame, &tests, BoxId::Object(o as u32), &ob, after);
                 if c == Coverage::Empty {
                     continue;
                 }
@@ -518,7 +511,7 @@ impl Prepared<'_> {
                     let pi = pi as usize;
                     if !piece_hidden[pi] {
                         let id = BoxId::Piece(pi as u32);
-                        self.test_box(frame, &tests, id, &self.piece_boxes[pi], cell, after);
+                        self.test_box(frame, &tests, id, &self.piece_boxes[pi], after);
                     }
                 }
                 if queries.borrow().boxes.len() > max {
@@ -557,14 +550,7 @@ impl Prepared<'_> {
             hidden: &|id, b| {
                 // (Past the share the walk goes on, as planning will, recording nothing.)
                 if recorded.borrow().boxes.len() <= max {
-                    self.test_box(
-                        &planned.job.frame,
-                        &tests,
-                        id,
-                        b,
-                        round.cell,
-                        (0.0, f64::INFINITY),
-                    );
+                    self.test_box(&planned.job.frame, &tests, id, b, (0.0, f64::INFINITY));
                 }
                 false
             },
@@ -608,7 +594,6 @@ impl Prepared<'_> {
                 self.record_queries(
                     &r.job,
                     round.share,
-                    round.cell,
                     round.range(r.dir, true),
                     hidden,
                     node_done,
@@ -641,10 +626,8 @@ impl Prepared<'_> {
         tests: &Tests,
         id: BoxId,
         b: &DAabb,
-        cell: &DAabb,
         range: (f64, f64),
     ) -> Coverage {
-        debug_assert_eq!(&frame.cell, cell, "a plane's frame holds its cell");
         if !in_reach(frame, b, range) {
             return Coverage::Empty;
         }
@@ -709,12 +692,12 @@ fn ends_sweep(
 type Rect = (glam::DVec2, glam::DVec2);
 
 /// What one round of planes shares: its index (the `k`-th plane of every direction), the
-/// cell's direction plans, the plane settings and the cell.
+/// cell's direction plans (each plane's frame holds the cell), the plane settings and the
+/// device's share of box tests.
 struct Round<'a> {
     k: usize,
     plans: &'a [DirectionPlan],
     settings: &'a PlaneSettings,
-    cell: &'a DAabb,
     /// Pixels per box test the device answers ([`RasterBackend::pixels_per_device_test`]).
     share: usize,
 }
