@@ -1,7 +1,10 @@
 // umbrasweep — occludee box tests on the GPU (`src/backend/gpu/hdm.rs`), the twin of
 // `project::occludee::box_coverage`: the CPU's walk sends each box it would test on a plane
 // whose map stays on the device, and the device computes the box's pixel rectangles itself, in
-// f64 with the CPU's expressions, instead of the CPU computing and sending them.
+// f64 with the CPU's expressions, instead of the CPU computing and sending them. A box of the
+// bake's resident table (`hdm::ResidentBoxes`: hierarchy nodes, objects, pieces; each written
+// there the first time a test names it) is sent as its index; the others (occluder parts) go
+// up whole with the submission.
 //
 // `box_plan` (one invocation per box) writes the box's three rectangle queries into the
 // queries buffer of `hdm.wgsl` at its slot — the standard Projection's (or the part of it
@@ -33,9 +36,10 @@ const STANDARD: u32 = 2u;
 const CLIPPED: u32 = 3u;
 const IMPROVED: u32 = 4u;
 
-// Boxes, 6 f64 each: min x, y, z, max x, y, z.
+// Boxes sent with the submission, 6 f64 each: min x, y, z, max x, y, z.
 @group(0) @binding(0) var<storage, read> boxes: array<f64>;
-// Per box: its tested plane, its first query slot.
+// Per box test: its tested plane, and its box: `INLINE_BOX | k` for the `k`-th of `boxes`,
+// else its index in `resident`.
 @group(0) @binding(1) var<storage, read> box_meta: array<vec2<u32>>;
 // Per tested plane, 12 f64: the cell's min (x, y, z) and max, the plane's position,
 // rect_min (u, v), rect_max (u, v), padding.
@@ -48,8 +52,37 @@ const IMPROVED: u32 = 4u;
 @group(0) @binding(6) var<storage, read> answers: array<u32>;
 // Per box, its answer.
 @group(0) @binding(8) var<storage, read_write> box_out: array<u32>;
-// x: the boxes.
+// x: the box tests; y: the first box test's first query slot (after every rectangle test).
 @group(0) @binding(7) var<uniform> box_count: vec4<u32>;
+// The bake's occludee boxes kept on the device (`hdm::ResidentBoxes`), 6 f64 each.
+@group(0) @binding(9) var<storage, read> resident: array<f64>;
+
+// `hdm::INLINE_BOX`.
+const INLINE_BOX: u32 = 0x80000000u;
+// `hdm::BOX_SLOTS`: query slots per box test.
+const BOX_SLOTS: u32 = 3u;
+
+// Box test `i`'s first query slot (`WaveLayout::box_slot`).
+fn box_slot(i: u32) -> u32 {
+    return box_count.y + i * BOX_SLOTS;
+}
+
+// Box test `i`'s box: min (x, y, z), max.
+fn test_box(i: u32) -> array<vec3<f64>, 2> {
+    let src = box_meta[i].y;
+    if (src & INLINE_BOX) != 0u {
+        let o = (src & ~INLINE_BOX) * 6u;
+        return array<vec3<f64>, 2>(
+            vec3<f64>(boxes[o], boxes[o + 1u], boxes[o + 2u]),
+            vec3<f64>(boxes[o + 3u], boxes[o + 4u], boxes[o + 5u]),
+        );
+    }
+    let o = src * 6u;
+    return array<vec3<f64>, 2>(
+        vec3<f64>(resident[o], resident[o + 1u], resident[o + 2u]),
+        vec3<f64>(resident[o + 3u], resident[o + 4u], resident[o + 5u]),
+    );
+}
 
 struct Frame {
     cmin: vec3<f64>,
@@ -227,16 +260,15 @@ fn box_plan(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= box_count.x {
         return;
     }
-    let m = box_meta[i];
-    let p = m.x;
-    let slot = m.y;
+    let p = box_meta[i].x;
+    let slot = box_slot(i);
     let none = vec4<u32>(NO_PLANE, 0u, 0u, 0u);
     queries[slot] = none;
     queries[slot + 1u] = none;
     queries[slot + 2u] = none;
-    let o = i * 6u;
-    let bmin = vec3<f64>(boxes[o], boxes[o + 1u], boxes[o + 2u]);
-    let bmax = vec3<f64>(boxes[o + 3u], boxes[o + 4u], boxes[o + 5u]);
+    let b = test_box(i);
+    let bmin = b[0];
+    let bmax = b[1];
     let f = frame(p);
     // `DAabb::overlaps` with the cell: always visible.
     if all(bmin <= f.cmax) && all(f.cmin <= bmax) {
@@ -293,7 +325,7 @@ fn box_decide(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= box_count.x {
         return;
     }
-    let slot = box_meta[i].y;
+    let slot = box_slot(i);
     let shape = shapes[i];
     var c = PARTIAL;
     switch shape & 3u {

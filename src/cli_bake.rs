@@ -131,6 +131,12 @@ pub struct BakeArgs {
     /// comparisons. Ignored on the CPU backend.
     #[arg(long)]
     pub sweep_maps_on_cpu: bool,
+    /// Send each occludee box with its test on the device (six `f64`, 48 bytes more a test)
+    /// instead of keeping the bake's object, hierarchy-node and piece boxes on the device,
+    /// each uploaded once when first tested (the default). The same PVS; for comparisons.
+    /// Ignored on the CPU backend.
+    #[arg(long)]
+    pub boxes_inline: bool,
     /// On the GPU backend, ask the device a plane's occludee tests only while they number at
     /// most one per N pixels of its map (default 64, measured on lavapipe); past that the map
     /// comes back and the CPU tests. Smaller N keeps more planes on the device for more CPU
@@ -543,7 +549,12 @@ pub fn make_backend(
     choice: BackendChoice,
     projection: Option<GpuProjection>,
     rsf_on_gpu: bool,
-    (tests_on_cpu, sweep_maps_on_cpu, pixels_per_test): (bool, bool, Option<u32>),
+    (tests_on_cpu, sweep_maps_on_cpu, boxes_inline, pixels_per_test): (
+        bool,
+        bool,
+        bool,
+        Option<u32>,
+    ),
     sampler_memory: Option<u64>,
 ) -> anyhow::Result<Box<dyn RasterBackend>> {
     use umbrasweep::backend::gpu::{GpuBackend, hardware_adapter_available};
@@ -565,6 +576,7 @@ pub fn make_backend(
                 }
                 b.set_tests_on_device(!tests_on_cpu);
                 b.set_keep_sweep_maps(!sweep_maps_on_cpu);
+                b.set_resident_boxes(!boxes_inline);
                 if let Some(n) = pixels_per_test {
                     b.set_pixels_per_device_test(n as usize);
                 }
@@ -743,6 +755,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         (
             a.tests_on_cpu,
             a.sweep_maps_on_cpu,
+            a.boxes_inline,
             a.pixels_per_device_test,
         ),
         a.gpu_sampler_memory,

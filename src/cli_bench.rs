@@ -77,6 +77,10 @@ pub struct BenchArgs {
     /// (the default): the same PVS, to compare the two.
     #[arg(long)]
     pub sweep_maps_on_cpu: bool,
+    /// Send each occludee box with its test instead of keeping the bake's boxes on the device
+    /// (the default), as `bake --boxes-inline`: the same PVS, to compare the two.
+    #[arg(long)]
+    pub boxes_inline: bool,
     /// Pixels per occludee test asked of the GPU backend's device, as `bake
     /// --pixels-per-device-test` (default 64).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
@@ -216,6 +220,7 @@ impl From<&BenchArgs> for BenchOptions {
             rsf_on_gpu: a.rsf_on_gpu,
             tests_on_cpu: a.tests_on_cpu,
             sweep_maps_on_cpu: a.sweep_maps_on_cpu,
+            boxes_inline: a.boxes_inline,
             pixels_per_device_test: a.pixels_per_device_test.map(|n| n as usize),
             gpu_sampler_memory: a.gpu_sampler_memory,
             shared: a.shared.clone(),

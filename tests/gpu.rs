@@ -26,8 +26,8 @@ use umbrasweep::generate::{self, CityOptions};
 use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::hdm::Hdm;
 use umbrasweep::plane::{
-    Coverage, DepthMap, OccluderSet, PlaneFrame, PlaneJob, PlaneQueries, PlaneResult, RectQuery,
-    Reprojection, depth_up,
+    Coverage, DepthMap, NOT_RESIDENT, OccluderSet, PlaneFrame, PlaneJob, PlaneQueries, PlaneResult,
+    RectQuery, Reprojection, depth_up,
 };
 use umbrasweep::project::occludee::box_coverage;
 use umbrasweep::scene::Scene;
@@ -1126,6 +1126,7 @@ fn box_tests_on_the_device_follow_the_cpu_rule() {
                     rects: vec![rect],
                     boxes: (0..600).map(|k| random_box(&mut rng, f, k)).collect(),
                     improved,
+                    ..Default::default()
                 })
             })
             .collect();
@@ -1176,6 +1177,205 @@ fn box_tests_on_the_device_follow_the_cpu_rule() {
     assert!(
         improved_hid > 10,
         "the improved Projections hide some boxes: {improved_hid}"
+    );
+}
+
+/// Boxes kept on the device (`RasterBackend::upload_occludee_boxes`: a query then names a box
+/// by its index in the table) are answered as the same boxes sent whole and as the CPU's rule
+/// answers them: a shuffled table with decoys, some boxes sent whole beside named ones, a
+/// table replaced (queries naming the old one send their boxes whole), and each box uploaded
+/// once: asking again sends only indices.
+#[test]
+fn resident_boxes_are_answered_as_boxes_sent_whole() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a second device");
+    let mut jobs = random_jobs(31, Shape::Quad, 24, &[16, 64, 256]);
+    jobs.extend(stretched_jobs());
+    let maps = b.render(&jobs).unwrap();
+    let hdms: Vec<Hdm> = maps.iter().map(Hdm::build).collect();
+    let mut rng = Pcg64::seed_from_u64(32);
+    let boxes: Vec<Vec<DAabb>> = jobs
+        .iter()
+        .map(|job| {
+            (0..400)
+                .map(|k| random_box(&mut rng, &job.frame, k))
+                .collect()
+        })
+        .collect();
+    // A table of every box and as many decoys, shuffled: a wrong index reads another box.
+    let table = |rng: &mut Pcg64| {
+        let mut entries: Vec<(Option<(usize, usize)>, DAabb)> = boxes
+            .iter()
+            .enumerate()
+            .flat_map(|(j, bs)| {
+                bs.iter()
+                    .enumerate()
+                    .map(move |(n, bx)| (Some((j, n)), *bx))
+            })
+            .collect();
+        for job in &jobs {
+            for k in 0..400 {
+                entries.push((None, random_box(rng, &job.frame, k + 3)));
+            }
+        }
+        for k in (1..entries.len()).rev() {
+            entries.swap(k, rng.random_range(0..=k));
+        }
+        let mut ids = vec![vec![0u32; 400]; jobs.len()];
+        for (at, (of, _)) in entries.iter().enumerate() {
+            if let Some((j, n)) = of {
+                ids[*j][*n] = at as u32;
+            }
+        }
+        let table: Vec<DAabb> = entries.into_iter().map(|(_, bx)| bx).collect();
+        (table, ids)
+    };
+    let queries = |generation: Option<u64>, ids: &[Vec<u32>]| -> Vec<Option<PlaneQueries>> {
+        (0..jobs.len())
+            .map(|j| {
+                Some(PlaneQueries {
+                    boxes: boxes[j].clone(),
+                    improved: true,
+                    table: generation,
+                    // Every fifth box is sent whole.
+                    ids: (0..400)
+                        .map(|n| if n % 5 == 2 { NOT_RESIDENT } else { ids[j][n] })
+                        .collect(),
+                    ..Default::default()
+                })
+            })
+            .collect()
+    };
+    let uploaded = || b.counters().unwrap().bytes_uploaded;
+    let answers = |qs: &[Option<PlaneQueries>]| {
+        let before = uploaded();
+        let r = b.render_tested(&jobs, qs).unwrap();
+        (r, uploaded() - before)
+    };
+    let (table1, ids1) = table(&mut rng);
+    let g1 = b.upload_occludee_boxes(&table1).unwrap();
+    assert!(g1.is_some(), "lavapipe keeps the boxes");
+    let (whole, whole_bytes) = answers(&queries(None, &ids1));
+    let (named, named_bytes) = answers(&queries(g1, &ids1));
+    let (again, again_bytes) = answers(&queries(g1, &ids1));
+    // A new table: queries naming the first send their boxes whole.
+    let (table2, ids2) = table(&mut rng);
+    let g2 = b.upload_occludee_boxes(&table2).unwrap();
+    assert!(g2.is_some() && g2 != g1, "{g1:?} then {g2:?}");
+    let (stale, stale_bytes) = answers(&queries(g1, &ids1));
+    let (renamed, _) = answers(&queries(g2, &ids2));
+    let mut checked = 0;
+    for (j, r) in whole.iter().enumerate() {
+        let PlaneResult::Answers(w) = r else { continue };
+        for other in [&named, &again, &stale, &renamed] {
+            let PlaneResult::Answers(o) = &other[j] else {
+                panic!("job {j} answered whole but not named");
+            };
+            assert_eq!(w, o, "job {j}");
+        }
+        let f = &jobs[j].frame;
+        for (n, bx) in boxes[j].iter().enumerate() {
+            assert_eq!(
+                w[n],
+                box_coverage(f, bx, true, |r| hdms[j].answer(r)),
+                "job {j} box {n}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 20 * 400, "{checked} boxes checked");
+    eprintln!(
+        "bytes up: whole {whole_bytes}, named {named_bytes}, again {again_bytes}, stale {stale_bytes}"
+    );
+    // Named: 8 bytes a test, and each named box once (48, with its neighbours in the table);
+    // asked again, 8 bytes a test.
+    let saved = (checked as u64 * 4 / 5) * 48;
+    assert!(
+        again_bytes + saved <= whole_bytes,
+        "asked again: {again_bytes} bytes, whole: {whole_bytes}"
+    );
+    assert_eq!(stale_bytes, whole_bytes, "a stale table sends boxes whole");
+}
+
+/// Threads testing boxes of one resident table at once, each call naming boxes no call named
+/// before (so each sends them while other threads submit), get the CPU's answers: a box is
+/// never read before its first write lands. (wgpu zeroes a buffer it thinks uninitialised
+/// where a submission binds it; that clear could follow another thread's first write of a box
+/// in the same submission. A table made mapped, hence initialised, has none: without that,
+/// some runs here read zero boxes.)
+#[test]
+fn resident_boxes_sent_from_many_threads_are_never_read_unwritten() {
+    if backend().is_none() {
+        return;
+    }
+    let b = GpuBackend::new().expect("a second device");
+    let jobs = random_jobs(41, Shape::Quad, 4, &[32]);
+    let maps = b.render(&jobs).unwrap();
+    let hdms: Vec<Hdm> = maps.iter().map(Hdm::build).collect();
+    const THREADS: usize = 4;
+    const CALLS: usize = 100;
+    const PER_JOB: usize = 30;
+    // Each round a fresh table, every box of it sent by the call that first names it (the
+    // race is a matter of timing: one round caught it about every other run).
+    let mut rng = Pcg64::seed_from_u64(42);
+    let n_jobs = jobs.len();
+    let mut wrong = 0;
+    for _round in 0..5 {
+        // Box `n` of job `j` in call `c` of thread `t` is table entry
+        // `((c·jobs + j)·PER_JOB + n)·THREADS + t`: the threads' boxes interleave.
+        let mut table = Vec::new();
+        for _ in 0..CALLS * n_jobs * PER_JOB {
+            for _ in 0..THREADS {
+                let j = (table.len() / THREADS / PER_JOB) % n_jobs;
+                table.push(random_box(&mut rng, &jobs[j].frame, table.len() as u32));
+            }
+        }
+        let generation = b.upload_occludee_boxes(&table).unwrap();
+        assert!(generation.is_some(), "lavapipe keeps the boxes");
+        wrong += std::thread::scope::<_, usize>(|s| {
+            let handles: Vec<_> = (0..THREADS)
+                .map(|t| {
+                    let (b, jobs, hdms, table) = (&b, &jobs, &hdms, &table);
+                    s.spawn(move || {
+                        let mut wrong = 0;
+                        for c in 0..CALLS {
+                            let at =
+                                |j: usize, n: usize| ((c * n_jobs + j) * PER_JOB + n) * THREADS + t;
+                            let queries: Vec<Option<PlaneQueries>> = (0..n_jobs)
+                                .map(|j| {
+                                    Some(PlaneQueries {
+                                        boxes: (0..PER_JOB).map(|n| table[at(j, n)]).collect(),
+                                        improved: true,
+                                        table: generation,
+                                        ids: (0..PER_JOB).map(|n| at(j, n) as u32).collect(),
+                                        ..Default::default()
+                                    })
+                                })
+                                .collect();
+                            let results = b.render_tested(jobs, &queries).unwrap();
+                            for (j, r) in results.iter().enumerate() {
+                                let PlaneResult::Answers(a) = r else { continue };
+                                let f = &jobs[j].frame;
+                                for n in 0..PER_JOB {
+                                    let want = box_coverage(f, &table[at(j, n)], true, |r| {
+                                        hdms[j].answer(r)
+                                    });
+                                    wrong += usize::from(a[n] != want);
+                                }
+                            }
+                        }
+                        wrong
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).sum()
+        });
+    }
+    assert_eq!(
+        wrong, 0,
+        "{wrong} box tests read a box before it was written"
     );
 }
 
@@ -2061,7 +2261,8 @@ fn the_default_projection_follows_the_adapter() {
 
 /// One box test per pixel sent to the device (`set_pixels_per_device_test(1)`) instead of one
 /// per 64 keeps more of a sweep's maps on the device and reads fewer back, with the PVS of the
-/// CPU backend.
+/// CPU backend; with the bake's boxes kept on the device it uploads less than with every box
+/// sent whole (`set_resident_boxes(false)`), for the same PVS.
 #[test]
 fn a_smaller_share_keeps_more_maps_with_the_same_pvs() {
     if backend().is_none() {
@@ -2083,6 +2284,26 @@ fn a_smaller_share_keeps_more_maps_with_the_same_pvs() {
         s1.bytes_read_back < s64.bytes_read_back,
         "{s1:?} against {s64:?}"
     );
+    // The bake keeps its boxes on the device, each sent once: sending every box with its
+    // test instead uploads more, for the same PVS.
+    let mut inline = GpuBackend::new().expect("a fourth device");
+    inline.set_pixels_per_device_test(1);
+    inline.set_resident_boxes(false);
+    let (_, _, g_inline) = sweep_forest_bakes(&inline);
+    let s_inline = inline.total_stats();
+    eprintln!("one per pixel, boxes sent whole: {s_inline:?}");
+    assert!(
+        s1.bytes_uploaded < s_inline.bytes_uploaded,
+        "resident: {} bytes up, sent whole: {}",
+        s1.bytes_uploaded,
+        s_inline.bytes_uploaded
+    );
+    for (k, (a, c)) in g_inline.cells.iter().zip(&c.cells).enumerate() {
+        assert_eq!(
+            a.visible, c.visible,
+            "cell {k}: boxes sent whole against the CPU"
+        );
+    }
     for (k, ((a, b), c)) in g1.cells.iter().zip(&g64.cells).zip(&c.cells).enumerate() {
         assert_eq!(
             a.visible, c.visible,

@@ -415,6 +415,19 @@ pub trait RasterBackend: Send + Sync {
     fn pixels_per_device_test(&self) -> usize {
         PIXELS_PER_DEVICE_TEST
     }
+    /// Keeps `boxes` on the device for the box tests of [`Self::render_tested`]: queries
+    /// that name this table ([`plane::PlaneQueries::table`] set to the generation returned)
+    /// send a box's index in it ([`plane::PlaneQueries::ids`]) instead of the box. A bake calls
+    /// it once, before its cells, with every box its walks name by index; a later call
+    /// replaces the table (queries naming an older generation send their boxes whole, with
+    /// the same answers). `Ok(None)` where the backend keeps no table: the default, and a
+    /// device that tests no boxes or cannot bind that many.
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails.
+    fn upload_occludee_boxes(&self, _boxes: &[DAabb]) -> Result<Option<u64>, BackendError> {
+        Ok(None)
+    }
     /// [`Self::render_tested`], where `keep[k]` asks to keep job `k`'s map on the device for
     /// later reprojections (an occlusion sweep's plane): the backend then gives back
     /// [`plane::PlaneResult::Kept`] — the answers to its queries (which must be given), the

@@ -381,6 +381,9 @@ pub fn bake_cells(
         }));
     }
     let mut prepared = Prepared::new(scene, settings, cells)?;
+    if backend.tests_on_device() {
+        prepared.occludee_table = backend.upload_occludee_boxes(&prepared.occludee_boxes())?;
+    }
     prepared.sampler_progress = hooks.sampler_progress;
     prepared.checkpoints = hooks.sampler_checkpoints;
     let done = std::sync::atomic::AtomicUsize::new(0);

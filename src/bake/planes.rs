@@ -52,7 +52,8 @@ use crate::backend::RasterBackend;
 use crate::geom::{Aabb, DAabb};
 use crate::hdm::{Coverage, Hdm};
 use crate::plane::{
-    DepthMap, OpenSides, PlaneFrame, PlaneJob, PlaneQueries, PlaneResult, Reprojection,
+    DepthMap, NOT_RESIDENT, OpenSides, PlaneFrame, PlaneJob, PlaneQueries, PlaneResult,
+    Reprojection,
 };
 use crate::project::occludee::{BoxId, answer_without_test, box_coverage};
 use crate::project::planes::{
@@ -186,7 +187,11 @@ impl Prepared<'_> {
             let keep: Vec<bool> = (planned.iter().zip(&queries))
                 .map(|(p, q)| q.is_some() && plans[p.dir].is_sweep())
                 .collect();
-            let (queries, index) = split_queries(queries, self.settings.improved_projection);
+            let (queries, index) = split_queries(
+                queries,
+                self.settings.improved_projection,
+                self.occludee_table,
+            );
             let mut rendered = render_round(&round, backend, planned, (queries, index), &keep)?;
             self.retest_ending(
                 &round,
@@ -603,7 +608,11 @@ impl Prepared<'_> {
             })
             .collect();
         let jobs: Vec<PlaneJob> = again.iter().map(|&i| rendered[i].job.clone()).collect();
-        let (queries, index) = split_queries(queries, self.settings.improved_projection);
+        let (queries, index) = split_queries(
+            queries,
+            self.settings.improved_projection,
+            self.occludee_table,
+        );
         let results = backend.render_tested(&jobs, &queries)?;
         for ((&i, result), x) in again.iter().zip(results).zip(index) {
             rendered[i].tested = Tested::of(result, x);
@@ -644,6 +653,21 @@ impl Prepared<'_> {
                 known.unwrap_or(Coverage::Partial)
             }
         }
+    }
+
+    /// Every box a walk names by index ([`BoxId`] but parts), in [`BoxIndex`] slot order: the
+    /// hierarchy's nodes, the objects, the pieces — each exactly as the walks test it — for a
+    /// backend to keep on its device ([`RasterBackend::upload_occludee_boxes`]).
+    pub(super) fn occludee_boxes(&self) -> Vec<DAabb> {
+        let nodes = self.bvh.iter().flat_map(|b| &b.nodes).map(|node| DAabb {
+            min: glam::Vec3::from(node.aabb.min).as_dvec3(),
+            max: glam::Vec3::from(node.aabb.max).as_dvec3(),
+        });
+        let objects = self.scene.objects.iter().map(|o| o.bounds.to_f64());
+        nodes
+            .chain(objects)
+            .chain(self.piece_boxes.iter().copied())
+            .collect()
     }
 
     /// The boxes a walk names ([`BoxId`]).
@@ -877,9 +901,11 @@ impl BoxIndex {
 const OPEN: u32 = u32::MAX;
 const EMPTY: u32 = u32::MAX - 1;
 
-/// The box tests a plane's walks may ask, each box once, in the order first asked.
+/// The box tests a plane's walks may ask, each box once, in the order first asked, with
+/// each box's index in [`Prepared::occludee_boxes`] (its [`BoxIndex`] slot; a part has none).
 struct Queries {
     boxes: Vec<DAabb>,
+    ids: Vec<u32>,
     index: BoxIndex,
 }
 
@@ -887,6 +913,7 @@ impl Queries {
     fn new(counts: BoxCounts) -> Self {
         Queries {
             boxes: Vec::new(),
+            ids: Vec::new(),
             index: BoxIndex::new(counts),
         }
     }
@@ -901,6 +928,8 @@ impl Queries {
                 Some(_) => OPEN,
                 None => {
                     self.boxes.push(*b);
+                    let id = self.index.slot(id).map_or(NOT_RESIDENT, |s| s as u32);
+                    self.ids.push(id);
                     self.boxes.len() as u32
                 }
             };
@@ -943,11 +972,13 @@ enum Tests<'a> {
     Record(&'a RefCell<Queries>),
 }
 
-/// Each plane's box tests for the backend ([`PlaneQueries`]), apart from where each box's
+/// Each plane's box tests for the backend ([`PlaneQueries`], naming the backend's table
+/// `table` of [`Prepared::occludee_boxes`] where it keeps one), apart from where each box's
 /// answer will lie.
 fn split_queries(
     queries: Vec<Option<Queries>>,
     improved: bool,
+    table: Option<u64>,
 ) -> (Vec<Option<PlaneQueries>>, Vec<Option<BoxIndex>>) {
     queries
         .into_iter()
@@ -957,6 +988,8 @@ fn split_queries(
                     rects: Vec::new(),
                     boxes: q.boxes,
                     improved,
+                    table,
+                    ids: q.ids,
                 }),
                 Some(q.index),
             ),

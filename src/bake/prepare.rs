@@ -60,6 +60,10 @@ pub struct Prepared<'a> {
     pub(super) sampler_progress: Option<&'a super::SamplerProgress>,
     /// Where the sampler saves its progress inside cells ([`super::BakeHooks`]).
     pub(super) checkpoints: Option<&'a super::SamplerCheckpoints>,
+    /// The generation of the backend's copy of [`Prepared::occludee_boxes`], where it keeps
+    /// one ([`crate::backend::RasterBackend::upload_occludee_boxes`]): box tests then name
+    /// boxes by index.
+    pub(super) occludee_table: Option<u64>,
 }
 
 /// Objects with at least this many triangles are also tested as pieces.
@@ -373,6 +377,7 @@ impl<'a> Prepared<'a> {
         Ok(Prepared {
             sampler_progress: None,
             checkpoints: None,
+            occludee_table: None,
             cullers: pipeline::cullers(settings, rsf, sweep, sampling),
             rsf_edges,
             rsf,

@@ -135,6 +135,9 @@ pub struct BenchOptions {
     /// Only the occlusion sweep's maps read back rather than kept on the device
     /// ([`GpuBackend::set_keep_sweep_maps`](crate::backend::gpu::GpuBackend::set_keep_sweep_maps)).
     pub sweep_maps_on_cpu: bool,
+    /// Occludee boxes sent with their tests rather than kept on the device
+    /// ([`GpuBackend::set_resident_boxes`](crate::backend::gpu::GpuBackend::set_resident_boxes)).
+    pub boxes_inline: bool,
     /// Pixels per occludee test asked of the device; `None` for the backend's default
     /// ([`GpuBackend::set_pixels_per_device_test`](crate::backend::gpu::GpuBackend::set_pixels_per_device_test)).
     pub pixels_per_device_test: Option<usize>,
@@ -172,6 +175,7 @@ impl Default for BenchOptions {
             rsf_on_gpu: false,
             tests_on_cpu: false,
             sweep_maps_on_cpu: false,
+            boxes_inline: false,
             pixels_per_device_test: None,
             gpu_sampler_memory: None,
             checkpoint_dir: None,
@@ -742,6 +746,7 @@ pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError>
     g.set_rsf_on_gpu(args.rsf_on_gpu).map_err(BenchError::Gpu)?;
     g.set_tests_on_device(!args.tests_on_cpu);
     g.set_keep_sweep_maps(!args.sweep_maps_on_cpu);
+    g.set_resident_boxes(!args.boxes_inline);
     if let Some(n) = args.pixels_per_device_test {
         g.set_pixels_per_device_test(n);
     }

@@ -290,7 +290,18 @@ pub struct PlaneQueries {
     pub boxes: Vec<DAabb>,
     /// Whether the box tests try the improved Projections.
     pub improved: bool,
+    /// Where a backend holds the boxes already: the generation of the table given to
+    /// [`RasterBackend::upload_occludee_boxes`](crate::backend::RasterBackend::upload_occludee_boxes)
+    /// that `ids` index, or `None` (then every box goes up whole).
+    pub table: Option<u64>,
+    /// With `table`, per box of `boxes`, its index in that table, or [`NOT_RESIDENT`] for a
+    /// box it does not hold (then that box goes up whole). The table's box at the index must
+    /// be the box itself, bit for bit. Ignored unless it has one entry per box.
+    pub ids: Vec<u32>,
 }
+
+/// [`PlaneQueries::ids`] of a box the backend's table does not hold.
+pub const NOT_RESIDENT: u32 = u32::MAX;
 
 impl PlaneQueries {
     /// Only rectangle tests.
@@ -309,6 +320,15 @@ impl PlaneQueries {
     /// True when nothing is asked.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// The index of box `k` in the backend's table of generation `resident`, where these
+    /// queries name it there ([`PlaneQueries::table`], [`PlaneQueries::ids`]); `None` when the
+    /// box must go up whole.
+    pub fn resident_id(&self, resident: Option<u64>, k: usize) -> Option<u32> {
+        let named =
+            resident.is_some() && self.table == resident && self.ids.len() == self.boxes.len();
+        named.then(|| self.ids[k]).filter(|&id| id != NOT_RESIDENT)
     }
 }
 

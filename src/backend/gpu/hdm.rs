@@ -316,6 +316,13 @@ impl HdmPipelines {
 pub(super) const BOX_SLOTS: u32 = 3;
 /// Bytes of one box (six `f64`).
 pub(super) const BOX_BYTES: u64 = 48;
+/// Storage buffers the box tests bind (`boxes.wgsl`): a device allowing fewer per stage
+/// tests no boxes.
+pub(super) const BOX_STORAGE_BUFFERS: u32 = 9;
+/// A box test's source word (`box_meta` in `boxes.wgsl`) with this bit set names a box sent
+/// with the submission (the rest of the word its index there); clear, a box of the resident
+/// table ([`ResidentBoxes`]).
+pub(super) const INLINE_BOX: u32 = 1 << 31;
 /// `f64`s of one tested plane's frame for the box tests (`frames_f` in `boxes.wgsl`).
 pub(super) const BOX_FRAME_F64S: usize = 12;
 
@@ -326,9 +333,78 @@ pub(super) const BOX_FRAME_F64S: usize = 12;
 pub(super) struct BoxPipelines {
     pub plan: wgpu::ComputePipeline,
     pub decide: wgpu::ComputePipeline,
-    /// Group 0: boxes, their planes and slots, the planes' frames (`f64`, `u32`), the
-    /// queries, the shapes, the answers, the count.
+    /// Group 0: boxes, their planes and sources, the planes' frames (`f64`, `u32`), the
+    /// queries, the shapes, the answers, the counts, the resident boxes.
     pub layout: wgpu::BindGroupLayout,
+    /// Bound as the resident boxes where a submission has none (one zero box).
+    pub no_resident: wgpu::Buffer,
+}
+
+/// The occludee boxes kept on the device for a bake's box tests
+/// ([`crate::backend::RasterBackend::upload_occludee_boxes`]): a test then sends the box's
+/// index here instead of its six `f64`. Each box goes up the first time a test names it
+/// ([`ResidentBoxes::send`]), so a bake uploads at most the boxes it tests, once each.
+#[derive(Clone, Debug)]
+pub(super) struct ResidentBoxes {
+    /// Which table this is: queries naming another send their boxes whole.
+    pub generation: u64,
+    /// Six `f64` per box, each written before the first submission that reads it.
+    pub buffer: std::sync::Arc<wgpu::Buffer>,
+    /// Bytes of `buffer` bound.
+    pub bytes: u64,
+    /// The boxes, on the CPU.
+    pub boxes: std::sync::Arc<[crate::geom::DAabb]>,
+    /// One bit per box: written to `buffer` already.
+    pub sent: std::sync::Arc<std::sync::Mutex<Vec<u64>>>,
+}
+
+impl ResidentBoxes {
+    /// Writes to the device every box of `ids` not written yet (in runs of neighbouring
+    /// indices) and returns the bytes written. The bits are set and the boxes written under
+    /// one lock, so a submission made after this returns — on any thread, once it has seen a
+    /// box's bit set — reads the box.
+    ///
+    /// # Panics
+    /// When an index is not below the table's length.
+    pub fn send(&self, queue: &wgpu::Queue, ids: impl Iterator<Item = u32>) -> u64 {
+        let mut sent = self.sent.lock().unwrap_or_else(|e| e.into_inner());
+        let mut new: Vec<u32> = ids
+            .filter(|&id| {
+                let (w, b) = (id as usize / 64, 1u64 << (id % 64));
+                let fresh = sent[w] & b == 0;
+                sent[w] |= b;
+                fresh
+            })
+            .collect();
+        new.sort_unstable();
+        // Runs of indices at most GAP apart go up as one write (the boxes between them too:
+        // they are the table's own, and are marked written).
+        const GAP: u32 = 2;
+        let mut written = 0u64;
+        let mut k = 0;
+        while k < new.len() {
+            let start = new[k];
+            let mut end = start;
+            while k < new.len() && new[k] <= end + GAP {
+                end = new[k];
+                k += 1;
+            }
+            for id in start..=end {
+                sent[id as usize / 64] |= 1u64 << (id % 64);
+            }
+            let words: Vec<f64> = self.boxes[start as usize..=end as usize]
+                .iter()
+                .flat_map(|b| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
+                .collect();
+            queue.write_buffer(
+                &self.buffer,
+                u64::from(start) * BOX_BYTES,
+                bytemuck::cast_slice(&words),
+            );
+            written += (words.len() * 8) as u64;
+        }
+        written
+    }
 }
 
 impl BoxPipelines {
@@ -352,6 +428,7 @@ impl BoxPipelines {
                 storage(5, false, 4),
                 storage(6, true, 4),
                 storage(8, false, 4),
+                storage(9, true, BOX_BYTES),
                 wgpu::BindGroupLayoutEntry {
                     binding: 7,
                     visibility: cs,
@@ -383,6 +460,12 @@ impl BoxPipelines {
             plan: pipeline("plan", "box_plan"),
             decide: pipeline("decide", "box_decide"),
             layout,
+            no_resident: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("no resident occludee boxes"),
+                size: BOX_BYTES,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }),
         }
     }
 }
@@ -440,8 +523,8 @@ pub(super) struct TestBuffers {
     pub tables: Option<wgpu::Buffer>,
     pub summary: Option<wgpu::Buffer>,
     pub summary_staging: Option<wgpu::Buffer>,
-    /// Box tests: the boxes, their planes and slots, the planes' frames, their shapes, the
-    /// count.
+    /// Box tests: the boxes sent with the submission, every test's plane and source, the
+    /// planes' frames, their shapes, the counts.
     pub boxes: Option<wgpu::Buffer>,
     pub box_meta: Option<wgpu::Buffer>,
     pub frames_f: Option<wgpu::Buffer>,

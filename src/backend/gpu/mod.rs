@@ -446,6 +446,11 @@ pub struct GpuBackend {
     projection: GpuProjection,
     /// Reprojection sources' summed-area tables kept on the device across calls.
     tables: tables::TableCache,
+    /// Keep a bake's occludee boxes on the device ([`GpuBackend::set_resident_boxes`]).
+    resident_wanted: bool,
+    /// The last [`RasterBackend::upload_occludee_boxes`]'s table, and the generations given.
+    resident: Mutex<Option<hdm::ResidentBoxes>>,
+    generations: std::sync::atomic::AtomicU64,
 }
 
 impl std::fmt::Debug for GpuBackend {
@@ -655,7 +660,10 @@ impl GpuBackend {
         } else {
             None
         };
-        let box_pipelines = if f64_ok {
+        // (WebGPU's default limits allow 8 storage buffers a stage; the box tests bind 9.)
+        let box_pipelines = if f64_ok
+            && device.limits().max_storage_buffers_per_shader_stage >= hdm::BOX_STORAGE_BUFFERS
+        {
             let scope = device::ErrorScopes::push(&device);
             let p = hdm::BoxPipelines::new(&device, BOXES_WGSL);
             scope.check()?;
@@ -696,6 +704,9 @@ impl GpuBackend {
             pixels_per_test: crate::backend::PIXELS_PER_DEVICE_TEST,
             projection,
             tables: tables::TableCache::default(),
+            resident_wanted: true,
+            resident: Mutex::default(),
+            generations: std::sync::atomic::AtomicU64::new(0),
         })
     }
 
@@ -762,6 +773,24 @@ impl GpuBackend {
     /// at any value.
     pub fn set_pixels_per_device_test(&mut self, pixels: usize) {
         self.pixels_per_test = pixels.max(1);
+    }
+
+    /// Keeps a bake's occludee boxes on the device (`on`, the default: box tests then send
+    /// indices, 8 bytes a test instead of 56, [`RasterBackend::upload_occludee_boxes`]) or
+    /// sends every box with its test (for comparisons). The same PVS either way.
+    pub fn set_resident_boxes(&mut self, on: bool) {
+        self.resident_wanted = on;
+        if !on {
+            *self.resident.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        }
+    }
+
+    /// The occludee boxes kept on the device, where a bake gave them.
+    fn resident_boxes(&self) -> Option<hdm::ResidentBoxes> {
+        self.resident
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     /// Keeps occlusion sweeps' maps on the device (`on`, the default, with the tests there
@@ -1039,6 +1068,55 @@ impl RasterBackend for GpuBackend {
 
     fn pixels_per_device_test(&self) -> usize {
         self.pixels_per_test
+    }
+
+    /// Keeps the boxes (six `f64` each) where box tests run on the device and the table fits
+    /// one storage binding: the device's table is made here, and each box goes up the first
+    /// time a wave's test names it ([`hdm::ResidentBoxes::send`]; those bytes count as
+    /// uploaded).
+    fn upload_occludee_boxes(
+        &self,
+        boxes: &[crate::geom::DAabb],
+    ) -> Result<Option<u64>, BackendError> {
+        let bytes = boxes.len() as u64 * hdm::BOX_BYTES;
+        let binding = self
+            .limits
+            .max_buffer
+            .min(self.device.limits().max_storage_buffer_binding_size);
+        let mut slot = self.resident.lock().unwrap_or_else(|e| e.into_inner());
+        // The old table goes first (waves in flight hold their own reference).
+        *slot = None;
+        if !(self.tests_on_device() && self.resident_wanted) || boxes.is_empty() || bytes > binding
+        {
+            return Ok(None);
+        }
+        self.check_failure()?;
+        let scope = device::ErrorScopes::push(&self.device);
+        // Mapped at creation, so that wgpu knows it initialised (zeros) from the start: a
+        // buffer it thinks uninitialised is zeroed where a submission binds it, and that
+        // clear could land after another thread's first write of a box in the same
+        // submission, leaving the box zero (a test of the wrong box: a false cull, seen on
+        // lavapipe as 5–19 objects of a cell culled by some runs).
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("resident occludee boxes"),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: true,
+        });
+        buffer.unmap();
+        scope.check()?;
+        let generation = self
+            .generations
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            + 1;
+        *slot = Some(hdm::ResidentBoxes {
+            generation,
+            buffer: std::sync::Arc::new(buffer),
+            bytes,
+            boxes: boxes.into(),
+            sent: std::sync::Arc::new(Mutex::new(vec![0; boxes.len().div_ceil(64)])),
+        });
+        Ok(Some(generation))
     }
 
     fn render_tested(

@@ -286,6 +286,11 @@ struct WaveLayout {
     /// [`hdm::BOX_SLOTS`] query slots each); `queries` counts the slots.
     rects: u32,
     boxes: u32,
+    /// Of the box tests, those whose box goes up with the wave (the others name it in
+    /// `resident`).
+    inline_boxes: u32,
+    /// The bake's occludee boxes on the device, when some query names them.
+    resident: Option<hdm::ResidentBoxes>,
     pyramid_floats: u64,
     mask_words: u32,
     reduce: Vec<(u32, u32)>,
@@ -309,8 +314,16 @@ impl WaveLayout {
         queries: &[Option<PlaneQueries>],
         keep: &[bool],
         limits: &DeviceLimits,
-        boxes_ok: bool,
+        (boxes_ok, resident): (bool, Option<hdm::ResidentBoxes>),
     ) -> Self {
+        let generation = resident.as_ref().map(|r| r.generation);
+        // A plane's boxes that go up with the wave: those its queries do not name in the
+        // resident table.
+        let inline = |q: &PlaneQueries| {
+            (0..q.boxes.len())
+                .filter(|&k| q.resident_id(generation, k).is_none())
+                .count() as u64
+        };
         let storage_align = limits.storage_align;
         // The tests' largest buffers (queries, pyramids) are each one storage binding.
         let test_cap = TEST_BUDGET.min(limits.max_chunk_words as u64 * 16);
@@ -324,7 +337,7 @@ impl WaveLayout {
         let mut planes = Vec::with_capacity(todo.len());
         let (mut counted, mut counted_f64s, mut counted_words) = (0usize, 0usize, 0usize);
         let (mut tested, mut n_queries, mut pyramid_floats) = (0u32, 0u32, 0u64);
-        let (mut n_boxes, mut n_rects) = (0u32, 0u32);
+        let (mut n_boxes, mut n_rects, mut n_inline) = (0u32, 0u32, 0u32);
         // Per reduction level k ≥ 1, the largest level-k size over the tested planes.
         let mut reduce: Vec<(u32, u32)> = Vec::new();
         let mut mask_words = 0u32;
@@ -361,7 +374,8 @@ impl WaveLayout {
                     .map_or(0, |m| m.depth.len().div_ceil(32) as u64);
                 (q.boxes.is_empty() || boxes_ok)
                     && (u64::from(n_queries) + slots(q)) * hdm::QUERY_BYTES <= test_cap
-                    && (u64::from(n_boxes) + q.boxes.len() as u64) * hdm::BOX_BYTES <= test_cap
+                    && (u64::from(n_inline) + inline(q)) * hdm::BOX_BYTES <= test_cap
+                    && (u64::from(n_boxes) + q.boxes.len() as u64) * 8 <= test_cap
                     && (pyramid_floats + hdm::pyramid_floats(f.width, f.height)) * 4 <= test_cap
                     && (u64::from(mask_words) + mask) * 4 <= test_cap
                     && f.width.max(f.height) <= hdm::MAX_SIDE
@@ -386,6 +400,7 @@ impl WaveLayout {
                     n_queries += slots(q) as u32;
                     n_rects += q.rects.len() as u32;
                     n_boxes += q.boxes.len() as u32;
+                    n_inline += inline(q) as u32;
                     pyramid_floats += hdm::pyramid_floats(f.width, f.height);
                     for (k, l) in t.levels.iter().enumerate().skip(1) {
                         if reduce.len() < k {
@@ -434,6 +449,8 @@ impl WaveLayout {
             queries: n_queries,
             rects: n_rects,
             boxes: n_boxes,
+            inline_boxes: n_inline,
+            resident: resident.filter(|_| n_inline < n_boxes),
             pyramid_floats,
             mask_words,
             reduce,
@@ -526,7 +543,8 @@ impl WaveLayout {
                 + 16;
             stats.bytes_read_back += u64::from(self.answers()) * 4;
             if self.boxes > 0 {
-                stats.bytes_uploaded += u64::from(self.boxes) * (hdm::BOX_BYTES + 8)
+                stats.bytes_uploaded += u64::from(self.boxes) * 8
+                    + u64::from(self.inline_boxes) * hdm::BOX_BYTES
                     + u64::from(self.tested) * (hdm::BOX_FRAME_F64S as u64 * 8 + 16)
                     + 16;
             }
@@ -603,14 +621,15 @@ impl GpuBackend {
             queries,
             keep,
             &self.limits,
-            self.box_pipelines.is_some(),
+            (self.box_pipelines.is_some(), self.resident_boxes()),
         );
         let tables = self.allocate(pool, &layout, prepared)?;
         let pool = &*pool;
         let buffers = WaveBuffers::of(pool, tables);
         self.upload(&buffers, &layout, jobs, prepared);
-        self.upload_tests(pool, &layout, jobs, prepared, queries);
+        let resident_bytes = self.upload_tests(pool, &layout, jobs, prepared, queries);
         layout.count(jobs, prepared, stats);
+        stats.bytes_uploaded += resident_bytes;
         let timestamps = self.timestamp_period.map(|period| Timestamps {
             sets: &pool.timestamps[..timestamp_sets(layout.timed_passes())],
             passes: layout.timed_passes(),
@@ -749,12 +768,18 @@ impl GpuBackend {
             let t = pool.tests.get_or_insert_with(TestBuffers::default);
             let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
             let n = u64::from(layout.boxes);
-            self.ensure_buffer(&mut t.boxes, n * hdm::BOX_BYTES, storage, "occludee boxes")?;
+            let inline = u64::from(layout.inline_boxes.max(1));
+            self.ensure_buffer(
+                &mut t.boxes,
+                inline * hdm::BOX_BYTES,
+                storage,
+                "occludee boxes",
+            )?;
             self.ensure_buffer(
                 &mut t.box_meta,
                 n * 8,
                 storage,
-                "occludee boxes' planes and slots",
+                "occludee box tests' planes and boxes",
             )?;
             self.ensure_buffer(
                 &mut t.frames_f,
@@ -962,7 +987,9 @@ impl GpuBackend {
     }
 
     /// Upload step of the occludee tests: each dispatch's level parameters, the tested planes,
-    /// their queries (`plane, i0 | j0 << 16, i1 | j1 << 16, depth`) and their count.
+    /// their queries (`plane, i0 | j0 << 16, i1 | j1 << 16, depth`) and their count, the box
+    /// tests (each box's plane and source, the boxes not resident) and the resident boxes named
+    /// for the first time. Returns the bytes of those resident boxes.
     fn upload_tests(
         &self,
         pool: &Pool,
@@ -970,9 +997,9 @@ impl GpuBackend {
         jobs: &[PlaneJob],
         prepared: &[Prepared],
         queries: &[Option<PlaneQueries>],
-    ) {
+    ) -> u64 {
         let Some(t) = pool.tests.as_ref().filter(|_| layout.tested > 0) else {
-            return;
+            return 0;
         };
         let (Some(params), Some(planes), Some(qbuf), Some(count), Some(masks), Some(steps)) = (
             &t.params, &t.planes, &t.queries, &t.count, &t.masks, &t.steps,
@@ -993,7 +1020,9 @@ impl GpuBackend {
         }
         let mut plane_words: Vec<u32> = Vec::with_capacity(layout.tested as usize * 4);
         let mut query_words: Vec<u32> = Vec::with_capacity(layout.rects as usize * 4);
-        let mut box_f64s: Vec<f64> = Vec::with_capacity(layout.boxes as usize * 6);
+        let mut box_f64s: Vec<f64> = Vec::with_capacity(layout.inline_boxes as usize * 6);
+        let generation = layout.resident.as_ref().map(|r| r.generation);
+        let mut resident_ids: Vec<u32> = Vec::new();
         let mut box_words: Vec<u32> = Vec::with_capacity(layout.boxes as usize * 2);
         let mut frame_f64s: Vec<f64> = Vec::new();
         let mut frame_words: Vec<u32> = Vec::new();
@@ -1025,11 +1054,29 @@ impl GpuBackend {
                 let (ff, fu) = hdm::box_frame(&jobs[plane.job].frame, q.improved);
                 frame_f64s.extend_from_slice(&ff);
                 frame_words.extend_from_slice(&fu);
+                // (Each test's query slots follow from its place: `box_slot`.)
                 for (k, b) in q.boxes.iter().enumerate() {
-                    box_f64s
-                        .extend_from_slice(&[b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]);
-                    let slot = layout.box_slot(tp.boxes.0 + k as u32);
-                    box_words.extend_from_slice(&[tp.index, slot]);
+                    let src = match q.resident_id(generation, k) {
+                        Some(id) => {
+                            debug_assert!(
+                                layout
+                                    .resident
+                                    .as_ref()
+                                    .is_some_and(|r| r.boxes[id as usize] == *b),
+                                "a query names box {id} of the resident table for another box"
+                            );
+                            resident_ids.push(id);
+                            id
+                        }
+                        None => {
+                            let at = (box_f64s.len() / 6) as u32;
+                            box_f64s.extend_from_slice(&[
+                                b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z,
+                            ]);
+                            hdm::INLINE_BOX | at
+                        }
+                    };
+                    box_words.extend_from_slice(&[tp.index, src]);
                 }
             }
         }
@@ -1043,16 +1090,21 @@ impl GpuBackend {
             ) else {
                 unreachable!("box buffers were just ensured");
             };
-            self.queue
-                .write_buffer(bx, 0, bytemuck::cast_slice(&box_f64s));
+            if !box_f64s.is_empty() {
+                self.queue
+                    .write_buffer(bx, 0, bytemuck::cast_slice(&box_f64s));
+            }
             self.queue
                 .write_buffer(meta, 0, bytemuck::cast_slice(&box_words));
             self.queue
                 .write_buffer(ff, 0, bytemuck::cast_slice(&frame_f64s));
             self.queue
                 .write_buffer(fu, 0, bytemuck::cast_slice(&frame_words));
-            self.queue
-                .write_buffer(bc, 0, bytemuck::cast_slice(&[layout.boxes, 0, 0, 0]));
+            self.queue.write_buffer(
+                bc,
+                0,
+                bytemuck::cast_slice(&[layout.boxes, layout.box_slot(0), 0, 0]),
+            );
         }
         self.queue.write_buffer(params, 0, &param_bytes);
         self.queue
@@ -1086,6 +1138,11 @@ impl GpuBackend {
             self.queue
                 .write_buffer(summary, 0, bytemuck::cast_slice(&start));
         }
+        // The resident boxes this wave names that no earlier wave sent.
+        layout
+            .resident
+            .as_ref()
+            .map_or(0, |r| r.send(&self.queue, resident_ids.into_iter()))
     }
 
     /// The occludee tests of the wave's tested planes, after their render passes: one compute
@@ -1267,12 +1324,20 @@ impl GpuBackend {
             .expect("box tests are laid out only with their pipelines");
         let n = u64::from(layout.boxes);
         let q = u64::from(layout.queries);
+        let (resident, resident_bytes) = match &layout.resident {
+            Some(r) => (&*r.buffer, r.bytes),
+            None => (&bp.no_resident, hdm::BOX_BYTES),
+        };
         let entry = buffer_entry;
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("box tests bind group"),
             layout: &bp.layout,
             entries: &[
-                entry(0, bx, n * hdm::BOX_BYTES),
+                entry(
+                    0,
+                    bx,
+                    u64::from(layout.inline_boxes.max(1)) * hdm::BOX_BYTES,
+                ),
                 entry(1, meta, n * 8),
                 entry(
                     2,
@@ -1285,6 +1350,7 @@ impl GpuBackend {
                 entry(6, answers, q * 4),
                 entry(7, bc, 16),
                 entry(8, box_out, n * 4),
+                entry(9, resident, resident_bytes),
             ],
         })
     }
