@@ -1072,7 +1072,7 @@ impl RasterBackend for GpuBackend {
 
     /// Keeps the boxes (six `f64` each) where box tests run on the device and the table fits
     /// one storage binding: the device's table is made here, and each box goes up the first
-    /// time a wave's test names it ([`hdm::ResidentBoxes::send`]; those bytes count as
+    /// time a wave's test names it (`hdm::ResidentBoxes::send`; those bytes count as
     /// uploaded).
     fn upload_occludee_boxes(
         &self,
