@@ -1182,9 +1182,9 @@ fn box_tests_on_the_device_follow_the_cpu_rule() {
 
 /// Boxes kept on the device (`RasterBackend::upload_occludee_boxes`: a query then names a box
 /// by its index in the table) are answered as the same boxes sent whole and as the CPU's rule
-/// answers them: a shuffled table with decoys, some boxes sent whole beside named ones, a
-/// table replaced (queries naming the old one send their boxes whole), and each box uploaded
-/// once: asking again sends only indices.
+/// answers them: a shuffled table with decoys, some boxes sent whole beside named ones (some
+/// of them named by an index beyond the table), a table replaced (queries naming the old one
+/// send their boxes whole), and each box uploaded once: asking again sends only indices.
 #[test]
 fn resident_boxes_are_answered_as_boxes_sent_whole() {
     if backend().is_none() {
@@ -1239,9 +1239,14 @@ fn resident_boxes_are_answered_as_boxes_sent_whole() {
                     boxes: boxes[j].clone(),
                     improved: true,
                     table: generation,
-                    // Every fifth box is sent whole.
+                    // Every fifth box is sent whole: named `NOT_RESIDENT`, or by an index
+                    // beyond the table.
                     ids: (0..400)
-                        .map(|n| if n % 5 == 2 { NOT_RESIDENT } else { ids[j][n] })
+                        .map(|n| match n % 10 {
+                            2 => NOT_RESIDENT,
+                            7 => 2 * (boxes.len() * 400) as u32 + n as u32,
+                            _ => ids[j][n],
+                        })
                         .collect(),
                     ..Default::default()
                 })

@@ -295,8 +295,9 @@ pub struct PlaneQueries {
     /// that `ids` index, or `None` (then every box goes up whole).
     pub table: Option<u64>,
     /// With `table`, per box of `boxes`, its index in that table, or [`NOT_RESIDENT`] for a
-    /// box it does not hold (then that box goes up whole). The table's box at the index must
-    /// be the box itself, bit for bit. Ignored unless it has one entry per box.
+    /// box it does not hold (then that box goes up whole, as does one whose index is not below
+    /// the table's length). The table's box at the index must be the box itself, bit for bit
+    /// (a debug build checks it). Ignored unless it has one entry per box.
     pub ids: Vec<u32>,
 }
 
@@ -322,13 +323,15 @@ impl PlaneQueries {
         self.len() == 0
     }
 
-    /// The index of box `k` in the backend's table of generation `resident`, where these
-    /// queries name it there ([`PlaneQueries::table`], [`PlaneQueries::ids`]); `None` when the
-    /// box must go up whole.
-    pub fn resident_id(&self, resident: Option<u64>, k: usize) -> Option<u32> {
-        let named =
-            resident.is_some() && self.table == resident && self.ids.len() == self.boxes.len();
-        named.then(|| self.ids[k]).filter(|&id| id != NOT_RESIDENT)
+    /// The index of box `k` in the backend's table `table` (its generation and length), where
+    /// these queries name it there ([`PlaneQueries::table`], [`PlaneQueries::ids`]); `None`
+    /// when the box must go up whole (no table, another generation, no index, or one not
+    /// below the table's length).
+    pub fn resident_id(&self, table: Option<(u64, usize)>, k: usize) -> Option<u32> {
+        let (generation, len) = table?;
+        (self.table == Some(generation) && self.ids.len() == self.boxes.len())
+            .then(|| self.ids[k])
+            .filter(|&id| (id as usize) < len)
     }
 }
 

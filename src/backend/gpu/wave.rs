@@ -316,7 +316,7 @@ impl WaveLayout {
         limits: &DeviceLimits,
         (boxes_ok, resident): (bool, Option<hdm::ResidentBoxes>),
     ) -> Self {
-        let generation = resident.as_ref().map(|r| r.generation);
+        let generation = resident.as_ref().map(|r| (r.generation, r.boxes.len()));
         // A plane's boxes that go up with the wave: those its queries do not name in the
         // resident table.
         let inline = |q: &PlaneQueries| {
@@ -1021,7 +1021,10 @@ impl GpuBackend {
         let mut plane_words: Vec<u32> = Vec::with_capacity(layout.tested as usize * 4);
         let mut query_words: Vec<u32> = Vec::with_capacity(layout.rects as usize * 4);
         let mut box_f64s: Vec<f64> = Vec::with_capacity(layout.inline_boxes as usize * 6);
-        let generation = layout.resident.as_ref().map(|r| r.generation);
+        let generation = layout
+            .resident
+            .as_ref()
+            .map(|r| (r.generation, r.boxes.len()));
         let mut resident_ids: Vec<u32> = Vec::new();
         let mut box_words: Vec<u32> = Vec::with_capacity(layout.boxes as usize * 2);
         let mut frame_f64s: Vec<f64> = Vec::new();
