@@ -9,8 +9,9 @@
 //!
 //! Bakes run with the default settings, with the occlusion sweep forced, with separate
 //! planes forced and (every fourth case) with the shrunk-occluder sampler after the sweep, on
-//! the CPU backend; the first cases also on the GPU backend (lavapipe here;
-//! without an adapter it prints why and skips, except under `CI`, where it fails).
+//! the CPU backend; the first cases also on the GPU backend (lavapipe here; the odd ones with
+//! every plane's box tests asked of the device; without an adapter it prints why and skips,
+//! except under `CI`, where it fails).
 //! A second campaign adds degenerate triangles to the same cases: slivers welded to the
 //! occluder's edges, needles, triangles seen edge-on from a corner of the cell, collinear
 //! fans and folded quads.
@@ -432,6 +433,13 @@ fn add_degenerates(c: &mut Case, seed: u64) -> usize {
 fn campaign(degenerate: bool) {
     let cpu = CpuBackend::new();
     let gpu = gpu();
+    // Odd GPU cases ask the device every plane's box tests (one per pixel), so that the
+    // device's answers — and the bake's boxes kept there — are attacked too, not only the
+    // maps read back.
+    let gpu_every_test = gpu.as_ref().and_then(|_| crate::gpu()).map(|mut g| {
+        g.set_pixels_per_device_test(1);
+        g
+    });
     let settings = [
         ("default", BakeSettings::default()),
         (
@@ -497,8 +505,9 @@ fn campaign(degenerate: bool) {
         }
         let cell = pl.aabb(c.cell.0, c.cell.1);
         let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
+        let g = if seed % 2 == 1 { &gpu_every_test } else { &gpu };
         if seed < gpu_cases()
-            && let Some(g) = &gpu
+            && let Some(g) = g
         {
             backends.push(g);
         }

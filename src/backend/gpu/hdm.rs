@@ -589,6 +589,20 @@ pub(super) fn param_offset(k: u32) -> u64 {
 mod tests {
     use super::*;
 
+    /// `boxes.wgsl` repeats this file's constants for the box tests and binds as many storage
+    /// buffers as the device is asked to allow.
+    #[test]
+    fn the_box_shader_agrees_with_its_constants() {
+        let src = super::super::BOXES_WGSL;
+        assert!(src.contains(&format!("const BOX_SLOTS: u32 = {BOX_SLOTS}u;")));
+        assert!(src.contains(&format!("const INLINE_BOX: u32 = 0x{INLINE_BOX:08x}u;")));
+        let storage = src
+            .lines()
+            .filter(|l| l.starts_with("@group(0) @binding(") && l.contains("var<storage"))
+            .count();
+        assert_eq!(storage as u32, BOX_STORAGE_BUFFERS);
+    }
+
     /// The pyramid's levels and offsets follow `Hdm::build`: halving each side down to 1,
     /// level 0 its own max and min, then a max and a min per level, back to back.
     #[test]
