@@ -19,14 +19,10 @@
 // rectangles' outward padding (1e-12 of their coordinates): the rectangle still holds the
 // exact one, and differs from the CPU's only where a pixel boundary falls within that ulp.
 //
-// `rounding.wgsl` (f32_down, …) is prepended to this file.
+// `rounding.wgsl` (f32_down, …) and `coverage.wgsl` (the answers' codes) are prepended to this
+// file.
 
-// The answers, as `plane::Coverage` codes (`hdm.wgsl`).
-const PARTIAL: u32 = 0u;
-const HIDDEN: u32 = 1u;
-const EMPTY: u32 = 2u;
-// A query slot with nothing to test.
-const NO_PLANE: u32 = 0xffffffffu;
+// (The answers' codes, `PARTIAL`, `HIDDEN`, `EMPTY` and `NO_PLANE`: `coverage.wgsl`, prepended.)
 
 // A box's shape: its first answer's kind in the low two bits, and `IMPROVED` when a `Partial`
 // first answer is followed by the improved Projections' tests.

@@ -89,12 +89,8 @@ struct Query {
     depth: f32,
 }
 
-// The answers, as `plane::Coverage` codes.
-const PARTIAL: u32 = 0u;
-const HIDDEN: u32 = 1u;
-const EMPTY: u32 = 2u;
+// (The answers' codes, `PARTIAL`, `HIDDEN`, `EMPTY` and `NO_PLANE`: `coverage.wgsl`, prepended.)
 const INF: u32 = 0x7f800000u;
-const NO_PLANE: u32 = 0xffffffffu;
 const MAX_LEVELS: u32 = 16u;
 const STACK: u32 = 64u;
 

@@ -350,8 +350,6 @@ pub(super) struct ResidentBoxes {
     pub generation: u64,
     /// Six `f64` per box, each written before the first submission that reads it.
     pub buffer: std::sync::Arc<wgpu::Buffer>,
-    /// Bytes of `buffer` bound.
-    pub bytes: u64,
     /// The boxes, on the CPU.
     pub boxes: std::sync::Arc<[crate::geom::DAabb]>,
     /// One bit per box: written to `buffer` already.
@@ -359,6 +357,11 @@ pub(super) struct ResidentBoxes {
 }
 
 impl ResidentBoxes {
+    /// Bytes of the device's table.
+    pub fn bytes(&self) -> u64 {
+        self.boxes.len() as u64 * BOX_BYTES
+    }
+
     /// Writes to the device every box of `ids` not written yet (in runs of neighbouring
     /// indices) and returns the bytes written. The bits are set and the boxes written under
     /// one lock, so a submission made after this returns — on any thread, once it has seen a

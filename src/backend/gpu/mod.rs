@@ -309,12 +309,16 @@ pub const SHADERS: &[(&str, &str)] = &[
     ),
     (
         "shaders/hdm.wgsl",
-        include_str!("../../../shaders/hdm.wgsl"),
+        concat!(
+            include_str!("../../../shaders/coverage.wgsl"),
+            include_str!("../../../shaders/hdm.wgsl")
+        ),
     ),
     (
         "shaders/boxes.wgsl",
         concat!(
             include_str!("../../../shaders/rounding.wgsl"),
+            include_str!("../../../shaders/coverage.wgsl"),
             include_str!("../../../shaders/boxes.wgsl")
         ),
     ),
@@ -327,6 +331,11 @@ pub const SHADERS: &[(&str, &str)] = &[
             include_str!("../../../shaders/sampler.wgsl"),
             include_str!("../../../shaders/sampler_blend.wgsl")
         ),
+    ),
+    // The answers' codes, prepended to `hdm.wgsl` and `boxes.wgsl`.
+    (
+        "shaders/coverage.wgsl",
+        include_str!("../../../shaders/coverage.wgsl"),
     ),
 ];
 
@@ -1112,7 +1121,6 @@ impl RasterBackend for GpuBackend {
         *slot = Some(hdm::ResidentBoxes {
             generation,
             buffer: std::sync::Arc::new(buffer),
-            bytes,
             boxes: boxes.into(),
             sent: std::sync::Arc::new(Mutex::new(vec![0; boxes.len().div_ceil(64)])),
         });

@@ -364,6 +364,7 @@ impl WaveLayout {
             // The device answers a plane's queries when asked (its slices' mask goes up as
             // bits and is merged there), and keeps its map when asked and its table fits.
             let table = u64::from(hdm::table_stride(f.width)) * u64::from(f.height);
+            let q_inline = queries[j].as_ref().map_or(0, inline);
             let slots = |q: &PlaneQueries| {
                 q.rects.len() as u64 + q.boxes.len() as u64 * u64::from(hdm::BOX_SLOTS)
             };
@@ -374,7 +375,7 @@ impl WaveLayout {
                     .map_or(0, |m| m.depth.len().div_ceil(32) as u64);
                 (q.boxes.is_empty() || boxes_ok)
                     && (u64::from(n_queries) + slots(q)) * hdm::QUERY_BYTES <= test_cap
-                    && (u64::from(n_inline) + inline(q)) * hdm::BOX_BYTES <= test_cap
+                    && (u64::from(n_inline) + q_inline) * hdm::BOX_BYTES <= test_cap
                     && (u64::from(n_boxes) + q.boxes.len() as u64) * 8 <= test_cap
                     && (pyramid_floats + hdm::pyramid_floats(f.width, f.height)) * 4 <= test_cap
                     && (u64::from(mask_words) + mask) * 4 <= test_cap
@@ -400,7 +401,7 @@ impl WaveLayout {
                     n_queries += slots(q) as u32;
                     n_rects += q.rects.len() as u32;
                     n_boxes += q.boxes.len() as u32;
-                    n_inline += inline(q) as u32;
+                    n_inline += q_inline as u32;
                     pyramid_floats += hdm::pyramid_floats(f.width, f.height);
                     for (k, l) in t.levels.iter().enumerate().skip(1) {
                         if reduce.len() < k {
@@ -1328,7 +1329,7 @@ impl GpuBackend {
         let n = u64::from(layout.boxes);
         let q = u64::from(layout.queries);
         let (resident, resident_bytes) = match &layout.resident {
-            Some(r) => (&*r.buffer, r.bytes),
+            Some(r) => (&*r.buffer, r.bytes()),
             None => (&bp.no_resident, hdm::BOX_BYTES),
         };
         let entry = buffer_entry;
