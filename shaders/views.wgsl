@@ -45,7 +45,8 @@ const F32_ERR_PER_PX: f64 = 4.76837158203125e-7lf;
 
 // Occluder points, 3 f64 each (scene coordinates).
 @group(0) @binding(0) var<storage, read> points: array<f64>;
-// Per occluder: (first point, point count | plane << 8, Depth bits, record word in `records`).
+// Per occluder: (first point, point count | RESIDENT_POINTS? | plane << 8, Depth bits, record
+// word in `records`).
 @group(0) @binding(1) var<storage, read> occ: array<vec4<u32>>;
 // Per plane, 32 f64: the 8 corners (x, y, z), rect_min (u, v), 1 / pixel size (u, v), the
 // plane's position, its side (±1), then padding.
@@ -53,6 +54,21 @@ const F32_ERR_PER_PX: f64 = 4.76837158203125e-7lf;
 // Per plane: (axis, width, height, 0).
 @group(0) @binding(3) var<storage, read> planes_u: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read_write> records: array<vec4<u32>>;
+// The bake's occluder parts' points, 3 f64 each, where it keeps them on the device: an
+// occluder whose count carries RESIDENT_POINTS reads its points here (the same f64s).
+@group(0) @binding(5) var<storage, read> resident_points: array<f64>;
+
+// `wave::RESIDENT_POINTS`: the occluder's first point indexes `resident_points`.
+const RESIDENT_POINTS: u32 = 0x80u;
+
+// Point k of occluder `o`.
+fn occluder_point(o: vec4<u32>, k: u32) -> vec3<f64> {
+    let b = 3u * (o.x + k);
+    if (o.y & RESIDENT_POINTS) != 0u {
+        return vec3<f64>(resident_points[b], resident_points[b + 1u], resident_points[b + 2u]);
+    }
+    return vec3<f64>(points[b], points[b + 1u], points[b + 2u]);
+}
 
 // `setup::flush_tiny`: GPUs may flush denormals.
 fn flush_tiny(x: f32) -> f32 {
@@ -116,7 +132,7 @@ fn views(
         return;
     }
     let o = occ[i];
-    let n = min(o.y & 0xffu, MAXP);
+    let n = min(o.y & 0x7fu, MAXP);
     let plane = o.y >> 8u;
     let r = o.w;
     let pf = plane * 32u;
@@ -139,8 +155,7 @@ fn views(
         var vlo = vec2<f64>(1e300lf, 1e300lf);
         var vhi = vec2<f64>(-1e300lf, -1e300lf);
         for (var k = 0u; k < n; k++) {
-            let b = 3u * (o.x + k);
-            let p = vec3<f64>(points[b], points[b + 1u], points[b + 2u]);
+            let p = occluder_point(o, k);
             let dz = s * (p[a] - v[a]);
             // Not strictly beyond the corner, or not finite (NaN fails both tests).
             if !(dz > 0.0lf && dz < 1e300lf) {

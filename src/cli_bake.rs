@@ -137,6 +137,12 @@ pub struct BakeArgs {
     /// Ignored on the CPU backend.
     #[arg(long)]
     pub boxes_inline: bool,
+    /// Send each counted occluder's points with its plane (24 bytes a point) instead of
+    /// keeping the scene's occluder parts on the device, each uploaded once when first
+    /// projected (the default with `--gpu-projection counting`). The same PVS; for
+    /// comparisons. Ignored on the CPU backend and with clipped projections.
+    #[arg(long)]
+    pub occluders_inline: bool,
     /// On the GPU backend, ask the device a plane's occludee tests only while they number at
     /// most one per N pixels of its map (default 64, measured on lavapipe); past that the map
     /// comes back and the CPU tests. Smaller N keeps more planes on the device for more CPU
@@ -549,7 +555,8 @@ pub fn make_backend(
     choice: BackendChoice,
     projection: Option<GpuProjection>,
     rsf_on_gpu: bool,
-    (tests_on_cpu, sweep_maps_on_cpu, boxes_inline, pixels_per_test): (
+    (tests_on_cpu, sweep_maps_on_cpu, boxes_inline, occluders_inline, pixels_per_test): (
+        bool,
         bool,
         bool,
         bool,
@@ -577,6 +584,7 @@ pub fn make_backend(
                 b.set_tests_on_device(!tests_on_cpu);
                 b.set_keep_sweep_maps(!sweep_maps_on_cpu);
                 b.set_resident_boxes(!boxes_inline);
+                b.set_resident_parts(!occluders_inline);
                 if let Some(n) = pixels_per_test {
                     b.set_pixels_per_device_test(n as usize);
                 }
@@ -756,6 +764,7 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
             a.tests_on_cpu,
             a.sweep_maps_on_cpu,
             a.boxes_inline,
+            a.occluders_inline,
             a.pixels_per_device_test,
         ),
         a.gpu_sampler_memory,

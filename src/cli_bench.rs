@@ -81,6 +81,11 @@ pub struct BenchArgs {
     /// (the default), as `bake --boxes-inline`: the same PVS, to compare the two.
     #[arg(long)]
     pub boxes_inline: bool,
+    /// Send counted occluders' points with their planes instead of keeping the scene's
+    /// occluder parts on the device (the default), as `bake --occluders-inline`: the same
+    /// PVS, to compare the two.
+    #[arg(long)]
+    pub occluders_inline: bool,
     /// Pixels per occludee test asked of the GPU backend's device, as `bake
     /// --pixels-per-device-test` (default 64).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
@@ -221,6 +226,7 @@ impl From<&BenchArgs> for BenchOptions {
             tests_on_cpu: a.tests_on_cpu,
             sweep_maps_on_cpu: a.sweep_maps_on_cpu,
             boxes_inline: a.boxes_inline,
+            occluders_inline: a.occluders_inline,
             pixels_per_device_test: a.pixels_per_device_test.map(|n| n as usize),
             gpu_sampler_memory: a.gpu_sampler_memory,
             shared: a.shared.clone(),

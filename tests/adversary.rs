@@ -10,8 +10,9 @@
 //! Bakes run with the default settings, with the occlusion sweep forced, with separate
 //! planes forced and (every fourth case) with the shrunk-occluder sampler after the sweep, on
 //! the CPU backend; the first cases also on the GPU backend (lavapipe here; the odd ones with
-//! every plane's box tests asked of the device; without an adapter it prints why and skips,
-//! except under `CI`, where it fails).
+//! every plane's box tests asked of the device and the views counted there, from the scene's
+//! occluder parts kept on the device, where it has `SHADER_F64`; without an adapter it prints
+//! why and skips, except under `CI`, where it fails).
 //! A second campaign adds degenerate triangles to the same cases: slivers welded to the
 //! occluder's edges, needles, triangles seen edge-on from a corner of the cell, collinear
 //! fans and folded quads.
@@ -435,9 +436,13 @@ fn campaign(degenerate: bool) {
     let gpu = gpu();
     // Odd GPU cases ask the device every plane's box tests (one per pixel), so that the
     // device's answers — and the bake's boxes kept there — are attacked too, not only the
-    // maps read back.
+    // maps read back; and they count the views on the device (lavapipe defaults to clipped
+    // projections), from the scene's occluder parts kept there.
     let gpu_every_test = gpu.as_ref().and_then(|_| crate::gpu()).map(|mut g| {
         g.set_pixels_per_device_test(1);
+        if let Err(e) = g.set_projection(umbrasweep::backend::gpu::GpuProjection::Counting) {
+            eprintln!("adversary: the odd GPU cases keep clipped projections: {e}");
+        }
         g
     });
     let settings = [

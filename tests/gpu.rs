@@ -26,8 +26,8 @@ use umbrasweep::generate::{self, CityOptions};
 use umbrasweep::geom::{Aabb, DAabb};
 use umbrasweep::hdm::Hdm;
 use umbrasweep::plane::{
-    Coverage, DepthMap, NOT_RESIDENT, OccluderSet, PlaneFrame, PlaneJob, PlaneQueries, PlaneResult,
-    RectQuery, Reprojection, depth_up,
+    Coverage, DepthMap, NO_PART, NOT_RESIDENT, OccluderSet, PlaneFrame, PlaneJob, PlaneQueries,
+    PlaneResult, RectQuery, Reprojection, depth_up,
 };
 use umbrasweep::project::occludee::box_coverage;
 use umbrasweep::scene::Scene;
@@ -3053,14 +3053,168 @@ fn counted_views_bake_the_same_pvs() {
         b.total_stats().counted > 0,
         "the bake counted views on the GPU"
     );
-    for (k, (cc, gc)) in c.cells.iter().zip(&g.cells).enumerate() {
+    // The scene's parts kept on the device (the default) or every occluder's points sent
+    // with its plane: the same PVS, more bytes up.
+    let Some(mut inline) = counting_backend() else {
+        return;
+    };
+    inline.set_resident_parts(false);
+    let (_, _, g_inline) = sweep_forest_bakes(&inline);
+    let (resident, sent) = (b.total_stats(), inline.total_stats());
+    eprintln!("parts resident: {resident:?}\npoints sent: {sent:?}");
+    assert_eq!(resident.counted, sent.counted);
+    assert!(
+        resident.bytes_uploaded < sent.bytes_uploaded,
+        "resident: {} bytes up, sent: {}",
+        resident.bytes_uploaded,
+        sent.bytes_uploaded
+    );
+    for (k, ((cc, gc), ic)) in c
+        .cells
+        .iter()
+        .zip(&g.cells)
+        .zip(&g_inline.cells)
+        .enumerate()
+    {
         assert!(
             cc.visible.len() < scene.objects.len(),
             "cell {k} culls something"
         );
         assert_eq!(cc.visible, gc.visible, "cell {k}");
         assert_eq!(cc.planes, gc.planes, "cell {k}");
+        assert_eq!(cc.visible, ic.visible, "cell {k}, points sent");
     }
+}
+
+/// Counted occluders that name the bake's resident parts (`upload_occluder_parts`) give the
+/// maps their points sent whole give, bit for bit: a shuffled table with as many decoy parts
+/// (a wrong index reads another occluder), every fifth occluder sent whole (`NO_PART`), one in
+/// ten naming a part beyond the table or one of another point count (sent whole), and a
+/// replaced table whose stale jobs send their points. Only the named points stay home: a job
+/// naming the table uploads 24 bytes a point less (the table's own writes apart), and asked
+/// again, nothing for the table.
+#[test]
+fn resident_parts_project_as_points_sent_whole() {
+    let Some(b) = &counting_backend() else { return };
+    let mut rng = Pcg64::seed_from_u64(52);
+    let mut jobs = random_jobs(51, Shape::Quad, 40, &[16, 64, 256]);
+    jobs.extend(random_jobs(53, Shape::Triangle, 40, &[64]));
+    let whole_maps = b.render(&jobs).unwrap();
+    // The table: every occluder's points and as many decoys (triangles and quads), shuffled.
+    let table = |rng: &mut Pcg64| {
+        // (Job and occluder, or a decoy; the points.)
+        type Entry = (Option<(usize, usize)>, Vec<DVec3>);
+        let mut entries: Vec<Entry> = Vec::new();
+        for (j, job) in jobs.iter().enumerate() {
+            for k in 0..job.occluders.len() {
+                entries.push((Some((j, k)), job.occluders.get(k).to_vec()));
+                let shape = if k % 2 == 0 {
+                    Shape::Quad
+                } else {
+                    Shape::Triangle
+                };
+                entries.push((None, random_occluder(rng, &job.frame, shape)));
+            }
+        }
+        for k in (1..entries.len()).rev() {
+            entries.swap(k, rng.random_range(0..=k));
+        }
+        let mut ids: Vec<Vec<u32>> = jobs.iter().map(|j| vec![0; j.occluders.len()]).collect();
+        let (mut points, mut spans) = (Vec::new(), Vec::new());
+        for (at, (of, pts)) in entries.iter().enumerate() {
+            if let Some((j, k)) = of {
+                ids[*j][*k] = at as u32;
+            }
+            let start = points.len() as u32;
+            points.extend_from_slice(pts);
+            spans.push((start, points.len() as u32));
+        }
+        (points, spans, ids)
+    };
+    // A decoy part of another point count than occluder `k` of job `j`, if any.
+    let other_count = |spans: &[(u32, u32)], n: usize| {
+        spans
+            .iter()
+            .position(|&(a, b)| (b - a) as usize != n)
+            .map(|p| p as u32)
+    };
+    let named = |generation: Option<u64>, spans: &[(u32, u32)], ids: &[Vec<u32>]| {
+        let mut resident_points = 0usize;
+        let jobs: Vec<PlaneJob> = (jobs.iter().zip(ids))
+            .map(|(job, ids)| {
+                let mut job = job.clone();
+                let occ = &mut job.occluders;
+                occ.table = generation;
+                occ.parts = (0..occ.len())
+                    .map(|k| {
+                        let n = occ.get(k).len();
+                        match k % 10 {
+                            2 | 7 => NO_PART,
+                            4 => spans.len() as u32 + k as u32,
+                            9 => other_count(spans, n).unwrap_or(NO_PART),
+                            _ => {
+                                resident_points += n;
+                                ids[k]
+                            }
+                        }
+                    })
+                    .collect();
+                job
+            })
+            .collect();
+        (jobs, resident_points)
+    };
+    let uploaded = || b.counters().unwrap().bytes_uploaded;
+    let render = |jobs: &[PlaneJob]| {
+        let before = uploaded();
+        let maps = b.render(jobs).unwrap();
+        (maps, uploaded() - before)
+    };
+    let (points1, spans1, ids1) = table(&mut rng);
+    let g1 = b.upload_occluder_parts(&points1, &spans1).unwrap();
+    assert!(g1.is_some(), "the counting backend keeps the parts");
+    let (plain, plain_bytes) = render(&named(None, &spans1, &ids1).0);
+    let (jobs1, resident_points) = named(g1, &spans1, &ids1);
+    let (first, first_bytes) = render(&jobs1);
+    let (again, again_bytes) = render(&jobs1);
+    // A new table: jobs naming the first send their points.
+    let (points2, spans2, ids2) = table(&mut rng);
+    let g2 = b.upload_occluder_parts(&points2, &spans2).unwrap();
+    assert!(g2.is_some() && g2 != g1, "{g1:?} then {g2:?}");
+    let (stale, stale_bytes) = render(&jobs1);
+    let (renamed, _) = render(&named(g2, &spans2, &ids2).0);
+    for (what, maps) in [
+        ("no table", &plain),
+        ("named", &first),
+        ("named again", &again),
+        ("stale", &stale),
+        ("renamed", &renamed),
+    ] {
+        for (j, (w, m)) in whole_maps.iter().zip(maps).enumerate() {
+            assert_eq!(w, m, "{what}: job {j}");
+        }
+    }
+    assert!(
+        whole_maps
+            .iter()
+            .any(|m| m.depth.iter().any(|d| d.is_finite())),
+        "the occluders cover something"
+    );
+    eprintln!(
+        "bytes up: plain {plain_bytes}, named {first_bytes}, again {again_bytes}, stale \
+         {stale_bytes}; {resident_points} points named"
+    );
+    assert!(resident_points > 1_000, "{resident_points} points named");
+    assert_eq!(
+        plain_bytes - again_bytes,
+        24 * resident_points as u64,
+        "asked again, only the named points stay home"
+    );
+    assert!(
+        first_bytes > again_bytes,
+        "the first call sends the named parts to the table"
+    );
+    assert_eq!(stale_bytes, plain_bytes, "a stale table sends the points");
 }
 
 /// Without `SHADER_F64` the counting projection is refused, naming the feature, and the
@@ -3112,6 +3266,16 @@ fn the_bake_command_counts_views_on_request() {
             "counting",
             &["--backend", "gpu", "--gpu-projection", "counting"][..],
         ),
+        (
+            "counting-points-sent",
+            &[
+                "--backend",
+                "gpu",
+                "--gpu-projection",
+                "counting",
+                "--occluders-inline",
+            ][..],
+        ),
         ("cpu", &["--backend", "cpu"][..]),
     ] {
         let out_path = dir.join(format!("{name}.json"));
@@ -3124,12 +3288,13 @@ fn the_bake_command_counts_views_on_request() {
             .expect("the backend line");
         assert_eq!(
             line.contains("counting projections"),
-            name == "counting",
+            name.starts_with("counting"),
             "{line}"
         );
         pvs.push(visible_sets(&out_path));
     }
-    assert_eq!(pvs[0], pvs[1]);
+    assert_eq!(pvs[0], pvs[2]);
+    assert_eq!(pvs[1], pvs[2]);
     let bad = dir.join("bad.json");
     let out = bake(&["--backend", "gpu", "--gpu-projection", "stencil"], &bad);
     let err = String::from_utf8_lossy(&out.stderr);

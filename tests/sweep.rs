@@ -1,7 +1,9 @@
 //! The occlusion sweep (issue 5) on analytic scenes: a cloud of small disjoint squares that
 //! hides a target only when several layers fuse (separate planes must fail, the sweep must
 //! succeed, and brute-force rays prove the target hidden), the same cloud with a straight
-//! tunnel (the target must stay visible), sub-cells, and the automatic choice of the sweep.
+//! tunnel (the target must stay visible), sub-cells, and the automatic choice of the sweep;
+//! and the scene parts the projected occluders name (`OccluderSet::parts`) for a backend that
+//! keeps the parts on its device.
 
 mod common;
 
@@ -335,5 +337,137 @@ fn flat_layers_get_wide_maps_with_about_square_pixels() {
             }
         }
         assert!(max_stretch == 1 || stretched > 10, "{stretched}");
+    }
+}
+
+/// The scene parts' points and each part's range of them, as a bake uploads them.
+type PartsTable = (Vec<glam::DVec3>, Vec<(u32, u32)>);
+
+/// A backend that checks the occluder sets' part ids against the table the bake gives it
+/// (`upload_occluder_parts`), then renders on the CPU: every occluder that names a part holds
+/// that part's points bit for bit, and every job names the table.
+struct PartsCheck {
+    cpu: CpuBackend,
+    table: std::sync::Mutex<Option<PartsTable>>,
+    /// Occluders that named a part, and those that did not.
+    counts: std::sync::Mutex<(usize, usize)>,
+}
+
+const PARTS_TABLE: u64 = 7;
+
+impl umbrasweep::backend::RasterBackend for PartsCheck {
+    fn name(&self) -> &'static str {
+        "parts-check"
+    }
+
+    fn render(
+        &self,
+        jobs: &[umbrasweep::plane::PlaneJob],
+    ) -> Result<Vec<umbrasweep::plane::DepthMap>, umbrasweep::backend::BackendError> {
+        let table = self.table.lock().unwrap();
+        let (points, spans) = table.as_ref().expect("the bake gave its parts first");
+        let (mut named, mut not) = (0, 0);
+        for job in jobs {
+            let occ = &job.occluders;
+            assert_eq!(occ.table, Some(PARTS_TABLE), "every job names the table");
+            assert_eq!(occ.parts.len(), occ.len());
+            for k in 0..occ.len() {
+                let Some(p) = occ.part(k) else {
+                    not += 1;
+                    continue;
+                };
+                named += 1;
+                let (a, b) = spans[p as usize];
+                let bits = |q: &[glam::DVec3]| -> Vec<[u64; 3]> {
+                    q.iter().map(|p| p.to_array().map(f64::to_bits)).collect()
+                };
+                assert_eq!(
+                    bits(occ.get(k)),
+                    bits(&points[a as usize..b as usize]),
+                    "occluder {k} names part {p}"
+                );
+            }
+        }
+        let mut c = self.counts.lock().unwrap();
+        c.0 += named;
+        c.1 += not;
+        self.cpu.render(jobs)
+    }
+
+    fn upload_occluder_parts(
+        &self,
+        points: &[glam::DVec3],
+        spans: &[(u32, u32)],
+    ) -> Result<Option<u64>, umbrasweep::backend::BackendError> {
+        *self.table.lock().unwrap() = Some((points.to_vec(), spans.to_vec()));
+        Ok(Some(PARTS_TABLE))
+    }
+}
+
+/// Slanted quads that cross the planes of the unit cell's faces beside it (each is cut at
+/// the face for the direction it crosses, and whole for the others), and boxes behind them.
+fn slanted_quads() -> Scene {
+    let mut objects = Vec::new();
+    for a in 0..3 {
+        let (u, w) = ((a + 1) % 3, (a + 2) % 3);
+        let at = |ta: f32, tu: f32, tw: f32| {
+            let mut p = Vec3::ZERO;
+            (p[a], p[u], p[w]) = (ta, tu, tw);
+            p
+        };
+        objects.push(quad(
+            &format!("slant{a}"),
+            at(-1.0, 1.5, -3.0),
+            at(-1.0, 1.5, 3.0),
+            at(3.0, 2.5, 3.0),
+            at(3.0, 2.5, -3.0),
+        ));
+        let (lo, hi) = (at(4.0, -0.5, -0.5), at(5.0, 0.5, 0.5));
+        objects.push(cube(&format!("behind{a}"), lo.into(), hi.into()));
+    }
+    Scene::from_objects(Path::new("slanted"), objects)
+}
+
+/// The occluders a bake projects name the scene part they are, unchanged, so that a backend
+/// keeping the parts on its device may send an index instead of the points: on a forest with
+/// the sweep (leaves cut where they cross a slab's planes name none) and without it, and on
+/// quads crossing the planes of the cell's faces (cut there), some occluders name parts and
+/// some do not, and each that does holds exactly that part's points; the PVS is the CPU
+/// backend's.
+#[test]
+fn occluders_name_the_scene_parts_they_hold_unchanged() {
+    let forest = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
+        trees: 40,
+        leaves: 60,
+        ..umbrasweep::generate::ForestOptions::coarse()
+    })
+    .unwrap();
+    let scene = forest.to_scene("forest");
+    let cells = &forest.cells[..forest.cells.len().min(2)];
+    let slanted = slanted_quads();
+    let unit = [unit_cell()];
+    for (scene, cells, sweep) in [
+        (&scene, cells, SweepChoice::On),
+        (&scene, cells, SweepChoice::Off),
+        (&slanted, &unit[..], SweepChoice::Off),
+    ] {
+        let settings = BakeSettings {
+            resolution: 64,
+            sweep,
+            ..BakeSettings::default()
+        };
+        let check = PartsCheck {
+            cpu: CpuBackend::new(),
+            table: Default::default(),
+            counts: Default::default(),
+        };
+        let got = bake(scene, cells, &settings, &check, None).unwrap();
+        let want = bake(scene, cells, &settings, &CpuBackend::new(), None).unwrap();
+        for (g, w) in got.cells.iter().zip(&want.cells) {
+            assert_eq!(g.visible, w.visible, "{sweep:?}");
+        }
+        let (named, not) = *check.counts.lock().unwrap();
+        eprintln!("{sweep:?}: {named} occluders named a part, {not} did not");
+        assert!(named > 0 && not > 0, "{sweep:?}: {named} named, {not} not");
     }
 }

@@ -428,6 +428,24 @@ pub trait RasterBackend: Send + Sync {
     fn upload_occludee_boxes(&self, _boxes: &[DAabb]) -> Result<Option<u64>, BackendError> {
         Ok(None)
     }
+    /// Keeps the scene's occluder parts on the device for the projections of
+    /// [`Self::render`] and its kin: part `k` is `points[spans[k].0 .. spans[k].1]`. A job
+    /// whose [`plane::OccluderSet::table`] is the generation returned then sends, for each
+    /// occluder that is a scene part unchanged ([`plane::OccluderSet::parts`]), the part's
+    /// index instead of its points. A bake calls it once, before its cells; a later call
+    /// replaces the table (jobs naming an older generation send their points, with the same
+    /// maps). `Ok(None)` where the backend keeps no table: the default, and a device that
+    /// projects no occluder from its points or cannot bind that many.
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails.
+    fn upload_occluder_parts(
+        &self,
+        _points: &[DVec3],
+        _spans: &[(u32, u32)],
+    ) -> Result<Option<u64>, BackendError> {
+        Ok(None)
+    }
     /// [`Self::render_tested`], where `keep[k]` asks to keep job `k`'s map on the device for
     /// later reprojections (an occlusion sweep's plane): the backend then gives back
     /// [`plane::PlaneResult::Kept`] — the answers to its queries (which must be given), the

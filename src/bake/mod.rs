@@ -384,6 +384,10 @@ pub fn bake_cells(
     if backend.tests_on_device() {
         prepared.occludee_table = backend.upload_occludee_boxes(&prepared.occludee_boxes())?;
     }
+    let spans: Vec<(u32, u32)> = (prepared.occluders.parts.iter())
+        .map(|p| (p.start, p.end))
+        .collect();
+    prepared.occluder_table = backend.upload_occluder_parts(&prepared.occluders.points, &spans)?;
     prepared.sampler_progress = hooks.sampler_progress;
     prepared.checkpoints = hooks.sampler_checkpoints;
     let done = std::sync::atomic::AtomicUsize::new(0);

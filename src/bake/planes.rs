@@ -192,6 +192,10 @@ impl Prepared<'_> {
                 self.settings.improved_projection,
                 self.occludee_table,
             );
+            let mut planned = planned;
+            for p in &mut planned {
+                p.job.occluders.table = self.occluder_table;
+            }
             let mut rendered = render_round(&round, backend, planned, (queries, index), &keep)?;
             self.retest_ending(
                 &round,

@@ -64,6 +64,10 @@ pub struct Prepared<'a> {
     /// one ([`crate::backend::RasterBackend::upload_occludee_boxes`]): box tests then name
     /// boxes by index.
     pub(super) occludee_table: Option<u64>,
+    /// The generation of the backend's copy of the occluder parts' points, where it keeps
+    /// one ([`crate::backend::RasterBackend::upload_occluder_parts`]): jobs then name parts by
+    /// index.
+    pub(super) occluder_table: Option<u64>,
 }
 
 /// Objects with at least this many triangles are also tested as pieces.
@@ -378,6 +382,7 @@ impl<'a> Prepared<'a> {
             sampler_progress: None,
             checkpoints: None,
             occludee_table: None,
+            occluder_table: None,
             cullers: pipeline::cullers(settings, rsf, sweep, sampling),
             rsf_edges,
             rsf,

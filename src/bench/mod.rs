@@ -138,6 +138,10 @@ pub struct BenchOptions {
     /// Occludee boxes sent with their tests rather than kept on the device
     /// ([`GpuBackend::set_resident_boxes`](crate::backend::gpu::GpuBackend::set_resident_boxes)).
     pub boxes_inline: bool,
+    /// Counted occluders' points sent with their planes rather than the scene's parts kept
+    /// on the device
+    /// ([`GpuBackend::set_resident_parts`](crate::backend::gpu::GpuBackend::set_resident_parts)).
+    pub occluders_inline: bool,
     /// Pixels per occludee test asked of the device; `None` for the backend's default
     /// ([`GpuBackend::set_pixels_per_device_test`](crate::backend::gpu::GpuBackend::set_pixels_per_device_test)).
     pub pixels_per_device_test: Option<usize>,
@@ -176,6 +180,7 @@ impl Default for BenchOptions {
             tests_on_cpu: false,
             sweep_maps_on_cpu: false,
             boxes_inline: false,
+            occluders_inline: false,
             pixels_per_device_test: None,
             gpu_sampler_memory: None,
             checkpoint_dir: None,
@@ -747,6 +752,7 @@ pub(crate) fn gpu_backend(args: &BenchOptions) -> Result<GpuBackend, BenchError>
     g.set_tests_on_device(!args.tests_on_cpu);
     g.set_keep_sweep_maps(!args.sweep_maps_on_cpu);
     g.set_resident_boxes(!args.boxes_inline);
+    g.set_resident_parts(!args.occluders_inline);
     if let Some(n) = args.pixels_per_device_test {
         g.set_pixels_per_device_test(n);
     }

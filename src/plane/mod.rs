@@ -158,14 +158,34 @@ pub struct OccluderSet {
     pub points: Vec<DVec3>,
     /// Per occluder, its range `start..end` in `points`.
     pub spans: Vec<(u32, u32)>,
+    /// Per occluder, the scene's occluder part whose points it holds unchanged, bit for bit
+    /// (its index in [`crate::project::occluders::Occluders::parts`]), or [`NO_PART`] for
+    /// a piece cut or shrunk from one. A backend that keeps the scene's parts on its device
+    /// ([`RasterBackend::upload_occluder_parts`](crate::backend::RasterBackend::upload_occluder_parts))
+    /// may send the index instead of the points.
+    pub parts: Vec<u32>,
+    /// The backend's table of the scene's parts that `parts` index (the generation
+    /// [`RasterBackend::upload_occluder_parts`](crate::backend::RasterBackend::upload_occluder_parts)
+    /// returned), or `None`: then every occluder's points go up.
+    pub table: Option<u64>,
 }
 
+/// [`OccluderSet::parts`]' entry for an occluder that is not a scene part unchanged.
+pub const NO_PART: u32 = u32::MAX;
+
 impl OccluderSet {
-    /// Appends one convex occluder with the vertices `pts`.
+    /// Appends one convex occluder with the vertices `pts` (not a scene part unchanged).
     pub fn push(&mut self, pts: impl IntoIterator<Item = DVec3>) {
+        self.push_part(NO_PART, pts);
+    }
+
+    /// Appends one convex occluder with the vertices `pts`, which are scene part `part`'s
+    /// unchanged (or [`NO_PART`]).
+    pub fn push_part(&mut self, part: u32, pts: impl IntoIterator<Item = DVec3>) {
         let start = self.points.len() as u32;
         self.points.extend(pts);
         self.spans.push((start, self.points.len() as u32));
+        self.parts.push(part);
     }
 
     /// The number of occluders.
@@ -182,6 +202,12 @@ impl OccluderSet {
     pub fn get(&self, k: usize) -> &[DVec3] {
         let (a, b) = self.spans[k];
         &self.points[a as usize..b as usize]
+    }
+
+    /// The scene part occluder `k` holds unchanged, if any (`None` also when `parts` was
+    /// not filled in for it).
+    pub fn part(&self, k: usize) -> Option<u32> {
+        self.parts.get(k).copied().filter(|&p| p != NO_PART)
     }
 }
 

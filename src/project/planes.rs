@@ -18,7 +18,7 @@
 use super::occluders::{Occluders, PartKind};
 use super::slice::slice_object;
 use crate::geom::DAabb;
-use crate::plane::{OccluderSet, PlaneFrame, PlaneJob};
+use crate::plane::{NO_PART, OccluderSet, PlaneFrame, PlaneJob};
 use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 
@@ -560,6 +560,15 @@ impl Sources<'_> {
             Source::Part(k) => self.parts.parts.set.get(k),
         }
     }
+
+    /// The scene part whose points `src` holds unchanged ([`OccluderSet::parts`]), or
+    /// [`NO_PART`].
+    fn part(&self, src: Source) -> u32 {
+        match src {
+            Source::Piece(_) => NO_PART,
+            Source::Part(k) => self.parts.parts.set.part(k).unwrap_or(NO_PART),
+        }
+    }
 }
 
 /// Occluder gathering step: the parts that may project onto the plane (not left out by
@@ -800,7 +809,10 @@ fn assemble_job(
     for kp in kept {
         // A Projection narrower than a pixel covers no whole pixel.
         if kp.hi.x - kp.lo.x >= px.x && kp.hi.y - kp.lo.y >= px.y {
-            set.push(sources.points(kp.source).iter().copied());
+            set.push_part(
+                sources.part(kp.source),
+                sources.points(kp.source).iter().copied(),
+            );
         }
     }
     if set.is_empty() && slices.is_empty() && carried.is_none() {
@@ -975,9 +987,21 @@ fn cut_parts(
         out.lo.push(summary.lo[i]);
         out.hi.push(summary.hi[i]);
         out.weight.push(summary.weight[i]);
-        out.set.push(buf.iter().copied());
+        out.set
+            .push_part(unchanged(k as u32, pts, &buf), buf.iter().copied());
     }
     out
+}
+
+/// `part` when `buf` holds its points `pts` unchanged, bit for bit (not cut at the face nor
+/// shrunk), else [`NO_PART`]: [`OccluderSet::parts`].
+fn unchanged(part: u32, pts: &[DVec3], buf: &[DVec3]) -> u32 {
+    let bits = |p: &DVec3| p.to_array().map(f64::to_bits);
+    if pts.len() == buf.len() && pts.iter().zip(buf).all(|(a, b)| bits(a) == bits(b)) {
+        part
+    } else {
+        NO_PART
+    }
 }
 
 /// The points of `part` (`pts`, nearest at distance `near` beyond the face) as projected from
@@ -1271,7 +1295,9 @@ pub fn gather_slab(
         p.lo.push(DVec2::new(b.min[u], b.min[v]));
         p.hi.push(DVec2::new(b.max[u], b.max[v]));
         p.weight.push(0.0);
-        p.set.push(buf.iter().copied());
+        let pts = occ.part_points(pi as usize);
+        p.set
+            .push_part(unchanged(pi, pts, &buf), buf.iter().copied());
         out.object.push(part.object);
         out.solid.push(matches!(part.kind, PartKind::Solid { .. }));
     }

@@ -342,73 +342,10 @@ pub(super) struct BoxPipelines {
 
 /// The occludee boxes kept on the device for a bake's box tests
 /// ([`crate::backend::RasterBackend::upload_occludee_boxes`]): a test then sends the box's
-/// index here instead of its six `f64`. Each box goes up the first time a test names it
-/// ([`ResidentBoxes::send`]), so a bake uploads at most the boxes it tests, once each.
-#[derive(Clone, Debug)]
-pub(super) struct ResidentBoxes {
-    /// Which table this is: queries naming another send their boxes whole.
-    pub generation: u64,
-    /// Six `f64` per box, each written before the first submission that reads it.
-    pub buffer: std::sync::Arc<wgpu::Buffer>,
-    /// The boxes, on the CPU.
-    pub boxes: std::sync::Arc<[crate::geom::DAabb]>,
-    /// One bit per box: written to `buffer` already.
-    pub sent: std::sync::Arc<std::sync::Mutex<Vec<u64>>>,
-}
-
-impl ResidentBoxes {
-    /// Bytes of the device's table.
-    pub fn bytes(&self) -> u64 {
-        self.boxes.len() as u64 * BOX_BYTES
-    }
-
-    /// Writes to the device every box of `ids` not written yet (in runs of neighbouring
-    /// indices) and returns the bytes written. The bits are set and the boxes written under
-    /// one lock, so a submission made after this returns — on any thread, once it has seen a
-    /// box's bit set — reads the box.
-    ///
-    /// # Panics
-    /// When an index is not below the table's length.
-    pub fn send(&self, queue: &wgpu::Queue, ids: impl Iterator<Item = u32>) -> u64 {
-        let mut sent = self.sent.lock().unwrap_or_else(|e| e.into_inner());
-        let mut new: Vec<u32> = ids
-            .filter(|&id| {
-                let (w, b) = (id as usize / 64, 1u64 << (id % 64));
-                let fresh = sent[w] & b == 0;
-                sent[w] |= b;
-                fresh
-            })
-            .collect();
-        new.sort_unstable();
-        // Runs of indices at most GAP apart go up as one write (the boxes between them too:
-        // they are the table's own, and are marked written).
-        const GAP: u32 = 2;
-        let mut written = 0u64;
-        let mut k = 0;
-        while k < new.len() {
-            let start = new[k];
-            let mut end = start;
-            while k < new.len() && new[k] <= end + GAP {
-                end = new[k];
-                k += 1;
-            }
-            for id in start..=end {
-                sent[id as usize / 64] |= 1u64 << (id % 64);
-            }
-            let words: Vec<f64> = self.boxes[start as usize..=end as usize]
-                .iter()
-                .flat_map(|b| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
-                .collect();
-            queue.write_buffer(
-                &self.buffer,
-                u64::from(start) * BOX_BYTES,
-                bytemuck::cast_slice(&words),
-            );
-            written += (words.len() * 8) as u64;
-        }
-        written
-    }
-}
+/// index here instead of its six `f64` (each an element of six `f64`: min, then max). Each box
+/// goes up the first time a test names it ([`super::resident::ResidentTable::send`]), so a
+/// bake uploads at most the boxes it tests, once each.
+pub(super) type ResidentBoxes = super::resident::ResidentTable;
 
 impl BoxPipelines {
     /// Compiles `source` (`shaders/boxes.wgsl` after `shaders/rounding.wgsl`) and creates its

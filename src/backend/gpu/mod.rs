@@ -80,6 +80,16 @@
 //! views of different occluders never add up. Occluders of more points (merged polygons,
 //! large solids) are set up on the CPU as before and drawn in the same render pass.
 //!
+//! A counted occluder that is a scene part unchanged ([`crate::plane::OccluderSet::parts`])
+//! sends no points where the bake gave the backend its parts
+//! ([`RasterBackend::upload_occluder_parts`], `resident::ResidentParts`): its record's first
+//! point is the part's place in that table and its count carries `wave::RESIDENT_POINTS`, and
+//! the views pass reads the points there (`occluder_point`), the same `f64`s bit for bit, so
+//! the same maps. Each part goes up the first time a wave names it (`ResidentTable::send`, as
+//! the occludee boxes do), to a table of the parts that fit one storage binding, from the
+//! first (`resident::parts_that_fit`; occluders naming the others send their points);
+//! [`GpuBackend::set_resident_parts`] sends every occluder's points instead.
+//!
 //! Same coverage as the clipped path up to near-tie pixels (`tests/gpu.rs`: random triangles,
 //! quads and boxes at 16²–256², stretched maps, a cell 10⁵ from the origin, 12-gons mixed in,
 //! rejects, sweeps, several submissions, and whole bakes with the same PVS). Measured on
@@ -230,6 +240,7 @@ mod device;
 mod hdm;
 mod pipelines;
 mod prepare;
+mod resident;
 mod rsf;
 pub mod sampler;
 pub mod setup;
@@ -460,6 +471,10 @@ pub struct GpuBackend {
     /// The last [`RasterBackend::upload_occludee_boxes`]'s table, and the generations given.
     resident: Mutex<Option<hdm::ResidentBoxes>>,
     generations: std::sync::atomic::AtomicU64,
+    /// Keep a bake's occluder parts on the device ([`GpuBackend::set_resident_parts`]).
+    parts_wanted: bool,
+    /// The last [`RasterBackend::upload_occluder_parts`]'s table.
+    resident_parts: Mutex<Option<resident::ResidentParts>>,
 }
 
 impl std::fmt::Debug for GpuBackend {
@@ -505,6 +520,9 @@ pub struct RenderStats {
     /// Occluders whose views the GPU computed ([`GpuProjection::Counting`]); they are not in
     /// `occluders`, `triangles` or `edges` (those are known on the GPU only).
     pub counted: usize,
+    /// Of `counted`, those that named a scene part kept on the device
+    /// ([`RasterBackend::upload_occluder_parts`]) instead of sending their points.
+    pub counted_resident: usize,
     /// Bytes written to GPU buffers and textures (vertices, records and edges, uniforms,
     /// reprojection windows and summed-area tables).
     pub bytes_uploaded: u64,
@@ -542,6 +560,7 @@ impl RenderStats {
         self.triangles += o.triangles;
         self.edges += o.edges;
         self.counted += o.counted;
+        self.counted_resident += o.counted_resident;
         self.tables_uploaded += o.tables_uploaded;
         self.tables_reused += o.tables_reused;
         self.kept_maps += o.kept_maps;
@@ -716,6 +735,8 @@ impl GpuBackend {
             resident_wanted: true,
             resident: Mutex::default(),
             generations: std::sync::atomic::AtomicU64::new(0),
+            parts_wanted: true,
+            resident_parts: Mutex::default(),
         })
     }
 
@@ -800,6 +821,36 @@ impl GpuBackend {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .clone()
+    }
+
+    /// Keeps a bake's occluder parts on the device for the counted projections (`on`, the
+    /// default: a counted occluder that is a scene part unchanged then sends its 16-byte
+    /// record and no points, [`RasterBackend::upload_occluder_parts`]) or sends every
+    /// occluder's points (for comparisons). The same maps either way; it matters only with
+    /// [`GpuProjection::Counting`].
+    pub fn set_resident_parts(&mut self, on: bool) {
+        self.parts_wanted = on;
+        if !on {
+            *self
+                .resident_parts
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = None;
+        }
+    }
+
+    /// The occluder parts kept on the device, where a bake gave them.
+    fn resident_parts(&self) -> Option<resident::ResidentParts> {
+        self.resident_parts
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    /// A new table generation (never 0).
+    fn next_generation(&self) -> u64 {
+        self.generations
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            + 1
     }
 
     /// Keeps occlusion sweeps' maps on the device (`on`, the default, with the tests there
@@ -987,9 +1038,11 @@ impl RasterBackend for GpuBackend {
                     t.pass_time.as_secs_f64() * 1e3 / n,
                     if t.counted > 0 {
                         format!(
-                            ", of which views {:.2} ms for {:.0} counted occluders",
+                            ", of which views {:.2} ms for {:.0} counted occluders ({:.0} named \
+                             by part)",
                             t.views_time.as_secs_f64() * 1e3 / n,
-                            t.counted as f64 / n
+                            t.counted as f64 / n,
+                            t.counted_resident as f64 / n
                         )
                     } else {
                         String::new()
@@ -1081,7 +1134,7 @@ impl RasterBackend for GpuBackend {
 
     /// Keeps the boxes (six `f64` each) where box tests run on the device and the table fits
     /// one storage binding: the device's table is made here, and each box goes up the first
-    /// time a wave's test names it (`hdm::ResidentBoxes::send`; those bytes count as
+    /// time a wave's test names it (`resident::ResidentTable::send`; those bytes count as
     /// uploaded).
     fn upload_occludee_boxes(
         &self,
@@ -1100,29 +1153,58 @@ impl RasterBackend for GpuBackend {
             return Ok(None);
         }
         self.check_failure()?;
-        let scope = device::ErrorScopes::push(&self.device);
-        // Mapped at creation, so that wgpu knows it initialised (zeros) from the start: a
-        // buffer it thinks uninitialised is zeroed where a submission binds it, and that
-        // clear could land after another thread's first write of a box in the same
-        // submission, leaving the box zero (a test of the wrong box: a false cull, seen on
-        // lavapipe as 5–19 objects of a cell culled by some runs).
-        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("resident occludee boxes"),
-            size: bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: true,
-        });
-        buffer.unmap();
-        scope.check()?;
-        let generation = self
-            .generations
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-            + 1;
-        *slot = Some(hdm::ResidentBoxes {
+        let generation = self.next_generation();
+        let data: Vec<f64> = (boxes.iter())
+            .flat_map(|b| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
+            .collect();
+        *slot = Some(resident::ResidentTable::new(
+            &self.device,
+            "resident occludee boxes",
+            data.into(),
+            6,
             generation,
-            buffer: std::sync::Arc::new(buffer),
-            boxes: boxes.into(),
-            sent: std::sync::Arc::new(Mutex::new(vec![0; boxes.len().div_ceil(64)])),
+        )?);
+        Ok(Some(generation))
+    }
+
+    /// Keeps the parts' points (three `f64` each) where the projections are counted
+    /// ([`GpuProjection::Counting`]): the device's table is made here, and each part's points
+    /// go up the first time a wave's counted occluder names it
+    /// (`resident::ResidentTable::send`; those bytes count as uploaded). A table larger than
+    /// one storage binding keeps the parts that fit in one, from the first; occluders naming
+    /// the others send their points.
+    fn upload_occluder_parts(
+        &self,
+        points: &[glam::DVec3],
+        spans: &[(u32, u32)],
+    ) -> Result<Option<u64>, BackendError> {
+        let binding = self
+            .limits
+            .max_buffer
+            .min(self.device.limits().max_storage_buffer_binding_size);
+        let mut slot = self
+            .resident_parts
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        // The old table goes first (waves in flight hold their own reference).
+        *slot = None;
+        let counting = self.projection == GpuProjection::Counting && self.view_pipelines.is_some();
+        let (kept, end) = resident::parts_that_fit(spans, points.len(), binding);
+        if !(counting && self.parts_wanted) || end == 0 {
+            return Ok(None);
+        }
+        self.check_failure()?;
+        let generation = self.next_generation();
+        let data: Vec<f64> = points[..end].iter().flat_map(|p| p.to_array()).collect();
+        *slot = Some(resident::ResidentParts {
+            points: resident::ResidentTable::new(
+                &self.device,
+                "resident occluder points",
+                data.into(),
+                3,
+                generation,
+            )?,
+            spans: spans[..kept].into(),
         });
         Ok(Some(generation))
     }

@@ -57,12 +57,15 @@ impl Pipelines {
 pub(super) struct ViewPipelines {
     /// The views pass.
     pub views: wgpu::ComputePipeline,
-    /// Its bind group: points, occluders, plane frames (f64 and u32), records (written).
+    /// Its bind group: points, occluders, plane frames (f64 and u32), records (written), the
+    /// resident parts' points.
     pub views_layout: wgpu::BindGroupLayout,
     /// The counted draw.
     pub counted: wgpu::RenderPipeline,
     /// Its bind group: the plane's uniforms, the records and the occluders.
     pub counted_layout: wgpu::BindGroupLayout,
+    /// Bound as the resident parts' points where a wave has none.
+    pub no_parts: wgpu::Buffer,
 }
 
 impl ViewPipelines {
@@ -94,6 +97,7 @@ impl ViewPipelines {
                 storage(2, true, cs),
                 storage(3, true, cs),
                 storage(4, false, cs),
+                storage(5, true, cs),
             ],
         });
         let views_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -135,12 +139,20 @@ impl ViewPipelines {
             ("vs_counted", "fs_main"),
             &[],
         );
+        let no_parts = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("no resident occluder points"),
+            size: 32,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         scope.check()?;
+
         Ok(ViewPipelines {
             views,
             views_layout,
             counted,
             counted_layout,
+            no_parts,
         })
     }
 }

@@ -44,6 +44,9 @@ pub(super) struct Counted {
     /// Record words reserved: `2 + 8·n` per occluder of `n` points (a view's hull has at most
     /// `n` edges).
     pub record_words: usize,
+    /// Per occluder, the scene part it is unchanged ([`crate::plane::OccluderSet::parts`]),
+    /// or [`crate::plane::NO_PART`]: with the parts on the device its points need not go up.
+    pub parts: Vec<u32>,
 }
 
 impl Counted {
@@ -55,6 +58,23 @@ impl Counted {
     /// True when there are none.
     pub fn is_empty(&self) -> bool {
         self.occ.is_empty()
+    }
+
+    /// Where occluder `i`'s points lie in the resident table `parts` when the job's
+    /// occluders name it (`table`, [`crate::plane::OccluderSet::table`]) and the occluder is
+    /// a part of it unchanged; `None`: its points go up.
+    pub fn resident_span(
+        &self,
+        parts: Option<&super::resident::ResidentParts>,
+        table: Option<u64>,
+        i: usize,
+    ) -> Option<(u32, u32)> {
+        let part = self
+            .parts
+            .get(i)
+            .copied()
+            .filter(|&p| p != crate::plane::NO_PART);
+        parts?.span(table, part, self.occ[i][1] as usize)
     }
 }
 
@@ -158,6 +178,13 @@ fn count_occluders(job: &PlaneJob, max_chunk_words: usize) -> Option<(Counted, V
         ]);
         c.points.extend(pts.iter().flat_map(|p| p.to_array()));
         c.record_words += 2 + 8 * pts.len();
+        c.parts.push(
+            job.occluders
+                .parts
+                .get(k)
+                .copied()
+                .unwrap_or(crate::plane::NO_PART),
+        );
     }
     (c.record_words + c.occ.len() <= max_chunk_words).then_some((c, rest))
 }

@@ -133,17 +133,33 @@ fn uniforms_entry<'a>(buffers: &WaveBuffers<'a>, plane: &PlaneLayout) -> wgpu::B
     }
 }
 
+/// Bytes of the views pass's points buffer: the wave's points, at least one (bound whole
+/// even when every counted occluder's points are resident).
+fn view_points_bytes(layout: &WaveLayout) -> u64 {
+    (layout.counted_f64s as u64 * 8).max(32)
+}
+
+/// The bit of a counted occluder's count word (`RESIDENT_POINTS` in `shaders/views.wgsl`)
+/// saying that its first point indexes the resident parts' points, not the wave's.
+pub(super) const RESIDENT_POINTS: u32 = 0x80;
+// Above every point count (`n & 0x7f` in the shader) and below the plane index (`<< 8`).
+const _: () = assert!(
+    RESIDENT_POINTS > 0x7f && RESIDENT_POINTS < 0x100 && super::prepare::COUNTED_MAX_POINTS <= 0x7f
+);
+
 /// Uploads the views pass's inputs: every plane's counted points, its occluders rebased onto
 /// the wave's buffers (first point, `count | plane << 8`, Depth, first record word), and every
 /// plane's frame (corners, rectangle, pixel scale, position and side in `f64`; axis and size in
-/// `u32`).
+/// `u32`). An occluder the resident parts hold (`layout.parts`) sends no points: its first
+/// point is its place in that table and its count carries [`RESIDENT_POINTS`]; the parts
+/// named for the first time go up to the table. Returns the bytes of those parts.
 fn upload_views(
     queue: &wgpu::Queue,
     v: &ViewBuffers,
     layout: &WaveLayout,
     jobs: &[PlaneJob],
     prepared: &[Prepared],
-) {
+) -> u64 {
     let (Some(points), Some(occ), Some(planes_f), Some(planes_u)) =
         (&v.points, &v.occ, &v.planes_f, &v.planes_u)
     else {
@@ -153,14 +169,35 @@ fn upload_views(
     let mut recs: Vec<[u32; 4]> = Vec::with_capacity(layout.counted);
     let mut pf: Vec<f64> = Vec::with_capacity(layout.planes.len() * PLANE_F64S);
     let mut pu: Vec<[u32; 4]> = Vec::with_capacity(layout.planes.len());
+    let mut named: Vec<std::ops::Range<u32>> = Vec::new();
     let mut words = 0u32;
     for (w, plane) in layout.planes.iter().enumerate() {
         let c = &prepared[plane.job].counted;
-        let base = (pts.len() / 3) as u32;
-        recs.extend(c.occ.iter().map(|&[first, n, depth, rec]| {
-            [first + base, n | (w as u32) << 8, depth, rec + words]
-        }));
-        pts.extend_from_slice(&c.points);
+        let table = jobs[plane.job].occluders.table;
+        for (i, &[first, n, depth, rec]) in c.occ.iter().enumerate() {
+            let (at, flag) = match c.resident_span(layout.parts.as_ref(), table, i) {
+                Some((a, b)) => {
+                    debug_assert!(
+                        layout.parts.as_ref().is_some_and(|r| (a..b).all(|k| r
+                            .points
+                            .element(k as usize)
+                            .iter()
+                            .zip(&c.points[3 * (first + k - a) as usize..])
+                            .all(|(x, y)| x.to_bits() == y.to_bits()))),
+                        "a counted occluder names part points {a}..{b} that are not its own"
+                    );
+                    named.push(a..b);
+                    (a, RESIDENT_POINTS)
+                }
+                None => {
+                    let at = (pts.len() / 3) as u32;
+                    let f = 3 * first as usize;
+                    pts.extend_from_slice(&c.points[f..f + 3 * n as usize]);
+                    (at, 0)
+                }
+            };
+            recs.push([at, n | flag | (w as u32) << 8, depth, rec + words]);
+        }
         words += c.record_words as u32;
         let f = &jobs[plane.job].frame;
         let start = pf.len();
@@ -179,10 +216,17 @@ fn upload_views(
         pf.resize(start + PLANE_F64S, 0.0);
         pu.push([f.axis as u32, f.width, f.height, 0]);
     }
+    debug_assert_eq!(pts.len(), layout.counted_f64s);
+    // The parts first, under their table's lock: a submission after this reads them.
+    let sent = layout
+        .parts
+        .as_ref()
+        .map_or(0, |r| r.points.send(queue, named.into_iter()));
     queue.write_buffer(points, 0, bytemuck::cast_slice(&pts));
     queue.write_buffer(occ, 0, bytemuck::cast_slice(&recs));
     queue.write_buffer(planes_f, 0, bytemuck::cast_slice(&pf));
     queue.write_buffer(planes_u, 0, bytemuck::cast_slice(&pu));
+    sent
 }
 
 /// Splits the planes that need the GPU (`gpu_jobs`, indexes of `jobs` and `prepared`) into
@@ -277,6 +321,8 @@ struct WaveLayout {
     counted: usize,
     counted_f64s: usize,
     counted_words: usize,
+    /// Of the counted occluders, those whose points the resident parts hold.
+    counted_resident: usize,
     /// Tested planes of the wave, their queries, their pyramids' `f32`s, the words of their
     /// slice masks, and per reduction level `k ≥ 1` (all planes in one dispatch) the largest
     /// size of that level.
@@ -291,6 +337,8 @@ struct WaveLayout {
     inline_boxes: u32,
     /// The bake's occludee boxes on the device, when some query names them.
     resident: Option<hdm::ResidentBoxes>,
+    /// The bake's occluder parts on the device, when some counted occluder is one of them.
+    parts: Option<super::resident::ResidentParts>,
     pyramid_floats: u64,
     mask_words: u32,
     reduce: Vec<(u32, u32)>,
@@ -314,9 +362,13 @@ impl WaveLayout {
         queries: &[Option<PlaneQueries>],
         keep: &[bool],
         limits: &DeviceLimits,
-        (boxes_ok, resident): (bool, Option<hdm::ResidentBoxes>),
+        (boxes_ok, resident, parts): (
+            bool,
+            Option<hdm::ResidentBoxes>,
+            Option<super::resident::ResidentParts>,
+        ),
     ) -> Self {
-        let generation = resident.as_ref().map(|r| (r.generation, r.boxes.len()));
+        let generation = resident.as_ref().map(|r| (r.generation, r.len()));
         // A plane's boxes that go up with the wave: those its queries do not name in the
         // resident table.
         let inline = |q: &PlaneQueries| {
@@ -336,6 +388,7 @@ impl WaveLayout {
         };
         let mut planes = Vec::with_capacity(todo.len());
         let (mut counted, mut counted_f64s, mut counted_words) = (0usize, 0usize, 0usize);
+        let (mut counted_resident, mut resident_f64s) = (0usize, 0usize);
         let (mut tested, mut n_queries, mut pyramid_floats) = (0u32, 0u32, 0u64);
         let (mut n_boxes, mut n_rects, mut n_inline) = (0u32, 0u32, 0u32);
         // Per reduction level k ≥ 1, the largest level-k size over the tested planes.
@@ -346,7 +399,15 @@ impl WaveLayout {
             let p = &prepared[j];
             let c = (counted as u32, p.counted.len() as u32);
             counted += p.counted.len();
+            // The occluders whose points the resident parts hold.
+            let table = jobs[j].occluders.table;
             counted_f64s += p.counted.points.len();
+            for (a, b) in (0..p.counted.len())
+                .filter_map(|i| p.counted.resident_span(parts.as_ref(), table, i))
+            {
+                counted_resident += 1;
+                resident_f64s += 3 * (b - a) as usize;
+            }
             counted_words += p.counted.record_words;
             let first_vertex = (vertex_bytes / VERTEX_SIZE) as u32;
             vertex_bytes += p.out.vertices.len() as u64 * VERTEX_SIZE;
@@ -444,7 +505,9 @@ impl WaveLayout {
             window_bytes,
             uniform_bytes: todo.len() as u64 * UNIFORM_STRIDE,
             counted,
-            counted_f64s,
+            // The points of the occluders the resident parts do not hold go up.
+            counted_f64s: counted_f64s - resident_f64s,
+            counted_resident,
             counted_words,
             tested,
             queries: n_queries,
@@ -452,6 +515,7 @@ impl WaveLayout {
             boxes: n_boxes,
             inline_boxes: n_inline,
             resident: resident.filter(|_| n_inline < n_boxes),
+            parts: parts.filter(|_| counted_resident > 0),
             pyramid_floats,
             mask_words,
             reduce,
@@ -508,6 +572,7 @@ impl WaveLayout {
         stats.submissions += 1;
         stats.passes += self.planes.len();
         stats.bytes_uploaded += self.vertex_bytes + self.uniform_bytes + self.view_bytes();
+        stats.counted_resident += self.counted_resident;
         for plane in &self.planes {
             let p = &prepared[plane.job];
             for sw in &p.sweeps {
@@ -622,15 +687,19 @@ impl GpuBackend {
             queries,
             keep,
             &self.limits,
-            (self.box_pipelines.is_some(), self.resident_boxes()),
+            (
+                self.box_pipelines.is_some(),
+                self.resident_boxes(),
+                self.resident_parts(),
+            ),
         );
         let tables = self.allocate(pool, &layout, prepared)?;
         let pool = &*pool;
         let buffers = WaveBuffers::of(pool, tables);
-        self.upload(&buffers, &layout, jobs, prepared);
+        let parts_bytes = self.upload(&buffers, &layout, jobs, prepared);
         let resident_bytes = self.upload_tests(pool, &layout, jobs, prepared, queries);
         layout.count(jobs, prepared, stats);
-        stats.bytes_uploaded += resident_bytes;
+        stats.bytes_uploaded += resident_bytes + parts_bytes;
         let timestamps = self.timestamp_period.map(|period| Timestamps {
             sets: &pool.timestamps[..timestamp_sets(layout.timed_passes())],
             passes: layout.timed_passes(),
@@ -677,7 +746,7 @@ impl GpuBackend {
             let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
             self.ensure_buffer(
                 &mut v.points,
-                layout.counted_f64s as u64 * 8,
+                view_points_bytes(layout),
                 storage,
                 "counted occluder points",
             )?;
@@ -903,14 +972,15 @@ impl GpuBackend {
 
     /// Upload step: every plane's vertices, chunks of records and edges and reprojection
     /// windows at their offsets, the planes' uniforms (`2 / width`, `2 / height`: pixel to
-    /// NDC scale), then the reprojections' summed-area tables.
+    /// NDC scale), the views pass's inputs, then the reprojections' summed-area tables.
+    /// Returns the bytes of resident parts sent (the rest is counted by the layout).
     fn upload(
         &self,
         buffers: &WaveBuffers,
         layout: &WaveLayout,
         jobs: &[PlaneJob],
         prepared: &[Prepared],
-    ) {
+    ) -> u64 {
         let mut uniforms = vec![0u8; layout.uniform_bytes as usize];
         for plane in &layout.planes {
             let p = &prepared[plane.job];
@@ -942,8 +1012,9 @@ impl GpuBackend {
             uniforms[o + 4..o + 8].copy_from_slice(&(2.0f32 / f.height as f32).to_le_bytes());
         }
         self.queue.write_buffer(buffers.uniforms, 0, &uniforms);
+        let mut sent = 0;
         if let (Some(v), true) = (buffers.views, layout.counted > 0) {
-            upload_views(&self.queue, v, layout, jobs, prepared);
+            sent = upload_views(&self.queue, v, layout, jobs, prepared);
         }
         for (plane, tables) in layout.planes.iter().zip(&buffers.tables) {
             for (sw, t) in prepared[plane.job].sweeps.iter().zip(tables) {
@@ -985,6 +1056,7 @@ impl GpuBackend {
                 );
             }
         }
+        sent
     }
 
     /// Upload step of the occludee tests: each dispatch's level parameters, the tested planes,
@@ -1022,10 +1094,7 @@ impl GpuBackend {
         let mut plane_words: Vec<u32> = Vec::with_capacity(layout.tested as usize * 4);
         let mut query_words: Vec<u32> = Vec::with_capacity(layout.rects as usize * 4);
         let mut box_f64s: Vec<f64> = Vec::with_capacity(layout.inline_boxes as usize * 6);
-        let generation = layout
-            .resident
-            .as_ref()
-            .map(|r| (r.generation, r.boxes.len()));
+        let generation = layout.resident.as_ref().map(|r| (r.generation, r.len()));
         let mut resident_ids: Vec<u32> = Vec::new();
         let mut box_words: Vec<u32> = Vec::with_capacity(layout.boxes as usize * 2);
         let mut frame_f64s: Vec<f64> = Vec::new();
@@ -1060,26 +1129,26 @@ impl GpuBackend {
                 frame_words.extend_from_slice(&fu);
                 // (Each test's query slots follow from its place: `box_slot`.)
                 for (k, b) in q.boxes.iter().enumerate() {
-                    let src = match q.resident_id(generation, k) {
-                        Some(id) => {
-                            debug_assert!(
-                                layout
-                                    .resident
-                                    .as_ref()
-                                    .is_some_and(|r| r.boxes[id as usize] == *b),
-                                "a query names box {id} of the resident table for another box"
-                            );
-                            resident_ids.push(id);
-                            id
-                        }
-                        None => {
-                            let at = (box_f64s.len() / 6) as u32;
-                            box_f64s.extend_from_slice(&[
-                                b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z,
-                            ]);
-                            hdm::INLINE_BOX | at
-                        }
-                    };
+                    let src =
+                        match q.resident_id(generation, k) {
+                            Some(id) => {
+                                debug_assert!(
+                                    layout.resident.as_ref().is_some_and(|r| r
+                                        .element(id as usize)
+                                        == [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]),
+                                    "a query names box {id} of the resident table for another box"
+                                );
+                                resident_ids.push(id);
+                                id
+                            }
+                            None => {
+                                let at = (box_f64s.len() / 6) as u32;
+                                box_f64s.extend_from_slice(&[
+                                    b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z,
+                                ]);
+                                hdm::INLINE_BOX | at
+                            }
+                        };
                     box_words.extend_from_slice(&[tp.index, src]);
                 }
             }
@@ -1143,10 +1212,9 @@ impl GpuBackend {
                 .write_buffer(summary, 0, bytemuck::cast_slice(&start));
         }
         // The resident boxes this wave names that no earlier wave sent.
-        layout
-            .resident
-            .as_ref()
-            .map_or(0, |r| r.send(&self.queue, resident_ids.into_iter()))
+        layout.resident.as_ref().map_or(0, |r| {
+            r.send(&self.queue, resident_ids.into_iter().map(|id| id..id + 1))
+        })
     }
 
     /// The occludee tests of the wave's tested planes, after their render passes: one compute
@@ -1612,7 +1680,7 @@ impl GpuBackend {
             entries: &[
                 wgpu::BindGroupEntry {
                     binding: 0,
-                    resource: whole(&v.points, layout.counted_f64s as u64 * 8),
+                    resource: whole(&v.points, view_points_bytes(layout)),
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
@@ -1629,6 +1697,14 @@ impl GpuBackend {
                 wgpu::BindGroupEntry {
                     binding: 4,
                     resource: whole(&v.records, layout.counted_words as u64 * 16),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: layout
+                        .parts
+                        .as_ref()
+                        .map_or(&vp.no_parts, |r| &*r.points.buffer)
+                        .as_entire_binding(),
                 },
             ],
         });
@@ -2305,5 +2381,20 @@ mod tests {
         assert_eq!(t.queries(0) as usize, TIMESTAMPS_PER_SET);
         assert_eq!(t.queries(1), 2);
         assert_eq!(t.bytes(1), 16);
+    }
+
+    /// `views.wgsl` reads the resident parts' flag where the wave writes it (the constant's
+    /// place between the count and the plane index is checked where it is defined).
+    #[test]
+    fn the_views_shader_agrees_with_the_resident_flag() {
+        let src = super::super::VIEWS_WGSL;
+        assert!(src.contains(&format!(
+            "const RESIDENT_POINTS: u32 = 0x{RESIDENT_POINTS:x}u;"
+        )));
+        assert!(src.contains("let n = min(o.y & 0x7fu, MAXP);"));
+        assert!(src.contains(&format!(
+            "const MAXP: u32 = {}u;",
+            super::super::prepare::COUNTED_MAX_POINTS
+        )));
     }
 }
