@@ -34,9 +34,11 @@ const IMPROVED: u32 = 4u;
 
 // Boxes sent with the submission, 6 f64 each: min x, y, z, max x, y, z.
 @group(0) @binding(0) var<storage, read> boxes: array<f64>;
-// Per box test: its tested plane, and its box: `INLINE_BOX | k` for the `k`-th of `boxes`,
-// else its index in `resident`.
-@group(0) @binding(1) var<storage, read> box_meta: array<vec2<u32>>;
+// First, per tested plane `p` (`box_count.z` of them), its first box test (the tests are in
+// the planes' order; then the total): plane `p`'s tests are `box_meta[p] .. box_meta[p + 1]`.
+// Then per box test its box: `INLINE_BOX | k` for the `k`-th of `boxes`, else its index in
+// `resident`.
+@group(0) @binding(1) var<storage, read> box_meta: array<u32>;
 // Per tested plane, 12 f64: the cell's min (x, y, z) and max, the plane's position,
 // rect_min (u, v), rect_max (u, v), padding.
 @group(0) @binding(2) var<storage, read> frames_f: array<f64>;
@@ -48,7 +50,8 @@ const IMPROVED: u32 = 4u;
 @group(0) @binding(6) var<storage, read> answers: array<u32>;
 // Per box, its answer.
 @group(0) @binding(8) var<storage, read_write> box_out: array<u32>;
-// x: the box tests; y: the first box test's first query slot (after every rectangle test).
+// x: the box tests; y: the first box test's first query slot (after every rectangle test);
+// z: the tested planes.
 @group(0) @binding(7) var<uniform> box_count: vec4<u32>;
 // The bake's occludee boxes kept on the device (`hdm::ResidentBoxes`), 6 f64 each.
 @group(0) @binding(9) var<storage, read> resident: array<f64>;
@@ -63,9 +66,26 @@ fn box_slot(i: u32) -> u32 {
     return box_count.y + i * BOX_SLOTS;
 }
 
+// Box test `i`'s tested plane: the last whose first test is at most `i` (a plane without
+// tests starts where the next one does).
+fn test_plane(i: u32) -> u32 {
+    var lo = 0u;
+    var hi = box_count.z;
+    // box_meta[lo] <= i < box_meta[hi] (the total), and lo < hi.
+    while hi - lo > 1u {
+        let mid = (lo + hi) / 2u;
+        if box_meta[mid] <= i {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
 // Box test `i`'s box: min (x, y, z), max.
 fn test_box(i: u32) -> array<vec3<f64>, 2> {
-    let src = box_meta[i].y;
+    let src = box_meta[box_count.z + 1u + i];
     if (src & INLINE_BOX) != 0u {
         let o = (src & ~INLINE_BOX) * 6u;
         return array<vec3<f64>, 2>(
@@ -256,7 +276,7 @@ fn box_plan(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= box_count.x {
         return;
     }
-    let p = box_meta[i].x;
+    let p = test_plane(i);
     let slot = box_slot(i);
     let none = vec4<u32>(NO_PLANE, 0u, 0u, 0u);
     queries[slot] = none;

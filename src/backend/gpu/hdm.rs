@@ -361,7 +361,7 @@ impl BoxPipelines {
             label: Some("box tests bind group layout"),
             entries: &[
                 storage(0, true, BOX_BYTES),
-                storage(1, true, 8),
+                storage(1, true, 4),
                 storage(2, true, BOX_FRAME_F64S as u64 * 8),
                 storage(3, true, 16),
                 storage(4, false, QUERY_BYTES),
@@ -463,8 +463,8 @@ pub(super) struct TestBuffers {
     pub tables: Option<wgpu::Buffer>,
     pub summary: Option<wgpu::Buffer>,
     pub summary_staging: Option<wgpu::Buffer>,
-    /// Box tests: the boxes sent with the submission, every test's plane and source, the
-    /// planes' frames, their shapes, the counts.
+    /// Box tests: the boxes sent with the submission, each tested plane's first test then
+    /// every test's source, the planes' frames, their shapes, the counts.
     pub boxes: Option<wgpu::Buffer>,
     pub box_meta: Option<wgpu::Buffer>,
     pub frames_f: Option<wgpu::Buffer>,

@@ -806,7 +806,7 @@ impl GpuBackend {
     }
 
     /// Keeps a bake's occludee boxes on the device (`on`, the default: box tests then send
-    /// indices, 8 bytes a test instead of 56, [`RasterBackend::upload_occludee_boxes`]) or
+    /// indices, 4 bytes a test instead of 56, [`RasterBackend::upload_occludee_boxes`]) or
     /// sends every box with its test (for comparisons). The same PVS either way.
     pub fn set_resident_boxes(&mut self, on: bool) {
         self.resident_wanted = on;

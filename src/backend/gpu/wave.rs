@@ -525,6 +525,12 @@ impl WaveLayout {
         }
     }
 
+    /// Bytes of the box tests' words: each tested plane's first test and the total, then a
+    /// word per test naming its box (`box_meta` in `shaders/boxes.wgsl`).
+    fn box_meta_bytes(&self) -> u64 {
+        (u64::from(self.tested) + 1 + u64::from(self.boxes)) * 4
+    }
+
     /// Answers read back: the rectangle tests', then the box tests'.
     fn answers(&self) -> u32 {
         self.rects + self.boxes
@@ -609,7 +615,7 @@ impl WaveLayout {
                 + 16;
             stats.bytes_read_back += u64::from(self.answers()) * 4;
             if self.boxes > 0 {
-                stats.bytes_uploaded += u64::from(self.boxes) * 8
+                stats.bytes_uploaded += self.box_meta_bytes()
                     + u64::from(self.inline_boxes) * hdm::BOX_BYTES
                     + u64::from(self.tested) * (hdm::BOX_FRAME_F64S as u64 * 8 + 16)
                     + 16;
@@ -847,7 +853,7 @@ impl GpuBackend {
             )?;
             self.ensure_buffer(
                 &mut t.box_meta,
-                n * 8,
+                layout.box_meta_bytes(),
                 storage,
                 "occludee box tests' planes and boxes",
             )?;
@@ -1061,7 +1067,8 @@ impl GpuBackend {
 
     /// Upload step of the occludee tests: each dispatch's level parameters, the tested planes,
     /// their queries (`plane, i0 | j0 << 16, i1 | j1 << 16, depth`) and their count, the box
-    /// tests (each box's plane and source, the boxes not resident) and the resident boxes named
+    /// tests (each tested plane's first test, each test's box, the boxes not resident) and the
+    /// resident boxes named
     /// for the first time. Returns the bytes of those resident boxes.
     fn upload_tests(
         &self,
@@ -1096,7 +1103,10 @@ impl GpuBackend {
         let mut box_f64s: Vec<f64> = Vec::with_capacity(layout.inline_boxes as usize * 6);
         let generation = layout.resident.as_ref().map(|r| (r.generation, r.len()));
         let mut resident_ids: Vec<u32> = Vec::new();
-        let mut box_words: Vec<u32> = Vec::with_capacity(layout.boxes as usize * 2);
+        // Each tested plane's first box test, then each test's box (`box_meta` in
+        // `shaders/boxes.wgsl`).
+        let mut box_starts: Vec<u32> = Vec::with_capacity(layout.tested as usize + 1);
+        let mut box_words: Vec<u32> = Vec::with_capacity(layout.boxes as usize);
         let mut frame_f64s: Vec<f64> = Vec::new();
         let mut frame_words: Vec<u32> = Vec::new();
         for plane in &layout.planes {
@@ -1124,6 +1134,12 @@ impl GpuBackend {
             // (The box tests' slots, after every rectangle test, are filled on the device by
             // `box_plan`.)
             if layout.boxes > 0 {
+                debug_assert_eq!(
+                    tp.index as usize,
+                    box_starts.len(),
+                    "tested planes in order"
+                );
+                box_starts.push(box_words.len() as u32);
                 let (ff, fu) = hdm::box_frame(&jobs[plane.job].frame, q.improved);
                 frame_f64s.extend_from_slice(&ff);
                 frame_words.extend_from_slice(&fu);
@@ -1149,7 +1165,7 @@ impl GpuBackend {
                                 hdm::INLINE_BOX | at
                             }
                         };
-                    box_words.extend_from_slice(&[tp.index, src]);
+                    box_words.push(src);
                 }
             }
         }
@@ -1167,8 +1183,11 @@ impl GpuBackend {
                 self.queue
                     .write_buffer(bx, 0, bytemuck::cast_slice(&box_f64s));
             }
+            debug_assert_eq!(box_starts.len(), layout.tested as usize);
+            box_starts.push(box_words.len() as u32);
+            box_starts.extend_from_slice(&box_words);
             self.queue
-                .write_buffer(meta, 0, bytemuck::cast_slice(&box_words));
+                .write_buffer(meta, 0, bytemuck::cast_slice(&box_starts));
             self.queue
                 .write_buffer(ff, 0, bytemuck::cast_slice(&frame_f64s));
             self.queue
@@ -1176,7 +1195,7 @@ impl GpuBackend {
             self.queue.write_buffer(
                 bc,
                 0,
-                bytemuck::cast_slice(&[layout.boxes, layout.box_slot(0), 0, 0]),
+                bytemuck::cast_slice(&[layout.boxes, layout.box_slot(0), layout.tested, 0]),
             );
         }
         self.queue.write_buffer(params, 0, &param_bytes);
@@ -1410,7 +1429,7 @@ impl GpuBackend {
                     bx,
                     u64::from(layout.inline_boxes.max(1)) * hdm::BOX_BYTES,
                 ),
-                entry(1, meta, n * 8),
+                entry(1, meta, layout.box_meta_bytes()),
                 entry(
                     2,
                     ff,
