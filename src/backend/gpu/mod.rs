@@ -85,9 +85,11 @@
 //! ([`RasterBackend::upload_occluder_parts`], `resident::ResidentParts`): its record's first
 //! point is the part's place in that table and its count carries `wave::RESIDENT_POINTS`, and
 //! the views pass reads the points there (`occluder_point`), the same `f64`s bit for bit, so
-//! the same maps. Each part goes up the first time a wave names it (`ResidentTable::send`, as
-//! the occludee boxes do), to a table of the parts that fit one storage binding, from the
-//! first (`resident::parts_that_fit`; occluders naming the others send their points);
+//! the same maps. Each part goes up the first time a wave names it, from the naming
+//! occluder's own points (`ResidentTable::given`, `send_given`: a scene's points can be
+//! hundreds of megabytes, of which no second copy stays on the CPU), to a table of the parts
+//! that fit one storage binding, from the first (`resident::parts_that_fit`; occluders naming
+//! the others send their points);
 //! [`GpuBackend::set_resident_parts`] sends every occluder's points instead.
 //!
 //! Same coverage as the clipped path up to near-tie pixels (`tests/gpu.rs`: random triangles,
@@ -1168,9 +1170,9 @@ impl RasterBackend for GpuBackend {
     }
 
     /// Keeps the parts' points (three `f64` each) where the projections are counted
-    /// ([`GpuProjection::Counting`]): the device's table is made here, and each part's points
-    /// go up the first time a wave's counted occluder names it
-    /// (`resident::ResidentTable::send`; those bytes count as uploaded). A table larger than
+    /// ([`GpuProjection::Counting`]): the device's table is made here, and each part goes up
+    /// the first time a wave's counted occluder names it, from that occluder's points (those
+    /// bytes count as uploaded; nothing of the table stays on the CPU). A table larger than
     /// one storage binding keeps the parts that fit in one, from the first; occluders naming
     /// the others send their points.
     fn upload_occluder_parts(
@@ -1195,15 +1197,14 @@ impl RasterBackend for GpuBackend {
         }
         self.check_failure()?;
         let generation = self.next_generation();
-        let data: Vec<f64> = points[..end].iter().flat_map(|p| p.to_array()).collect();
+        let points = resident::ResidentTable::given(
+            &self.device,
+            "resident occluder points",
+            (end, 3),
+            generation,
+        )?;
         *slot = Some(resident::ResidentParts {
-            points: resident::ResidentTable::new(
-                &self.device,
-                "resident occluder points",
-                data.into(),
-                3,
-                generation,
-            )?,
+            points,
             spans: spans[..kept].into(),
         });
         Ok(Some(generation))

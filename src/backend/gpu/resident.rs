@@ -1,36 +1,59 @@
-//! Tables a bake keeps on the device and fills lazily: [`ResidentTable`], the occludee boxes
-//! of the box tests ([`super::hdm::ResidentBoxes`]) and the scene's occluder parts' points of
-//! the counted projections ([`ResidentParts`]).
+//! Tables a bake keeps on the device, each element written when work first names it:
+//! [`ResidentTable`], the occludee boxes of the box tests ([`super::hdm::ResidentBoxes`]) and
+//! the scene's occluder parts' points of the counted projections ([`ResidentParts`]).
 
 use super::device::ErrorScopes;
 use crate::backend::BackendError;
 use std::sync::{Arc, Mutex};
 
 /// A table of `f64` elements (`stride` `f64`s each) kept on the device: work then names an
-/// element by its index instead of sending it. Each element goes up the first time work
-/// names it ([`ResidentTable::send`]), so a bake uploads at most what it uses, once.
+/// element by its index instead of sending it, and each element goes up the first time work
+/// names it, so a bake uploads at most what it uses, once. [`ResidentTable::new`] keeps the
+/// elements on the CPU to send ([`ResidentTable::send`]); [`ResidentTable::given`] keeps
+/// nothing there, the work naming an element giving its values ([`ResidentTable::send_given`]).
 #[derive(Clone, Debug)]
 pub(super) struct ResidentTable {
     /// Which table this is: work naming another sends its data whole.
     pub generation: u64,
     /// The device's table, each element written before the first submission that reads it.
     pub buffer: Arc<wgpu::Buffer>,
-    /// The elements, on the CPU.
-    data: Arc<[f64]>,
+    /// The elements, on the CPU ([`ResidentTable::new`]'s only).
+    data: Option<Arc<[f64]>>,
+    /// Elements in the table.
+    len: usize,
     /// `f64`s per element.
     stride: usize,
     /// One bit per element: written to `buffer` already.
     sent: Arc<Mutex<Vec<u64>>>,
 }
 
+/// The device's buffer of `f64s` `f64`s (zeros), mapped at creation.
+///
+/// Mapped at creation, so that wgpu knows it initialised from the start: a buffer it thinks
+/// uninitialised is zeroed where a submission binds it, and that clear could land after
+/// another thread's first write of an element in the same submission, leaving the element
+/// zero (work on the wrong data: for boxes a false cull, seen on lavapipe as 5–19 objects of a
+/// cell culled by some runs).
+fn mapped_table(
+    device: &wgpu::Device,
+    label: &str,
+    f64s: usize,
+) -> Result<wgpu::Buffer, BackendError> {
+    let scope = ErrorScopes::push(device);
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: (f64s as u64 * 8).max(8),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: true,
+    });
+    buffer.unmap();
+    scope.check()?;
+    Ok(buffer)
+}
+
 impl ResidentTable {
-    /// A table of `data` (`stride` `f64`s per element) for `device`, labelled `label`.
-    ///
-    /// The buffer is mapped at creation, so that wgpu knows it initialised (zeros) from the
-    /// start: a buffer it thinks uninitialised is zeroed where a submission binds it, and
-    /// that clear could land after another thread's first write of an element in the same
-    /// submission, leaving the element zero (work on the wrong data: for boxes a false
-    /// cull, seen on lavapipe as 5–19 objects of a cell culled by some runs).
+    /// A lazy table of `data` (`stride` `f64`s per element) for `device`, labelled `label`:
+    /// zeros until [`ResidentTable::send`] writes what work names.
     ///
     /// # Errors
     /// [`BackendError`] when the device fails to make the buffer.
@@ -41,20 +64,36 @@ impl ResidentTable {
         stride: usize,
         generation: u64,
     ) -> Result<Self, BackendError> {
-        let scope = ErrorScopes::push(device);
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: (data.len() as u64 * 8).max(8),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: true,
-        });
-        buffer.unmap();
-        scope.check()?;
+        let buffer = mapped_table(device, label, data.len())?;
         let len = data.len() / stride;
         Ok(ResidentTable {
             generation,
             buffer: Arc::new(buffer),
-            data,
+            data: Some(data),
+            len,
+            stride,
+            sent: Arc::new(Mutex::new(vec![0; len.div_ceil(64)])),
+        })
+    }
+
+    /// A lazy table of `len` elements of `stride` `f64`s that keeps nothing on the CPU: work
+    /// that names an element for the first time gives its values
+    /// ([`ResidentTable::send_given`]).
+    ///
+    /// # Errors
+    /// [`BackendError`] when the device fails to make the buffer.
+    pub fn given(
+        device: &wgpu::Device,
+        label: &str,
+        (len, stride): (usize, usize),
+        generation: u64,
+    ) -> Result<Self, BackendError> {
+        let buffer = mapped_table(device, label, len * stride)?;
+        Ok(ResidentTable {
+            generation,
+            buffer: Arc::new(buffer),
+            data: None,
+            len,
             stride,
             sent: Arc::new(Mutex::new(vec![0; len.div_ceil(64)])),
         })
@@ -62,23 +101,26 @@ impl ResidentTable {
 
     /// Elements in the table.
     pub fn len(&self) -> usize {
-        self.data.len() / self.stride
+        self.len
     }
 
     /// Bytes of the device's table.
     pub fn bytes(&self) -> u64 {
-        self.data.len() as u64 * 8
+        (self.len * self.stride) as u64 * 8
     }
 
-    /// Element `i`'s `f64`s (panics when `i >= len()`).
-    pub fn element(&self, i: usize) -> &[f64] {
-        &self.data[i * self.stride..(i + 1) * self.stride]
+    /// Element `i`'s `f64`s, where the table keeps them on the CPU ([`ResidentTable::new`];
+    /// panics when `i >= len()`).
+    pub fn element(&self, i: usize) -> Option<&[f64]> {
+        let d = self.data.as_ref()?;
+        Some(&d[i * self.stride..(i + 1) * self.stride])
     }
 
     /// Writes to the device every element of `ranges` not written yet (in runs of
-    /// neighbouring indices) and returns the bytes written. The bits are set and the
-    /// elements written under one lock, so a submission made after this returns — on any
-    /// thread, once it has seen an element's bit set — reads the element.
+    /// neighbouring indices) and returns the bytes written (none for a table of given values,
+    /// [`ResidentTable::given`]). The
+    /// bits are set and the elements written under one lock, so a submission made after this
+    /// returns — on any thread, once it has seen an element's bit set — reads the element.
     ///
     /// # Panics
     /// When an index is not below the table's length.
@@ -87,6 +129,9 @@ impl ResidentTable {
         queue: &wgpu::Queue,
         ranges: impl Iterator<Item = std::ops::Range<u32>>,
     ) -> u64 {
+        let Some(data) = &self.data else {
+            return 0;
+        };
         let mut sent = self.sent.lock().unwrap_or_else(|e| e.into_inner());
         let mut new: Vec<u32> = ranges
             .flatten()
@@ -120,9 +165,51 @@ impl ResidentTable {
             queue.write_buffer(
                 &self.buffer,
                 a as u64 * 8,
-                bytemuck::cast_slice(&self.data[a..b]),
+                bytemuck::cast_slice(&data[a..b]),
             );
             written += (b - a) as u64 * 8;
+        }
+        written
+    }
+
+    /// Writes to the device the elements of each `(first, values)` not written yet: the
+    /// elements from `first` on that `values` fills (`stride` per element; work names a run
+    /// of elements together, and all of a run are new or none are). Runs that meet go up as
+    /// one write. Returns the bytes written. As [`ResidentTable::send`], under one lock.
+    ///
+    /// # Panics
+    /// When a run reaches beyond the table.
+    pub fn send_given(&self, queue: &wgpu::Queue, runs: Vec<(u32, &[f64])>) -> u64 {
+        let mut sent = self.sent.lock().unwrap_or_else(|e| e.into_inner());
+        let mut new: Vec<(u32, &[f64])> = runs
+            .into_iter()
+            .filter(|&(first, values)| {
+                let fresh = sent[first as usize / 64] & 1u64 << (first % 64) == 0;
+                for id in first..first + (values.len() / self.stride) as u32 {
+                    sent[id as usize / 64] |= 1u64 << (id % 64);
+                }
+                fresh
+            })
+            .collect();
+        new.sort_unstable_by_key(|r| r.0);
+        let mut written = 0u64;
+        let mut k = 0;
+        let mut bytes: Vec<f64> = Vec::new();
+        while k < new.len() {
+            let start = new[k].0;
+            let mut end = start;
+            bytes.clear();
+            while k < new.len() && new[k].0 == end {
+                bytes.extend_from_slice(new[k].1);
+                end += (new[k].1.len() / self.stride) as u32;
+                k += 1;
+            }
+            queue.write_buffer(
+                &self.buffer,
+                u64::from(start) * self.stride as u64 * 8,
+                bytemuck::cast_slice(&bytes),
+            );
+            written += bytes.len() as u64 * 8;
         }
         written
     }
@@ -130,8 +217,11 @@ impl ResidentTable {
 
 /// The scene's occluder parts' points kept on the device for the counted projections
 /// ([`crate::backend::RasterBackend::upload_occluder_parts`]): the table's elements are
-/// points (three `f64`), part `k` is `spans[k]` of them. A counted occluder that is a scene
-/// part unchanged then sends 16 bytes (its record) instead of 16 plus 24 per point.
+/// points (three `f64`), part `k` is `spans[k]` of them, each part written the first time a
+/// counted occluder names it, from that occluder's own points, which are the part's bit for bit
+/// ([`ResidentTable::given`]: a scene's points can be hundreds of megabytes, of which no second
+/// copy stays on the CPU). A counted occluder that is a scene part unchanged then sends 16
+/// bytes (its record) instead of 16 plus 24 per point.
 #[derive(Clone, Debug)]
 pub(super) struct ResidentParts {
     /// The points.

@@ -151,8 +151,9 @@ const _: () = assert!(
 /// the wave's buffers (first point, `count | plane << 8`, Depth, first record word), and every
 /// plane's frame (corners, rectangle, pixel scale, position and side in `f64`; axis and size in
 /// `u32`). An occluder the resident parts hold (`layout.parts`) sends no points: its first
-/// point is its place in that table and its count carries [`RESIDENT_POINTS`]; the parts
-/// named for the first time go up to the table. Returns the bytes of those parts.
+/// point is its place in that table and its count carries [`RESIDENT_POINTS`]; a part named
+/// for the first time goes up to the table from the naming occluder's points (the part's,
+/// bit for bit: [`crate::plane::OccluderSet::parts`]). Returns the bytes of those parts.
 fn upload_views(
     queue: &wgpu::Queue,
     v: &ViewBuffers,
@@ -169,24 +170,17 @@ fn upload_views(
     let mut recs: Vec<[u32; 4]> = Vec::with_capacity(layout.counted);
     let mut pf: Vec<f64> = Vec::with_capacity(layout.planes.len() * PLANE_F64S);
     let mut pu: Vec<[u32; 4]> = Vec::with_capacity(layout.planes.len());
-    let mut named: Vec<std::ops::Range<u32>> = Vec::new();
+    // The named parts: their first point in the table and their points.
+    let mut named: Vec<(u32, &[f64])> = Vec::new();
     let mut words = 0u32;
     for (w, plane) in layout.planes.iter().enumerate() {
         let c = &prepared[plane.job].counted;
         let table = jobs[plane.job].occluders.table;
         for (i, &[first, n, depth, rec]) in c.occ.iter().enumerate() {
             let (at, flag) = match c.resident_span(layout.parts.as_ref(), table, i) {
-                Some((a, b)) => {
-                    debug_assert!(
-                        layout.parts.as_ref().is_some_and(|r| (a..b).all(|k| r
-                            .points
-                            .element(k as usize)
-                            .iter()
-                            .zip(&c.points[3 * (first + k - a) as usize..])
-                            .all(|(x, y)| x.to_bits() == y.to_bits()))),
-                        "a counted occluder names part points {a}..{b} that are not its own"
-                    );
-                    named.push(a..b);
+                Some((a, _)) => {
+                    let f = 3 * first as usize;
+                    named.push((a, &c.points[f..f + 3 * n as usize]));
                     (a, RESIDENT_POINTS)
                 }
                 None => {
@@ -221,7 +215,7 @@ fn upload_views(
     let sent = layout
         .parts
         .as_ref()
-        .map_or(0, |r| r.points.send(queue, named.into_iter()));
+        .map_or(0, |r| r.points.send_given(queue, named));
     queue.write_buffer(points, 0, bytemuck::cast_slice(&pts));
     queue.write_buffer(occ, 0, bytemuck::cast_slice(&recs));
     queue.write_buffer(planes_f, 0, bytemuck::cast_slice(&pf));
@@ -1145,26 +1139,27 @@ impl GpuBackend {
                 frame_words.extend_from_slice(&fu);
                 // (Each test's query slots follow from its place: `box_slot`.)
                 for (k, b) in q.boxes.iter().enumerate() {
-                    let src =
-                        match q.resident_id(generation, k) {
-                            Some(id) => {
-                                debug_assert!(
-                                    layout.resident.as_ref().is_some_and(|r| r
-                                        .element(id as usize)
-                                        == [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]),
-                                    "a query names box {id} of the resident table for another box"
-                                );
-                                resident_ids.push(id);
-                                id
-                            }
-                            None => {
-                                let at = (box_f64s.len() / 6) as u32;
-                                box_f64s.extend_from_slice(&[
-                                    b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z,
-                                ]);
-                                hdm::INLINE_BOX | at
-                            }
-                        };
+                    let src = match q.resident_id(generation, k) {
+                        Some(id) => {
+                            debug_assert!(
+                                layout
+                                    .resident
+                                    .as_ref()
+                                    .is_some_and(|r| r.element(id as usize).is_none_or(|e| e
+                                        == [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])),
+                                "a query names box {id} of the resident table for another box"
+                            );
+                            resident_ids.push(id);
+                            id
+                        }
+                        None => {
+                            let at = (box_f64s.len() / 6) as u32;
+                            box_f64s.extend_from_slice(&[
+                                b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z,
+                            ]);
+                            hdm::INLINE_BOX | at
+                        }
+                    };
                     box_words.push(src);
                 }
             }
