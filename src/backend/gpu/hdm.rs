@@ -343,8 +343,9 @@ pub(super) struct BoxPipelines {
 /// The occludee boxes kept on the device for a bake's box tests
 /// ([`crate::backend::RasterBackend::upload_occludee_boxes`]): a test then sends the box's
 /// index here instead of its six `f64` (each an element of six `f64`: min, then max). Each box
-/// goes up the first time a test names it ([`super::resident::ResidentTable::send`]), so a
-/// bake uploads at most the boxes it tests, once each.
+/// goes up the first time a test names it, from that test's box
+/// ([`super::resident::ResidentTable::send_given`]), so a bake uploads at most the boxes it
+/// tests, once each.
 pub(super) type ResidentBoxes = super::resident::ResidentTable;
 
 impl BoxPipelines {

@@ -1156,15 +1156,18 @@ impl RasterBackend for GpuBackend {
         }
         self.check_failure()?;
         let generation = self.next_generation();
-        let data: Vec<f64> = (boxes.iter())
-            .flat_map(|b| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
-            .collect();
-        *slot = Some(resident::ResidentTable::new(
+        // (Debug builds keep the boxes to check each test's box against the one it names.)
+        let check = cfg!(debug_assertions).then(|| {
+            (boxes.iter())
+                .flat_map(|b| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
+                .collect()
+        });
+        *slot = Some(resident::ResidentTable::given(
             &self.device,
             "resident occludee boxes",
-            data.into(),
-            6,
+            (boxes.len(), 6),
             generation,
+            check,
         )?);
         Ok(Some(generation))
     }
@@ -1202,6 +1205,7 @@ impl RasterBackend for GpuBackend {
             "resident occluder points",
             (end, 3),
             generation,
+            None,
         )?;
         *slot = Some(resident::ResidentParts {
             points,

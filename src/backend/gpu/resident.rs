@@ -1,4 +1,5 @@
-//! Tables a bake keeps on the device, each element written when work first names it:
+//! Tables a bake keeps on the device, each element written when work first names it, from
+//! that work's own values:
 //! [`ResidentTable`], the occludee boxes of the box tests ([`super::hdm::ResidentBoxes`]) and
 //! the scene's occluder parts' points of the counted projections ([`ResidentParts`]).
 
@@ -8,17 +9,16 @@ use std::sync::{Arc, Mutex};
 
 /// A table of `f64` elements (`stride` `f64`s each) kept on the device: work then names an
 /// element by its index instead of sending it, and each element goes up the first time work
-/// names it, so a bake uploads at most what it uses, once. [`ResidentTable::new`] keeps the
-/// elements on the CPU to send ([`ResidentTable::send`]); [`ResidentTable::given`] keeps
-/// nothing there, the work naming an element giving its values ([`ResidentTable::send_given`]).
+/// names it, from the values that work has at hand ([`ResidentTable::send_given`]), so a bake
+/// uploads at most what it uses, once, and keeps no copy of the table on the CPU.
 #[derive(Clone, Debug)]
 pub(super) struct ResidentTable {
     /// Which table this is: work naming another sends its data whole.
     pub generation: u64,
     /// The device's table, each element written before the first submission that reads it.
     pub buffer: Arc<wgpu::Buffer>,
-    /// The elements, on the CPU ([`ResidentTable::new`]'s only).
-    data: Option<Arc<[f64]>>,
+    /// What the elements must be, where kept to check work against (debug builds).
+    check: Option<Arc<[f64]>>,
     /// Elements in the table.
     len: usize,
     /// `f64`s per element.
@@ -52,33 +52,10 @@ fn mapped_table(
 }
 
 impl ResidentTable {
-    /// A lazy table of `data` (`stride` `f64`s per element) for `device`, labelled `label`:
-    /// zeros until [`ResidentTable::send`] writes what work names.
-    ///
-    /// # Errors
-    /// [`BackendError`] when the device fails to make the buffer.
-    pub fn new(
-        device: &wgpu::Device,
-        label: &str,
-        data: Arc<[f64]>,
-        stride: usize,
-        generation: u64,
-    ) -> Result<Self, BackendError> {
-        let buffer = mapped_table(device, label, data.len())?;
-        let len = data.len() / stride;
-        Ok(ResidentTable {
-            generation,
-            buffer: Arc::new(buffer),
-            data: Some(data),
-            len,
-            stride,
-            sent: Arc::new(Mutex::new(vec![0; len.div_ceil(64)])),
-        })
-    }
-
-    /// A lazy table of `len` elements of `stride` `f64`s that keeps nothing on the CPU: work
-    /// that names an element for the first time gives its values
-    /// ([`ResidentTable::send_given`]).
+    /// A table of `len` elements of `stride` `f64`s (zeros) that keeps nothing on the CPU:
+    /// work that names an element for the first time gives its values
+    /// ([`ResidentTable::send_given`]). `check`, where given (debug builds), holds what the
+    /// elements must be, for [`ResidentTable::element`].
     ///
     /// # Errors
     /// [`BackendError`] when the device fails to make the buffer.
@@ -87,12 +64,13 @@ impl ResidentTable {
         label: &str,
         (len, stride): (usize, usize),
         generation: u64,
+        check: Option<Arc<[f64]>>,
     ) -> Result<Self, BackendError> {
         let buffer = mapped_table(device, label, len * stride)?;
         Ok(ResidentTable {
             generation,
             buffer: Arc::new(buffer),
-            data: None,
+            check,
             len,
             stride,
             sent: Arc::new(Mutex::new(vec![0; len.div_ceil(64)])),
@@ -109,73 +87,19 @@ impl ResidentTable {
         (self.len * self.stride) as u64 * 8
     }
 
-    /// Element `i`'s `f64`s, where the table keeps them on the CPU ([`ResidentTable::new`];
-    /// panics when `i >= len()`).
+    /// What element `i` must be, where the table keeps that to check (panics when
+    /// `i >= len()`).
     pub fn element(&self, i: usize) -> Option<&[f64]> {
-        let d = self.data.as_ref()?;
+        let d = self.check.as_ref()?;
         Some(&d[i * self.stride..(i + 1) * self.stride])
-    }
-
-    /// Writes to the device every element of `ranges` not written yet (in runs of
-    /// neighbouring indices) and returns the bytes written (none for a table of given values,
-    /// [`ResidentTable::given`]). The
-    /// bits are set and the elements written under one lock, so a submission made after this
-    /// returns — on any thread, once it has seen an element's bit set — reads the element.
-    ///
-    /// # Panics
-    /// When an index is not below the table's length.
-    pub fn send(
-        &self,
-        queue: &wgpu::Queue,
-        ranges: impl Iterator<Item = std::ops::Range<u32>>,
-    ) -> u64 {
-        let Some(data) = &self.data else {
-            return 0;
-        };
-        let mut sent = self.sent.lock().unwrap_or_else(|e| e.into_inner());
-        let mut new: Vec<u32> = ranges
-            .flatten()
-            .filter(|&id| {
-                let (w, b) = (id as usize / 64, 1u64 << (id % 64));
-                let fresh = sent[w] & b == 0;
-                sent[w] |= b;
-                fresh
-            })
-            .collect();
-        new.sort_unstable();
-        // Runs of indices at most GAP apart go up as one write (the elements between them
-        // too: they are the table's own, and are marked written).
-        const GAP: u32 = 2;
-        let mut written = 0u64;
-        let mut k = 0;
-        while k < new.len() {
-            let start = new[k];
-            let mut end = start;
-            while k < new.len() && new[k] <= end + GAP {
-                end = new[k];
-                k += 1;
-            }
-            for id in start..=end {
-                sent[id as usize / 64] |= 1u64 << (id % 64);
-            }
-            let (a, b) = (
-                start as usize * self.stride,
-                (end as usize + 1) * self.stride,
-            );
-            queue.write_buffer(
-                &self.buffer,
-                a as u64 * 8,
-                bytemuck::cast_slice(&data[a..b]),
-            );
-            written += (b - a) as u64 * 8;
-        }
-        written
     }
 
     /// Writes to the device the elements of each `(first, values)` not written yet: the
     /// elements from `first` on that `values` fills (`stride` per element; work names a run
     /// of elements together, and all of a run are new or none are). Runs that meet go up as
-    /// one write. Returns the bytes written. As [`ResidentTable::send`], under one lock.
+    /// one write. Returns the bytes written. The bits are set and the elements written under
+    /// one lock, so a submission made after this returns — on any thread, once it has seen an
+    /// element's bit set — reads the element.
     ///
     /// # Panics
     /// When a run reaches beyond the table.
@@ -219,9 +143,9 @@ impl ResidentTable {
 /// ([`crate::backend::RasterBackend::upload_occluder_parts`]): the table's elements are
 /// points (three `f64`), part `k` is `spans[k]` of them, each part written the first time a
 /// counted occluder names it, from that occluder's own points, which are the part's bit for bit
-/// ([`ResidentTable::given`]: a scene's points can be hundreds of megabytes, of which no second
-/// copy stays on the CPU). A counted occluder that is a scene part unchanged then sends 16
-/// bytes (its record) instead of 16 plus 24 per point.
+/// (a scene's points can be hundreds of megabytes, of which no second copy stays on the CPU).
+/// A counted occluder that is a scene part unchanged then sends 16 bytes (its record) instead
+/// of 16 plus 24 per point.
 #[derive(Clone, Debug)]
 pub(super) struct ResidentParts {
     /// The points.

@@ -1096,7 +1096,8 @@ impl GpuBackend {
         let mut query_words: Vec<u32> = Vec::with_capacity(layout.rects as usize * 4);
         let mut box_f64s: Vec<f64> = Vec::with_capacity(layout.inline_boxes as usize * 6);
         let generation = layout.resident.as_ref().map(|r| (r.generation, r.len()));
-        let mut resident_ids: Vec<u32> = Vec::new();
+        // The resident boxes named, with their values (the first naming sends them).
+        let mut named: Vec<(u32, [f64; 6])> = Vec::new();
         // Each tested plane's first box test, then each test's box (`box_meta` in
         // `shaders/boxes.wgsl`).
         let mut box_starts: Vec<u32> = Vec::with_capacity(layout.tested as usize + 1);
@@ -1149,7 +1150,8 @@ impl GpuBackend {
                                         == [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])),
                                 "a query names box {id} of the resident table for another box"
                             );
-                            resident_ids.push(id);
+                            named
+                                .push((id, [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]));
                             id
                         }
                         None => {
@@ -1227,7 +1229,8 @@ impl GpuBackend {
         }
         // The resident boxes this wave names that no earlier wave sent.
         layout.resident.as_ref().map_or(0, |r| {
-            r.send(&self.queue, resident_ids.into_iter().map(|id| id..id + 1))
+            let runs = named.iter().map(|(id, b)| (*id, &b[..])).collect();
+            r.send_given(&self.queue, runs)
         })
     }
 
