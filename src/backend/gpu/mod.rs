@@ -1175,7 +1175,8 @@ impl RasterBackend for GpuBackend {
     /// Keeps the parts' points (three `f64` each) where the projections are counted
     /// ([`GpuProjection::Counting`]): the device's table is made here, and each part goes up
     /// the first time a wave's counted occluder names it, from that occluder's points (those
-    /// bytes count as uploaded; nothing of the table stays on the CPU). A table larger than
+    /// bytes count as uploaded; nothing of the table stays on the CPU but in debug builds,
+    /// which check every named occluder's points against its part's). A table larger than
     /// one storage binding keeps the parts that fit in one, from the first; occluders naming
     /// the others send their points.
     fn upload_occluder_parts(
@@ -1200,12 +1201,15 @@ impl RasterBackend for GpuBackend {
         }
         self.check_failure()?;
         let generation = self.next_generation();
+        // (Debug builds keep the points to check each named occluder's against its part's.)
+        let check = cfg!(debug_assertions)
+            .then(|| points[..end].iter().flat_map(|p| p.to_array()).collect());
         let points = resident::ResidentTable::given(
             &self.device,
             "resident occluder points",
             (end, 3),
             generation,
-            None,
+            check,
         )?;
         *slot = Some(resident::ResidentParts {
             points,

@@ -143,7 +143,8 @@ impl ResidentTable {
 /// ([`crate::backend::RasterBackend::upload_occluder_parts`]): the table's elements are
 /// points (three `f64`), part `k` is `spans[k]` of them, each part written the first time a
 /// counted occluder names it, from that occluder's own points, which are the part's bit for bit
-/// (a scene's points can be hundreds of megabytes, of which no second copy stays on the CPU).
+/// (a scene's points can be hundreds of megabytes, of which no second copy stays on the CPU
+/// but in debug builds, which check each named occluder against its part).
 /// A counted occluder that is a scene part unchanged then sends 16 bytes (its record) instead
 /// of 16 plus 24 per point.
 #[derive(Clone, Debug)]

@@ -180,7 +180,21 @@ fn upload_views(
             let (at, flag) = match c.resident_span(layout.parts.as_ref(), table, i) {
                 Some((a, _)) => {
                     let f = 3 * first as usize;
-                    named.push((a, &c.points[f..f + 3 * n as usize]));
+                    let own = &c.points[f..f + 3 * n as usize];
+                    debug_assert!(
+                        layout
+                            .parts
+                            .as_ref()
+                            .is_some_and(|r| (0..n as usize).all(|k| r
+                                .points
+                                .element(a as usize + k)
+                                .is_none_or(|e| e
+                                    .iter()
+                                    .zip(&own[3 * k..])
+                                    .all(|(x, y)| x.to_bits() == y.to_bits())))),
+                        "a counted occluder names part points from {a} that are not its own"
+                    );
+                    named.push((a, own));
                     (a, RESIDENT_POINTS)
                 }
                 None => {
