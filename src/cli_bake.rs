@@ -1162,6 +1162,9 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
                         100.0 * h
                     )
                 });
+                if let Some(r) = l.probe_rects {
+                    probe += &format!("; its probe sampled {r:.0} rectangles");
+                }
                 if let (Some(h), Some(t)) = (l.probe_cell_hidden, l.probe_objects) {
                     probe += &format!(
                         "; {h:.0} of the {t:.0} undecided objects it tested were hidden at every probed rectangle"

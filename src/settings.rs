@@ -208,7 +208,9 @@ pub struct SamplingSettings {
     /// [`SamplingSettings::PROBE_MAX`] at most); when
     /// the probe proves hidden less than this fraction of the objects it tests, or hides no
     /// undecided object at every probed rectangle that tests it, the rest of the level is
-    /// split without sampling. Default 0.01; 0 samples every level whole.
+    /// split without sampling. Default 0.01; 0 samples every level whole. A probe runs in
+    /// rounds of a few rectangles and stops early once the rest of it could prove nothing
+    /// (the level's `probe_rects` says how many it sampled).
     #[serde(rename = "sampling_probe", default = "default_probe")]
     pub probe: f64,
     /// A level's probe must also prove hidden for the cell — at every probed rectangle that

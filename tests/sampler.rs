@@ -1300,3 +1300,77 @@ fn a_large_cell_in_fine_leaves_trades_pixels_for_points() {
     );
     assert!(te < ge * 0.75, "finest ε {te} traded, {ge} given");
 }
+
+/// A level's probe stops once the rest of it could prove nothing for the cell, and a bake
+/// cut inside such a probe resumes to the same result. A small fine forest's middle cell:
+/// its ~0.5-unit leaves do not fuse at the two coarse levels (ε 0.118 and 0.059), whose
+/// probes would take 8 and 24 rectangles. One round of 8 leaves every undecided object it
+/// tests open somewhere and every face's objects tested, so the second probe stops there.
+#[test]
+fn a_probe_stops_once_its_rest_could_prove_nothing() {
+    let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
+        trees: 120,
+        leaves: 150,
+        ..umbrasweep::generate::ForestOptions::fine()
+    })
+    .unwrap();
+    let scene = generated.to_scene("forest.obj");
+    let cell = generated.cells[generated.cells.len() / 2];
+    let mut settings = settings();
+    settings.sampling_settings = SamplingSettings {
+        eps: Some(0.03),
+        levels: 2,
+        resolution: Some(96),
+        rays: 3_000,
+        ..SamplingSettings::default()
+    };
+    let key = |r: &bake::BakeResult| {
+        let c = &r.cells[0];
+        let w = &c.cullers[sampler_index(r)].work;
+        let curve: Vec<_> = w
+            .levels
+            .iter()
+            .map(|l| umbrasweep::pvs::SamplingLevel { seconds: 0.0, ..*l })
+            .collect();
+        (c.visible.clone(), w.points, w.polygons, curve)
+    };
+    let run = |spec: Option<&bake::SamplerCheckpoints>| {
+        bake_with(
+            &scene,
+            cell,
+            &settings,
+            bake::BakeHooks {
+                sampler_checkpoints: spec,
+                ..bake::BakeHooks::default()
+            },
+        )
+    };
+    let whole = key(&run(None).unwrap());
+    let levels = &whole.3;
+    assert_eq!(levels.len(), 3, "{levels:?}");
+    for (l, rects) in levels[..2].iter().zip([8, 8]) {
+        assert!(l.probe_only, "{levels:?}");
+        assert_eq!(l.probe_cell_hidden, Some(0), "{levels:?}");
+        assert_eq!(l.probe_rects, Some(rects), "{levels:?}");
+    }
+    // The second level's probe stopped after its first round: 8 points, not 24.
+    assert_eq!(levels[1].points - levels[0].points, 8, "{levels:?}");
+    assert!(levels[2].probe_rects.is_none() && !levels[2].probe_only);
+    // Cut right after each probe's round (one checkpoint write per round), and in the
+    // finest level: the same result, the recorded rounds replayed.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("forest.pvs");
+    for writes in [1, 2, 3] {
+        let mut spec = bake::SamplerCheckpoints::new(&out, "inputs", false, 0.0);
+        spec.stop_after_writes = Some(writes);
+        let e = run(Some(&spec)).expect_err("stopped");
+        assert!(matches!(e, bake::BakeError::Interrupted), "{e}");
+        let spec = bake::SamplerCheckpoints::new(&out, "inputs", true, 0.0);
+        assert_eq!(
+            key(&run(Some(&spec)).unwrap()),
+            whole,
+            "resumed after {writes} writes"
+        );
+        assert!(spec.replayed.load(std::sync::atomic::Ordering::Relaxed) >= 8);
+    }
+}

@@ -23,11 +23,14 @@
 //! written to a temporary name and renamed, at most every `every_seconds` (after a chunk
 //! ends), and removed when their cell is finished.
 //!
-//! Format: JSON, `{"format": "umbrasweep-sampler-checkpoint", "version": 2, "inputs": …,
+//! Format: JSON, `{"format": "umbrasweep-sampler-checkpoint", "version": 3, "inputs": …,
 //! "cell": [min, max], "finest_eps": …, "seconds": …, "known": "<hex bits per object>",
-//! "levels": [{"probe_only": …, "pilot": [cost, saving], "curve": …, "rects": {"<index>":
+//! "levels": [{"probe_only": …, "probe_rounds": …, "pilot": [cost, saving], "curve": …, "rects": {"<index>":
 //! {"open": [ids] | null, "tested": …, "hid": …, "point": …, "polygons": …}}}]}` (`pilot`
-//! only where the level's pilot ran: a resumed level takes its decision and figures).
+//! only where the level's pilot ran: a resumed level takes its decision and figures;
+//! `probe_rounds` only where a probe went on after a round). Version 3 (December 7): a
+//! level's probe runs in rounds and may stop early, so version 2 files, whose probes ran
+//! whole, are not resumed.
 
 use super::BakeError;
 use crate::geom::Aabb;
@@ -42,7 +45,7 @@ use std::time::Instant;
 /// The first field of a checkpoint file.
 pub const CHECKPOINT_FORMAT: &str = "umbrasweep-sampler-checkpoint";
 /// The checkpoint format's version.
-pub const CHECKPOINT_VERSION: u32 = 2;
+pub const CHECKPOINT_VERSION: u32 = 3;
 
 /// Where and how often the sampler saves its progress inside a cell
 /// ([`super::BakeHooks::sampler_checkpoints`]).
@@ -113,12 +116,21 @@ pub(super) struct RectRecord {
     pub polygons: u64,
 }
 
+fn is_zero(n: &u32) -> bool {
+    *n == 0
+}
+
 /// One level's records.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub(super) struct LevelRecord {
     /// The probe's decision, once made.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_only: Option<bool>,
+    /// How many of the probe's rounds were followed by another (`bake::sampling`: a probe
+    /// stops early once its rest could prove nothing): a resumed probe goes on after as many
+    /// without asking again, since the objects known visible then are not in the file.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub probe_rounds: u32,
     /// The pilot's estimates per rectangle (cost, saving), when one ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pilot: Option<(f64, f64)>,

@@ -329,6 +329,7 @@ mod tests {
                         probe_hidden: k.is_multiple_of(2).then_some(0.25),
                         probe_cell_hidden: k.is_multiple_of(2).then_some(k),
                         probe_objects: k.is_multiple_of(2).then_some(100),
+                        probe_rects: k.is_multiple_of(2).then_some(7),
                         probe_cost: k.is_multiple_of(2).then_some(3.5),
                         pilot_saving: k.is_multiple_of(4).then_some(1.25),
                     }],

@@ -753,6 +753,7 @@ fn level_summary(curves: &[&[crate::pvs::SamplingLevel]]) -> Vec<crate::pvs::Pvs
                 probe_hidden: probe_mean(curves, k, |l| l.probe_hidden),
                 probe_cell_hidden: probe_mean(curves, k, |l| l.probe_cell_hidden.map(f64::from)),
                 probe_objects: probe_mean(curves, k, |l| l.probe_objects.map(f64::from)),
+                probe_rects: probe_mean(curves, k, |l| l.probe_rects.map(f64::from)),
                 probe_cost: probe_mean(curves, k, |l| l.probe_cost),
                 pilot_saving: probe_mean(curves, k, |l| l.pilot_saving),
             }

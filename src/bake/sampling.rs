@@ -833,33 +833,75 @@ impl Culler for SamplingCuller {
             let mut probe_cell = None;
             let mut probe_cost = None;
             let mut pilot_saving = None;
+            let mut probe_rects = None;
             if s.probe > 0.0 && !finest_level && stride > 1 {
-                let probe: Vec<usize> = (0..level.len()).step_by(stride).collect();
+                // Every `stride`-th rectangle, the faces in turn, in rounds.
+                let probe = faces_in_turn((0..level.len()).step_by(stride).collect(), |i| {
+                    level[i].0.face
+                });
                 let (t0, h0) = (
                     shared.tested.load(Ordering::Relaxed),
                     shared.hid.load(Ordering::Relaxed),
                 );
-                for (&i, o) in probe.iter().zip(sample(&probe)) {
-                    open[i] = o;
-                }
-                let tested = shared.tested.load(Ordering::Relaxed) - t0;
-                let hid = shared.hid.load(Ordering::Relaxed) - h0;
-                probe_hidden = (tested > 0).then(|| hid as f64 / tested as f64);
                 // Per-rectangle hides add up to a cull only for an object hidden at every
                 // rectangle that tests it: unless some object still undecided was hidden at
                 // every probed rectangle that tested it, the rest of the level will rarely cull
                 // anything (it mostly prunes the next level's lists). Only an object that no
                 // probed rectangle tests escapes this guess; unsampled rectangles pass every
                 // candidate on, so it costs points, never soundness.
+                // `seen`: 1, in a probed rectangle's list; 2, left open by one.
                 let mut seen = vec![0u8; n];
-                for &i in &probe {
-                    for &o in level[i].1.iter() {
-                        seen[o as usize] |= 1;
+                // Rounds a resumed probe goes on after without asking (see below).
+                let go_on = ckpt
+                    .as_ref()
+                    .map_or(0, |c| c.with_level(this_level, |l| l.probe_rounds));
+                let mut probed = 0;
+                let mut rounds = 0u32;
+                while probed < probe.len() {
+                    let round = &probe[probed..(probed + PROBE_ROUND).min(probe.len())];
+                    for (&i, o) in round.iter().zip(sample(round)) {
+                        open[i] = o;
                     }
-                    for &o in open[i].iter().flat_map(|l| l.iter()) {
-                        seen[o as usize] |= 2;
+                    for &i in round {
+                        for &o in level[i].1.iter() {
+                            seen[o as usize] |= 1;
+                        }
+                        for &o in open[i].iter().flat_map(|l| l.iter()) {
+                            seen[o as usize] |= 2;
+                        }
+                    }
+                    probed += round.len();
+                    if probed == probe.len() || stopped() || shared.has_failed() {
+                        continue;
+                    }
+                    // The probe stops early when its rest could prove nothing: every object
+                    // still undecided that it tested was left open by some probed rectangle
+                    // (that stays so), and the rectangles left test no undecided object it
+                    // has not. Then the whole probe would prove nothing either, so the level
+                    // is split unsampled all the same (the decision below), sooner. A resumed
+                    // probe goes on after the rounds its interrupted run went on after (the
+                    // objects known visible then, which this asks, are not in the file; after
+                    // the last recorded round they are the file's).
+                    if rounds >= go_on
+                        && !shared.spent()
+                        && probe_can_stop(
+                            &seen,
+                            |o| !shared.done[o as usize].load(Ordering::Relaxed),
+                            probe[probed..].iter().map(|&i| &level[i].1[..]),
+                        )
+                    {
+                        break;
+                    }
+                    rounds += 1;
+                    if let Some(c) = &ckpt {
+                        c.with_level(this_level, |l| l.probe_rounds = l.probe_rounds.max(rounds));
                     }
                 }
+                let probe = &probe[..probed];
+                let tested = shared.tested.load(Ordering::Relaxed) - t0;
+                let hid = shared.hid.load(Ordering::Relaxed) - h0;
+                probe_hidden = (tested > 0).then(|| hid as f64 / tested as f64);
+                probe_rects = Some(probed as u32);
                 // Objects still undecided that the probe tested, and those of them that every
                 // probed rectangle testing them hid (the level's cull, had it been only its
                 // probe).
@@ -876,7 +918,11 @@ impl Culler for SamplingCuller {
                 // little (`SamplingSettings::probe_cull`).
                 let may_cull = probe_all_hid > 0
                     && f64::from(probe_all_hid) >= s.probe_cull * f64::from(probe_tested);
-                let rest: Vec<usize> = (0..level.len()).filter(|i| i % stride != 0).collect();
+                let mut in_probe = vec![false; level.len()];
+                for &i in probe {
+                    in_probe[i] = true;
+                }
+                let rest: Vec<usize> = (0..level.len()).filter(|&i| !in_probe[i]).collect();
                 // A resumed level keeps the decision its interrupted run made.
                 let resumed = ckpt
                     .as_ref()
@@ -903,7 +949,7 @@ impl Culler for SamplingCuller {
                             // The pilot's hemicubes replace the level's (one per thread).
                             pool.clear();
                             let (cost, saving) =
-                                shared.pilot(&level, &open, &probe, resolution, finest_res);
+                                shared.pilot(&level, &open, probe, resolution, finest_res);
                             (probe_cost, pilot_saving) = (Some(cost), Some(saving));
                         }
                         let too_dear = probe_cost
@@ -962,6 +1008,7 @@ impl Culler for SamplingCuller {
                 probe_hidden,
                 probe_cell_hidden: probe_cell.map(|(h, _)| h),
                 probe_objects: probe_cell.map(|(_, t)| t),
+                probe_rects,
                 probe_cost,
                 pilot_saving,
             };
@@ -1128,6 +1175,47 @@ fn probe_stride(n: usize) -> usize {
 
 /// A level sampled whole starts with every this-many-th rectangle.
 const SCOUT_STRIDE: usize = 16;
+/// A level's probe samples this many rectangles at a time, then asks whether the rest could
+/// prove anything. Fixed, never the thread count, so that where it stops does not depend on
+/// the machine. Eight is more than one per face.
+///
+/// Measured on the fine forest's middle 4×2×4 cell (`bake --sweep --sampling --backend cpu`
+/// with the defaults, two cores): see `docs/sampling.md`, "Probes that stop early".
+const PROBE_ROUND: usize = 8;
+
+/// Whether a level's probe can stop before the rectangles whose candidate lists `rest` gives:
+/// every object `undecided` that it tested (`seen[o]` 1: in a probed rectangle's list) was
+/// left open by some probed rectangle (`seen[o]` 3), and no list of the rest holds an object
+/// `undecided` that it has not tested (`seen[o]` 0). Then no object undecided at the end can
+/// be hidden at every probed rectangle testing it, however many more it probes (an object
+/// left open stays so, and objects only leave the undecided), so the whole probe would prove
+/// nothing for the cell either.
+fn probe_can_stop<'a>(
+    seen: &[u8],
+    undecided: impl Fn(u32) -> bool,
+    mut rest: impl Iterator<Item = &'a [u32]>,
+) -> bool {
+    let all_open = !(0..seen.len() as u32).any(|o| seen[o as usize] == 1 && undecided(o));
+    all_open && !rest.any(|l| l.iter().any(|&o| seen[o as usize] == 0 && undecided(o)))
+}
+
+/// `probe` (rectangle indices, each face's in order) reordered so that the faces take turns:
+/// the first rectangle of each face, then the second of each, and so on (faces in the order
+/// they first appear). A probe's first rounds then test every face's objects.
+fn faces_in_turn(probe: Vec<usize>, face: impl Fn(usize) -> usize) -> Vec<usize> {
+    let mut by_face: Vec<(usize, Vec<usize>)> = Vec::new();
+    for i in probe {
+        let f = face(i);
+        match by_face.iter_mut().find(|(g, _)| *g == f) {
+            Some((_, l)) => l.push(i),
+            None => by_face.push((f, vec![i])),
+        }
+    }
+    let longest = by_face.iter().map(|(_, l)| l.len()).max().unwrap_or(0);
+    (0..longest)
+        .flat_map(|k| by_face.iter().filter_map(move |(_, l)| l.get(k).copied()))
+        .collect()
+}
 /// A level's pilot ([`Shared::pilot`]) renders at most this many of its probed rectangles
 /// again, and one quadrant of each twice.
 const PILOT_RECTS: usize = 8;
@@ -1773,6 +1861,41 @@ mod tests {
     }
 
     /// [`probe_stride`]: every 16th rectangle, at least 8 and about 64 at most.
+    #[test]
+    fn a_probe_stops_only_when_its_rest_could_prove_nothing() {
+        // Objects 0–4: 0 tested and left open, 1 tested and hidden everywhere so far, 2 not
+        // tested, 3 tested and open, 4 not tested.
+        let seen = [3u8, 1, 0, 3, 0];
+        let all = |_: u32| true;
+        let rest: [&[u32]; 2] = [&[0, 3], &[3]];
+        // Object 1 could still be hidden at every probed rectangle.
+        assert!(!probe_can_stop(&seen, all, rest.iter().copied()));
+        // Unless it is known visible now.
+        let not_1 = |o: u32| o != 1;
+        assert!(probe_can_stop(&seen, not_1, rest.iter().copied()));
+        // A rectangle left to probe tests object 2, which no probed one has.
+        let rest2: [&[u32]; 2] = [&[0], &[3, 2]];
+        assert!(!probe_can_stop(&seen, not_1, rest2.iter().copied()));
+        // Unless object 2 is known visible too.
+        assert!(probe_can_stop(
+            &seen,
+            |o| o != 1 && o != 2,
+            rest2.iter().copied()
+        ));
+        // Nothing left to probe: only the tested objects count.
+        assert!(probe_can_stop(&seen, not_1, std::iter::empty()));
+    }
+
+    #[test]
+    fn a_probe_takes_the_faces_in_turn() {
+        // Faces 0, 0, 0, 2, 2, 5: each face's rectangles keep their order.
+        let face = |i: usize| [0, 0, 0, 2, 2, 5][i / 10];
+        let probe = vec![0, 10, 20, 30, 40, 50];
+        assert_eq!(faces_in_turn(probe, face), vec![0, 30, 50, 10, 40, 20]);
+        assert_eq!(faces_in_turn(vec![], face), Vec::<usize>::new());
+        assert_eq!(faces_in_turn(vec![3, 7], |_| 4), vec![3, 7]);
+    }
+
     #[test]
     fn a_probe_takes_every_16th_rectangle_within_its_bounds() {
         let probed = |n: usize| (0..n).step_by(probe_stride(n)).count();

@@ -180,6 +180,11 @@ pub struct SamplingLevel {
     /// The level's probe: the objects still undecided that some probed rectangle tested.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_objects: Option<u32>,
+    /// The level's probe: the rectangles it sampled. Fewer than every 16th (about 64 at most)
+    /// where it stopped early, once the rest could prove nothing (absent in documents written
+    /// before it was recorded, and for a level without a probe).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_rects: Option<u32>,
     /// The level's pilot (`sampling_probe_pay`): what sampling one more of its rectangles
     /// costs, in polygons drawn weighted by resolution (`SamplingSettings::polygon_weight`).
     /// Absent where no pilot ran (no probe, a probe that stopped the level already, or the
@@ -316,6 +321,9 @@ pub struct PvsLevelSummary {
     /// Mean over the cells whose level had a probe of [`SamplingLevel::probe_objects`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_objects: Option<f64>,
+    /// Mean over the cells whose level had a probe of [`SamplingLevel::probe_rects`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_rects: Option<f64>,
     /// Mean over the cells whose level had a pilot of [`SamplingLevel::probe_cost`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub probe_cost: Option<f64>,
