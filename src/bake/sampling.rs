@@ -764,9 +764,17 @@ impl Culler for SamplingCuller {
                         continue;
                     }
                     let known = shared.known_now();
+                    // The points the budget has left for this chunk go to its first
+                    // rectangles, in order (a rectangle further on gives up, as one past the
+                    // budget does), not to whichever lanes ask first, so that which rectangles
+                    // are sampled does not depend on the threads either.
+                    let left = s
+                        .budget_points
+                        .saturating_sub(shared.points.load(Ordering::Relaxed));
                     let lanes: Vec<Vec<Outcome>> = chunk
                         .par_chunks(lane_len)
-                        .map(|lane| {
+                        .enumerate()
+                        .map(|(l, lane)| {
                             let mut known = known.clone();
                             let Some(mut r) = pool.take(new_renderer) else {
                                 // No renderer (the device failed): what the lane would test
@@ -778,7 +786,8 @@ impl Culler for SamplingCuller {
                             };
                             let open = lane
                                 .iter()
-                                .map(|&i| {
+                                .enumerate()
+                                .map(|(k, &i)| {
                                     let mut rec = RectRecord::default();
                                     let o = shared.patch(
                                         &mut r,
@@ -786,7 +795,7 @@ impl Culler for SamplingCuller {
                                         &level[i].1,
                                         &mut known,
                                         &mut rec,
-                                        false,
+                                        Take::Point(((l * lane_len + k) as u64) < left),
                                     );
                                     shared.count(&rec);
                                     (o, rec)
@@ -1067,6 +1076,16 @@ impl Culler for SamplingCuller {
             ..CullerWork::default()
         })
     }
+}
+
+/// How a rectangle stands with the budget ([`Shared::patch`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Take {
+    /// It may take a sample point (false: the points its chunk had left went to the
+    /// rectangles before it; it gives up as one past the budget does).
+    Point(bool),
+    /// A trial render (a level's pilot): no point taken, nothing given up.
+    Trial,
 }
 
 /// One candidate's result in a render for its group ([`Shared::render_group`]).
@@ -1387,9 +1406,10 @@ impl Shared<'_> {
     /// that other lanes update meanwhile, so that its result is the same whatever runs beside
     /// it, and adds to it what it finds visible.
     ///
-    /// A `trial` (a level's pilot, [`Shared::pilot`]) renders and tests as the rectangle
-    /// would but takes no point of the budget and gives nothing up: what it leaves open at the
-    /// finest ε stays undecided (only its counts in `rec` are used).
+    /// `take` says whether it may take a point of the budget ([`Take`]); a trial (a level's
+    /// pilot, [`Shared::pilot`]) renders and tests as the rectangle would but takes no point
+    /// of the budget and gives nothing up: what it leaves open at the finest ε stays
+    /// undecided (only its counts in `rec` are used).
     fn patch(
         &self,
         renderer: &mut Renderer,
@@ -1397,8 +1417,9 @@ impl Shared<'_> {
         list: &[u32],
         known: &mut [bool],
         rec: &mut RectRecord,
-        trial: bool,
+        take: Take,
     ) -> Option<Arc<Vec<u32>>> {
+        let trial = take == Take::Trial;
         let list: Vec<u32> = list
             .iter()
             .copied()
@@ -1407,8 +1428,8 @@ impl Shared<'_> {
         if list.is_empty() {
             return None;
         }
-        if !trial {
-            if !self.take_point() {
+        if let Take::Point(allowed) = take {
+            if !allowed || !self.take_point() {
                 self.give_up(&list, known);
                 return None;
             }
@@ -1532,7 +1553,7 @@ impl Shared<'_> {
             }
             let (_, r) = slot.get_or_insert_with(|| (res, Renderer::cpu(res, tuck)));
             let mut rec = RectRecord::default();
-            self.patch(r, q, list, &mut known.clone(), &mut rec, true);
+            self.patch(r, q, list, &mut known.clone(), &mut rec, Take::Trial);
             rec.polygons as f64
         };
         let (wl, wf) = (
