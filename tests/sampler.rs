@@ -900,17 +900,22 @@ fn sampler_index(r: &bake::BakeResult) -> usize {
         .expect("the sampler ran")
 }
 
-/// A 120-tree forest's middle cell and sampler settings that give it many rectangles, two
-/// levels with probes, certifying rays and distance bands.
-fn small_forest() -> (umbrasweep::Scene, Aabb, BakeSettings) {
+/// A 120-tree, 150-leaf forest of the `preset`'s leaves and its middle cell.
+fn forest_middle_cell(preset: umbrasweep::generate::ForestOptions) -> (umbrasweep::Scene, Aabb) {
     let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
         trees: 120,
         leaves: 150,
-        ..umbrasweep::generate::ForestOptions::coarse()
+        ..preset
     })
     .unwrap();
-    let scene = generated.to_scene("forest.obj");
     let cell = generated.cells[generated.cells.len() / 2];
+    (generated.to_scene("forest.obj"), cell)
+}
+
+/// A 120-tree forest's middle cell and sampler settings that give it many rectangles, two
+/// levels with probes, certifying rays and distance bands.
+fn small_forest() -> (umbrasweep::Scene, Aabb, BakeSettings) {
+    let (scene, cell) = forest_middle_cell(umbrasweep::generate::ForestOptions::coarse());
     let mut settings = settings();
     settings.sampling_settings = SamplingSettings {
         eps: Some(0.12),
@@ -933,15 +938,7 @@ fn small_forest() -> (umbrasweep::Scene, Aabb, BakeSettings) {
 #[test]
 fn the_sampler_hides_the_same_on_any_thread_count() {
     let (scene, cell, settings) = small_forest();
-    let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let (hidden, work) = pool.install(|| run_sampler(&scene, &cell, &settings));
-        let curve: Vec<(u64, u32)> = work.levels.iter().map(|l| (l.points, l.hidden)).collect();
-        (hidden, work.points, curve)
-    };
+    let run = |threads: usize| sampled_on(threads, &scene, &cell, &settings);
     let one = run(1);
     assert!(
         one.1 > 64 && one.2.len() >= 2 && one.0.contains(&true),
@@ -959,6 +956,23 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
     }
 }
 
+/// The sampler alone on `threads` threads: what it hid, its points and its cost curve's
+/// points and hidden objects per level.
+fn sampled_on(
+    threads: usize,
+    scene: &umbrasweep::Scene,
+    cell: &Aabb,
+    settings: &BakeSettings,
+) -> (Vec<bool>, u64, Vec<(u64, u32)>) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let (hidden, work) = pool.install(|| run_sampler(scene, cell, settings));
+    let curve = work.levels.iter().map(|l| (l.points, l.hidden)).collect();
+    (hidden, work.points, curve)
+}
+
 /// A point budget that runs out inside a level gives its last points to the same rectangles
 /// on any thread count, run after run: the small forest's cell with ten points fewer than it
 /// takes unbudgeted, on 1, 3 and 4 threads (4 twice). When lanes took points from a shared counter
@@ -973,15 +987,7 @@ fn a_point_budget_runs_out_at_the_same_rectangles_on_any_thread_count() {
     // every undecided object whichever rectangles they are.)
     let budget = whole - 10;
     settings.sampling_settings.budget_points = budget;
-    let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let (hidden, work) = pool.install(|| run_sampler(&scene, &cell, &settings));
-        let curve: Vec<(u64, u32)> = work.levels.iter().map(|l| (l.points, l.hidden)).collect();
-        (hidden, work.points, curve)
-    };
+    let run = |threads: usize| sampled_on(threads, &scene, &cell, &settings);
     let one = run(1);
     assert!(
         one.1 <= budget && one.1 + 32 > budget && one.2.len() >= 2,
@@ -1348,14 +1354,7 @@ fn a_large_cell_in_fine_leaves_trades_pixels_for_points() {
 /// tests open somewhere and every face's objects tested, so the second probe stops there.
 #[test]
 fn a_probe_stops_once_its_rest_could_prove_nothing() {
-    let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
-        trees: 120,
-        leaves: 150,
-        ..umbrasweep::generate::ForestOptions::fine()
-    })
-    .unwrap();
-    let scene = generated.to_scene("forest.obj");
-    let cell = generated.cells[generated.cells.len() / 2];
+    let (scene, cell) = forest_middle_cell(umbrasweep::generate::ForestOptions::fine());
     let mut settings = settings();
     settings.sampling_settings = SamplingSettings {
         eps: Some(0.03),
