@@ -1236,6 +1236,7 @@ fn faces_in_turn(probe: Vec<usize>, face: impl Fn(usize) -> usize) -> Vec<usize>
         .flat_map(|k| by_face.iter().filter_map(move |(_, l)| l.get(k).copied()))
         .collect()
 }
+
 /// A level's pilot ([`Shared::pilot`]) renders at most this many of its probed rectangles
 /// again, and one quadrant of each twice.
 const PILOT_RECTS: usize = 8;
@@ -1882,7 +1883,8 @@ mod tests {
         assert_eq!(live.load(Ordering::SeqCst), 0);
     }
 
-    /// [`probe_stride`]: every 16th rectangle, at least 8 and about 64 at most.
+    /// [`probe_can_stop`]: only when every undecided object tested was left open somewhere
+    /// and the rest tests none untested.
     #[test]
     fn a_probe_stops_only_when_its_rest_could_prove_nothing() {
         // Objects 0–4: 0 tested and left open, 1 tested and hidden everywhere so far, 2 not
@@ -1908,6 +1910,7 @@ mod tests {
         assert!(probe_can_stop(&seen, not_1, std::iter::empty()));
     }
 
+    /// [`faces_in_turn`].
     #[test]
     fn a_probe_takes_the_faces_in_turn() {
         // Faces 0, 0, 0, 2, 2, 5: each face's rectangles keep their order.
@@ -1918,6 +1921,7 @@ mod tests {
         assert_eq!(faces_in_turn(vec![3, 7], |_| 4), vec![3, 7]);
     }
 
+    /// [`probe_stride`]: every 16th rectangle, at least 8 and about 64 at most.
     #[test]
     fn a_probe_takes_every_16th_rectangle_within_its_bounds() {
         let probed = |n: usize| (0..n).step_by(probe_stride(n)).count();
