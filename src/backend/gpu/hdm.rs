@@ -316,6 +316,11 @@ impl HdmPipelines {
 pub(super) const BOX_SLOTS: u32 = 3;
 /// Bytes of one box (six `f64`).
 pub(super) const BOX_BYTES: u64 = 48;
+
+/// Box `b` as the shaders read a box ([`BOX_BYTES`]): min x, y, z, then max x, y, z.
+pub(super) fn box_f64s(b: &crate::geom::DAabb) -> [f64; 6] {
+    [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]
+}
 /// Storage buffers the box tests bind (`boxes.wgsl`): a device allowing fewer per stage
 /// tests no boxes.
 pub(super) const BOX_STORAGE_BUFFERS: u32 = 9;

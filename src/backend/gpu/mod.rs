@@ -1157,11 +1157,8 @@ impl RasterBackend for GpuBackend {
         self.check_failure()?;
         let generation = self.next_generation();
         // (Debug builds keep the boxes to check each test's box against the one it names.)
-        let check = cfg!(debug_assertions).then(|| {
-            (boxes.iter())
-                .flat_map(|b| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
-                .collect()
-        });
+        let check =
+            cfg!(debug_assertions).then(|| (boxes.iter()).flat_map(hdm::box_f64s).collect());
         *slot = Some(resident::ResidentTable::given(
             &self.device,
             "resident occludee boxes",

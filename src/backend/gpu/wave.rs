@@ -1154,25 +1154,21 @@ impl GpuBackend {
                 frame_words.extend_from_slice(&fu);
                 // (Each test's query slots follow from its place: `box_slot`.)
                 for (k, b) in q.boxes.iter().enumerate() {
+                    let values = hdm::box_f64s(b);
                     let src = match q.resident_id(generation, k) {
                         Some(id) => {
                             debug_assert!(
-                                layout
-                                    .resident
-                                    .as_ref()
-                                    .is_some_and(|r| r.element(id as usize).is_none_or(|e| e
-                                        == [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])),
+                                layout.resident.as_ref().is_some_and(|r| r
+                                    .element(id as usize)
+                                    .is_none_or(|e| e == values)),
                                 "a query names box {id} of the resident table for another box"
                             );
-                            named
-                                .push((id, [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]));
+                            named.push((id, values));
                             id
                         }
                         None => {
                             let at = (box_f64s.len() / 6) as u32;
-                            box_f64s.extend_from_slice(&[
-                                b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z,
-                            ]);
+                            box_f64s.extend_from_slice(&values);
                             hdm::INLINE_BOX | at
                         }
                     };
