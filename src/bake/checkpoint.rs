@@ -25,12 +25,17 @@
 //!
 //! Format: JSON, `{"format": "umbrasweep-sampler-checkpoint", "version": 3, "inputs": …,
 //! "cell": [min, max], "finest_eps": …, "seconds": …, "known": "<hex bits per object>",
-//! "levels": [{"probe_only": …, "probe_rounds": …, "pilot": [cost, saving], "curve": …, "rects": {"<index>":
-//! {"open": [ids] | null, "tested": …, "hid": …, "point": …, "polygons": …}}}]}` (`pilot`
-//! only where the level's pilot ran: a resumed level takes its decision and figures;
-//! `probe_rounds` only where a probe went on after a round). Version 3 (December 7): a
-//! level's probe runs in rounds and may stop early, so version 2 files, whose probes ran
-//! whole, are not resumed.
+//! "levels": [{"probe_only": …, "probe_rounds": …, "probe_cell": [hidden, tested], "pilot": [cost,
+//! saving], "curve": …, "rects": {"<index>": {"open": [ids] | null, "tested": …, "hid": …,
+//! "point": …, "polygons": …}}}]}` (`pilot` only where the level's pilot ran: a resumed level
+//! takes its decision and figures; `probe_rounds` only where a probe went on after a round;
+//! `probe_cell` with the probe's decision: what it proved of the objects still undecided, which
+//! a run resumed after the probe would count against the cut's known set, not the probe's).
+//! Version 3 (December 7): a level's probe runs in rounds and may stop early, so version 2
+//! files, whose probes ran whole, are not resumed; version 3 files written before `probe_cell`
+//! (the same day) resume with the counts made again. Numbers are read back to the bits written
+//! (serde_json's `float_roundtrip`): the finest ε is compared bit for bit and the finished
+//! levels' cost-curve entries are copied into the PVS document.
 
 use super::BakeError;
 use crate::geom::Aabb;
@@ -131,6 +136,11 @@ pub(super) struct LevelRecord {
     /// without asking again, since the objects known visible then are not in the file.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub probe_rounds: u32,
+    /// The probe's count of the objects still undecided that it tested and of those every
+    /// probed rectangle hid (`SamplingLevel::probe_objects`, `probe_cell_hidden`), recorded
+    /// with the decision: a resumed run counts after a later file's known objects.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_cell: Option<(u32, u32)>,
     /// The pilot's estimates per rectangle (cost, saving), when one ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pilot: Option<(f64, f64)>,
@@ -360,5 +370,53 @@ mod tests {
         }
         assert_eq!(from_hex("f", 5), None);
         assert_eq!(from_hex("g", 4), None);
+    }
+
+    /// A checkpoint's numbers read back to the same bits: a resumed cell compares its finest
+    /// ε bit by bit and copies the finished levels' cost-curve entries into the PVS document,
+    /// so a number read back one unit in the last place off would refuse the file or change
+    /// the document's bytes. serde_json's default parser was off by one unit for the level ε
+    /// 0.11785113019775803 (`float_roundtrip` fixes that); also 20,000 random finite numbers.
+    #[test]
+    fn numbers_read_back_to_the_same_bits() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let mut values = vec![0.11785113019775803, 0.05 / 2f64.sqrt(), 1e-300, 5e-324];
+        while values.len() < 20_000 {
+            let v = f64::from_bits(rng.random());
+            if v.is_finite() {
+                values.push(v);
+            }
+        }
+        for v in values {
+            let level = LevelRecord {
+                pilot: Some((v, -v)),
+                curve: Some(SamplingLevel {
+                    eps: v,
+                    ..SamplingLevel::default()
+                }),
+                ..LevelRecord::default()
+            };
+            let file = CheckpointFile {
+                format: CHECKPOINT_FORMAT.into(),
+                version: CHECKPOINT_VERSION,
+                inputs: String::new(),
+                cell: [[0.0; 3]; 2],
+                finest_eps: v,
+                seconds: v,
+                known: String::new(),
+                levels: vec![level.clone()],
+            };
+            let back: CheckpointFile =
+                serde_json::from_slice(&serde_json::to_vec(&file).unwrap()).unwrap();
+            assert_eq!(back.finest_eps.to_bits(), v.to_bits(), "{v:e}");
+            assert_eq!(back.seconds.to_bits(), v.to_bits(), "{v:e}");
+            let curve = back.levels[0].curve.as_ref().unwrap();
+            assert_eq!(curve.eps.to_bits(), v.to_bits(), "{v:e}");
+            assert_eq!(
+                back.levels[0].pilot.map(|p| p.0.to_bits()),
+                Some(v.to_bits())
+            );
+        }
     }
 }

@@ -933,12 +933,17 @@ impl Culler for SamplingCuller {
                 }
                 let rest: Vec<usize> = (0..level.len()).filter(|&i| !in_probe[i]).collect();
                 // A resumed level keeps the decision its interrupted run made.
-                let resumed = ckpt
-                    .as_ref()
-                    .and_then(|c| c.with_level(this_level, |l| l.probe_only.map(|p| (p, l.pilot))));
+                let resumed = ckpt.as_ref().and_then(|c| {
+                    c.with_level(this_level, |l| {
+                        l.probe_only.map(|p| (p, l.pilot, l.probe_cell))
+                    })
+                });
                 let skip = match resumed {
-                    Some((skip, pilot)) => {
+                    Some((skip, pilot, cell)) => {
                         (probe_cost, pilot_saving) = (pilot.map(|p| p.0), pilot.map(|p| p.1));
+                        // Counted when the decision was made: objects found visible after it
+                        // (in the file's known set) would leave this count.
+                        probe_cell = cell.or(probe_cell);
                         skip
                     }
                     None => {
@@ -970,6 +975,7 @@ impl Culler for SamplingCuller {
                 if let Some(c) = &ckpt {
                     c.with_level(this_level, |l| {
                         l.probe_only = Some(skip);
+                        l.probe_cell = probe_cell;
                         l.pilot = probe_cost.zip(pilot_saving);
                     });
                 }
