@@ -23,7 +23,7 @@
 //! written to a temporary name and renamed, at most every `every_seconds` (after a chunk
 //! ends), and removed when their cell is finished.
 //!
-//! Format: JSON, `{"format": "umbrasweep-sampler-checkpoint", "version": 3, "inputs": …,
+//! Format: JSON, `{"format": "umbrasweep-sampler-checkpoint", "version": 4, "inputs": …,
 //! "cell": [min, max], "finest_eps": …, "seconds": …, "known": "<hex bits per object>",
 //! "levels": [{"probe_only": …, "probe_rounds": …, "probe_cell": [hidden, tested], "pilot": [cost,
 //! saving], "curve": …, "rects": {"<index>": {"open": [ids] | null, "tested": …, "hid": …,
@@ -32,8 +32,9 @@
 //! `probe_cell` with the probe's decision: what it proved of the objects still undecided, which
 //! a run resumed after the probe would count against the cut's known set, not the probe's).
 //! Version 3 (December 7): a level's probe runs in rounds and may stop early, so version 2
-//! files, whose probes ran whole, are not resumed; version 3 files written before `probe_cell`
-//! (the same day) resume with the counts made again. Numbers are read back to the bits written
+//! files, whose probes ran whole, are not resumed. Version 4 (December 7, later): a level is
+//! split into at most four rectangles per point the budget has left (`bake::sampling`), so a
+//! version 3 file may index a longer level than the one it would be replayed onto. Numbers are read back to the bits written
 //! (serde_json's `float_roundtrip`): the finest ε is compared bit for bit and the finished
 //! levels' cost-curve entries are copied into the PVS document.
 
@@ -50,7 +51,7 @@ use std::time::Instant;
 /// The first field of a checkpoint file.
 pub const CHECKPOINT_FORMAT: &str = "umbrasweep-sampler-checkpoint";
 /// The checkpoint format's version.
-pub const CHECKPOINT_VERSION: u32 = 3;
+pub const CHECKPOINT_VERSION: u32 = 4;
 
 /// Where and how often the sampler saves its progress inside a cell
 /// ([`super::BakeHooks::sampler_checkpoints`]).

@@ -1040,12 +1040,27 @@ impl Culler for SamplingCuller {
                 }
                 break;
             }
-            level = level
-                .iter()
-                .zip(open)
-                .filter_map(|((patch, _), open)| open.map(|o| (patch, o)))
-                .flat_map(|(patch, o)| patch.quadrants().map(move |q| (q, o.clone())))
-                .collect();
+            // The next level: each rectangle left with undecided objects split in four, but
+            // no more than `SPLIT_PER_POINT_LEFT` per point the budget has left. A level far
+            // beyond the budget (a tiny ε, levels split unsampled one after another) would
+            // otherwise hold millions of rectangles that can never be sampled (6 GB for a
+            // wall with a window 1e-6 across); those past the cap give their objects up now,
+            // as the budget would when it reached them. (Not filtered by what is decided: a
+            // resumed run knows the cut's visible objects here, and would split otherwise.)
+            let left = s
+                .budget_points
+                .saturating_sub(shared.points.load(Ordering::Relaxed));
+            let cap = left.saturating_mul(SPLIT_PER_POINT_LEFT).max(64);
+            let mut next = Vec::new();
+            for ((patch, _), open) in level.iter().zip(open) {
+                let Some(o) = open else { continue };
+                if next.len() as u64 + 4 > cap {
+                    shared.mark_visible(&o);
+                    continue;
+                }
+                next.extend(patch.quadrants().map(|q| (q, o.clone())));
+            }
+            level = next;
         }
         if let Some(e) = shared
             .failed
@@ -1197,6 +1212,13 @@ fn probe_stride(n: usize) -> usize {
         .min(n / SamplingSettings::PROBE_MIN)
         .max(1)
 }
+
+/// A level is split into at most this many rectangles per sample point the budget has left
+/// (`--sampling-budget`); the rest give their objects up at the split. Four: a rectangle
+/// whose objects were all decided before its turn takes no point, and on the fine forest's
+/// 4×2×4 cell a quarter of the finest level's rectangles take none (36,931 points for
+/// 48,384), so a level up to four times the points left may still be sampled whole.
+const SPLIT_PER_POINT_LEFT: u64 = 4;
 
 /// A level sampled whole starts with every this-many-th rectangle.
 const SCOUT_STRIDE: usize = 16;
