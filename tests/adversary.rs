@@ -651,6 +651,9 @@ fn pinhole_cases() -> u64 {
         .unwrap_or(24)
 }
 
+/// A pinhole case: its objects, cell, `P` and the target's centre.
+type Pinhole = (Vec<(String, Vec<[Vec3; 3]>)>, Aabb, Vec3, Vec3);
+
 /// Pinhole case `seed`, in world coordinates (placed as [`placement`] places it): a target
 /// seen from one point `P` of the cell (inside, on a face, an edge or a corner) through a
 /// square hole 0.1–3 % of the cell's diagonal across in a wall that is otherwise endless, the
@@ -659,8 +662,7 @@ fn pinhole_cases() -> u64 {
 /// on that line. So the target is visible from a patch of the cell as small as the hole, often
 /// from a corner or an edge of the cell only. Returns the objects (`target` first, then
 /// `wall`), the cell, and the world `P` and target centre.
-#[allow(clippy::type_complexity)]
-fn pinhole(seed: u64) -> (Vec<(String, Vec<[Vec3; 3]>)>, Aabb, Vec3, Vec3) {
+fn pinhole(seed: u64) -> Pinhole {
     let mut r = Rng(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ 0x91);
     let ratio = |r: &mut Rng, span: f64| 50f64.powf(r.f(-span, span));
     let s = DVec3::new(
@@ -786,7 +788,7 @@ fn a_target_seen_through_a_pinhole_from_one_patch_of_the_cell_stays_visible() {
             BakeSettings {
                 sweep: SweepChoice::On,
                 sampling: SweepChoice::On,
-                sampling_settings: sampler.clone(),
+                sampling_settings: sampler,
                 ..BakeSettings::default()
             },
         ),
