@@ -434,23 +434,10 @@ fn add_degenerates(c: &mut Case, seed: u64) -> usize {
     added
 }
 
-/// Bakes every case with every setting and attacks what each culled; panics on a false cull.
-/// `degenerate` adds [`add_degenerates`] to each case.
-fn campaign(degenerate: bool) {
-    let cpu = CpuBackend::new();
-    let gpu = gpu();
-    // Odd GPU cases ask the device every plane's box tests (one per pixel), so that the
-    // device's answers — and the bake's boxes kept there — are attacked too, not only the
-    // maps read back; and they count the views on the device (lavapipe defaults to clipped
-    // projections), from the scene's occluder parts kept there.
-    let gpu_every_test = gpu.as_ref().and_then(|_| crate::gpu()).map(|mut g| {
-        g.set_pixels_per_device_test(1);
-        if let Err(e) = g.set_projection(umbrasweep::backend::gpu::GpuProjection::Counting) {
-            eprintln!("adversary: the odd GPU cases keep clipped projections: {e}");
-        }
-        g
-    });
-    let settings = [
+/// The settings every case is baked with: the defaults, the sweep forced, separate planes
+/// forced, and the shrunk-occluder sampler after the sweep (no rays, 400 points at 32 px).
+fn culler_settings() -> Vec<(&'static str, BakeSettings)> {
+    vec![
         ("default", BakeSettings::default()),
         (
             "sweep",
@@ -480,7 +467,26 @@ fn campaign(degenerate: bool) {
                 ..BakeSettings::default()
             },
         ),
-    ];
+    ]
+}
+
+/// Bakes every case with every setting and attacks what each culled; panics on a false cull.
+/// `degenerate` adds [`add_degenerates`] to each case.
+fn campaign(degenerate: bool) {
+    let cpu = CpuBackend::new();
+    let gpu = gpu();
+    // Odd GPU cases ask the device every plane's box tests (one per pixel), so that the
+    // device's answers — and the bake's boxes kept there — are attacked too, not only the
+    // maps read back; and they count the views on the device (lavapipe defaults to clipped
+    // projections), from the scene's occluder parts kept there.
+    let gpu_every_test = gpu.as_ref().and_then(|_| crate::gpu()).map(|mut g| {
+        g.set_pixels_per_device_test(1);
+        if let Err(e) = g.set_projection(umbrasweep::backend::gpu::GpuProjection::Counting) {
+            eprintln!("adversary: the odd GPU cases keep clipped projections: {e}");
+        }
+        g
+    });
+    let settings = culler_settings();
     let mut problems = Vec::new();
     let (mut culled, mut targets_culled) = (0usize, 0usize);
     // Degenerate triangles the scene keeps (`is_degenerate` drops only exact zeros).
@@ -754,45 +760,14 @@ fn pinhole(seed: u64) -> Pinhole {
 fn a_target_seen_through_a_pinhole_from_one_patch_of_the_cell_stays_visible() {
     let cpu = CpuBackend::new();
     let gpu = gpu();
-    let sampler = umbrasweep::settings::SamplingSettings {
-        rays: 0,
-        budget_points: 400,
-        resolution: Some(32),
-        ..Default::default()
-    };
-    let settings = [
-        ("default", BakeSettings::default()),
-        (
-            "sweep",
-            BakeSettings {
-                sweep: SweepChoice::On,
-                ..BakeSettings::default()
-            },
-        ),
-        (
-            "separate planes",
-            BakeSettings {
-                sweep: SweepChoice::Off,
-                ..BakeSettings::default()
-            },
-        ),
-        (
-            "rsf",
-            BakeSettings {
-                rsf: SweepChoice::On,
-                ..BakeSettings::default()
-            },
-        ),
-        (
-            "sampling",
-            BakeSettings {
-                sweep: SweepChoice::On,
-                sampling: SweepChoice::On,
-                sampling_settings: sampler,
-                ..BakeSettings::default()
-            },
-        ),
-    ];
+    let mut settings = culler_settings();
+    settings.push((
+        "rsf",
+        BakeSettings {
+            rsf: SweepChoice::On,
+            ..BakeSettings::default()
+        },
+    ));
     let (mut valid, mut problems) = (0, Vec::new());
     for seed in 0..pinhole_cases() {
         let (objects, cell, p, tc) = pinhole(seed);

@@ -900,6 +900,40 @@ fn sampler_index(r: &bake::BakeResult) -> usize {
         .expect("the sampler ran")
 }
 
+/// What a resume test compares of a bake: the PVS, points, polygons and the cost curve but
+/// its seconds.
+type ResumeKey = (Vec<u32>, u64, u64, Vec<umbrasweep::pvs::SamplingLevel>);
+
+/// [`ResumeKey`] of a one-cell bake.
+fn resume_key(r: &bake::BakeResult) -> ResumeKey {
+    let c = &r.cells[0];
+    let w = &c.cullers[sampler_index(r)].work;
+    let curve = w
+        .levels
+        .iter()
+        .map(|l| umbrasweep::pvs::SamplingLevel { seconds: 0.0, ..*l })
+        .collect();
+    (c.visible.clone(), w.points, w.polygons, curve)
+}
+
+/// [`bake_with`] with sampler checkpoints `spec` (none: no file).
+fn bake_checkpointed(
+    scene: &umbrasweep::Scene,
+    cell: Aabb,
+    settings: &BakeSettings,
+    spec: Option<&bake::SamplerCheckpoints>,
+) -> Result<bake::BakeResult, bake::BakeError> {
+    bake_with(
+        scene,
+        cell,
+        settings,
+        bake::BakeHooks {
+            sampler_checkpoints: spec,
+            ..bake::BakeHooks::default()
+        },
+    )
+}
+
 /// A 120-tree, 150-leaf forest of the `preset`'s leaves and its middle cell.
 fn forest_middle_cell(preset: umbrasweep::generate::ForestOptions) -> (umbrasweep::Scene, Aabb) {
     let generated = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
@@ -1363,28 +1397,9 @@ fn a_probe_stops_once_its_rest_could_prove_nothing() {
         rays: 3_000,
         ..SamplingSettings::default()
     };
-    let key = |r: &bake::BakeResult| {
-        let c = &r.cells[0];
-        let w = &c.cullers[sampler_index(r)].work;
-        let curve: Vec<_> = w
-            .levels
-            .iter()
-            .map(|l| umbrasweep::pvs::SamplingLevel { seconds: 0.0, ..*l })
-            .collect();
-        (c.visible.clone(), w.points, w.polygons, curve)
-    };
-    let run = |spec: Option<&bake::SamplerCheckpoints>| {
-        bake_with(
-            &scene,
-            cell,
-            &settings,
-            bake::BakeHooks {
-                sampler_checkpoints: spec,
-                ..bake::BakeHooks::default()
-            },
-        )
-    };
-    let whole = key(&run(None).unwrap());
+    let run =
+        |spec: Option<&bake::SamplerCheckpoints>| bake_checkpointed(&scene, cell, &settings, spec);
+    let whole = resume_key(&run(None).unwrap());
     let levels = &whole.3;
     assert_eq!(levels.len(), 3, "{levels:?}");
     for (l, rects) in levels[..2].iter().zip([8, 8]) {
@@ -1406,7 +1421,7 @@ fn a_probe_stops_once_its_rest_could_prove_nothing() {
         assert!(matches!(e, bake::BakeError::Interrupted), "{e}");
         let spec = bake::SamplerCheckpoints::new(&out, "inputs", true, 0.0);
         assert_eq!(
-            key(&run(Some(&spec)).unwrap()),
+            resume_key(&run(Some(&spec)).unwrap()),
             whole,
             "resumed after {writes} writes"
         );
@@ -1468,30 +1483,12 @@ fn a_cell_cut_inside_or_after_a_probe_of_rounds_resumes_to_the_same_result() {
             budget_points: 150,
             ..settings.sampling_settings
         };
-        let key = |r: &bake::BakeResult| {
-            let c = &r.cells[0];
-            let w = &c.cullers[sampler_index(r)].work;
-            let curve: Vec<_> = w
-                .levels
-                .iter()
-                .map(|l| umbrasweep::pvs::SamplingLevel { seconds: 0.0, ..*l })
-                .collect();
-            (c.visible.clone(), w.points, w.polygons, curve)
-        };
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("slit.pvs");
         let run = |spec: Option<&bake::SamplerCheckpoints>| {
-            bake_with(
-                &scene,
-                cell,
-                &settings,
-                bake::BakeHooks {
-                    sampler_checkpoints: spec,
-                    ..bake::BakeHooks::default()
-                },
-            )
+            bake_checkpointed(&scene, cell, &settings, spec)
         };
-        let whole = key(&run(None).unwrap());
+        let whole = resume_key(&run(None).unwrap());
         assert_eq!(whole.0, [0, 1], "the cube is seen through the hole");
         assert!(
             whole.3.iter().any(|l| l.probe_rects.is_some_and(|r| r > 8)),
@@ -1520,7 +1517,7 @@ fn a_cell_cut_inside_or_after_a_probe_of_rounds_resumes_to_the_same_result() {
             spec.stop_after_writes = Some(writes);
             match run(Some(&spec)) {
                 Ok(r) => {
-                    assert_eq!(key(&r), whole);
+                    assert_eq!(resume_key(&r), whole);
                     break;
                 }
                 Err(e) => assert!(matches!(e, bake::BakeError::Interrupted), "{e}"),
@@ -1529,7 +1526,7 @@ fn a_cell_cut_inside_or_after_a_probe_of_rounds_resumes_to_the_same_result() {
             after_rounds |= rounds.iter().any(|&r| r > 0);
             let spec = bake::SamplerCheckpoints::new(&out, "inputs", true, 0.0);
             assert_eq!(
-                key(&run(Some(&spec)).unwrap()),
+                resume_key(&run(Some(&spec)).unwrap()),
                 whole,
                 "resumed after {writes} writes (probe rounds in the file: {rounds:?})"
             );
