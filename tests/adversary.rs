@@ -434,6 +434,17 @@ fn add_degenerates(c: &mut Case, seed: u64) -> usize {
     added
 }
 
+/// The scene of `objects` (name, triangles), every one opaque.
+fn opaque_scene(name: &str, objects: &[(String, Vec<[Vec3; 3]>)]) -> Scene {
+    Scene::from_objects(
+        Path::new(name),
+        objects
+            .iter()
+            .map(|(n, t)| (n.clone(), t.clone(), true))
+            .collect(),
+    )
+}
+
 /// The settings every case is baked with: the defaults, the sweep forced, separate planes
 /// forced, and the shrunk-occluder sampler after the sweep (no rays, 400 points at 32 px).
 fn culler_settings() -> Vec<(&'static str, BakeSettings)> {
@@ -504,13 +515,7 @@ fn campaign(degenerate: bool) {
             .iter()
             .map(|(n, t)| (n.clone(), t.iter().map(|t| t.map(|p| pl.p(p))).collect()))
             .collect();
-        let scene = Scene::from_objects(
-            Path::new("adversary"),
-            objects
-                .iter()
-                .map(|(n, t)| (n.clone(), t.clone(), true))
-                .collect(),
-        );
+        let scene = opaque_scene("adversary", &objects);
         if degenerate {
             let sliver_tris = objects[0].1.iter().rev().take(added);
             let others = objects.iter().filter(|(n, _)| n.starts_with("degenerate"));
@@ -777,13 +782,7 @@ fn a_target_seen_through_a_pinhole_from_one_patch_of_the_cell_stays_visible() {
             continue;
         }
         valid += 1;
-        let scene = Scene::from_objects(
-            Path::new("pinhole"),
-            objects
-                .iter()
-                .map(|(n, t)| (n.clone(), t.clone(), true))
-                .collect(),
-        );
+        let scene = opaque_scene("pinhole", &objects);
         let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
         if seed < gpu_cases()
             && let Some(g) = &gpu
@@ -825,23 +824,12 @@ fn a_target_seen_through_a_pinhole_from_one_patch_of_the_cell_stays_visible() {
 fn a_tiny_window_lays_out_no_more_rectangles_than_the_budget_can_sample() {
     use std::sync::atomic::Ordering;
     let (objects, cell, _, _) = pinhole(1);
-    let scene = Scene::from_objects(
-        Path::new("pinhole"),
-        objects
-            .iter()
-            .map(|(n, t)| (n.clone(), t.clone(), true))
-            .collect(),
-    );
-    let settings = BakeSettings {
-        sampling: SweepChoice::On,
-        sampling_settings: umbrasweep::settings::SamplingSettings {
-            rays: 0,
-            budget_points: 400,
-            resolution: Some(32),
-            ..Default::default()
-        },
-        ..BakeSettings::default()
-    };
+    let scene = opaque_scene("pinhole", &objects);
+    // The campaigns' sampler: 400 points at 32 px.
+    let (_, settings) = culler_settings()
+        .into_iter()
+        .find(|(label, _)| *label == "sampling")
+        .unwrap();
     let progress = umbrasweep::bake::SamplerProgress::default();
     let r = umbrasweep::bake::bake_cells(
         &scene,

@@ -1076,17 +1076,8 @@ fn resume_after_cuts(
             .filter(|p| p.to_string_lossy().contains(".sampler-"))
             .collect()
     };
-    let run = |spec: Option<&bake::SamplerCheckpoints>| {
-        bake_with(
-            scene,
-            cell,
-            settings,
-            bake::BakeHooks {
-                sampler_checkpoints: spec,
-                ..bake::BakeHooks::default()
-            },
-        )
-    };
+    let run =
+        |spec: Option<&bake::SamplerCheckpoints>| bake_checkpointed(scene, cell, settings, spec);
     // What a comparison keeps of a bake: the PVS and the sampler's work but its seconds.
     let key = |r: &bake::BakeResult| {
         let k = sampler_index(r);
