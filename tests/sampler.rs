@@ -980,14 +980,22 @@ fn the_sampler_hides_the_same_on_any_thread_count() {
         (one.1, &one.2)
     );
     for threads in [3, 4] {
-        let other = run(threads);
-        assert_eq!(one.2, other.2, "cost curve on {threads} threads");
-        assert_eq!(one.1, other.1, "points on {threads} threads");
-        assert!(
-            one.0 == other.0,
-            "hidden objects differ on {threads} threads"
-        );
+        assert_same_sampling(&one, &run(threads), threads);
     }
+}
+
+/// What [`sampled_on`] gives: the objects hidden, the points, and per level the points and
+/// objects hidden.
+type Sampled = (Vec<bool>, u64, Vec<(u64, u32)>);
+
+/// Panics unless the run on `threads` threads gave what the one-thread run gave.
+fn assert_same_sampling(one: &Sampled, other: &Sampled, threads: usize) {
+    assert_eq!(one.2, other.2, "cost curve on {threads} threads");
+    assert_eq!(one.1, other.1, "points on {threads} threads");
+    assert!(
+        one.0 == other.0,
+        "hidden objects differ on {threads} threads"
+    );
 }
 
 /// The sampler alone on `threads` threads: what it hid, its points and its cost curve's
@@ -997,7 +1005,7 @@ fn sampled_on(
     scene: &umbrasweep::Scene,
     cell: &Aabb,
     settings: &BakeSettings,
-) -> (Vec<bool>, u64, Vec<(u64, u32)>) {
+) -> Sampled {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -1029,13 +1037,7 @@ fn a_point_budget_runs_out_at_the_same_rectangles_on_any_thread_count() {
         (one.1, &one.2)
     );
     for threads in [3, 4, 4] {
-        let other = run(threads);
-        assert_eq!(one.2, other.2, "cost curve on {threads} threads");
-        assert_eq!(one.1, other.1, "points on {threads} threads");
-        assert!(
-            one.0 == other.0,
-            "hidden objects differ on {threads} threads"
-        );
+        assert_same_sampling(&one, &run(threads), threads);
     }
 }
 

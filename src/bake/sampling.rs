@@ -674,9 +674,7 @@ impl Culler for SamplingCuller {
                 // holds more rectangles than the budget has points left: then no level below
                 // can be sampled whole, and what it would test stays visible (a tiny ε below
                 // a larger maximum would otherwise lay out its whole finest level at once).
-                let left = s
-                    .budget_points
-                    .saturating_sub(shared.points.load(Ordering::Relaxed));
+                let left = shared.points_left();
                 if (level.len() as u64).saturating_mul(4) > left {
                     for (_, l) in &level {
                         shared.mark_visible(l);
@@ -768,9 +766,7 @@ impl Culler for SamplingCuller {
                     // rectangles, in order (a rectangle further on gives up, as one past the
                     // budget does), not to whichever lanes ask first, so that which rectangles
                     // are sampled does not depend on the threads either.
-                    let left = s
-                        .budget_points
-                        .saturating_sub(shared.points.load(Ordering::Relaxed));
+                    let left = shared.points_left();
                     let lanes: Vec<Vec<Outcome>> = chunk
                         .par_chunks(lane_len)
                         .enumerate()
@@ -1047,9 +1043,7 @@ impl Culler for SamplingCuller {
             // wall with a window 1e-6 across); those past the cap give their objects up now,
             // as the budget would when it reached them. (Not filtered by what is decided: a
             // resumed run knows the cut's visible objects here, and would split otherwise.)
-            let left = s
-                .budget_points
-                .saturating_sub(shared.points.load(Ordering::Relaxed));
+            let left = shared.points_left();
             let cap = left.saturating_mul(SPLIT_PER_POINT_LEFT).max(64);
             let mut next = Vec::new();
             for ((patch, _), open) in level.iter().zip(open) {
@@ -1331,6 +1325,11 @@ fn cell_seed(cell: &Aabb) -> u64 {
 
 impl Shared<'_> {
     /// Whether the budget is spent (no point can be taken).
+    /// Sample points the budget has left (`--sampling-budget` in points).
+    fn points_left(&self) -> u64 {
+        (self.data.settings.budget_points).saturating_sub(self.points.load(Ordering::Relaxed))
+    }
+
     fn spent(&self) -> bool {
         let s = &self.data.settings;
         self.points.load(Ordering::Relaxed) >= s.budget_points || !self.in_time()
