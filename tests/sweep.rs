@@ -345,8 +345,10 @@ type PartsTable = (Vec<glam::DVec3>, Vec<(u32, u32)>);
 
 /// A backend that checks the occluder sets' part ids against the table the bake gives it
 /// (`upload_occluder_parts`), then renders on the CPU: every occluder that names a part holds
-/// that part's points bit for bit, and every job names the table.
+/// that part's points bit for bit, and every job names the table. Where it says it keeps no
+/// table (`keeps` false), the bake must give it no spans and its jobs name none.
 struct PartsCheck {
+    keeps: bool,
     cpu: CpuBackend,
     table: std::sync::Mutex<Option<PartsTable>>,
     /// Occluders that named a part, and those that did not.
@@ -364,6 +366,10 @@ impl umbrasweep::backend::RasterBackend for PartsCheck {
         &self,
         jobs: &[umbrasweep::plane::PlaneJob],
     ) -> Result<Vec<umbrasweep::plane::DepthMap>, umbrasweep::backend::BackendError> {
+        if !self.keeps {
+            assert!(jobs.iter().all(|j| j.occluders.table.is_none()));
+            return self.cpu.render(jobs);
+        }
         let table = self.table.lock().unwrap();
         let (points, spans) = table.as_ref().expect("the bake gave its parts first");
         let (mut named, mut not) = (0, 0);
@@ -394,11 +400,23 @@ impl umbrasweep::backend::RasterBackend for PartsCheck {
         self.cpu.render(jobs)
     }
 
+    fn keeps_occluder_parts(&self) -> bool {
+        self.keeps
+    }
+
     fn upload_occluder_parts(
         &self,
         points: &[glam::DVec3],
         spans: &[(u32, u32)],
     ) -> Result<Option<u64>, umbrasweep::backend::BackendError> {
+        if !self.keeps {
+            assert!(
+                spans.is_empty(),
+                "{} spans listed for no table",
+                spans.len()
+            );
+            return Ok(None);
+        }
         *self.table.lock().unwrap() = Some((points.to_vec(), spans.to_vec()));
         Ok(Some(PARTS_TABLE))
     }
@@ -433,7 +451,7 @@ fn slanted_quads() -> Scene {
 /// the sweep (leaves cut where they cross a slab's planes name none) and without it, and on
 /// quads crossing the planes of the cell's faces (cut there), some occluders name parts and
 /// some do not, and each that does holds exactly that part's points; the PVS is the CPU
-/// backend's.
+/// backend's. A backend that keeps no table is given no spans.
 #[test]
 fn occluders_name_the_scene_parts_they_hold_unchanged() {
     let forest = umbrasweep::generate::forest(&umbrasweep::generate::ForestOptions {
@@ -456,18 +474,23 @@ fn occluders_name_the_scene_parts_they_hold_unchanged() {
             sweep,
             ..BakeSettings::default()
         };
-        let check = PartsCheck {
-            cpu: CpuBackend::new(),
-            table: Default::default(),
-            counts: Default::default(),
-        };
-        let got = bake(scene, cells, &settings, &check, None).unwrap();
         let want = bake(scene, cells, &settings, &CpuBackend::new(), None).unwrap();
-        for (g, w) in got.cells.iter().zip(&want.cells) {
-            assert_eq!(g.visible, w.visible, "{sweep:?}");
+        for keeps in [true, false] {
+            let check = PartsCheck {
+                keeps,
+                cpu: CpuBackend::new(),
+                table: Default::default(),
+                counts: Default::default(),
+            };
+            let got = bake(scene, cells, &settings, &check, None).unwrap();
+            for (g, w) in got.cells.iter().zip(&want.cells) {
+                assert_eq!(g.visible, w.visible, "{sweep:?}, keeps {keeps}");
+            }
+            if keeps {
+                let (named, not) = *check.counts.lock().unwrap();
+                eprintln!("{sweep:?}: {named} occluders named a part, {not} did not");
+                assert!(named > 0 && not > 0, "{sweep:?}: {named} named, {not} not");
+            }
         }
-        let (named, not) = *check.counts.lock().unwrap();
-        eprintln!("{sweep:?}: {named} occluders named a part, {not} did not");
-        assert!(named > 0 && not > 0, "{sweep:?}: {named} named, {not} not");
     }
 }

@@ -428,6 +428,12 @@ pub trait RasterBackend: Send + Sync {
     fn upload_occludee_boxes(&self, _boxes: &[DAabb]) -> Result<Option<u64>, BackendError> {
         Ok(None)
     }
+    /// True when [`Self::upload_occluder_parts`] may keep a table: only then does a bake
+    /// list the parts' spans for it (on the paper-size forest, 62 MB it would build for
+    /// nothing). The default, and the CPU backend: false.
+    fn keeps_occluder_parts(&self) -> bool {
+        false
+    }
     /// Keeps the scene's occluder parts on the device for the projections of
     /// [`Self::render`] and its kin: part `k` is `points[spans[k].0 .. spans[k].1]`. A job
     /// whose [`plane::OccluderSet::table`] is the generation returned then sends, for each
@@ -435,7 +441,8 @@ pub trait RasterBackend: Send + Sync {
     /// index instead of its points. A bake calls it once, before its cells; a later call
     /// replaces the table (jobs naming an older generation send their points, with the same
     /// maps). `Ok(None)` where the backend keeps no table: the default, and a device that
-    /// projects no occluder from its points or cannot bind that many.
+    /// projects no occluder from its points or cannot bind that many. Empty `spans` only
+    /// drop the table kept before.
     ///
     /// # Errors
     /// [`BackendError`] when the device fails.

@@ -384,9 +384,14 @@ pub fn bake_cells(
     if backend.tests_on_device() {
         prepared.occludee_table = backend.upload_occludee_boxes(&prepared.occludee_boxes())?;
     }
-    let spans: Vec<(u32, u32)> = (prepared.occluders.parts.iter())
-        .map(|p| (p.start, p.end))
-        .collect();
+    // (Empty where the backend keeps no table: that only drops one kept before.)
+    let spans: Vec<(u32, u32)> = if backend.keeps_occluder_parts() {
+        (prepared.occluders.parts.iter())
+            .map(|p| (p.start, p.end))
+            .collect()
+    } else {
+        Vec::new()
+    };
     prepared.occluder_table = backend.upload_occluder_parts(&prepared.occluders.points, &spans)?;
     prepared.sampler_progress = hooks.sampler_progress;
     prepared.checkpoints = hooks.sampler_checkpoints;

@@ -1176,6 +1176,12 @@ impl RasterBackend for GpuBackend {
     /// which check every named occluder's points against its part's). A table larger than
     /// one storage binding keeps the parts that fit in one, from the first; occluders naming
     /// the others send their points.
+    fn keeps_occluder_parts(&self) -> bool {
+        self.projection == GpuProjection::Counting
+            && self.view_pipelines.is_some()
+            && self.parts_wanted
+    }
+
     fn upload_occluder_parts(
         &self,
         points: &[glam::DVec3],
@@ -1191,9 +1197,8 @@ impl RasterBackend for GpuBackend {
             .unwrap_or_else(|e| e.into_inner());
         // The old table goes first (waves in flight hold their own reference).
         *slot = None;
-        let counting = self.projection == GpuProjection::Counting && self.view_pipelines.is_some();
         let (kept, end) = resident::parts_that_fit(spans, points.len(), binding);
-        if !(counting && self.parts_wanted) || end == 0 {
+        if !self.keeps_occluder_parts() || end == 0 {
             return Ok(None);
         }
         self.check_failure()?;
