@@ -1169,6 +1169,14 @@ impl RasterBackend for GpuBackend {
         Ok(Some(generation))
     }
 
+    /// Where the projections are counted on a device that has the views' pipelines, unless
+    /// [`GpuBackend::set_resident_parts`] turned the table off.
+    fn keeps_occluder_parts(&self) -> bool {
+        self.projection == GpuProjection::Counting
+            && self.view_pipelines.is_some()
+            && self.parts_wanted
+    }
+
     /// Keeps the parts' points (three `f64` each) where the projections are counted
     /// ([`GpuProjection::Counting`]): the device's table is made here, and each part goes up
     /// the first time a wave's counted occluder names it, from that occluder's points (those
@@ -1176,12 +1184,6 @@ impl RasterBackend for GpuBackend {
     /// which check every named occluder's points against its part's). A table larger than
     /// one storage binding keeps the parts that fit in one, from the first; occluders naming
     /// the others send their points.
-    fn keeps_occluder_parts(&self) -> bool {
-        self.projection == GpuProjection::Counting
-            && self.view_pipelines.is_some()
-            && self.parts_wanted
-    }
-
     fn upload_occluder_parts(
         &self,
         points: &[glam::DVec3],
