@@ -23,8 +23,8 @@
 //! default 24).
 //! A fourth family, leaf gaps ([`leaf_gap`]), shows a target through a gap of radius 5–32 %
 //! of the cell's diagonal left between the near edges of a few huge leaves at slightly
-//! different depths (some hinged out of their plane), among small leaves at random orientations that
-//! crowd the line of sight, and bakes each case twice: as built, where every culler on both
+//! different depths (some hinged out of their plane), among small leaves at random
+//! orientations that crowd the line of sight, and bakes each case twice: as built, where every culler on both
 //! backends must keep the target (the sampler also with the tuck pass, bands only and a
 //! finest ε a fifth of the gap), and with a plug over the gap, where the cullers may cull it
 //! and the sampler must in some cases, so the family keeps its teeth
@@ -84,6 +84,11 @@ impl Place {
     fn aabb(&self, min: DVec3, max: DVec3) -> Aabb {
         let (a, b) = (self.p(min), self.p(max));
         Aabb::new(a.min(b), a.max(b))
+    }
+
+    /// Local triangles mapped to world ones.
+    fn tris(&self, tris: &[[DVec3; 3]]) -> Vec<[Vec3; 3]> {
+        tris.iter().map(|t| t.map(|x| self.p(x))).collect()
     }
 }
 
@@ -350,6 +355,22 @@ fn assert_most_kept(valid: u64, cases: u64, what: &str) {
     );
 }
 
+/// The backends case `seed` is baked on: the CPU's, and `gpu` too for the first
+/// [`gpu_cases`] cases.
+fn backends<'a>(
+    seed: u64,
+    cpu: &'a CpuBackend,
+    gpu: Option<&'a GpuBackend>,
+) -> Vec<&'a dyn RasterBackend> {
+    let mut backends: Vec<&dyn RasterBackend> = vec![cpu];
+    if seed < gpu_cases()
+        && let Some(g) = gpu
+    {
+        backends.push(g);
+    }
+    backends
+}
+
 fn gpu() -> Option<GpuBackend> {
     match GpuBackend::new() {
         Ok(b) => Some(b),
@@ -500,6 +521,26 @@ fn culler_settings() -> Vec<(&'static str, BakeSettings)> {
     ]
 }
 
+/// [`culler_settings`] and ray space factorization forced: the see-through families' settings.
+fn see_through_settings() -> Vec<(&'static str, BakeSettings)> {
+    let mut settings = culler_settings();
+    settings.push((
+        "rsf",
+        BakeSettings {
+            rsf: SweepChoice::On,
+            ..BakeSettings::default()
+        },
+    ));
+    settings
+}
+
+/// Whether the ray from `p` to `tc` first hits the object named `target` among `objects`
+/// (the see-through families' independent proof that the target is visible), `p` in `cell`.
+fn sees_target(objects: &[(String, Vec<[Vec3; 3]>)], cell: &Aabb, p: Vec3, tc: Vec3) -> bool {
+    let named = objects.iter().map(|(n, t)| (n.as_str(), t.as_slice()));
+    cell.contains_point(p) && common::first_hit(named, p, tc - p) == Some("target")
+}
+
 /// Bakes every case with every setting and attacks what each culled; panics on a false cull.
 /// `degenerate` adds [`add_degenerates`] to each case.
 fn campaign(degenerate: bool) {
@@ -532,7 +573,7 @@ fn campaign(degenerate: bool) {
         let objects: Vec<(String, Vec<[Vec3; 3]>)> = c
             .objects
             .iter()
-            .map(|(n, t)| (n.clone(), t.iter().map(|t| t.map(|p| pl.p(p))).collect()))
+            .map(|(n, t)| (n.clone(), pl.tris(t)))
             .collect();
         let scene = opaque_scene("adversary", &objects);
         if degenerate {
@@ -544,14 +585,8 @@ fn campaign(degenerate: bool) {
                 .count();
         }
         let cell = pl.aabb(c.cell.0, c.cell.1);
-        let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
         let g = if seed % 2 == 1 { &gpu_every_test } else { &gpu };
-        if seed < gpu_cases()
-            && let Some(g) = g
-        {
-            backends.push(g);
-        }
-        for backend in backends {
+        for backend in backends(seed, &cpu, g.as_ref()) {
             for (label, s) in &settings {
                 if std::env::var_os("UMBRASWEEP_ADVERSARY_TRACE").is_some() {
                     eprintln!("adversary: case {seed}, {label}, {}", backend.name());
@@ -707,11 +742,10 @@ fn pinhole(seed: u64) -> Pinhole {
     }
     let (target, tc, _) = target_beyond(&mut r, &s, hole);
     let pl = placement(seed);
-    let place = |tris: Vec<[DVec3; 3]>| tris.iter().map(|t| t.map(|x| pl.p(x))).collect();
     (
         vec![
-            ("target".into(), place(target)),
-            ("wall".into(), place(wall)),
+            ("target".into(), pl.tris(&target)),
+            ("wall".into(), pl.tris(&wall)),
         ],
         pl.aabb(s.cmin, s.cmax),
         pl.p(s.p),
@@ -829,31 +863,16 @@ fn target_beyond(r: &mut Rng, s: &Sight, gap: f64) -> (Vec<[DVec3; 3]>, DVec3, f
 fn a_target_seen_through_a_pinhole_from_one_patch_of_the_cell_stays_visible() {
     let cpu = CpuBackend::new();
     let gpu = gpu();
-    let mut settings = culler_settings();
-    settings.push((
-        "rsf",
-        BakeSettings {
-            rsf: SweepChoice::On,
-            ..BakeSettings::default()
-        },
-    ));
+    let settings = see_through_settings();
     let (mut valid, mut problems) = (0, Vec::new());
     for seed in 0..pinhole_cases() {
         let (objects, cell, p, tc) = pinhole(seed);
-        // Independent proof that the target is visible: the ray from P to its centre.
-        let named = || objects.iter().map(|(n, t)| (n.as_str(), t.as_slice()));
-        if !cell.contains_point(p) || common::first_hit(named(), p, tc - p) != Some("target") {
+        if !sees_target(&objects, &cell, p, tc) {
             continue;
         }
         valid += 1;
         let scene = opaque_scene("pinhole", &objects);
-        let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
-        if seed < gpu_cases()
-            && let Some(g) = &gpu
-        {
-            backends.push(g);
-        }
-        for backend in backends {
+        for backend in backends(seed, &cpu, gpu.as_ref()) {
             for (label, s) in &settings {
                 let res = bake(&scene, &[cell], s, backend, None).unwrap();
                 if res.cells[0].visible.first() != Some(&0) {
@@ -1085,13 +1104,12 @@ fn leaf_gap(seed: u64) -> LeafGap {
     ];
     let plug = vec![[sq[0], sq[1], sq[2]], [sq[0], sq[2], sq[3]]];
     let pl = placement(seed);
-    let place = |tris: &[[DVec3; 3]]| tris.iter().map(|t| t.map(|x| pl.p(x))).collect();
     LeafGap {
         objects: objects
             .iter()
-            .map(|(name, tris)| (name.clone(), place(tris)))
+            .map(|(name, tris)| (name.clone(), pl.tris(tris)))
             .collect(),
-        plug: place(&plug),
+        plug: pl.tris(&plug),
         cell: pl.aabb(s.cmin, s.cmax),
         p: pl.p(s.p),
         tc: pl.p(tc),
@@ -1116,27 +1134,21 @@ fn a_target_seen_through_a_gap_between_leaves_stays_visible() {
     let mut tempted: BTreeMap<String, u64> = BTreeMap::new();
     for seed in 0..leaf_gap_cases() {
         let c = leaf_gap(seed);
-        let named = || c.objects.iter().map(|(n, t)| (n.as_str(), t.as_slice()));
-        if !c.cell.contains_point(c.p)
-            || common::first_hit(named(), c.p, c.tc - c.p) != Some("target")
-        {
+        if !sees_target(&c.objects, &c.cell, c.p, c.tc) {
             continue;
         }
         valid += 1;
-        let mut settings = culler_settings();
-        let sampler = settings.last().expect("the sampler's settings").1.clone();
+        let mut settings = see_through_settings();
+        let sampler = (settings.iter())
+            .find(|(label, _)| *label == "sampling")
+            .expect("the sampler's settings")
+            .1
+            .clone();
         let with = |f: &dyn Fn(&mut umbrasweep::settings::SamplingSettings)| {
             let mut s = sampler.clone();
             f(&mut s.sampling_settings);
             s
         };
-        settings.push((
-            "rsf",
-            BakeSettings {
-                rsf: SweepChoice::On,
-                ..BakeSettings::default()
-            },
-        ));
         settings.push(("sampling, tuck", with(&|s| s.tuck = true)));
         settings.push(("sampling, bands only", with(&|s| s.whole_first = false)));
         settings.push((
@@ -1151,13 +1163,7 @@ fn a_target_seen_through_a_gap_between_leaves_stays_visible() {
         let mut closed = c.objects.clone();
         closed.push(("plug".into(), c.plug.clone()));
         let closed = opaque_scene("leaf gap, plugged", &closed);
-        let mut backends: Vec<&dyn RasterBackend> = vec![&cpu];
-        if seed < gpu_cases()
-            && let Some(g) = &gpu
-        {
-            backends.push(g);
-        }
-        for (i, backend) in backends.into_iter().enumerate() {
+        for (i, backend) in backends(seed, &cpu, gpu.as_ref()).into_iter().enumerate() {
             for (label, s) in &settings {
                 let res = bake(&scene, &[c.cell], s, backend, None).unwrap();
                 if res.cells[0].visible.first() != Some(&0) {

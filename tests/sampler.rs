@@ -1424,8 +1424,8 @@ fn a_probe_stops_once_its_rest_could_prove_nothing() {
 
 /// The cell `[-0.5, 0.5]³`, a wall at z = 3 with a square hole 0.02 across, and a cube 0.02
 /// across at z = 6 behind it, seen through the hole only from about a 0.07-wide square of the
-/// cell's +z face centred on `(x, y)` (the OBJ text and its vertex count).
-fn slit_obj(x: f64, y: f64) -> (String, usize) {
+/// cell's +z face centred on `(x, y)`.
+fn slit_scene(x: f64, y: f64) -> (umbrasweep::Scene, Aabb) {
     let (mut obj, mut nv) =
         walled_target(DVec3::new(-0.01, -0.01, 6.0), DVec3::new(0.01, 0.01, 6.02));
     // Lines from the face (z = 0.5) to the cube cross the wall 2.5/5.5 of the way.
@@ -1444,12 +1444,6 @@ fn slit_obj(x: f64, y: f64) -> (String, usize) {
         writeln!(obj, "f {} {} {} {}", nv + 1, nv + 2, nv + 3, nv + 4).unwrap();
         nv += 4;
     }
-    (obj, nv)
-}
-
-/// [`slit_scene`] as a scene.
-fn slit_scene(x: f64, y: f64) -> (umbrasweep::Scene, Aabb) {
-    let (obj, _) = slit_obj(x, y);
     let scene = load_obj("slit", &obj);
     (scene, Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)))
 }

@@ -488,7 +488,8 @@ pub const BAKE_BYTES_PER_THREAD: u64 = 96 << 20;
 pub fn estimate_memory(scene: &Scene, settings: &BakeSettings, threads: usize) -> u64 {
     let tris = scene.triangles.len() as u64;
     let loaded = scene.vertices.len() as u64 * 12 + tris * 13 + scene.objects.len() as u64 * 96;
-    let sampler = if settings.sampling == SweepChoice::On {
+    let sampling = settings.sampling == SweepChoice::On;
+    let sampler = if sampling {
         SAMPLER_BYTES_PER_TRIANGLE
     } else {
         0
@@ -500,7 +501,7 @@ pub fn estimate_memory(scene: &Scene, settings: &BakeSettings, threads: usize) -
         && !settings.alpha_occluders
     {
         let each = CARD_POLYGON_BYTES
-            + if settings.sampling == SweepChoice::On {
+            + if sampling {
                 SAMPLER_BYTES_PER_CARD_POLYGON
             } else {
                 0
@@ -510,7 +511,7 @@ pub fn estimate_memory(scene: &Scene, settings: &BakeSettings, threads: usize) -
         0
     };
     // One hemicube per worker thread at the largest resolution the sampler may render.
-    let hemicube = if settings.sampling == SweepChoice::On {
+    let hemicube = if sampling {
         crate::settings::SamplingSettings::hemicube_bytes(
             settings.sampling_settings.max_resolution(),
         )

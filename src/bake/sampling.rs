@@ -1324,12 +1324,12 @@ fn cell_seed(cell: &Aabb) -> u64 {
 }
 
 impl Shared<'_> {
-    /// Whether the budget is spent (no point can be taken).
     /// Sample points the budget has left (`--sampling-budget` in points).
     fn points_left(&self) -> u64 {
         (self.data.settings.budget_points).saturating_sub(self.points.load(Ordering::Relaxed))
     }
 
+    /// Whether the budget is spent (no point can be taken).
     fn spent(&self) -> bool {
         let s = &self.data.settings;
         self.points.load(Ordering::Relaxed) >= s.budget_points || !self.in_time()
