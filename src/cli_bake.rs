@@ -12,7 +12,7 @@ use umbrasweep::backend::gpu::GpuProjection;
 use umbrasweep::bake::{self, BakeSettings, SweepChoice};
 use umbrasweep::geom::Aabb;
 use umbrasweep::project::planes::{Spacing, SweepSettings};
-use umbrasweep::settings::UpAxis;
+use umbrasweep::settings::{SamplingFusion, UpAxis};
 use umbrasweep::{cells, scene};
 
 /// Where each direction's planes go.
@@ -22,6 +22,15 @@ pub enum PlacementChoice {
     Geometric,
     /// Weighted quantiles of the occluders' distances.
     Quantile,
+}
+
+/// How the sampler's render of a face rectangle fuses the leaves (`--sampling-fusion`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FusionChoice {
+    /// Every leaf shrunk for the whole rectangle's parallax.
+    Shrink,
+    /// The per-rectangle occlusion sweep (CPU only).
+    Sweep,
 }
 
 /// How sweep planes are spaced.
@@ -347,6 +356,14 @@ pub struct BakeArgs {
     /// The sampler without the tuck pass (the default; every edge shrunk).
     #[arg(long)]
     pub no_sampling_tuck: bool,
+    /// How the sampler's render of a face rectangle fuses the leaves. `shrink`: every leaf
+    /// shrunk for the whole rectangle's parallax (renders on the GPU too). `sweep`: the
+    /// per-rectangle occlusion sweep, each leaf's extended projection onto a plane just
+    /// behind it and only the leaves' union eroded as the sweep moves away, so leaves stay
+    /// fused at a far coarser ε (CPU only: with `--backend gpu` the sampler renders on the
+    /// CPU).
+    #[arg(long, value_enum, default_value_t = FusionChoice::Shrink)]
+    pub sampling_fusion: FusionChoice,
     /// How often the sampler saves its progress inside a cell, in seconds, to
     /// OUTPUT.sampler-<cell> (removed when the cell is finished): `bake --resume` then
     /// continues a cell that takes hours from its last save instead of from scratch, with the
@@ -645,6 +662,10 @@ pub fn run(a: &BakeArgs) -> anyhow::Result<()> {
         band_ratio: a.sampling_band_ratio,
         whole_first: !a.sampling_bands_only,
         tuck: a.sampling_tuck,
+        fusion: match a.sampling_fusion {
+            FusionChoice::Shrink => SamplingFusion::Shrink,
+            FusionChoice::Sweep => SamplingFusion::Sweep,
+        },
         ..BakeSettings::default_settings().sampling_settings
     };
     if let Some(b) = &a.sampling_budget {

@@ -292,6 +292,34 @@ pub struct SamplingSettings {
     /// Documents written before it existed read as off.
     #[serde(rename = "sampling_tuck", default)]
     pub tuck: bool,
+    /// How a sample rectangle's render fuses the leaves ([`SamplingFusion`]). Documents
+    /// written before it existed read as [`SamplingFusion::Shrink`].
+    #[serde(rename = "sampling_fusion", default)]
+    pub fusion: SamplingFusion,
+}
+
+/// How the sampler's render of one face rectangle fuses the occluders.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SamplingFusion {
+    /// Every polygon's silhouette shrunk for the whole rectangle's parallax, the union kept
+    /// per sub-pixel with its depths ([`crate::sampler::Hemicube`]). Renders on the GPU too.
+    #[default]
+    Shrink,
+    /// The per-rectangle occlusion sweep ([`crate::sampler::RectSweep`]): each polygon's
+    /// extended projection onto a plane just behind it, the union eroded as the sweep moves
+    /// away. Leaves that fuse stay fused at a far coarser ε. CPU only.
+    Sweep,
+}
+
+impl SamplingFusion {
+    /// The name `--sampling-fusion` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            SamplingFusion::Shrink => "shrink",
+            SamplingFusion::Sweep => "sweep",
+        }
+    }
 }
 
 impl SamplingSettings {
@@ -316,9 +344,17 @@ impl SamplingSettings {
     /// they do not). The one place that decides it: the bake's summary line and the
     /// sampler's choice of renderer both ask here.
     pub fn gpu_refusal(&self) -> Option<&'static str> {
+        if self.fusion == SamplingFusion::Sweep {
+            return Some("the per-rectangle sweep (--sampling-fusion sweep) has no GPU twin yet");
+        }
         self.tuck
             .then_some("the tuck pass (--sampling-tuck) has no GPU twin yet")
     }
+
+    /// Pixels per view of the per-rectangle sweep ([`SamplingFusion::Sweep`]) when
+    /// `--sampling-resolution` is not given, at every level: its fusion needs sub-pixels
+    /// fine next to the leaves' seams, not next to ε.
+    pub const SWEEP_RESOLUTION: u32 = 512;
 
     /// The automatic resolution's pixels per unit of `h/ε` (see [`Self::auto_resolution`]).
     pub const AUTO_PIXELS: f64 = 8.0;
@@ -361,6 +397,7 @@ impl SamplingSettings {
     /// ```
     pub fn cell_finest(&self, eps: f64, h: f64) -> (f64, Option<u32>) {
         if self.eps.is_none()
+            && self.fusion == SamplingFusion::Shrink
             && self.resolution.is_none()
             && Self::auto_resolution(h, eps) > Self::TRADE_RESOLUTION
         {
@@ -455,6 +492,7 @@ impl SamplingSettings {
             band_ratio: std::f64::consts::SQRT_2,
             whole_first: true,
             tuck: false,
+            fusion: SamplingFusion::Shrink,
         }
     }
 }

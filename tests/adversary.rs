@@ -8,8 +8,9 @@
 //! traced by brute force: a ray whose first hit is the culled object is a false cull.
 //!
 //! Bakes run with the default settings, with the occlusion sweep forced, with separate
-//! planes forced and (every fourth case) with the shrunk-occluder sampler after the sweep, on
-//! the CPU backend; the first cases also on the GPU backend (lavapipe here; the odd ones with
+//! planes forced and (every fourth case) with the shrunk-occluder sampler after the sweep (its
+//! shrinking render and its per-rectangle sweep, `--sampling-fusion sweep`), on the CPU
+//! backend; the first cases also on the GPU backend (lavapipe here; the odd ones with
 //! every plane's box tests asked of the device and the views counted there, from the scene's
 //! occluder parts kept on the device, where it has `SHADER_F64`; without an adapter it prints
 //! why and skips, except under `CI`, where it fails).
@@ -513,6 +514,21 @@ fn culler_settings() -> Vec<(&'static str, BakeSettings)> {
                     rays: 0,
                     budget_points: 400,
                     resolution: Some(32),
+                    ..Default::default()
+                },
+                ..BakeSettings::default()
+            },
+        ),
+        (
+            "sampling, sweep fusion",
+            BakeSettings {
+                sweep: SweepChoice::On,
+                sampling: SweepChoice::On,
+                sampling_settings: umbrasweep::settings::SamplingSettings {
+                    rays: 0,
+                    budget_points: 400,
+                    resolution: Some(32),
+                    fusion: umbrasweep::settings::SamplingFusion::Sweep,
                     ..Default::default()
                 },
                 ..BakeSettings::default()

@@ -291,6 +291,77 @@ fn the_sampler_runs_with_a_budget_and_reports_itself() {
     );
 }
 
+/// `--sampling-fusion sweep` renders with the per-rectangle sweep: the summary says so, the
+/// settings record it, every level renders at the sweep's 512 px, and the target behind the
+/// wall stays culled. An unknown fusion is refused with the choices.
+#[test]
+fn the_sampler_fuses_by_the_sweep_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = write(d, "s.obj", SCENE);
+    let cells = write(d, "c.json", CELLS);
+    let out = d.join("out.json");
+    let bake = |fusion: &str| {
+        bin()
+            .arg("bake")
+            .arg(&scene)
+            .args(["--cells", cells.to_str().unwrap(), "--backend", "cpu"])
+            .args([
+                "--sampling",
+                "--sampling-budget",
+                "40",
+                "--sampling-eps",
+                "0.5",
+                "--sampling-rays",
+                "0",
+                "--sampling-fusion",
+                fusion,
+            ])
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
+    let r = bake("sweep");
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("512 px per view; leaves fused by the per-rectangle sweep"),
+        "{stderr}"
+    );
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        doc["settings"]["sampling_fusion"],
+        serde_json::json!("sweep")
+    );
+    let mut levels = 0;
+    for cell in doc["cells"].as_array().unwrap() {
+        let sampler = cell["cullers"].as_array().unwrap().last().unwrap();
+        assert_eq!(sampler["name"], "shrunk_sampling");
+        for l in sampler["levels"].as_array().into_iter().flatten() {
+            assert_eq!(l["resolution"], serde_json::json!(512), "{sampler}");
+            levels += 1;
+        }
+    }
+    assert!(levels > 0, "no cell sampled a level");
+    assert!(
+        !doc["cells"][0]["visible"]
+            .as_array()
+            .unwrap()
+            .contains(&serde_json::json!(1))
+    );
+    let r = bake("fused");
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success());
+    assert!(
+        stderr.contains("--sampling-fusion")
+            && stderr.contains("shrink")
+            && stderr.contains("sweep"),
+        "{stderr}"
+    );
+}
+
 /// `--sampling-resolution N` renders every level at N pixels, recorded in the settings and
 /// in each level of the cost curve.
 #[test]

@@ -51,7 +51,7 @@ mod common;
 use glam::DVec3;
 use std::f64::consts::{PI, TAU};
 use umbrasweep::geom::DAabb;
-use umbrasweep::sampler::{BoxTest, Hemicube, SampleOccluders};
+use umbrasweep::sampler::{BoxTest, Hemicube, Occludees, RectSweep, SampleOccluders};
 
 /// Relative margin of the strict crossing test (about 450 units of rounding of `f64`).
 const TOL: f64 = 1e-13;
@@ -1620,13 +1620,111 @@ struct Variant {
     subpixel: bool,
     depth_bounded: bool,
     tuck: bool,
+    /// Rendered by the per-rectangle sweep (`RectSweep`) instead of the hemicube, always
+    /// for a rectangle.
+    sweep: bool,
 }
 
 const DEFAULT: Variant = Variant {
     subpixel: true,
     depth_bounded: true,
     tuck: false,
+    sweep: false,
 };
+
+/// The configuration's boxes, then its triangles, as `RectSweep` objects: a box alone; a
+/// triangle as an object of its own box with one piece (the configuration's box around it)
+/// holding the triangle.
+struct SweepCase<'a> {
+    cfg: &'a Config,
+}
+
+impl SweepCase<'_> {
+    fn tri_box(&self, i: usize) -> DAabb {
+        let t = self.cfg.tris[i];
+        DAabb {
+            min: t[0].min(t[1]).min(t[2]),
+            max: t[0].max(t[1]).max(t[2]),
+        }
+    }
+}
+
+impl Occludees for SweepCase<'_> {
+    fn len(&self) -> usize {
+        self.cfg.boxes.len() + self.cfg.tris.len()
+    }
+    fn object_box(&self, i: usize) -> DAabb {
+        let n = self.cfg.boxes.len();
+        if i < n {
+            self.cfg.boxes[i]
+        } else {
+            self.tri_box(i - n)
+        }
+    }
+    fn pieces(&self, i: usize) -> std::ops::Range<u32> {
+        let n = self.cfg.boxes.len();
+        if i < n {
+            0..0
+        } else {
+            (i - n) as u32..(i - n) as u32 + 1
+        }
+    }
+    fn piece_box(&self, k: u32) -> DAabb {
+        let (b, t) = (self.cfg.boxes[k as usize], self.tri_box(k as usize));
+        DAabb {
+            min: b.min.min(t.min),
+            max: b.max.max(t.max),
+        }
+    }
+    fn piece_triangles(&self, k: u32) -> &[u32] {
+        &TRI_IDS[k as usize..k as usize + 1]
+    }
+    fn triangle(&self, t: u32) -> [DVec3; 3] {
+        self.cfg.tris[t as usize]
+    }
+}
+
+/// Triangle indices `0, 1, 2, …` for [`SweepCase::piece_triangles`].
+static TRI_IDS: [u32; 4096] = {
+    let mut a = [0u32; 4096];
+    let mut i = 0;
+    while i < 4096 {
+        a[i] = i as u32;
+        i += 1;
+    }
+    a
+};
+
+/// Renders `cfg` (with a rectangle) by the sweep, its rectangle scaled by `factor`: the
+/// boxes' and the triangles' results.
+fn render_sweep(cfg: &Config, factor: f64) -> (Vec<BoxTest>, Vec<BoxTest>) {
+    let occ = SampleOccluders::from_polygons(&cfg.polys);
+    let [hb, hc] = cfg.patch.expect("the sweep renders rectangles");
+    let mut sw = RectSweep::new(cfg.res.max(16));
+    let case = SweepCase { cfg };
+    let (hidden, _) = sw.render(
+        &occ,
+        cfg.eye,
+        cfg.axis,
+        cfg.sign,
+        [hb * factor, hc * factor],
+        &case,
+    );
+    let to = |h: bool| {
+        if h {
+            BoxTest::Hidden
+        } else {
+            BoxTest::Open {
+                direction: DVec3::X,
+            }
+        }
+    };
+    let n = cfg.boxes.len();
+    (
+        hidden[..n].iter().map(|&h| to(h)).collect(),
+        hidden[n..].iter().map(|&h| to(h)).collect(),
+    )
+}
 
 /// Runs `n` configurations of a family and checks every hidden box.
 #[expect(
@@ -1651,7 +1749,7 @@ fn run_family(
         let mut rng = Rng(cseed);
         let local = generate(&mut rng);
         let mut cfg = to_world(name, index, cseed, &local, &mut rng, scaled);
-        if patch {
+        if patch || variant.sweep {
             // Half sides with the ball's radius as half diagonal; some flat (a segment).
             let t = match rng.below(10) {
                 0 => 0.0,
@@ -1673,7 +1771,11 @@ fn run_family(
         cubes[k].set_depth_bounded(variant.depth_bounded);
         cubes[k].set_tuck(variant.tuck);
         cfg.tris = cfg.boxes.iter().map(|b| tri_in_box(&mut rng, b)).collect();
-        let (results, tri_results) = render_tris(&mut cubes[k], &cfg, &cfg.polys, render_eps);
+        let (results, tri_results) = if variant.sweep {
+            render_sweep(&cfg, render_eps)
+        } else {
+            render_tris(&mut cubes[k], &cfg, &cfg.polys, render_eps)
+        };
         let rel = rel_polys(&cfg);
         st.configs += 1;
         st.polygons += cfg.polys.len();
@@ -2043,6 +2145,70 @@ fn tucked_edges_keep_every_family_hidden_from_the_whole_ball() {
             },
         );
         assert_meaningful(f.name, &st, f.min_hidden);
+    }
+}
+
+/// Every family again rendered by the per-rectangle sweep (`RectSweep`, module docs of
+/// `sampler::sweep`), each from a rectangle of the face (some flat): every hidden box and
+/// triangle gets the same segment checks from the rectangle's points. The sweep fuses
+/// differently from the hemicube, so the share each family hides differs; together they must
+/// hide a share of their boxes and triangles.
+#[test]
+fn the_sweep_keeps_every_family_hidden_from_the_whole_rectangle() {
+    let (mut hidden, mut boxes, mut tris_hidden, mut tris) = (0, 0, 0, 0);
+    for f in FAMILIES {
+        let st = run_family(
+            f.name,
+            f.seed ^ 0x5EE9,
+            count(f.configs / 2),
+            f.scaled,
+            f.patch,
+            &f.generate,
+            1.0,
+            Variant {
+                sweep: true,
+                ..DEFAULT
+            },
+        );
+        hidden += st.hidden;
+        boxes += st.boxes;
+        tris_hidden += st.tris_hidden;
+        tris += st.tris;
+    }
+    assert!(
+        hidden * 20 >= boxes && tris_hidden * 20 >= tris,
+        "the sweep hid {hidden} of {boxes} boxes and {tris_hidden} of {tris} triangles: the \
+         check is too weak"
+    );
+}
+
+/// The segment check catches a sweep rendered for a smaller rectangle than the one checked
+/// (half of it, or a point): some box or triangle it reports hidden is seen from a point of
+/// the whole rectangle.
+#[test]
+fn check_catches_a_sweep_for_a_smaller_rectangle() {
+    for factor in [0.0, 0.5] {
+        let mut total = 0;
+        for f in &FAMILIES {
+            let st = run_family(
+                f.name,
+                f.seed ^ 0x5EEA,
+                count(f.configs / 4),
+                f.scaled,
+                f.patch,
+                &f.generate,
+                factor,
+                Variant {
+                    sweep: true,
+                    ..DEFAULT
+                },
+            );
+            total += st.violations;
+        }
+        assert!(
+            total > 0,
+            "no violation found with the sweep's rectangle x {factor}"
+        );
     }
 }
 

@@ -10,7 +10,7 @@ use crate::geom::{Aabb, DAabb};
 use crate::project::occluders::{self, Occluders};
 use crate::project::planes::Sliceable;
 use crate::scene::Scene;
-use crate::settings::SamplingSettings;
+use crate::settings::{SamplingFusion, SamplingSettings};
 use obvhs::bvh2::Bvh2;
 use std::time::Instant;
 
@@ -337,6 +337,10 @@ impl<'a> Prepared<'a> {
             let ss = &settings.sampling_settings;
             sampling_reason = match ss.resolution {
                 Some(r) => format!("{sampling_reason}; {r} px per view (--sampling-resolution)"),
+                None if ss.fusion == SamplingFusion::Sweep => format!(
+                    "{sampling_reason}; {} px per view",
+                    SamplingSettings::SWEEP_RESOLUTION
+                ),
                 None => format!(
                     "{sampling_reason}; pixels per view chosen per cell and level ({} × the \
                      median ray hit distance / ε, {}–{}){}",
@@ -355,6 +359,12 @@ impl<'a> Prepared<'a> {
                     }
                 ),
             };
+            if ss.fusion == SamplingFusion::Sweep {
+                sampling_reason = format!(
+                    "{sampling_reason}; leaves fused by the per-rectangle sweep \
+                     (--sampling-fusion sweep, on the CPU)"
+                );
+            }
             d
         });
         let Pieces {

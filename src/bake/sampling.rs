@@ -80,9 +80,9 @@ use crate::backend::gpu::sampler::{GpuSampler, GpuSamplerScene};
 use crate::backend::{BackendError, RasterBackend};
 use crate::geom::{Aabb, DAabb};
 use crate::pvs::SamplingLevel;
-use crate::sampler::{BoxTest, Hemicube, SampleOccluders};
+use crate::sampler::{BoxTest, Hemicube, Occludees, RectSweep, SampleOccluders};
 use crate::scene::Scene;
-use crate::settings::SamplingSettings;
+use crate::settings::{SamplingFusion, SamplingSettings};
 use crate::validate::SceneRays;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -340,13 +340,19 @@ impl SamplingCuller {
 enum Renderer<'a> {
     Cpu(Box<Hemicube>),
     Gpu(Box<GpuSampler<'a>>),
+    /// The per-rectangle occlusion sweep (`--sampling-fusion sweep`; CPU only).
+    Sweep(Box<RectSweep>),
 }
 
 impl Renderer<'_> {
-    /// The CPU's hemicube at `res` pixels per view, with the tuck pass when `tuck`.
-    fn cpu(res: u32, tuck: bool) -> Self {
+    /// The CPU's renderer at `res` pixels per view for settings `s`: the sweep, or the
+    /// hemicube with the tuck pass when `s.tuck`.
+    fn cpu(res: u32, s: &SamplingSettings) -> Self {
+        if s.fusion == SamplingFusion::Sweep {
+            return Renderer::Sweep(Box::new(RectSweep::new(res)));
+        }
         let mut hc = Hemicube::new(res);
-        hc.set_tuck(tuck);
+        hc.set_tuck(s.tuck);
         Renderer::Cpu(Box::new(hc))
     }
 }
@@ -367,6 +373,39 @@ const CERTIFY_PER_POINT: usize = 64;
 /// A sampled rectangle's outcome: the objects it leaves undecided for its quadrants (none:
 /// nothing to refine) and what it counted, for the checkpoint.
 type Outcome = (Option<Arc<Vec<u32>>>, RectRecord);
+
+/// A rectangle's candidates as the per-rectangle sweep tests them ([`Occludees`]): their
+/// boxes, and the prepared pieces and triangles of the scene.
+struct SweepObjects<'a> {
+    prepared: &'a Prepared<'a>,
+    list: &'a [u32],
+    boxes: &'a [DAabb],
+}
+
+impl Occludees for SweepObjects<'_> {
+    fn len(&self) -> usize {
+        self.list.len()
+    }
+    fn object_box(&self, i: usize) -> DAabb {
+        self.boxes[i]
+    }
+    fn pieces(&self, i: usize) -> std::ops::Range<u32> {
+        self.prepared.pieces[self.list[i] as usize].clone()
+    }
+    fn piece_box(&self, k: u32) -> DAabb {
+        self.prepared.piece_boxes[k as usize]
+    }
+    fn piece_triangles(&self, k: u32) -> &[u32] {
+        let r = &self.prepared.piece_triangle_ranges[k as usize];
+        &self.prepared.piece_triangles[r.start as usize..r.end as usize]
+    }
+    fn triangle(&self, t: u32) -> [DVec3; 3] {
+        self.prepared
+            .scene
+            .triangle(t as usize)
+            .map(|v| v.as_dvec3())
+    }
+}
 
 /// One rectangle of a face: `[b0, b1] × [c0, c1]` on the face's plane.
 #[derive(Clone, Copy, Debug)]
@@ -651,6 +690,9 @@ impl Culler for SamplingCuller {
         // The pixels per view of a level whose balls have radius `eps`.
         let level_resolution = |eps: f64| {
             s.resolution.unwrap_or_else(|| {
+                if s.fusion == SamplingFusion::Sweep {
+                    return SamplingSettings::SWEEP_RESOLUTION;
+                }
                 let r = SamplingSettings::auto_resolution(hit_distance, eps);
                 resolution_cap.map_or(r, |c| r.min(c))
             })
@@ -722,7 +764,7 @@ impl Culler for SamplingCuller {
             // gives the same answers, and so is every later one of the level.
             let level_on_cpu = AtomicBool::new(false);
             let new_renderer = || -> Option<Renderer> {
-                let cpu = || Some(Renderer::cpu(resolution, s.tuck));
+                let cpu = || Some(Renderer::cpu(resolution, &s));
                 match &gpu_scene {
                     Some((g, scene)) if !level_on_cpu.load(Ordering::Relaxed) => {
                         match GpuSampler::new(g, scene, resolution) {
@@ -1482,6 +1524,10 @@ impl Shared<'_> {
         let half = [hb * (1.0 + 1e-9), hcx * (1.0 + 1e-9)];
         let mut open: Vec<u32> = Vec::new();
         let mut rays = 0usize;
+        if let Renderer::Sweep(sw) = renderer {
+            self.sweep_patch(sw, eye, &f, half, &list, &boxes, known, rec, &mut open);
+            return self.patch_outcome(open, known, eps, trial);
+        }
         let ratio = self.data.settings.band_ratio;
         let bands = distance_bands(eye, &boxes, ratio);
         // One render for the whole list first, its edges shrunk for the farthest box (a
@@ -1526,6 +1572,19 @@ impl Shared<'_> {
                 }
             }
         }
+        self.patch_outcome(open, known, eps, trial)
+    }
+
+    /// What a rectangle of ball radius `eps` leaves its quadrants: the objects it found open
+    /// and no ray certified since, unless it is at the finest ε (then they are given up,
+    /// visible for the cell, except in a trial).
+    fn patch_outcome(
+        &self,
+        mut open: Vec<u32>,
+        known: &mut [bool],
+        eps: f64,
+        trial: bool,
+    ) -> Option<Arc<Vec<u32>>> {
         // Certification may have reached objects found open earlier.
         open.retain(|&o| !known[o as usize]);
         if open.is_empty() {
@@ -1538,6 +1597,52 @@ impl Shared<'_> {
             return None;
         }
         Some(Arc::new(open))
+    }
+
+    /// [`Shared::patch`] with the per-rectangle sweep: one render decides every candidate
+    /// (`list`, boxes `boxes`), each tested when the sweep reaches it (its box, then its
+    /// pieces' boxes and triangles, as [`Shared::test_object`] does). Open objects are
+    /// certified with rays (towards their box's centre) and appended to `open`.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "the rectangle (eye, face, half sides), its lists and the lane's state, as render_group"
+    )]
+    fn sweep_patch(
+        &self,
+        sw: &mut RectSweep,
+        eye: DVec3,
+        f: &Face,
+        half: [f64; 2],
+        list: &[u32],
+        boxes: &[DAabb],
+        known: &mut [bool],
+        rec: &mut RectRecord,
+        open: &mut Vec<u32>,
+    ) {
+        let objects = SweepObjects {
+            prepared: self.prepared,
+            list,
+            boxes,
+        };
+        let (hidden, st) = sw.render(&self.data.occluders, eye, f.axis, f.sign, half, &objects);
+        rec.polygons += st.polygons;
+        let mut rays = 0usize;
+        for (i, &o) in list.iter().enumerate() {
+            if known[o as usize] {
+                continue;
+            }
+            rec.tested += 1;
+            if hidden[i] {
+                rec.hid += 1;
+                continue;
+            }
+            if rays < CERTIFY_PER_POINT {
+                rays += self.certify(eye, o, boxes[i].center() - eye, known);
+            }
+            if !known[o as usize] {
+                open.push(o);
+            }
+        }
     }
 
     /// The pilot of the level just above the finest ([`SamplingSettings::probe_pay`]): what
@@ -1570,7 +1675,7 @@ impl Shared<'_> {
             return (0.0, 0.0);
         }
         let known = self.known_now();
-        let tuck = self.data.settings.tuck;
+        let settings = self.data.settings;
         // One hemicube per thread at a time (made again when the resolution changes), as
         // the bake's memory estimate allows. Trials are not sample points: nothing of theirs
         // is counted in the cell's totals (a resumed cell that replays the decision renders
@@ -1579,7 +1684,7 @@ impl Shared<'_> {
             if slot.as_ref().is_some_and(|(r, _)| *r != res) {
                 *slot = None;
             }
-            let (_, r) = slot.get_or_insert_with(|| (res, Renderer::cpu(res, tuck)));
+            let (_, r) = slot.get_or_insert_with(|| (res, Renderer::cpu(res, &settings)));
             let mut rec = RectRecord::default();
             self.patch(r, q, list, &mut known.clone(), &mut rec, Take::Trial);
             rec.polygons as f64
@@ -1643,6 +1748,7 @@ impl Shared<'_> {
                 rec.polygons += hc.draw(&self.data.occluders).polygons;
                 None
             }
+            Renderer::Sweep(_) => unreachable!("Shared::patch renders the sweep by itself"),
             Renderer::Gpu(gs) => {
                 gs.begin_patch(eye, f.axis, f.sign, half, &group_boxes);
                 let objects: Vec<(u32, DAabb)> = group
@@ -1685,6 +1791,7 @@ impl Shared<'_> {
                 (_, Some(r)) => r,
                 (Renderer::Cpu(hc), None) => self.test_object(hc, o, bx),
                 (Renderer::Gpu(_), None) => unreachable!("the batch holds every object"),
+                (Renderer::Sweep(_), None) => unreachable!("never renders by group"),
             };
             out.push(match test {
                 None => {

@@ -193,8 +193,10 @@
 //! bounding rectangles, `f32` rounding with margins.
 
 mod hemicube;
+mod sweep;
 
 pub use hemicube::{BoxRect, BoxTest, Hemicube, RenderStats};
+pub use sweep::{Occludees, RectSweep, SweepProbe, SweepStats};
 
 use crate::geom::{Aabb, DAabb};
 use crate::project::occluders::{Occluders, PartKind, polygon_inradius};
