@@ -1,9 +1,13 @@
-//! A probe of the per-rectangle occlusion sweep (Durand et al. 2000's extended projections and
-//! sweep, with a face rectangle of the sampler as the "cell"): from the centre of one face of
-//! a cell, front view only, which objects (boxes, then triangles) the hemicube's shrunk render
-//! hides and which the sweep hides. `cargo run --release --example sampler_slabs -- SCENE
-//! CELLS CELL EPS RES FACE [STEP [START]]` (STEP: sub-pixels of erosion per slab, default 2;
-//! START: the depth of the first slab's end, default 1).
+//! The per-rectangle occlusion sweep (`sampler::RectSweep`, `--sampling-fusion sweep`) against
+//! the shrinking hemicube, from the centre of one face of a cell: over the objects the front
+//! view alone decides (their boxes inside it from every point of the rectangle), how many the
+//! hemicube hides (a first render for all, then one per √2 band of what it leaves open, as the
+//! bake renders), how many a front-view-only prototype of the sweep hides, and how many the
+//! library's sweep (all five views) hides; then every triangle either sweep hid is attacked
+//! with 32 segments from random points of the rectangle to random points of it, traced against
+//! the scene. `cargo run --release --example sampler_slabs -- SCENE CELLS CELL EPS RES FACE
+//! [STEP [START]]` (the prototype's STEP: sub-pixels of erosion per slab, default 2; START:
+//! the depth of the first slab's end, default 1, for both sweeps).
 
 mod common;
 
