@@ -361,7 +361,11 @@ pub struct BakeArgs {
     /// per-rectangle occlusion sweep, each leaf's extended projection onto a plane just
     /// behind it and only the leaves' union eroded as the sweep moves away, so leaves stay
     /// fused at a far coarser ε (CPU only: with `--backend gpu` the sampler renders on the
-    /// CPU).
+    /// CPU). It tests each occludee at its own depth in one render per rectangle, so the
+    /// bands (`--sampling-band-ratio`, `--sampling-bands-only`) and the tuck pass do not
+    /// apply to it; it renders at 512 px unless `--sampling-resolution` says otherwise. Per
+    /// sample point it hides at ε 0.125 what `shrink` hides at ε 0.03 on the fine forest, but
+    /// each point costs far more: not yet the faster choice per cell (docs/sampling.md).
     #[arg(long, value_enum, default_value_t = FusionChoice::Shrink)]
     pub sampling_fusion: FusionChoice,
     /// How often the sampler saves its progress inside a cell, in seconds, to

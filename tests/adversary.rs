@@ -45,6 +45,7 @@ use umbrasweep::backend::gpu::GpuBackend;
 use umbrasweep::bake::{BakeSettings, SweepChoice, bake};
 use umbrasweep::geom::{Aabb, box_triangles};
 use umbrasweep::scene::Scene;
+use umbrasweep::settings::SamplingFusion;
 
 /// A small deterministic generator.
 struct Rng(u64);
@@ -505,36 +506,29 @@ fn culler_settings() -> Vec<(&'static str, BakeSettings)> {
                 ..BakeSettings::default()
             },
         ),
-        (
-            "sampling",
-            BakeSettings {
-                sweep: SweepChoice::On,
-                sampling: SweepChoice::On,
-                sampling_settings: umbrasweep::settings::SamplingSettings {
-                    rays: 0,
-                    budget_points: 400,
-                    resolution: Some(32),
-                    ..Default::default()
-                },
-                ..BakeSettings::default()
-            },
-        ),
+        ("sampling", sampler_settings(SamplingFusion::Shrink)),
         (
             "sampling, sweep fusion",
-            BakeSettings {
-                sweep: SweepChoice::On,
-                sampling: SweepChoice::On,
-                sampling_settings: umbrasweep::settings::SamplingSettings {
-                    rays: 0,
-                    budget_points: 400,
-                    resolution: Some(32),
-                    fusion: umbrasweep::settings::SamplingFusion::Sweep,
-                    ..Default::default()
-                },
-                ..BakeSettings::default()
-            },
+            sampler_settings(SamplingFusion::Sweep),
         ),
     ]
+}
+
+/// The sweep and the sampler after it (no certifying rays, 400 points at 32 px), fusing the
+/// leaves as `fusion` says.
+fn sampler_settings(fusion: SamplingFusion) -> BakeSettings {
+    BakeSettings {
+        sweep: SweepChoice::On,
+        sampling: SweepChoice::On,
+        sampling_settings: umbrasweep::settings::SamplingSettings {
+            rays: 0,
+            budget_points: 400,
+            resolution: Some(32),
+            fusion,
+            ..Default::default()
+        },
+        ..BakeSettings::default()
+    }
 }
 
 /// [`culler_settings`] and ray space factorization forced: the see-through families' settings.

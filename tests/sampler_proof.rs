@@ -2188,28 +2188,40 @@ fn the_sweep_keeps_every_family_hidden_from_the_whole_rectangle() {
 #[test]
 fn check_catches_a_sweep_for_a_smaller_rectangle() {
     for factor in [0.0, 0.5] {
-        let mut total = 0;
-        for f in &FAMILIES {
+        let found = violations_per_family(
+            factor,
+            0x5EEA,
+            Variant {
+                sweep: true,
+                ..DEFAULT
+            },
+        );
+        assert!(
+            found.iter().map(|f| f.1).sum::<usize>() > 0,
+            "no violation found with the sweep's rectangle x {factor}"
+        );
+    }
+}
+
+/// Every family's violations (its name, how many) rendered `variant`, with the ball or
+/// rectangle scaled by `factor`, a quarter of its configurations, seeds salted by `salt`.
+fn violations_per_family(factor: f64, salt: u64, variant: Variant) -> Vec<(&'static str, usize)> {
+    FAMILIES
+        .iter()
+        .map(|f| {
             let st = run_family(
                 f.name,
-                f.seed ^ 0x5EEA,
+                f.seed ^ salt,
                 count(f.configs / 4),
                 f.scaled,
                 f.patch,
                 &f.generate,
                 factor,
-                Variant {
-                    sweep: true,
-                    ..DEFAULT
-                },
+                variant,
             );
-            total += st.violations;
-        }
-        assert!(
-            total > 0,
-            "no violation found with the sweep's rectangle x {factor}"
-        );
-    }
+            (f.name, st.violations)
+        })
+        .collect()
 }
 
 /// Degenerate polygons hide nothing: three collinear points (up to rounding) give one plane
@@ -2322,29 +2334,17 @@ fn scaled_by_1e_3_and_offset_by_1e5() {
 #[test]
 fn check_catches_a_render_with_less_shrink() {
     for factor in [0.0, 0.5] {
-        let mut total = 0;
-        for f in &FAMILIES {
-            let st = run_family(
-                f.name,
-                f.seed ^ 0x5A5A,
-                count(f.configs / 4),
-                f.scaled,
-                f.patch,
-                &f.generate,
-                factor,
-                DEFAULT,
-            );
-            total += st.violations;
-            if ["near", "general", "patch"].contains(&f.name) {
+        let found = violations_per_family(factor, 0x5A5A, DEFAULT);
+        for (name, v) in &found {
+            if ["near", "general", "patch"].contains(name) {
                 assert!(
-                    st.violations > 0,
-                    "family {}: no violation found with the render's eps x {factor}",
-                    f.name
+                    *v > 0,
+                    "family {name}: no violation found with the render's eps x {factor}"
                 );
             }
         }
         assert!(
-            total > 0,
+            found.iter().map(|f| f.1).sum::<usize>() > 0,
             "no violation found with the render's eps x {factor}"
         );
     }

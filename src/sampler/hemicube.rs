@@ -8,7 +8,7 @@
 //! was drawn (`segment_hidden`), and occludee boxes tested with outer-conservative rectangles
 //! at their nearest depth. The argument is in the parent module's docs.
 
-use super::{SampleCard, SampleOccluders};
+use super::{SampleCard, SampleOccluders, view_coords, view_maps};
 use crate::geom::DAabb;
 use crate::scene::alpha::Coverage;
 use glam::{DVec2, DVec3};
@@ -469,16 +469,6 @@ pub struct BoxRect {
     pub z: f64,
 }
 
-/// `p` (relative to the eye) in the coordinates of the view whose axes are `map`
-/// ([`View::map`]).
-fn view_coords(map: [(usize, f64); 3], p: DVec3) -> DVec3 {
-    DVec3::new(
-        map[0].1 * p[map[0].0],
-        map[1].1 * p[map[1].0],
-        map[2].1 * p[map[2].0],
-    )
-}
-
 /// A polygon's footprint in one view ([`Hemicube::footprint`]).
 #[derive(Clone, Copy, Debug)]
 struct Footprint {
@@ -738,14 +728,7 @@ impl Hemicube {
     }
 
     fn setup(&mut self, eye: DVec3, axis: usize, sign: f64, eps: f64, boxes: &[DAabb]) {
-        let (a, b, c) = (axis, (axis + 1) % 3, (axis + 2) % 3);
-        let maps = [
-            [(b, 1.0), (c, 1.0), (a, sign)],
-            [(c, 1.0), (a, sign), (b, 1.0)],
-            [(c, 1.0), (a, sign), (b, -1.0)],
-            [(b, 1.0), (a, sign), (c, 1.0)],
-            [(b, 1.0), (a, sign), (c, -1.0)],
-        ];
+        let maps = view_maps(axis, sign);
         let res = self.res;
         if self.views.is_empty() {
             self.views = maps

@@ -207,6 +207,32 @@ use obvhs::bvh2::Bvh2;
 use rayon::prelude::*;
 use std::sync::Arc;
 
+/// The axes of the five views from a point of the face with outward normal `sign × e_axis`
+/// (the hemicube's and the sweep's): the front view, then the outer halves of the side
+/// views. View `k`'s `X`, `Y`, `Z` are `s × q[ax]` for its `(ax, s)` of a point `q` relative
+/// to the eye ([`view_coords`]).
+pub(crate) fn view_maps(axis: usize, sign: f64) -> [[(usize, f64); 3]; 5] {
+    let (a, b, c) = (axis, (axis + 1) % 3, (axis + 2) % 3);
+    [
+        [(b, 1.0), (c, 1.0), (a, sign)],
+        [(c, 1.0), (a, sign), (b, 1.0)],
+        [(c, 1.0), (a, sign), (b, -1.0)],
+        [(b, 1.0), (a, sign), (c, 1.0)],
+        [(b, 1.0), (a, sign), (c, -1.0)],
+    ]
+}
+
+/// `p` (relative to the eye) in the coordinates of the view whose axes are `map`
+/// ([`view_maps`]).
+#[inline]
+pub(crate) fn view_coords(map: [(usize, f64); 3], p: DVec3) -> DVec3 {
+    DVec3::new(
+        map[0].1 * p[map[0].0],
+        map[1].1 * p[map[1].0],
+        map[2].1 * p[map[2].0],
+    )
+}
+
 /// One convex planar occluder polygon of the sampler.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SamplePoly {

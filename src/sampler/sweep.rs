@@ -60,7 +60,7 @@
 //! four projections do not share an orientation (their plane passes between the corners) or
 //! come too near the eye are left out.
 
-use super::SampleOccluders;
+use super::{SampleOccluders, view_coords, view_maps};
 use crate::geom::DAabb;
 use glam::{DVec2, DVec3};
 use std::cmp::Ordering;
@@ -292,16 +292,6 @@ impl SweepProbe<'_> {
     }
 }
 
-/// `p` in the coordinates of the view whose axes are `map`.
-#[inline]
-fn view_coords(map: [(usize, f64); 3], p: DVec3) -> DVec3 {
-    DVec3::new(
-        map[0].1 * p[map[0].0],
-        map[1].1 * p[map[1].0],
-        map[2].1 * p[map[2].0],
-    )
-}
-
 impl SweepView {
     /// Whether every sub-pixel that the rectangle `[lo, hi]` (in `ψ`) touches within the
     /// bitmap is set (true when it touches none).
@@ -528,14 +518,8 @@ impl RectSweep {
         objects: &dyn Occludees,
     ) -> (Vec<bool>, SweepStats) {
         let mut st = SweepStats::default();
-        let (a, b, c) = (axis, (axis + 1) % 3, (axis + 2) % 3);
-        let maps = [
-            [(b, 1.0), (c, 1.0), (a, sign)],
-            [(c, 1.0), (a, sign), (b, 1.0)],
-            [(c, 1.0), (a, sign), (b, -1.0)],
-            [(b, 1.0), (a, sign), (c, 1.0)],
-            [(b, 1.0), (a, sign), (c, -1.0)],
-        ];
+        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+        let maps = view_maps(axis, sign);
         // A point (or a segment) renders as a rectangle too small to matter.
         let tiny = 1e-9 * eye.abs().max_element().max(1.0);
         let half = [half[0].max(tiny), half[1].max(tiny)];
@@ -833,12 +817,13 @@ impl RectSweep {
                                     }
                                     for pk in pieces {
                                         if let Some(z) = near(objects.piece_box(pk)) {
-                                            slots.push((i as u32, pk));
-                                            self.heap.push(Ev {
+                                            schedule(
+                                                &mut self.heap,
+                                                &mut slots,
+                                                (i as u32, pk),
                                                 z,
-                                                kind: EV_PIECE,
-                                                id: (slots.len() - 1) as u32,
-                                            });
+                                                EV_PIECE,
+                                            );
                                             tests_left += 1;
                                         }
                                     }
@@ -853,12 +838,13 @@ impl RectSweep {
                                     for &t in objects.piece_triangles(pk) {
                                         let tri = objects.triangle(t).map(|q| q - eye);
                                         if let Some(z) = probe.triangle_near(&tri) {
-                                            tris.push((i, t));
-                                            self.heap.push(Ev {
+                                            schedule(
+                                                &mut self.heap,
+                                                &mut tris,
+                                                (i, t),
                                                 z,
-                                                kind: EV_TRIANGLE,
-                                                id: (tris.len() - 1) as u32,
-                                            });
+                                                EV_TRIANGLE,
+                                            );
                                             tests_left += 1;
                                         }
                                     }
@@ -882,6 +868,22 @@ impl RectSweep {
         }
         (hidden, st)
     }
+}
+
+/// Appends `item` to `list` and a test event of `kind` for it at depth `z`.
+fn schedule(
+    heap: &mut BinaryHeap<Ev>,
+    list: &mut Vec<(u32, u32)>,
+    item: (u32, u32),
+    z: f64,
+    kind: u8,
+) {
+    list.push(item);
+    heap.push(Ev {
+        z,
+        kind,
+        id: (list.len() - 1) as u32,
+    });
 }
 
 /// The extended projection of the convex polygon `pts` (view coordinates) onto the frame's
