@@ -202,7 +202,8 @@ const EV_POLY: u8 = 4;
 /// farthest depth: it hides only what lies strictly behind it, by more than rounding.
 const DEPTH_MARGIN: f64 = 1.0 + 1e-9;
 
-/// What a test callback sees: the current view and plane.
+/// The current view and plane of a sweep, as its occludee tests read them: a box, piece box
+/// or triangle is blocked when the bitmap holds every sub-pixel its projections touch.
 pub struct SweepProbe<'a> {
     view: &'a SweepView,
     frame: Frame,
