@@ -2130,20 +2130,11 @@ fn depth_bounded_shrinks_fuse_what_unbounded_ones_cannot() {
 /// themselves drawn unshrunk. Each hidden box and triangle gets the same segment checks.
 #[test]
 fn tucked_edges_keep_every_family_hidden_from_the_whole_ball() {
-    for f in FAMILIES {
-        let st = run_family(
-            f.name,
-            f.seed ^ 0x7C,
-            count(f.configs / 2),
-            f.scaled,
-            f.patch,
-            &f.generate,
-            1.0,
-            Variant {
-                tuck: true,
-                ..DEFAULT
-            },
-        );
+    let tuck = Variant {
+        tuck: true,
+        ..DEFAULT
+    };
+    for (f, st) in FAMILIES.iter().zip(run_every_family(0x7C, 2, 1.0, tuck)) {
         assert_meaningful(f.name, &st, f.min_hidden);
     }
 }
@@ -2155,21 +2146,12 @@ fn tucked_edges_keep_every_family_hidden_from_the_whole_ball() {
 /// hide a share of their boxes and triangles.
 #[test]
 fn the_sweep_keeps_every_family_hidden_from_the_whole_rectangle() {
+    let sweep = Variant {
+        sweep: true,
+        ..DEFAULT
+    };
     let (mut hidden, mut boxes, mut tris_hidden, mut tris) = (0, 0, 0, 0);
-    for f in FAMILIES {
-        let st = run_family(
-            f.name,
-            f.seed ^ 0x5EE9,
-            count(f.configs / 2),
-            f.scaled,
-            f.patch,
-            &f.generate,
-            1.0,
-            Variant {
-                sweep: true,
-                ..DEFAULT
-            },
-        );
+    for st in run_every_family(0x5EE9, 2, 1.0, sweep) {
         hidden += st.hidden;
         boxes += st.boxes;
         tris_hidden += st.tris_hidden;
@@ -2208,18 +2190,28 @@ fn check_catches_a_sweep_for_a_smaller_rectangle() {
 fn violations_per_family(factor: f64, salt: u64, variant: Variant) -> Vec<(&'static str, usize)> {
     FAMILIES
         .iter()
+        .zip(run_every_family(salt, 4, factor, variant))
+        .map(|(f, st)| (f.name, st.violations))
+        .collect()
+}
+
+/// Runs every family ([`run_family`]) with `1/share` of its configurations, seeds salted by
+/// `salt`, the ball or rectangle scaled by `factor`, rendered `variant`: their stats in
+/// [`FAMILIES`]' order.
+fn run_every_family(salt: u64, share: usize, factor: f64, variant: Variant) -> Vec<Stats> {
+    FAMILIES
+        .iter()
         .map(|f| {
-            let st = run_family(
+            run_family(
                 f.name,
                 f.seed ^ salt,
-                count(f.configs / 4),
+                count(f.configs / share),
                 f.scaled,
                 f.patch,
                 &f.generate,
                 factor,
                 variant,
-            );
-            (f.name, st.violations)
+            )
         })
         .collect()
 }
