@@ -1,7 +1,8 @@
 //! Setup shared by the sampler's probe examples (`sampler_bands`, `sampler_leaks`,
-//! `sampler_points`, `sampler_probe`, `sampler_render_bench`, `sampler_slabs`, `sampler_why`): which face of a
-//! cell a probe looks out of, the eye on it, the objects beyond it, the sampler's per-scene
-//! data, and the arguments most of them begin with. Each example uses part of it.
+//! `sampler_points`, `sampler_probe`, `sampler_render_bench`, `sampler_slabs`, `sampler_why`,
+//! `sweep_bench`): which face of a cell a probe looks out of, the eye on it, the objects
+//! beyond it, the sampler's per-scene data, and the arguments most of them begin with. Each
+//! example uses part of it.
 #![allow(dead_code, reason = "each example uses part of this module")]
 
 use glam::DVec3;
