@@ -8,7 +8,6 @@
 
 mod common;
 
-use glam::DVec3;
 use std::time::Instant;
 use umbrasweep::sampler::{BoxTest, Hemicube};
 
@@ -30,17 +29,7 @@ fn main() {
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
         .collect();
     let half = eps / 2f64.sqrt();
-    let mut rnd = common::uniform(7u64);
-    let eyes: Vec<(usize, DVec3)> = (0..n)
-        .map(|k| {
-            let f = k % 6;
-            let mut eye = DVec3::ZERO;
-            for a in 0..3 {
-                eye[a] = cell.min[a] + rnd() * (cell.max[a] - cell.min[a]);
-            }
-            (f, common::Face::from_index(f).onto(&cell, eye))
-        })
-        .collect();
+    let eyes = common::fixed_eyes(&cell, n);
     let mut hc = Hemicube::new(res);
     let mut times = Vec::new();
     let (mut reached, mut drawn, mut hidden) = (0u64, 0u64, 0usize);

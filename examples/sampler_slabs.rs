@@ -394,39 +394,8 @@ fn main() {
     let t = Instant::now();
     let mut rs = umbrasweep::sampler::RectSweep::with_start(res, start / eps);
     let fboxes: Vec<DAabb> = front.iter().map(|&i| boxes[i]).collect();
-    struct Objs<'a> {
-        scene: &'a umbrasweep::scene::Scene,
-        boxes: Vec<DAabb>,
-        tris: Vec<Vec<u32>>,
-    }
-    impl umbrasweep::sampler::Occludees for Objs<'_> {
-        fn len(&self) -> usize {
-            self.boxes.len()
-        }
-        fn object_box(&self, i: usize) -> DAabb {
-            self.boxes[i]
-        }
-        fn pieces(&self, i: usize) -> std::ops::Range<u32> {
-            i as u32..i as u32 + 1
-        }
-        fn piece_box(&self, k: u32) -> DAabb {
-            self.boxes[k as usize]
-        }
-        fn piece_triangles(&self, k: u32) -> &[u32] {
-            &self.tris[k as usize]
-        }
-        fn triangle(&self, t: u32) -> [DVec3; 3] {
-            self.scene.triangle(t as usize).map(|p| p.as_dvec3())
-        }
-    }
-    let objs_lib = Objs {
-        scene: &scene,
-        boxes: fboxes.clone(),
-        tris: front
-            .iter()
-            .map(|&i| scene.objects[objs[i]].triangles.clone().collect())
-            .collect(),
-    };
+    let front_objs: Vec<usize> = front.iter().map(|&i| objs[i]).collect();
+    let objs_lib = common::BoxObjects::new(&scene, &front_objs, fboxes);
     let (lib_hidden, lst) = rs.render(&data.occluders, eye, axis, sign, [h, h], &objs_lib);
     println!(
         "library sweep: {} hidden in {:.2} s ({lst:?})",

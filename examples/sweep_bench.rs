@@ -8,39 +8,9 @@
 
 mod common;
 
-use glam::DVec3;
 use std::time::Instant;
 use umbrasweep::geom::DAabb;
-use umbrasweep::sampler::{Occludees, RectSweep};
-use umbrasweep::scene::Scene;
-
-/// The objects beyond one face: each its box, one piece (the box again) and its triangles.
-struct Objects<'a> {
-    scene: &'a Scene,
-    boxes: &'a [DAabb],
-    tris: Vec<Vec<u32>>,
-}
-
-impl Occludees for Objects<'_> {
-    fn len(&self) -> usize {
-        self.boxes.len()
-    }
-    fn object_box(&self, i: usize) -> DAabb {
-        self.boxes[i]
-    }
-    fn pieces(&self, i: usize) -> std::ops::Range<u32> {
-        i as u32..i as u32 + 1
-    }
-    fn piece_box(&self, k: u32) -> DAabb {
-        self.boxes[k as usize]
-    }
-    fn piece_triangles(&self, k: u32) -> &[u32] {
-        &self.tris[k as usize]
-    }
-    fn triangle(&self, t: u32) -> [DVec3; 3] {
-        self.scene.triangle(t as usize).map(|p| p.as_dvec3())
-    }
-}
+use umbrasweep::sampler::RectSweep;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -59,29 +29,12 @@ fn main() {
     let beyond: Vec<(Vec<usize>, Vec<DAabb>)> = (0..6)
         .map(|f| common::Face::from_index(f).beyond(&scene, &cell))
         .collect();
-    let objects: Vec<Objects> = beyond
+    let objects: Vec<common::BoxObjects> = beyond
         .iter()
-        .map(|(objs, boxes)| Objects {
-            scene: &scene,
-            boxes,
-            tris: objs
-                .iter()
-                .map(|&o| scene.objects[o].triangles.clone().collect())
-                .collect(),
-        })
+        .map(|(objs, boxes)| common::BoxObjects::new(&scene, objs, boxes.clone()))
         .collect();
     let half = eps / 2f64.sqrt();
-    let mut rnd = common::uniform(7u64);
-    let eyes: Vec<(usize, DVec3)> = (0..n)
-        .map(|k| {
-            let f = k % 6;
-            let mut eye = DVec3::ZERO;
-            for a in 0..3 {
-                eye[a] = cell.min[a] + rnd() * (cell.max[a] - cell.min[a]);
-            }
-            (f, common::Face::from_index(f).onto(&cell, eye))
-        })
-        .collect();
+    let eyes = common::fixed_eyes(&cell, n);
     let mut sw = RectSweep::new(res);
     let mut times = Vec::new();
     let (mut drawn, mut nodes, mut erosions, mut hidden, mut tested) = (0, 0, 0, 0, 0);

@@ -8,6 +8,7 @@
 use glam::DVec3;
 use umbrasweep::bake::{BakeSettings, SamplerData};
 use umbrasweep::geom::DAabb;
+use umbrasweep::sampler::Occludees;
 use umbrasweep::scene::Scene;
 
 /// One face of a cell: outward normal `sign × e_axis`.
@@ -126,4 +127,63 @@ pub fn scene_cell_eps_res(args: &[String]) -> (Scene, DAabb, f64, u32) {
     let eps = args[4].parse().expect("EPS");
     let res = args[5].parse().expect("RES");
     (scene, cells[ci].to_f64(), eps, res)
+}
+
+/// `n` eyes at fixed pseudo-random places on a cell's faces (the same every run), face by
+/// face in turn (numbered as [`Face::from_index`]): the benches' rectangles.
+pub fn fixed_eyes(cell: &DAabb, n: usize) -> Vec<(usize, DVec3)> {
+    let mut rnd = uniform(7u64);
+    (0..n)
+        .map(|k| {
+            let f = k % 6;
+            let mut eye = DVec3::ZERO;
+            for a in 0..3 {
+                eye[a] = cell.min[a] + rnd() * (cell.max[a] - cell.min[a]);
+            }
+            (f, Face::from_index(f).onto(cell, eye))
+        })
+        .collect()
+}
+
+/// Objects as the per-rectangle sweep tests them: each its box, one piece (the box again)
+/// and the scene triangles of `objects`.
+pub struct BoxObjects<'a> {
+    pub scene: &'a Scene,
+    pub boxes: Vec<DAabb>,
+    pub tris: Vec<Vec<u32>>,
+}
+
+impl<'a> BoxObjects<'a> {
+    /// Scene objects `objects` with their boxes `boxes`.
+    pub fn new(scene: &'a Scene, objects: &[usize], boxes: Vec<DAabb>) -> Self {
+        BoxObjects {
+            scene,
+            boxes,
+            tris: objects
+                .iter()
+                .map(|&o| scene.objects[o].triangles.clone().collect())
+                .collect(),
+        }
+    }
+}
+
+impl Occludees for BoxObjects<'_> {
+    fn len(&self) -> usize {
+        self.boxes.len()
+    }
+    fn object_box(&self, i: usize) -> DAabb {
+        self.boxes[i]
+    }
+    fn pieces(&self, i: usize) -> std::ops::Range<u32> {
+        i as u32..i as u32 + 1
+    }
+    fn piece_box(&self, k: u32) -> DAabb {
+        self.boxes[k as usize]
+    }
+    fn piece_triangles(&self, k: u32) -> &[u32] {
+        &self.tris[k as usize]
+    }
+    fn triangle(&self, t: u32) -> [DVec3; 3] {
+        self.scene.triangle(t as usize).map(|p| p.as_dvec3())
+    }
 }
