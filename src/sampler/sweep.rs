@@ -188,6 +188,7 @@ pub struct RectSweep {
     views: Vec<SweepView>,
     heap: BinaryHeap<Ev>,
     scratch: ErodeScratch,
+    poly: PolyScratch,
 }
 
 /// A sweep event, ordered by depth, then kind (nodes, tests, polygons).
@@ -668,6 +669,7 @@ impl RectSweep {
             views: Vec::new(),
             heap: BinaryHeap::new(),
             scratch: ErodeScratch::default(),
+            poly: PolyScratch::default(),
         }
     }
 
@@ -975,12 +977,15 @@ impl RectSweep {
                     }
                     EV_POLY => {
                         let sp = occ.polys[ev.id as usize];
-                        let pts: Vec<DVec3> = occ.points[sp.start as usize..sp.end as usize]
-                            .iter()
-                            .map(|q| view_coords(map, *q - eye))
-                            .collect();
-                        if let Some(p) = extended_projection(&frame, &pts) {
-                            v.fill(&p, s);
+                        let pc = &mut self.poly;
+                        pc.pts.clear();
+                        pc.pts.extend(
+                            occ.points[sp.start as usize..sp.end as usize]
+                                .iter()
+                                .map(|q| view_coords(map, *q - eye)),
+                        );
+                        if let Some(p) = extended_projection(&frame, pc) {
+                            v.fill(p, s);
                             st.polygons += 1;
                         }
                     }
@@ -1072,15 +1077,34 @@ fn schedule(
     });
 }
 
-/// The extended projection of the convex polygon `pts` (view coordinates) onto the frame's
-/// plane: the intersection of its projections from the four corners, counter-clockwise; None
-/// when empty or when the corners do not see it with one orientation.
-fn extended_projection(f: &Frame, pts: &[DVec3]) -> Option<Vec<DVec2>> {
-    let mut acc: Vec<DVec2> = Vec::new();
+/// Buffers of [`extended_projection`], kept between polygons.
+#[derive(Default)]
+struct PolyScratch {
+    /// The polygon, in view coordinates (the input).
+    pts: Vec<DVec3>,
+    /// Its projection from one corner.
+    proj: Vec<DVec2>,
+    /// The intersection so far, and the next.
+    acc: Vec<DVec2>,
+    tmp: Vec<DVec2>,
+}
+
+/// The extended projection of the convex polygon `sc.pts` (view coordinates) onto the
+/// frame's plane: the intersection of its projections from the four corners,
+/// counter-clockwise; None when empty or when the corners do not see it with one
+/// orientation.
+fn extended_projection<'s>(f: &Frame, sc: &'s mut PolyScratch) -> Option<&'s [DVec2]> {
+    let PolyScratch {
+        pts,
+        proj,
+        acc,
+        tmp,
+    } = sc;
+    acc.clear();
     let mut orient = 0.0f64;
-    let mut tmp: Vec<DVec2> = Vec::with_capacity(16);
     for (ci, &c) in f.corners.iter().enumerate() {
-        let mut proj: Vec<DVec2> = pts.iter().map(|&q| f.project(c, q)).collect();
+        proj.clear();
+        proj.extend(pts.iter().map(|&q| f.project(c, q)));
         let area: f64 = (0..proj.len())
             .map(|k| proj[k].perp_dot(proj[(k + 1) % proj.len()]))
             .sum();
@@ -1106,7 +1130,7 @@ fn extended_projection(f: &Frame, pts: &[DVec3]) -> Option<Vec<DVec2>> {
             proj.reverse();
         }
         if ci == 0 {
-            acc = proj;
+            acc.extend_from_slice(proj);
             continue;
         }
         for e in 0..proj.len() {
@@ -1123,7 +1147,7 @@ fn extended_projection(f: &Frame, pts: &[DVec3]) -> Option<Vec<DVec2>> {
                     tmp.push(p0 + (p1 - p0) * (s0 / (s0 - s1)));
                 }
             }
-            std::mem::swap(&mut acc, &mut tmp);
+            std::mem::swap(acc, tmp);
             if acc.len() < 3 {
                 return None;
             }
